@@ -1,0 +1,157 @@
+"""Zenoh plumbing: sessions from settings, notifications, and subscriptions for asyncio code.
+
+Zenoh runs callbacks on its own threads. :func:`subscribe` hands every sample to the event
+loop with ``call_soon_threadsafe`` so handlers run on the loop like any other asyncio code.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import msgpack
+import zenoh
+
+from common.config import ZenohSettings
+from common.contract import keys
+from common.errors import ConfigError, ConnectionFailure
+
+log = logging.getLogger(__name__)
+
+Handler = Callable[[str, bytes], None]
+
+
+def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
+    """A Zenoh config: the file (if any) first, then the settings on top of it."""
+    if settings.config_file:
+        try:
+            config = zenoh.Config.from_file(settings.config_file)
+        except Exception as exc:
+            raise ConfigError(f"PNAV_ZENOH_CONFIG={settings.config_file!r}: {exc}") from exc
+    else:
+        config = zenoh.Config()
+    config.insert_json5("mode", json.dumps(settings.mode))
+    config.insert_json5("scouting/multicast/enabled", json.dumps(settings.multicast))
+    if settings.mode != "router" or settings.connect:
+        config.insert_json5("connect/endpoints", json.dumps(list(settings.connect)))
+    if settings.listen:
+        config.insert_json5("listen/endpoints", json.dumps(list(settings.listen)))
+    return config
+
+
+def open_session(settings: ZenohSettings) -> zenoh.Session:
+    """Open a Zenoh session; raises ConnectionFailure if no router/peer answers."""
+    try:
+        return zenoh.open(zenoh_config(settings))
+    except ConfigError:
+        raise
+    except Exception as exc:
+        where = ",".join(settings.connect or settings.listen) or "(no endpoint)"
+        raise ConnectionFailure(
+            f"cannot open a Zenoh {settings.mode} session on {where}: {exc}"
+        ) from exc
+
+
+def start_router(listen: tuple[str, ...]) -> zenoh.Session:
+    """Run a Zenoh router inside this process, listening on ``listen`` endpoints."""
+    return open_session(ZenohSettings(mode="router", connect=(), listen=listen))
+
+
+def subscribe(
+    session: zenoh.Session,
+    key_expr: str,
+    handler: Handler,
+    loop: asyncio.AbstractEventLoop | None = None,
+) -> zenoh.Subscriber:
+    """Call ``handler(key, payload)`` on ``loop`` for every sample on ``key_expr``.
+
+    Keep the returned subscriber referenced; call ``undeclare()`` on it to stop.
+    """
+    loop = loop or asyncio.get_running_loop()
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        # Runs on a Zenoh thread: copy out of the sample, then cross over to the loop.
+        key = str(sample.key_expr)
+        payload = sample.payload.to_bytes()
+        try:
+            loop.call_soon_threadsafe(handler, key, payload)
+        except RuntimeError:
+            pass  # the loop is closed: the service is shutting down
+
+    return session.declare_subscriber(key_expr, on_sample)
+
+
+def subscribe_threaded(session: zenoh.Session, key_expr: str, handler: Handler) -> zenoh.Subscriber:
+    """Call ``handler(key, payload)`` directly on Zenoh's thread (must be thread-safe, quick)."""
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        handler(str(sample.key_expr), sample.payload.to_bytes())
+
+    return session.declare_subscriber(key_expr, on_sample)
+
+
+def pack(message: dict[str, Any]) -> bytes:
+    """msgpack bytes of a contract message."""
+    data: bytes = msgpack.packb(message, use_bin_type=True)
+    return data
+
+
+def unpack(payload: bytes) -> Any:
+    """Decode msgpack bytes; raises ValueError (not msgpack's own types) on bad input."""
+    try:
+        return msgpack.unpackb(payload, raw=False, strict_map_key=True)
+    except Exception as exc:
+        raise ValueError(f"malformed msgpack payload: {exc}") from exc
+
+
+@dataclass(frozen=True)
+class Notification:
+    """A change hint: ``table`` changed for ``robot`` (None: not robot-scoped), newest ``id``."""
+
+    table: str
+    robot: str | None
+    id: int | None
+
+    def encode(self) -> bytes:
+        return pack({"table": self.table, "robot": self.robot, "id": self.id})
+
+    @classmethod
+    def decode(cls, key: str, payload: bytes) -> Notification:
+        table, robot = keys.parse_notify_key(key)
+        body = unpack(payload) if payload else {}
+        row_id = body.get("id") if isinstance(body, dict) else None
+        return cls(table, robot, row_id if isinstance(row_id, int) else None)
+
+
+class Notifier:
+    """Publishes change notifications, one cached express publisher per key."""
+
+    def __init__(self, session: zenoh.Session) -> None:
+        self._session = session
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._lock = threading.Lock()
+
+    def notify(self, table: str, robot: str | None, row_id: int | None) -> None:
+        key = keys.notify_key(table, robot)
+        publisher = self._publishers.get(key)
+        if publisher is None:
+            with self._lock:
+                publisher = self._publishers.get(key)
+                if publisher is None:
+                    publisher = self._session.declare_publisher(key, express=True)
+                    self._publishers[key] = publisher
+        publisher.put(Notification(table, robot, row_id).encode())
+
+    def close(self) -> None:
+        with self._lock:
+            for publisher in self._publishers.values():
+                try:
+                    publisher.undeclare()
+                except Exception:  # already gone with its session
+                    log.debug("publisher undeclare failed", exc_info=True)
+            self._publishers.clear()

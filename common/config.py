@@ -1,0 +1,178 @@
+"""Typed configuration read from ``PNAV_*`` environment variables.
+
+Each settings class is a frozen dataclass with defaults and one ``from_env()`` that reads its
+variables by name; a bad value raises :class:`~common.errors.ConfigError` naming the variable.
+
+=========================  ====================================  ===============================
+variable                   meaning                               default
+=========================  ====================================  ===============================
+PNAV_DATABASE_URL          Postgres DSN (postgresql://...)       none: required by services
+PNAV_DB_POOL_MAX           most connections in a service's pool  4
+PNAV_ZENOH_MODE            client, peer or router                client
+PNAV_ZENOH_CONNECT         comma-separated endpoints to connect  tcp/127.0.0.1:7447
+PNAV_ZENOH_LISTEN          comma-separated endpoints to listen   (none)
+PNAV_ZENOH_MULTICAST       multicast scouting on (true/false)    false
+PNAV_ZENOH_CONFIG          path of a Zenoh JSON5 config file,    (none)
+                           applied before the variables above
+PNAV_ENGINE_PERIOD_MS      F: activation period and bound        50
+PNAV_ENGINE_MAX_RULES      N: most rules run per activation      1000
+PNAV_ENGINE_PAUSE_MS       P: least pause between activations    0
+PNAV_STATS_PERIOD_S        how often engine_stats is written     2.0
+PNAV_INSTANCE              this process's instance id            <hostname>-<pid>
+PNAV_LOG_LEVEL             DEBUG, INFO, WARNING, ERROR           INFO
+=========================  ====================================  ===============================
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from common.errors import ConfigError
+
+Env = Mapping[str, str]
+
+
+def _get(env: Env, name: str, default: str) -> str:
+    value = env.get(name, "").strip()
+    return value or default
+
+
+def _float(env: Env, name: str, default: float, *, minimum: float = 0.0) -> float:
+    raw = _get(env, name, str(default))
+    try:
+        value = float(raw)
+    except ValueError:
+        raise ConfigError(f"{name}={raw!r} is not a number") from None
+    if not value >= minimum:
+        raise ConfigError(f"{name}={raw!r} must be at least {minimum}")
+    return value
+
+
+def _int(env: Env, name: str, default: int, *, minimum: int = 0) -> int:
+    raw = _get(env, name, str(default))
+    try:
+        value = int(raw)
+    except ValueError:
+        raise ConfigError(f"{name}={raw!r} is not a whole number") from None
+    if value < minimum:
+        raise ConfigError(f"{name}={raw!r} must be at least {minimum}")
+    return value
+
+
+def _bool(env: Env, name: str, default: bool) -> bool:
+    raw = _get(env, name, "true" if default else "false").lower()
+    if raw in ("1", "true", "yes", "on"):
+        return True
+    if raw in ("0", "false", "no", "off"):
+        return False
+    raise ConfigError(f"{name}={raw!r} is not a boolean (true/false)")
+
+
+def _list(env: Env, name: str, default: tuple[str, ...]) -> tuple[str, ...]:
+    raw = env.get(name)
+    if raw is None:
+        return default
+    return tuple(part.strip() for part in raw.split(",") if part.strip())
+
+
+@dataclass(frozen=True)
+class ZenohSettings:
+    mode: str = "client"
+    connect: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
+    listen: tuple[str, ...] = ()
+    multicast: bool = False
+    config_file: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("client", "peer", "router"):
+            raise ConfigError(f"PNAV_ZENOH_MODE={self.mode!r} must be client, peer or router")
+
+    @classmethod
+    def from_env(cls, env: Env | None = None) -> ZenohSettings:
+        env = os.environ if env is None else env
+        return cls(
+            mode=_get(env, "PNAV_ZENOH_MODE", cls.mode),
+            connect=_list(env, "PNAV_ZENOH_CONNECT", cls.connect),
+            listen=_list(env, "PNAV_ZENOH_LISTEN", cls.listen),
+            multicast=_bool(env, "PNAV_ZENOH_MULTICAST", cls.multicast),
+            config_file=env.get("PNAV_ZENOH_CONFIG") or None,
+        )
+
+    def to_env(self) -> dict[str, str]:
+        """The variables that make a child process's ``from_env()`` equal to this."""
+        out = {
+            "PNAV_ZENOH_MODE": self.mode,
+            "PNAV_ZENOH_CONNECT": ",".join(self.connect),
+            "PNAV_ZENOH_LISTEN": ",".join(self.listen),
+            "PNAV_ZENOH_MULTICAST": "true" if self.multicast else "false",
+        }
+        if self.config_file:
+            out["PNAV_ZENOH_CONFIG"] = self.config_file
+        return out
+
+
+@dataclass(frozen=True)
+class EngineSettings:
+    """The thesis' F, N and P (section 3.2), with navigation defaults."""
+
+    period_s: float = 0.050
+    max_rules: int = 1000
+    pause_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.period_s <= 0:
+            raise ConfigError(f"the activation period F must be positive, got {self.period_s}")
+        if self.max_rules < 1:
+            raise ConfigError(f"N (most rules per activation) must be >= 1, got {self.max_rules}")
+        if self.pause_s < 0:
+            raise ConfigError(f"the pause P must not be negative, got {self.pause_s}")
+
+    @classmethod
+    def from_env(cls, env: Env | None = None) -> EngineSettings:
+        env = os.environ if env is None else env
+        return cls(
+            period_s=_float(env, "PNAV_ENGINE_PERIOD_MS", cls.period_s * 1000, minimum=0.1) / 1000,
+            max_rules=_int(env, "PNAV_ENGINE_MAX_RULES", cls.max_rules, minimum=1),
+            pause_s=_float(env, "PNAV_ENGINE_PAUSE_MS", cls.pause_s * 1000) / 1000,
+        )
+
+
+def default_instance() -> str:
+    return f"{socket.gethostname()}-{os.getpid()}".replace(".", "-")
+
+
+@dataclass(frozen=True)
+class ServiceConfig:
+    """Everything a scenario service needs to start."""
+
+    service: str
+    database_url: str
+    zenoh: ZenohSettings = field(default_factory=ZenohSettings)
+    engine: EngineSettings = field(default_factory=EngineSettings)
+    pool_max: int = 4
+    stats_period_s: float = 2.0
+    instance: str = field(default_factory=default_instance)
+    log_level: str = "INFO"
+
+    @classmethod
+    def from_env(cls, service: str, env: Env | None = None) -> ServiceConfig:
+        env = os.environ if env is None else env
+        url = env.get("PNAV_DATABASE_URL", "").strip()
+        if not url:
+            raise ConfigError(
+                "PNAV_DATABASE_URL is not set: point it at the contract database "
+                "(postgresql://user:pass@host:5432/db), or start the stack with `pnav up`"
+            )
+        return cls(
+            service=service,
+            database_url=url,
+            zenoh=ZenohSettings.from_env(env),
+            engine=EngineSettings.from_env(env),
+            pool_max=_int(env, "PNAV_DB_POOL_MAX", cls.pool_max, minimum=1),
+            stats_period_s=_float(env, "PNAV_STATS_PERIOD_S", cls.stats_period_s, minimum=0.1),
+            instance=_get(env, "PNAV_INSTANCE", default_instance()),
+            log_level=_get(env, "PNAV_LOG_LEVEL", cls.log_level).upper(),
+        )

@@ -1,0 +1,261 @@
+-- proactive-nav shared-database contract.
+--
+-- This file is the single source of truth for every contract table. It is a list of numbered
+-- migrations; `common.contract.migrate.apply_migrations` applies, in one transaction each,
+-- those not yet recorded in schema_version. An applied migration is never edited: change the
+-- contract by appending a new one. CONTRACT.md documents every table in language-neutral terms.
+--
+-- Units: metres, radians, seconds, m/s, rad/s, watt-hours, watts. "stamp" columns are sim time
+-- in seconds (the sim's clock), "*_at" timestamptz columns are wall-clock times.
+
+-- migration 1: initial contract
+CREATE TABLE robot (
+    robot_id            text PRIMARY KEY CHECK (robot_id ~ '^[A-Za-z0-9_-]+$'),
+    model               text NOT NULL DEFAULT 'turtlebot3_burger',
+    wheel_radius_m      double precision NOT NULL DEFAULT 0.033,
+    wheel_separation_m  double precision NOT NULL DEFAULT 0.160,
+    max_linear_mps      double precision NOT NULL DEFAULT 0.22,
+    max_angular_rps     double precision NOT NULL DEFAULT 2.84,
+    footprint_radius_m  double precision NOT NULL DEFAULT 0.105,
+    battery_capacity_wh double precision NOT NULL DEFAULT 19.98,
+    world               text,
+    registered_at       timestamptz NOT NULL DEFAULT now()
+);
+
+CREATE TABLE odometry (
+    id          bigserial PRIMARY KEY,
+    robot_id    text NOT NULL REFERENCES robot ON DELETE CASCADE,
+    stamp       double precision NOT NULL,
+    seq         bigint NOT NULL DEFAULT 0,
+    x           double precision NOT NULL,
+    y           double precision NOT NULL,
+    yaw         double precision NOT NULL,
+    linear_mps  double precision NOT NULL,
+    angular_rps double precision NOT NULL,
+    received_at timestamptz NOT NULL DEFAULT clock_timestamp()
+);
+CREATE INDEX odometry_robot_newest ON odometry (robot_id, id DESC);
+
+CREATE TABLE laser_scan (
+    id              bigserial PRIMARY KEY,
+    robot_id        text NOT NULL REFERENCES robot ON DELETE CASCADE,
+    stamp           double precision NOT NULL,
+    seq             bigint NOT NULL DEFAULT 0,
+    angle_min       double precision NOT NULL,
+    angle_increment double precision NOT NULL,
+    range_min       double precision NOT NULL,
+    range_max       double precision NOT NULL,
+    ranges          real[] NOT NULL,
+    received_at     timestamptz NOT NULL DEFAULT clock_timestamp()
+);
+CREATE INDEX laser_scan_robot_newest ON laser_scan (robot_id, id DESC);
+
+CREATE TABLE battery (
+    id          bigserial PRIMARY KEY,
+    robot_id    text NOT NULL REFERENCES robot ON DELETE CASCADE,
+    stamp       double precision NOT NULL,
+    energy_wh   double precision NOT NULL CHECK (energy_wh >= 0),
+    capacity_wh double precision NOT NULL CHECK (capacity_wh > 0),
+    percentage  double precision NOT NULL CHECK (percentage BETWEEN 0 AND 100),
+    charging    boolean NOT NULL DEFAULT false,
+    power_w     double precision NOT NULL DEFAULT 0,
+    received_at timestamptz NOT NULL DEFAULT clock_timestamp()
+);
+CREATE INDEX battery_robot_newest ON battery (robot_id, id DESC);
+
+CREATE TABLE collision_event (
+    id          bigserial PRIMARY KEY,
+    robot_id    text NOT NULL REFERENCES robot ON DELETE CASCADE,
+    stamp       double precision NOT NULL,
+    other       text NOT NULL,
+    x           double precision NOT NULL,
+    y           double precision NOT NULL,
+    received_at timestamptz NOT NULL DEFAULT clock_timestamp()
+);
+CREATE INDEX collision_event_robot_newest ON collision_event (robot_id, id DESC);
+
+CREATE TABLE map (
+    map_id          text PRIMARY KEY,
+    resolution_m    double precision NOT NULL CHECK (resolution_m > 0),
+    origin_x        double precision NOT NULL,
+    origin_y        double precision NOT NULL,
+    origin_yaw      double precision NOT NULL DEFAULT 0,
+    width           integer NOT NULL CHECK (width > 0),
+    height          integer NOT NULL CHECK (height > 0),
+    -- row-major, row 0 at origin_y (bottom), one byte per cell: 0 free, 100 occupied, 255 unknown
+    grid            bytea NOT NULL CHECK (length(grid) = width * height),
+    source          text NOT NULL DEFAULT '',
+    loaded_at       timestamptz NOT NULL DEFAULT now()
+);
+
+CREATE TABLE charging_station (
+    station_id     text PRIMARY KEY,
+    map_id         text REFERENCES map ON DELETE CASCADE,
+    x              double precision NOT NULL,
+    y              double precision NOT NULL,
+    radius_m       double precision NOT NULL CHECK (radius_m > 0),
+    charge_power_w double precision NOT NULL CHECK (charge_power_w > 0)
+);
+
+CREATE TABLE goal (
+    id            bigserial PRIMARY KEY,
+    robot_id      text NOT NULL REFERENCES robot ON DELETE CASCADE,
+    x             double precision NOT NULL,
+    y             double precision NOT NULL,
+    tolerance_m   double precision NOT NULL DEFAULT 0.15 CHECK (tolerance_m > 0),
+    status        text NOT NULL DEFAULT 'active'
+                  CHECK (status IN ('active', 'reached', 'cancelled', 'superseded', 'failed')),
+    reason        text,
+    created_at    timestamptz NOT NULL DEFAULT now(),
+    stamp         double precision,
+    finished_stamp double precision
+);
+-- at most one active goal per robot: a new goal supersedes the old one
+CREATE UNIQUE INDEX goal_one_active ON goal (robot_id) WHERE status = 'active';
+
+CREATE TABLE strategy (
+    code                 text PRIMARY KEY CHECK (code ~ '^[A-Z0-9_]+$'),
+    planner_scenario     text,
+    controller_scenarios text[] NOT NULL DEFAULT '{}',
+    params               jsonb NOT NULL DEFAULT '{}',
+    description          text NOT NULL DEFAULT '',
+    created_at           timestamptz NOT NULL DEFAULT now()
+);
+
+INSERT INTO strategy (code, planner_scenario, controller_scenarios, params, description) VALUES
+    ('GOTO_AVOID', 'turn_then_move', '{avoid_left,avoid_right,safety_stop}',
+     '{"target": "goal"}', 'go to the goal, avoiding obstacles'),
+    ('GOTO_DIRECT', 'turn_then_move', '{safety_stop}',
+     '{"target": "goal"}', 'go straight to the goal; no avoidance, but safety_stop still holds'),
+    ('CHARGE', 'turn_then_move', '{avoid_left,avoid_right,safety_stop}',
+     '{"target": "nearest_charger"}', 'go to the nearest charging station and charge'),
+    ('IDLE', NULL, '{}', '{}', 'stand still');
+
+CREATE TABLE user_command (
+    id          bigserial PRIMARY KEY,
+    robot_id    text NOT NULL REFERENCES robot ON DELETE CASCADE,
+    command     text NOT NULL,
+    argument    text,
+    status      text NOT NULL DEFAULT 'pending'
+                CHECK (status IN ('pending', 'accepted', 'rejected')),
+    reason      text,
+    created_at  timestamptz NOT NULL DEFAULT now(),
+    treated_at  timestamptz
+);
+CREATE INDEX user_command_pending ON user_command (robot_id, id) WHERE status = 'pending';
+
+CREATE TABLE command_recommendation (
+    id              bigserial PRIMARY KEY,
+    robot_id        text NOT NULL REFERENCES robot ON DELETE CASCADE,
+    kind            text NOT NULL CHECK (kind IN ('robot', 'system')),
+    source          text NOT NULL,
+    priority        integer NOT NULL,
+    linear_mps      double precision,
+    angular_rps     double precision,
+    system_command  text,
+    stamp           double precision NOT NULL,
+    expires_stamp   double precision NOT NULL,
+    inputs          jsonb NOT NULL DEFAULT '{}',
+    reason          text NOT NULL DEFAULT '',
+    treated_by      bigint,
+    created_at      timestamptz NOT NULL DEFAULT clock_timestamp(),
+    CHECK (expires_stamp >= stamp),
+    CHECK (kind <> 'robot' OR (linear_mps IS NOT NULL AND angular_rps IS NOT NULL)),
+    CHECK (kind <> 'system' OR system_command IS NOT NULL)
+);
+CREATE INDEX command_recommendation_live ON command_recommendation (robot_id, kind, expires_stamp);
+
+CREATE TABLE command2robot (
+    id                bigserial PRIMARY KEY,
+    robot_id          text NOT NULL REFERENCES robot ON DELETE CASCADE,
+    stamp             double precision NOT NULL,
+    linear_mps        double precision NOT NULL,
+    angular_rps       double precision NOT NULL,
+    recommendation_id bigint,
+    source            text,
+    considered_ids    bigint[] NOT NULL DEFAULT '{}',
+    reason            text NOT NULL DEFAULT '',
+    created_at        timestamptz NOT NULL DEFAULT clock_timestamp()
+);
+CREATE INDEX command2robot_robot_newest ON command2robot (robot_id, id DESC);
+
+CREATE TABLE system_command (
+    id                bigserial PRIMARY KEY,
+    robot_id          text NOT NULL REFERENCES robot ON DELETE CASCADE,
+    command           text NOT NULL,
+    recommendation_id bigint,
+    considered_ids    bigint[] NOT NULL DEFAULT '{}',
+    reason            text NOT NULL DEFAULT '',
+    status            text NOT NULL DEFAULT 'pending'
+                      CHECK (status IN ('pending', 'accepted', 'rejected')),
+    status_reason     text,
+    stamp             double precision,
+    created_at        timestamptz NOT NULL DEFAULT clock_timestamp(),
+    treated_at        timestamptz
+);
+CREATE INDEX system_command_pending ON system_command (robot_id, id) WHERE status = 'pending';
+
+CREATE TABLE active_strategy (
+    robot_id        text PRIMARY KEY REFERENCES robot ON DELETE CASCADE,
+    strategy_code   text NOT NULL REFERENCES strategy,
+    resume_code     text REFERENCES strategy,
+    source          text NOT NULL DEFAULT 'default'
+                    CHECK (source IN ('default', 'user', 'system')),
+    command_id      bigint,
+    stamp           double precision,
+    updated_at      timestamptz NOT NULL DEFAULT now()
+);
+
+CREATE TABLE engine_stats (
+    service        text NOT NULL,
+    instance       text NOT NULL,
+    rule_type      text NOT NULL,
+    scenario       text NOT NULL DEFAULT '',
+    executed       bigint NOT NULL DEFAULT 0,
+    activated      bigint NOT NULL DEFAULT 0,
+    acted          bigint NOT NULL DEFAULT 0,
+    errors         bigint NOT NULL DEFAULT 0,
+    total_time_s   double precision NOT NULL DEFAULT 0,
+    max_time_s     double precision NOT NULL DEFAULT 0,
+    updated_at     timestamptz NOT NULL DEFAULT now(),
+    PRIMARY KEY (service, instance, rule_type)
+);
+
+CREATE TABLE retention_policy (
+    table_name          text PRIMARY KEY
+                        CHECK (table_name IN ('odometry', 'laser_scan', 'battery', 'collision_event')),
+    keep_rows_per_robot integer NOT NULL CHECK (keep_rows_per_robot >= 1)
+);
+INSERT INTO retention_policy (table_name, keep_rows_per_robot) VALUES
+    ('odometry', 900),          -- 30 s at 30 Hz
+    ('laser_scan', 150),        -- 30 s at 5 Hz
+    ('battery', 300),
+    ('collision_event', 1000);
+
+-- Deletes the oldest sensor rows beyond each table's keep_rows_per_robot, per robot.
+-- Returns the number of rows deleted. Writers of sensor tables call it now and then.
+CREATE FUNCTION prune_sensor_rows() RETURNS bigint LANGUAGE plpgsql AS $$
+DECLARE
+    pol record;
+    rid text;
+    cutoff bigint;
+    n bigint;
+    total bigint := 0;
+BEGIN
+    FOR pol IN SELECT table_name, keep_rows_per_robot FROM retention_policy LOOP
+        FOR rid IN SELECT robot_id FROM robot LOOP
+            EXECUTE format(
+                'SELECT id FROM %I WHERE robot_id = $1 ORDER BY id DESC OFFSET $2 LIMIT 1',
+                pol.table_name)
+              INTO cutoff USING rid, pol.keep_rows_per_robot;
+            IF cutoff IS NOT NULL THEN
+                EXECUTE format('DELETE FROM %I WHERE robot_id = $1 AND id <= $2', pol.table_name)
+                  USING rid, cutoff;
+                GET DIAGNOSTICS n = ROW_COUNT;
+                total := total + n;
+            END IF;
+        END LOOP;
+    END LOOP;
+    RETURN total;
+END;
+$$;

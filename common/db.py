@@ -1,0 +1,123 @@
+"""Postgres access for services: a pool, and writes that notify over Zenoh after commit.
+
+The rule of the contract: a notification is published only after the write it announces has
+committed, so a woken reader always finds the row. :meth:`Database.write` does that for one
+statement; :meth:`Database.transaction` for several, publishing nothing if it rolls back.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import time
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from typing import Any
+
+import asyncpg
+
+from common.bus import Notifier
+from common.errors import ConnectionFailure
+
+log = logging.getLogger(__name__)
+
+
+async def _init_connection(conn: asyncpg.Connection) -> None:
+    await conn.set_type_codec("jsonb", encoder=json.dumps, decoder=json.loads, schema="pg_catalog")
+    await conn.set_type_codec("json", encoder=json.dumps, decoder=json.loads, schema="pg_catalog")
+
+
+async def create_pool(
+    url: str, *, min_size: int = 1, max_size: int = 4, wait_s: float = 10.0
+) -> asyncpg.Pool:
+    """Open a pool, retrying for ``wait_s`` while Postgres is still starting up."""
+    deadline = time.monotonic() + wait_s
+    while True:
+        try:
+            pool: asyncpg.Pool = await asyncpg.create_pool(
+                url, min_size=min_size, max_size=max_size, init=_init_connection
+            )
+            return pool
+        except (OSError, asyncpg.CannotConnectNowError, asyncpg.ConnectionDoesNotExistError) as exc:
+            if time.monotonic() >= deadline:
+                raise ConnectionFailure(f"cannot reach Postgres at {_redact(url)}: {exc}") from exc
+            await asyncio.sleep(0.2)
+        except asyncpg.InvalidCatalogNameError as exc:
+            raise ConnectionFailure(f"no such database at {_redact(url)}: {exc}") from exc
+
+
+async def connect(url: str) -> asyncpg.Connection:
+    """One connection with the contract's codecs (for tools and tests)."""
+    try:
+        conn: asyncpg.Connection = await asyncpg.connect(url)
+    except OSError as exc:
+        raise ConnectionFailure(f"cannot reach Postgres at {_redact(url)}: {exc}") from exc
+    await _init_connection(conn)
+    return conn
+
+
+def _redact(url: str) -> str:
+    """Hide a password in a DSN before it goes into an error message."""
+    if "@" not in url or "://" not in url:
+        return url
+    scheme, rest = url.split("://", 1)
+    creds, host = rest.rsplit("@", 1)
+    user = creds.split(":", 1)[0]
+    return f"{scheme}://{user}:***@{host}" if ":" in creds else url
+
+
+class Changes:
+    """The notifications a transaction will publish once it commits."""
+
+    def __init__(self, conn: asyncpg.Connection) -> None:
+        self.conn = conn
+        self._pending: dict[tuple[str, str | None], int | None] = {}
+
+    def changed(self, table: str, robot: str | None, row_id: int | None = None) -> None:
+        """Announce ``table`` changed for ``robot``; the newest id per (table, robot) wins."""
+        key = (table, robot)
+        previous = self._pending.get(key)
+        if row_id is None or previous is None or row_id > previous:
+            self._pending[key] = row_id if row_id is not None else previous
+
+    def items(self) -> list[tuple[str, str | None, int | None]]:
+        return [(table, robot, row_id) for (table, robot), row_id in self._pending.items()]
+
+
+class Database:
+    """A service's pool plus its notifier."""
+
+    def __init__(self, pool: asyncpg.Pool, notifier: Notifier) -> None:
+        self.pool = pool
+        self.notifier = notifier
+
+    async def write(self, table: str, robot: str | None, sql: str, *args: Any) -> Any:
+        """Run one statement (autocommit), then notify ``table``/``robot``.
+
+        If the statement returns a value (``RETURNING id``) it is the notification's id and
+        the return value.
+        """
+        async with self.pool.acquire() as conn:
+            value = await conn.fetchval(sql, *args)
+        self.notifier.notify(table, robot, value if isinstance(value, int) else None)
+        return value
+
+    @asynccontextmanager
+    async def transaction(self) -> AsyncIterator[Changes]:
+        """``async with db.transaction() as tx: ... tx.changed(table, robot, id)``.
+
+        Notifications go out after COMMIT, and not at all on rollback.
+        """
+        async with self.pool.acquire() as conn, conn.transaction():
+            changes = Changes(conn)
+            yield changes
+        for table, robot, row_id in changes.items():
+            self.notifier.notify(table, robot, row_id)
+
+    async def close(self, timeout_s: float = 5.0) -> None:
+        try:
+            await asyncio.wait_for(self.pool.close(), timeout_s)
+        except TimeoutError:
+            log.warning("pool did not close in time; terminating connections")
+            self.pool.terminate()

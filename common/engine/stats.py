@@ -1,0 +1,50 @@
+"""Per-rule-type statistics the engine keeps and services publish to ``engine_stats``."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+
+@dataclass
+class RuleStats:
+    """Counters for one rule type.
+
+    ``executed``: rules of this type run; ``activated``: whose guards held; ``acted``: whose
+    actions completed; ``errors``: whose acquisition, tests, actions or generation raised or
+    returned something invalid. Times are wall-clock seconds per execution.
+    """
+
+    rule_type: str
+    scenario: str = ""
+    executed: int = 0
+    activated: int = 0
+    acted: int = 0
+    errors: int = 0
+    total_time_s: float = 0.0
+    max_time_s: float = 0.0
+
+    def record_time(self, seconds: float) -> None:
+        self.total_time_s += seconds
+        if seconds > self.max_time_s:
+            self.max_time_s = seconds
+
+    @property
+    def mean_time_s(self) -> float:
+        return self.total_time_s / self.executed if self.executed else 0.0
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass
+class EngineCounters:
+    """Engine-wide counters: activations and what started them."""
+
+    activations: int = 0
+    woken_by_notification: int = 0
+    woken_by_period: int = 0
+    rules_run: int = 0
+    capped_by_n: int = 0
+    capped_by_f: int = 0
+    meta_reseeded: int = 0
