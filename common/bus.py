@@ -67,7 +67,7 @@ def subscribe(
     key_expr: str,
     handler: Handler,
     loop: asyncio.AbstractEventLoop | None = None,
-) -> zenoh.Subscriber:
+) -> zenoh.Subscriber[None]:
     """Call ``handler(key, payload)`` on ``loop`` for every sample on ``key_expr``.
 
     Keep the returned subscriber referenced; call ``undeclare()`` on it to stop.
@@ -86,7 +86,9 @@ def subscribe(
     return session.declare_subscriber(key_expr, on_sample)
 
 
-def subscribe_threaded(session: zenoh.Session, key_expr: str, handler: Handler) -> zenoh.Subscriber:
+def subscribe_threaded(
+    session: zenoh.Session, key_expr: str, handler: Handler
+) -> zenoh.Subscriber[None]:
     """Call ``handler(key, payload)`` directly on Zenoh's thread (must be thread-safe, quick)."""
 
     def on_sample(sample: zenoh.Sample) -> None:

@@ -62,10 +62,11 @@ class EmbeddedPostgres:
     def start(self) -> str:
         """Start (or attach to) the server; return its admin DSN."""
         # pgserver wants a runtime dir at import time; CI machines may not set one.
-        os.environ.setdefault("XDG_RUNTIME_DIR", tempfile.gettempdir())
+        if not os.environ.get("XDG_RUNTIME_DIR"):
+            os.environ["XDG_RUNTIME_DIR"] = tempfile.mkdtemp(prefix="pnav-run-")
         import pgserver
 
-        self._server = pgserver.get_server(
+        self._server = pgserver.get_server(  # type: ignore[attr-defined]
             self.data_dir, cleanup_mode=None if self.persistent else "stop"
         )
         uri: str = self._server.get_uri()

@@ -1,0 +1,144 @@
+"""What every service process needs: connections, a liveliness token, signals, clean exit.
+
+:class:`Runtime` owns the Postgres pool, the Zenoh session, the notifier, the sim clock and
+the liveliness token ``pnav/alive/{service}/{instance}``. :func:`run_service` is the process
+entry point: structured logs, uvloop, SIGINT/SIGTERM handlers that ask the service to stop,
+and an exit code (0 clean, 1 failed, 2 misconfigured).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import signal
+import sys
+from collections.abc import Awaitable, Callable
+from typing import Any
+
+import uvloop
+import zenoh
+
+from common import bus, log
+from common.clock import SimClock
+from common.config import ServiceConfig
+from common.contract import keys
+from common.db import Database, create_pool
+from common.errors import ConnectionFailure, UsageError
+
+logger = logging.getLogger("pnav.runtime")
+
+
+class Runtime:
+    """Connections of one service process. Build with :meth:`open`, end with :meth:`close`."""
+
+    def __init__(self, config: ServiceConfig) -> None:
+        self.config = config
+        self.session: zenoh.Session | None = None
+        self.db: Database | None = None
+        self.clock = SimClock()
+        self._token: Any = None
+        self._closers: list[Callable[[], Any]] = []
+
+    @classmethod
+    async def open(cls, config: ServiceConfig, *, with_db: bool = True) -> Runtime:
+        runtime = cls(config)
+        try:
+            # Zenoh's open blocks while it connects: keep the loop free meanwhile.
+            runtime.session = await asyncio.to_thread(bus.open_session, config.zenoh)
+            runtime.clock.attach(runtime.session)
+            if with_db:
+                pool = await create_pool(config.database_url, max_size=config.pool_max)
+                runtime.db = Database(pool, bus.Notifier(runtime.session))
+            runtime._token = runtime.session.liveliness().declare_token(
+                keys.alive_key(config.service, config.instance)
+            )
+        except BaseException:
+            await runtime.close()
+            raise
+        log.event(
+            logger,
+            logging.INFO,
+            "connected",
+            service=config.service,
+            instance=config.instance,
+            zenoh=",".join(config.zenoh.connect),
+        )
+        return runtime
+
+    @property
+    def zenoh(self) -> zenoh.Session:
+        if self.session is None:
+            raise ConnectionFailure("the Zenoh session is not open")
+        return self.session
+
+    @property
+    def database(self) -> Database:
+        if self.db is None:
+            raise ConnectionFailure("this runtime was opened without a database")
+        return self.db
+
+    def on_close(self, closer: Callable[[], Any]) -> None:
+        """Run ``closer()`` (e.g. ``subscriber.undeclare``) first thing in :meth:`close`."""
+        self._closers.append(closer)
+
+    async def close(self) -> None:
+        """Undeclare everything, close the pool, then the session; safe to call twice."""
+        for closer in reversed(self._closers):
+            try:
+                result = closer()
+                if asyncio.iscoroutine(result):
+                    await result
+            except Exception:
+                logger.warning("closing %r failed", closer, exc_info=True)
+        self._closers.clear()
+        self.clock.close()
+        if self._token is not None:
+            try:
+                self._token.undeclare()
+            except Exception:
+                logger.debug("liveliness token undeclare failed", exc_info=True)
+            self._token = None
+        if self.db is not None:
+            self.db.notifier.close()
+            await self.db.close()
+            self.db = None
+        if self.session is not None:
+            session, self.session = self.session, None
+            await asyncio.to_thread(session.close)
+
+
+ServiceMain = Callable[[ServiceConfig, asyncio.Event], Awaitable[None]]
+
+
+def run_service(service: str, main: ServiceMain, argv: list[str] | None = None) -> int:
+    """Run ``main(config, stop_event)`` under uvloop until it returns; return an exit code.
+
+    SIGINT and SIGTERM set ``stop_event``; ``main`` is expected to drain and return.
+    """
+    try:
+        config = ServiceConfig.from_env(service)
+    except UsageError as exc:
+        print(f"{service}: {exc}", file=sys.stderr)
+        return 2
+    log.setup(service, config.log_level)
+
+    async def runner() -> None:
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
+        await main(config, stop)
+
+    try:
+        uvloop.run(runner())
+    except UsageError as exc:
+        logger.error("%s", exc)
+        return 2
+    except ConnectionFailure as exc:
+        logger.error("%s", exc)
+        return 1
+    except Exception:
+        logger.exception("service failed")
+        return 1
+    log.event(logger, logging.INFO, "stopped", service=service)
+    return 0

@@ -1,0 +1,179 @@
+"""The skeleton every scenario service (strategy, planner, controller, decision) runs on.
+
+Lifecycle of a :class:`ScenarioService`:
+
+1. ``Runtime.open``: Postgres pool, Zenoh session, sim clock, liveliness token.
+2. :meth:`ScenarioService.seed`: the subclass adds its meta rules (``engine.add_meta``).
+3. The service subscribes to the change notifications of every table the meta rules watch;
+   each one wakes the engine at once (the callback runs on Zenoh's thread and only
+   schedules ``engine.wake`` on the loop).
+4. The engine runs; every ``stats_period_s`` its statistics are upserted into engine_stats.
+5. On SIGINT/SIGTERM: the engine finishes the activation under way (it is never cut in the
+   middle of a rule), the statistics are written one last time, the connections close.
+
+A service module ends with ``if __name__ == "__main__": sys.exit(MyService.main())``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from abc import ABC, abstractmethod
+from typing import ClassVar
+
+import zenoh
+
+from common import bus, log
+from common.config import ServiceConfig
+from common.contract import keys
+from common.engine import Engine
+from common.runtime import Runtime, run_service
+
+logger = logging.getLogger("pnav.service")
+
+_UPSERT_STATS = """
+INSERT INTO engine_stats AS s (service, instance, rule_type, scenario, executed, activated,
+                               acted, errors, total_time_s, max_time_s, updated_at)
+VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, now())
+ON CONFLICT (service, instance, rule_type) DO UPDATE SET
+    scenario = EXCLUDED.scenario, executed = EXCLUDED.executed,
+    activated = EXCLUDED.activated, acted = EXCLUDED.acted, errors = EXCLUDED.errors,
+    total_time_s = EXCLUDED.total_time_s, max_time_s = EXCLUDED.max_time_s,
+    updated_at = now()
+"""
+
+
+def wake_on_notifications(
+    session: zenoh.Session,
+    engine: Engine,
+    tables: tuple[str, ...],
+    observer: bus.Handler | None = None,
+) -> list[zenoh.Subscriber[None]]:
+    """Subscribe to ``tables``' notifications; each one wakes ``engine`` (call on its loop).
+
+    The Zenoh callback only schedules ``engine.wake`` on the loop, so the wake-up costs one
+    loop iteration. ``observer(key, payload)``, if given, runs first on Zenoh's thread
+    (instrumentation: it must be quick and thread-safe).
+    """
+    loop = asyncio.get_running_loop()
+    wake = engine.wake
+
+    def on_notification(key: str, payload: bytes) -> None:
+        if observer is not None:
+            observer(key, payload)
+        try:
+            loop.call_soon_threadsafe(wake)
+        except RuntimeError:
+            pass  # loop closed: shutting down
+
+    return [
+        bus.subscribe_threaded(session, keys.notify_watch(table), on_notification)
+        for table in tables
+    ]
+
+
+class ScenarioService(ABC):
+    """A service made of scenarios run by one Proactive Engine."""
+
+    service: ClassVar[str] = ""
+
+    def __init__(self, runtime: Runtime) -> None:
+        self.runtime = runtime
+        self.config: ServiceConfig = runtime.config
+        self.engine = Engine(self.config.engine, name=self.config.service)
+
+    @abstractmethod
+    def seed(self) -> None:
+        """Add this service's meta rules to ``self.engine`` with ``engine.add_meta``."""
+
+    def watch(self) -> None:
+        """Wake the engine on every notification of a table the meta rules watch."""
+        for subscriber in wake_on_notifications(
+            self.runtime.zenoh, self.engine, self.engine.watched_tables
+        ):
+            self.runtime.on_close(subscriber.undeclare)
+
+    async def publish_stats(self) -> None:
+        """Upsert this engine's statistics into engine_stats and notify."""
+        rows = [
+            (
+                self.config.service,
+                self.config.instance,
+                s.rule_type,
+                s.scenario,
+                s.executed,
+                s.activated,
+                s.acted,
+                s.errors,
+                s.total_time_s,
+                s.max_time_s,
+            )
+            for s in self.engine.stats()
+        ]
+        if not rows:
+            return
+        db = self.runtime.database
+        async with db.pool.acquire() as conn:
+            await conn.executemany(_UPSERT_STATS, rows)
+        db.notifier.notify(keys.ENGINE_STATS, None, None)
+
+    async def _stats_loop(self) -> None:
+        while True:
+            await asyncio.sleep(self.config.stats_period_s)
+            try:
+                await self.publish_stats()
+            except Exception:
+                logger.warning("could not write engine_stats", exc_info=True)
+
+    async def run(self, stop: asyncio.Event) -> None:
+        """Seed, watch, and run the engine until ``stop`` is set; then drain."""
+        self.seed()
+        self.watch()
+        log.event(
+            logger,
+            logging.INFO,
+            "engine started",
+            rules=len(self.engine),
+            watches=",".join(self.engine.watched_tables),
+            period_ms=self.config.engine.period_s * 1000,
+            max_rules=self.config.engine.max_rules,
+        )
+        engine_task = asyncio.create_task(self.engine.run(), name="engine")
+        stats_task = asyncio.create_task(self._stats_loop(), name="engine-stats")
+        stop_task = asyncio.create_task(stop.wait(), name="stop")
+        try:
+            done, _ = await asyncio.wait(
+                {engine_task, stop_task}, return_when=asyncio.FIRST_COMPLETED
+            )
+            if engine_task in done:
+                engine_task.result()  # the engine only returns early on a bug: raise it
+        finally:
+            self.engine.stop()
+            stop_task.cancel()
+            stats_task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await stats_task
+            if not engine_task.done():
+                # Drain: let the activation under way finish, within a bound.
+                try:
+                    await asyncio.wait_for(engine_task, self.config.engine.period_s * 4 + 5.0)
+                except TimeoutError:
+                    logger.error("engine did not drain in time; cancelled")
+            try:
+                await self.publish_stats()
+            except Exception:
+                logger.warning("final engine_stats write failed", exc_info=True)
+
+    @classmethod
+    async def serve(cls, config: ServiceConfig, stop: asyncio.Event) -> None:
+        runtime = await Runtime.open(config)
+        try:
+            await cls(runtime).run(stop)
+        finally:
+            await runtime.close()
+
+    @classmethod
+    def main(cls, argv: list[str] | None = None) -> int:
+        """Process entry point: ``sys.exit(MyService.main())``."""
+        return run_service(cls.service, cls.serve, argv)

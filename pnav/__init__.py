@@ -1,0 +1,1 @@
+"""The ``pnav`` command line: run the stack, drive it, and measure it."""
