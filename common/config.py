@@ -8,6 +8,7 @@ variable                   meaning                               default
 =========================  ====================================  ===============================
 PNAV_DATABASE_URL          Postgres DSN (postgresql://...)       none: required by services
 PNAV_DB_POOL_MAX           most connections in a service's pool  4
+PNAV_DB_WAIT_S             how long to retry an unreachable DB   10
 PNAV_ZENOH_MODE            client, peer or router                client
 PNAV_ZENOH_CONNECT         comma-separated endpoints to connect  tcp/127.0.0.1:7447
 PNAV_ZENOH_LISTEN          comma-separated endpoints to listen   (none)
@@ -153,6 +154,7 @@ class ServiceConfig:
     zenoh: ZenohSettings = field(default_factory=ZenohSettings)
     engine: EngineSettings = field(default_factory=EngineSettings)
     pool_max: int = 4
+    db_wait_s: float = 10.0
     stats_period_s: float = 2.0
     instance: str = field(default_factory=default_instance)
     log_level: str = "INFO"
@@ -172,6 +174,7 @@ class ServiceConfig:
             zenoh=ZenohSettings.from_env(env),
             engine=EngineSettings.from_env(env),
             pool_max=_int(env, "PNAV_DB_POOL_MAX", cls.pool_max, minimum=1),
+            db_wait_s=_float(env, "PNAV_DB_WAIT_S", cls.db_wait_s),
             stats_period_s=_float(env, "PNAV_STATS_PERIOD_S", cls.stats_period_s, minimum=0.1),
             instance=_get(env, "PNAV_INSTANCE", default_instance()),
             log_level=_get(env, "PNAV_LOG_LEVEL", cls.log_level).upper(),

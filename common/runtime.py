@@ -47,7 +47,9 @@ class Runtime:
             runtime.session = await asyncio.to_thread(bus.open_session, config.zenoh)
             runtime.clock.attach(runtime.session)
             if with_db:
-                pool = await create_pool(config.database_url, max_size=config.pool_max)
+                pool = await create_pool(
+                    config.database_url, max_size=config.pool_max, wait_s=config.db_wait_s
+                )
                 runtime.db = Database(pool, bus.Notifier(runtime.session))
             runtime._token = runtime.session.liveliness().declare_token(
                 keys.alive_key(config.service, config.instance)
