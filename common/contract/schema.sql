@@ -124,11 +124,15 @@ CREATE TABLE strategy (
 
 INSERT INTO strategy (code, planner_scenario, controller_scenarios, params, description) VALUES
     ('GOTO_AVOID', 'turn_then_move', '{avoid_left,avoid_right,safety_stop}',
-     '{"target": "goal"}', 'go to the goal, avoiding obstacles'),
+     '{"target": "goal", "battery_wh_per_m": 0.006, "battery_reserve_wh": 0.05}',
+     'go to the goal, avoiding obstacles'),
     ('GOTO_DIRECT', 'turn_then_move', '{safety_stop}',
-     '{"target": "goal"}', 'go straight to the goal; no avoidance, but safety_stop still holds'),
+     '{"target": "goal", "battery_wh_per_m": 0.006, "battery_reserve_wh": 0.05}',
+     'go straight to the goal; no avoidance, but safety_stop still holds'),
     ('CHARGE', 'turn_then_move', '{avoid_left,avoid_right,safety_stop}',
-     '{"target": "nearest_charger"}', 'go to the nearest charging station and charge'),
+     '{"target": "nearest_charger", "battery_wh_per_m": 0.006, "battery_reserve_wh": 0.05,
+       "resume_at_pct": 100, "resume_margin": 3.0}',
+     'go to the nearest charging station and charge, then resume'),
     ('IDLE', NULL, '{}', '{}', 'stand still');
 
 CREATE TABLE user_command (

@@ -13,18 +13,23 @@ CONTRACT = Path(keys.__file__).with_name("CONTRACT.md")
 
 
 def documented_columns() -> dict[str, set[str]]:
-    """Table name -> column names, read from the '### table' sections' first column."""
+    """Table name -> column names, from the `| column | ...` table under each '### name'."""
     tables: dict[str, set[str]] = {}
-    current: set[str] | None = None
+    section: set[str] | None = None
+    in_columns = False
     for line in CONTRACT.read_text().splitlines():
         heading = re.match(r"^### (\w+)$", line)
         if heading:
-            current = tables.setdefault(heading[1], set())
+            section, in_columns = tables.setdefault(heading[1], set()), False
         elif line.startswith("## "):
-            current = None
-        elif current is not None and line.startswith("| ") and not line.startswith("| column"):
+            section, in_columns = None, False
+        elif section is not None and line.startswith("| column"):
+            in_columns = True
+        elif in_columns and line.startswith("| ") and not line.startswith("|---"):
             cell = line.split("|")[1].strip()
-            current.update(name.strip() for name in cell.split(","))
+            section.update(name.strip() for name in cell.split(","))
+        elif not line.startswith("|"):
+            in_columns = False
     return tables
 
 

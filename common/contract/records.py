@@ -1,0 +1,266 @@
+"""Typed rows of the contract tables, and the queries every scenario service needs.
+
+Services may write their own SQL against CONTRACT.md; these are the common reads and writes
+so that four services do not each re-implement "the newest odometry of robot r". All take an
+asyncpg connection (or pool) and return plain frozen dataclasses.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, TypeAlias
+
+import asyncpg
+import numpy as np
+
+from common.contract import keys
+from common.db import Database
+
+# A connection or a pool: both have fetch/fetchrow/fetchval.
+Executor: TypeAlias = Any
+
+
+@dataclass(frozen=True)
+class Robot:
+    robot_id: str
+    max_linear_mps: float
+    max_angular_rps: float
+    footprint_radius_m: float
+    battery_capacity_wh: float
+
+
+@dataclass(frozen=True)
+class Odometry:
+    id: int
+    robot_id: str
+    stamp: float
+    x: float
+    y: float
+    yaw: float
+    linear_mps: float
+    angular_rps: float
+
+
+@dataclass(frozen=True)
+class LaserScan:
+    id: int
+    robot_id: str
+    stamp: float
+    angle_min: float
+    angle_increment: float
+    range_min: float
+    range_max: float
+    ranges: np.ndarray[Any, np.dtype[np.float32]]
+
+    def angles(self) -> np.ndarray[Any, np.dtype[np.float64]]:
+        """Beam angles relative to the heading, wrapped to (-pi, pi]."""
+        raw = self.angle_min + self.angle_increment * np.arange(len(self.ranges))
+        return np.asarray(np.arctan2(np.sin(raw), np.cos(raw)), dtype=np.float64)
+
+    def sector_min(self, low: float, high: float) -> float:
+        """Closest valid range among beams with angle in [low, high] (rad); inf if none."""
+        angles = self.angles()
+        mask = (angles >= low) & (angles <= high) & (self.ranges >= self.range_min)
+        return float(self.ranges[mask].min()) if mask.any() else math.inf
+
+
+@dataclass(frozen=True)
+class Battery:
+    id: int
+    robot_id: str
+    stamp: float
+    energy_wh: float
+    capacity_wh: float
+    percentage: float
+    charging: bool
+
+
+@dataclass(frozen=True)
+class Strategy:
+    code: str
+    planner_scenario: str | None
+    controller_scenarios: tuple[str, ...]
+    params: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class ActiveStrategy:
+    robot_id: str
+    strategy: Strategy
+    resume_code: str | None
+    source: str
+
+
+@dataclass(frozen=True)
+class Goal:
+    id: int
+    robot_id: str
+    x: float
+    y: float
+    tolerance_m: float
+
+
+@dataclass(frozen=True)
+class ChargingStation:
+    station_id: str
+    x: float
+    y: float
+    radius_m: float
+
+
+async def robots(db: Executor) -> list[Robot]:
+    rows = await db.fetch(
+        "SELECT robot_id, max_linear_mps, max_angular_rps, footprint_radius_m, "
+        "battery_capacity_wh FROM robot ORDER BY robot_id"
+    )
+    return [Robot(**dict(r)) for r in rows]
+
+
+async def newest_odometry(db: Executor, robot_id: str) -> Odometry | None:
+    row = await db.fetchrow(
+        "SELECT id, robot_id, stamp, x, y, yaw, linear_mps, angular_rps FROM odometry "
+        "WHERE robot_id = $1 ORDER BY id DESC LIMIT 1",
+        robot_id,
+    )
+    return Odometry(**dict(row)) if row else None
+
+
+async def newest_scan(db: Executor, robot_id: str) -> LaserScan | None:
+    row = await db.fetchrow(
+        "SELECT id, robot_id, stamp, angle_min, angle_increment, range_min, range_max, ranges "
+        "FROM laser_scan WHERE robot_id = $1 ORDER BY id DESC LIMIT 1",
+        robot_id,
+    )
+    if row is None:
+        return None
+    fields = dict(row)
+    fields["ranges"] = np.asarray(fields["ranges"], dtype=np.float32)
+    return LaserScan(**fields)
+
+
+async def newest_battery(db: Executor, robot_id: str) -> Battery | None:
+    row = await db.fetchrow(
+        "SELECT id, robot_id, stamp, energy_wh, capacity_wh, percentage, charging FROM battery "
+        "WHERE robot_id = $1 ORDER BY id DESC LIMIT 1",
+        robot_id,
+    )
+    return Battery(**dict(row)) if row else None
+
+
+def _strategy(row: asyncpg.Record) -> Strategy:
+    return Strategy(
+        code=row["code"],
+        planner_scenario=row["planner_scenario"],
+        controller_scenarios=tuple(row["controller_scenarios"]),
+        params=dict(row["params"] or {}),
+    )
+
+
+async def strategies(db: Executor) -> dict[str, Strategy]:
+    rows = await db.fetch(
+        "SELECT code, planner_scenario, controller_scenarios, params FROM strategy"
+    )
+    return {r["code"]: _strategy(r) for r in rows}
+
+
+async def active_strategies(db: Executor) -> dict[str, ActiveStrategy]:
+    """Robot id -> the strategy it follows now (robots with no row are absent)."""
+    rows = await db.fetch(
+        "SELECT a.robot_id, a.resume_code, a.source, s.code, s.planner_scenario, "
+        "s.controller_scenarios, s.params FROM active_strategy a "
+        "JOIN strategy s ON s.code = a.strategy_code"
+    )
+    return {
+        r["robot_id"]: ActiveStrategy(r["robot_id"], _strategy(r), r["resume_code"], r["source"])
+        for r in rows
+    }
+
+
+async def active_goal(db: Executor, robot_id: str) -> Goal | None:
+    row = await db.fetchrow(
+        "SELECT id, robot_id, x, y, tolerance_m FROM goal "
+        "WHERE robot_id = $1 AND status = 'active'",
+        robot_id,
+    )
+    return Goal(**dict(row)) if row else None
+
+
+async def charging_stations(db: Executor) -> list[ChargingStation]:
+    rows = await db.fetch(
+        "SELECT station_id, x, y, radius_m FROM charging_station ORDER BY station_id"
+    )
+    return [ChargingStation(**dict(r)) for r in rows]
+
+
+_RECOMMEND = """
+INSERT INTO command_recommendation (robot_id, kind, source, priority, linear_mps, angular_rps,
+    system_command, stamp, expires_stamp, inputs, reason)
+VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)
+RETURNING id
+"""
+
+
+async def recommend_velocity(
+    db: Database,
+    robot_id: str,
+    *,
+    source: str,
+    priority: int,
+    linear: float,
+    angular: float,
+    stamp: float,
+    ttl_s: float,
+    reason: str,
+    inputs: dict[str, Any] | None = None,
+) -> int:
+    """Write a robot recommendation valid until ``stamp + ttl_s`` (sim time) and notify."""
+    value = await db.write(
+        keys.COMMAND_RECOMMENDATION,
+        robot_id,
+        _RECOMMEND,
+        robot_id,
+        "robot",
+        source,
+        priority,
+        float(linear),
+        float(angular),
+        None,
+        stamp,
+        stamp + ttl_s,
+        inputs or {},
+        reason,
+    )
+    return int(value)
+
+
+async def recommend_system(
+    db: Database,
+    robot_id: str,
+    *,
+    source: str,
+    priority: int,
+    command: str,
+    stamp: float,
+    ttl_s: float,
+    reason: str,
+    inputs: dict[str, Any] | None = None,
+) -> int:
+    """Write a system recommendation (e.g. CMD_BATTSAVE) and notify."""
+    value = await db.write(
+        keys.COMMAND_RECOMMENDATION,
+        robot_id,
+        _RECOMMEND,
+        robot_id,
+        "system",
+        source,
+        priority,
+        None,
+        None,
+        command,
+        stamp,
+        stamp + ttl_s,
+        inputs or {},
+        reason,
+    )
+    return int(value)
