@@ -14,11 +14,14 @@ import socket
 import tempfile
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from common.config import ZenohSettings
+from common.config import ServiceConfig, ZenohSettings
+
+if TYPE_CHECKING:
+    from common.service import ScenarioService
 
 
 def free_port() -> int:
@@ -96,3 +99,36 @@ class EmbeddedPostgres:
                     break
                 except OSError:
                     time.sleep(0.1)
+
+
+@contextlib.asynccontextmanager
+async def running_service(
+    service_cls: type[ScenarioService], config: ServiceConfig, settle_s: float = 0.3
+) -> AsyncIterator[ScenarioService]:
+    """Run a scenario service on the current loop, as its process would; stop and drain it
+    on exit. ``settle_s`` lets its subscriptions reach the router before the test writes."""
+    import asyncio
+
+    from common.runtime import Runtime
+
+    runtime = await Runtime.open(config)
+    service = service_cls(runtime)
+    stop = asyncio.Event()
+    task = asyncio.create_task(service.run(stop))
+    try:
+        await asyncio.sleep(settle_s)
+        yield service
+    finally:
+        stop.set()
+        try:
+            await asyncio.wait_for(task, 15)
+        finally:
+            await runtime.close()
+
+
+def publish_clock(session: Any, stamp: float, rate: float = 1.0) -> None:
+    """Publish sim time as the sim does (for tests that play the sim's part)."""
+    from common import bus
+    from common.contract import keys
+
+    session.put(keys.SIM_CLOCK, bus.pack({"stamp": stamp, "rate": rate}))
