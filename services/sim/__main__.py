@@ -1,0 +1,186 @@
+"""``python -m services.sim``: the simulator service, or its benchmark with ``--bench``.
+
+    python -m services.sim --world worlds/warehouse.yaml [--gui] [--rate R|max] [--robots N]
+    python -m services.sim --bench --robots 10 --seconds 60 [--world worlds/warehouse.yaml]
+
+Options fall back to environment variables (for containers): PNAV_SIM_WORLD, PNAV_SIM_RATE,
+PNAV_SIM_ROBOTS, PNAV_SIM_BATTERY, PNAV_SIM_SEED, PNAV_SIM_SCAN_HZ; Zenoh comes from the
+PNAV_ZENOH_* variables (common.config.ZenohSettings). SIGINT and SIGTERM stop it cleanly.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import sys
+import threading
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+from types import FrameType
+
+from common.bus import open_session
+from common.config import ZenohSettings, default_instance
+from common.errors import ConfigError, ConnectionFailure, UsageError
+from common.log import event, setup
+from services.sim.bench import report, run_bench
+from services.sim.clock import parse_rate
+from services.sim.lidar import LidarParams
+from services.sim.sim import SimConfig
+from services.sim.world import World, load_world
+
+log = logging.getLogger("services.sim")
+
+WORLDS_DIR = Path(__file__).resolve().parents[2] / "worlds"
+BENCH_WORLD = WORLDS_DIR / "warehouse.yaml"
+
+
+def _env(name: str) -> str | None:
+    value = os.environ.get(name, "").strip()
+    return value or None
+
+
+def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(
+        prog="python -m services.sim", description="proactive-nav pybullet simulator"
+    )
+    ap.add_argument(
+        "--world",
+        default=_env("PNAV_SIM_WORLD"),
+        help="world file (or bare map_server YAML) [PNAV_SIM_WORLD]",
+    )
+    ap.add_argument("--gui", action="store_true", help="open the pybullet GUI (default headless)")
+    ap.add_argument(
+        "--rate",
+        default=_env("PNAV_SIM_RATE") or "1",
+        help="sim seconds per wall second, or 'max' [PNAV_SIM_RATE, default 1]",
+    )
+    ap.add_argument(
+        "--robots",
+        type=int,
+        default=_int_env("PNAV_SIM_ROBOTS"),
+        help="run exactly N robots: the world's first N, then extra ones placed on "
+        "free spots [PNAV_SIM_ROBOTS]",
+    )
+    ap.add_argument(
+        "--battery",
+        type=float,
+        default=_float_env("PNAV_SIM_BATTERY"),
+        help="start charge of every robot, percent (overrides the world) [PNAV_SIM_BATTERY]",
+    )
+    ap.add_argument(
+        "--seed",
+        type=int,
+        default=_int_env("PNAV_SIM_SEED") or 0,
+        help="seed of the sensor noise [PNAV_SIM_SEED, default 0]",
+    )
+    ap.add_argument(
+        "--scan-hz",
+        type=float,
+        default=_float_env("PNAV_SIM_SCAN_HZ") or 5.0,
+        help="lidar rate in sim time [PNAV_SIM_SCAN_HZ, default 5]",
+    )
+    ap.add_argument(
+        "--physics-hz", type=float, default=240.0, help="physics steps per sim second (default 240)"
+    )
+    ap.add_argument(
+        "--bench",
+        action="store_true",
+        help="benchmark: run flat out without Zenoh and print sim s per wall s",
+    )
+    ap.add_argument(
+        "--seconds", type=float, default=60.0, help="sim seconds to run in --bench (default 60)"
+    )
+    return ap.parse_args(argv)
+
+
+def _int_env(name: str) -> int | None:
+    raw = _env(name)
+    if raw is None:
+        return None
+    try:
+        return int(raw)
+    except ValueError:
+        raise ConfigError(f"{name}={raw!r} is not a whole number") from None
+
+
+def _float_env(name: str) -> float | None:
+    raw = _env(name)
+    if raw is None:
+        return None
+    try:
+        return float(raw)
+    except ValueError:
+        raise ConfigError(f"{name}={raw!r} is not a number") from None
+
+
+def build(args: argparse.Namespace) -> tuple[World, SimConfig, float]:
+    """The world, config and rate the arguments ask for; UsageError if they are wrong."""
+    path = args.world or (str(BENCH_WORLD) if args.bench else None)
+    if not path:
+        raise ConfigError("no world: pass --world worlds/<name>.yaml or set PNAV_SIM_WORLD")
+    world = load_world(path)
+    if args.robots is not None:
+        world = world.with_robot_count(args.robots)
+    if args.battery is not None and not 0.0 <= args.battery <= 100.0:
+        raise ConfigError(f"--battery {args.battery} must be a percentage within [0, 100]")
+    if not args.physics_hz > 0 or not args.scan_hz > 0:
+        raise ConfigError("--physics-hz and --scan-hz must be positive")
+    config = SimConfig(
+        physics_hz=args.physics_hz,
+        scan_hz=args.scan_hz,
+        battery_percent=args.battery,
+        seed=args.seed,
+        gui=args.gui,
+        lidar=LidarParams(),
+    )
+    return world, config, parse_rate(args.rate)
+
+
+def serve(world: World, config: SimConfig, rate: float) -> int:
+    from services.sim.node import SimNode
+
+    stop = threading.Event()
+
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
+        event(log, logging.INFO, "stopping", signal=signal.Signals(signum).name)
+        stop.set()
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    settings = ZenohSettings.from_env()
+    session = open_session(settings)
+    try:
+        instance = _env("PNAV_INSTANCE") or default_instance()
+        node = SimNode(world, config, session, rate=rate, instance=instance)
+        try:
+            node.run(stop)
+        finally:
+            node.close()
+    finally:
+        session.close()
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    setup("sim")
+    try:
+        args = parse_args(argv)
+        world, config, rate = build(args)
+        if args.bench:
+            print(report(run_bench(world, replace(config, gui=False), args.seconds)), flush=True)
+            return 0
+        return serve(world, config, rate)
+    except UsageError as exc:
+        event(log, logging.ERROR, "cannot start the sim", problem=str(exc))
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except ConnectionFailure as exc:
+        event(log, logging.ERROR, "cannot reach Zenoh", problem=str(exc))
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,183 @@
+"""The sim on Zenoh: publishes sensors, clock and world, obeys cmd_vel, answers world queries.
+
+The loop runs on one thread (the main thread under ``python -m services.sim``, a worker thread
+in tests). Zenoh delivers cmd_vel and world queries on its own threads; they only hand a
+command to :meth:`Simulation.set_command` (thread-safe) or reply with bytes built at start.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Any
+
+import zenoh
+
+from common.bus import pack, subscribe_threaded, unpack
+from common.contract import keys
+from common.log import event
+from services.sim import messages
+from services.sim.clock import Pacer
+from services.sim.sim import SimConfig, Simulation
+from services.sim.world import World
+
+log = logging.getLogger(__name__)
+
+SERVICE = "sim"
+# the clock goes out at this wall rate, above the contract's 20 Hz floor
+CLOCK_HZ = 30.0
+# and the world every this many wall seconds, besides the queryable
+WORLD_PERIOD_S = 1.0
+# at most one log line per robot per this many seconds about bad cmd_vel
+BAD_COMMAND_LOG_PERIOD_S = 1.0
+
+
+class SimNode:
+    def __init__(
+        self,
+        world: World,
+        config: SimConfig,
+        session: zenoh.Session,
+        *,
+        rate: float = 1.0,
+        instance: str = "sim",
+    ) -> None:
+        self.session = session
+        self.rate = rate
+        self._publishers: dict[tuple[str, str], zenoh.Publisher] = {}
+        for spec in world.robots:
+            for topic in keys.SENSOR_TOPICS:
+                # a lost collision event cannot be recomputed, so it waits for room; sensor
+                # streams drop under congestion instead of stalling the sim
+                congestion = (
+                    zenoh.CongestionControl.BLOCK
+                    if topic == keys.COLLISION
+                    else zenoh.CongestionControl.DROP
+                )
+                self._publishers[(spec.robot_id, topic)] = session.declare_publisher(
+                    keys.robot_key(spec.robot_id, topic), congestion_control=congestion
+                )
+        self._clock_pub = session.declare_publisher(keys.SIM_CLOCK, express=True)
+        self._world_pub = session.declare_publisher(
+            keys.SIM_WORLD, congestion_control=zenoh.CongestionControl.BLOCK
+        )
+        self.sim = Simulation(world, config, self._publish)
+        self._world_payload = pack(world.message())
+        self._bad_logged: dict[str, float] = {}
+        self._subscriber = subscribe_threaded(
+            session, keys.robot_watch(keys.CMD_VEL), self._on_cmd_vel
+        )
+        self._queryable = session.declare_queryable(keys.SIM_WORLD, self._on_world_query)
+        self._token = session.liveliness().declare_token(keys.alive_key(SERVICE, instance))
+        self.commands_received = 0
+
+    # -- Zenoh callbacks (Zenoh's threads) --------------------------------------------------
+    def _on_cmd_vel(self, key: str, payload: bytes) -> None:
+        try:
+            robot, _topic = keys.parse_robot_key(key)
+        except ValueError:
+            return
+        try:
+            cmd = messages.parse_cmd_vel(unpack(payload))
+        except ValueError as exc:
+            self._complain(robot, "malformed cmd_vel ignored", str(exc))
+            return
+        if not self.sim.set_command(robot, cmd.linear, cmd.angular):
+            self._complain(robot, "cmd_vel for an unknown robot ignored", robot)
+            return
+        self.commands_received += 1
+
+    def _complain(self, robot: str, msg: str, problem: str) -> None:
+        now = time.monotonic()
+        if now - self._bad_logged.get(robot, -1e9) >= BAD_COMMAND_LOG_PERIOD_S:
+            self._bad_logged[robot] = now
+            event(log, logging.WARNING, msg, robot=robot, problem=problem)
+
+    def _on_world_query(self, query: zenoh.Query) -> None:
+        query.reply(keys.SIM_WORLD, self._world_payload)
+
+    # -- publishing --------------------------------------------------------------------------
+    def _publish(self, robot: str, topic: str, message: dict[str, Any]) -> None:
+        self._publishers[(robot, topic)].put(pack(message))
+
+    def publish_clock(self) -> None:
+        self._clock_pub.put(pack(messages.clock(self.sim.time, self.rate)))
+
+    def publish_world(self) -> None:
+        self._world_pub.put(self._world_payload)
+
+    # -- the loop ----------------------------------------------------------------------------
+    def run(self, stop: threading.Event, *, until_sim_s: float | None = None) -> None:
+        """Step the sim at ``rate`` until ``stop`` is set (or sim time reaches ``until_sim_s``),
+        publishing the clock at CLOCK_HZ and the world every WORLD_PERIOD_S of wall time."""
+        sim = self.sim
+        pacer = Pacer(self.rate, sim.dt)
+        clock_period = 1.0 / CLOCK_HZ
+        self.publish_world()
+        next_world = time.monotonic() + WORLD_PERIOD_S
+        next_clock = 0.0
+        event(
+            log,
+            logging.INFO,
+            "sim running",
+            world=sim.world.name,
+            rate=self.rate or "max",
+            robots=[r.robot_id for r in sim.robots],
+            physics_hz=sim.config.physics_hz,
+        )
+        while not stop.is_set():
+            if until_sim_s is not None and sim.time >= until_sim_s:
+                break
+            now = time.monotonic()
+            if now >= next_clock:
+                self.publish_clock()
+                next_clock = now + clock_period
+            if now >= next_world:
+                self.publish_world()
+                next_world = now + WORLD_PERIOD_S
+            owed = pacer.steps_due(sim.steps)
+            if owed == 0:
+                stop.wait(min(pacer.wall_until_next(sim.steps), max(0.0, next_clock - now)))
+                continue
+            for k in range(owed):
+                sim.step()
+                # come back in time for the clock however many steps are owed
+                if k & 15 == 15 and time.monotonic() >= next_clock:
+                    break
+                if until_sim_s is not None and sim.time >= until_sim_s:
+                    break
+        self.publish_clock()
+        if pacer.slips:
+            event(
+                log,
+                logging.WARNING,
+                "sim could not keep up with the rate asked",
+                rate=self.rate,
+                slips=pacer.slips,
+            )
+        event(
+            log,
+            logging.INFO,
+            "sim stopped",
+            sim_time=round(sim.time, 3),
+            commands=self.commands_received,
+        )
+
+    def close(self) -> None:
+        """Undeclare everything this node declared and free pybullet (not the session)."""
+        entities: list[Any] = [
+            self._subscriber,
+            self._queryable,
+            self._token,
+            self._clock_pub,
+            self._world_pub,
+            *self._publishers.values(),
+        ]
+        for entity in entities:
+            try:
+                entity.undeclare()
+            except Exception:  # the session is already closed
+                log.debug("undeclare failed", exc_info=True)
+        self._publishers.clear()
+        self.sim.close()

@@ -1,0 +1,196 @@
+"""The simulation proper: fixed physics steps, robots, batteries and sensors on sim time.
+
+:class:`Simulation` knows nothing of Zenoh or wall time. Each :meth:`Simulation.step` first
+takes the sensor readings due at the current sim time (through ``sink``), then advances the
+world by one physics step. The node (node.py) paces steps against the wall clock and turns
+sink calls into Zenoh publications; the benchmark (bench.py) runs steps flat out.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from common.contract import keys
+from services.sim import messages
+from services.sim.battery import Battery, BatteryModel
+from services.sim.clock import Every
+from services.sim.lidar import Lidar, LidarParams
+from services.sim.physics import Scene
+from services.sim.robot import RobotState, clamp_command, integrate
+from services.sim.world import World
+
+# (robot_id, topic, message): topic is one of common.contract.keys.SENSOR_TOPICS
+Sink = Callable[[str, str, dict[str, Any]], None]
+
+# the sensor topics, as the contract names them
+SCAN, ODOM, BATTERY, COLLISION = keys.SCAN, keys.ODOM, keys.BATTERY_MSG, keys.COLLISION
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    physics_hz: float = 240.0
+    scan_hz: float = 5.0
+    odom_hz: float = 30.0
+    battery_hz: float = 1.0
+    lidar: LidarParams = field(default_factory=LidarParams)
+    battery: BatteryModel = field(default_factory=BatteryModel)
+    battery_percent: float | None = None  # start charge of every robot; None: the world's
+    seed: int = 0
+    gui: bool = False
+
+
+class Simulation:
+    def __init__(self, world: World, config: SimConfig, sink: Sink) -> None:
+        self.world = world
+        self.config = config
+        self.sink = sink
+        self.dt = 1.0 / config.physics_hz
+        self.steps = 0
+        self.rng = np.random.default_rng(config.seed)
+        params = world.params
+        self.robots = [RobotState(r.robot_id, r.x, r.y, r.yaw, params) for r in world.robots]
+        self.index = {r.robot_id: i for i, r in enumerate(self.robots)}
+        model = BatteryModel(
+            capacity_wh=params.battery_capacity_wh,
+            idle_w=config.battery.idle_w,
+            k_linear_w_per_mps=config.battery.k_linear_w_per_mps,
+            k_angular_w_per_rps=config.battery.k_angular_w_per_rps,
+        )
+        self.batteries = [
+            Battery.at_percent(model, _start_percent(config.battery_percent, r.battery_percent))
+            for r in world.robots
+        ]
+        self.lidar = Lidar(config.lidar, params.lidar_height_m, params.footprint_radius_m)
+        self.scene = Scene(world, gui=config.gui)
+        self._touching: list[frozenset[str]] = [frozenset() for _ in self.robots]
+        self._seq: dict[tuple[int, str], int] = {}
+        self._schedule = {
+            SCAN: Every(1.0 / config.scan_hz, self.dt),
+            ODOM: Every(1.0 / config.odom_hz, self.dt),
+            BATTERY: Every(1.0 / config.battery_hz, self.dt),
+        }
+        # commands arrive on Zenoh's threads; the loop takes them under this lock
+        self._lock = threading.Lock()
+        self._pending: dict[int, tuple[float, float]] = {}
+        self.counts: dict[str, int] = {SCAN: 0, ODOM: 0, BATTERY: 0, COLLISION: 0}
+        for i in range(len(self.robots)):
+            self._touching[i] = self.scene.touching(i, self.robots[i].x, self.robots[i].y)
+
+    @property
+    def time(self) -> float:
+        """Sim time, s: whole steps times the step, so it never drifts."""
+        return self.steps * self.dt
+
+    def set_command(self, robot_id: str, linear: float, angular: float) -> bool:
+        """Obey (linear, angular) from the next step on, until another command; thread-safe.
+        False if there is no such robot."""
+        i = self.index.get(robot_id)
+        if i is None:
+            return False
+        with self._lock:
+            self._pending[i] = (linear, angular)
+        return True
+
+    def step(self) -> None:
+        """Sense what is due now, then advance the world by one physics step."""
+        self._sense()
+        if self._pending:
+            with self._lock:
+                pending, self._pending = self._pending, {}
+            for i, (v, w) in pending.items():
+                self.robots[i].cmd_linear, self.robots[i].cmd_angular = v, w
+        self.steps += 1
+        for i, robot in enumerate(self.robots):
+            self._advance(i, robot)
+
+    def run_for(self, sim_seconds: float) -> None:
+        for _ in range(round(sim_seconds / self.dt)):
+            self.step()
+
+    def close(self) -> None:
+        self.scene.close()
+
+    # -- internals -------------------------------------------------------------------------
+    def _advance(self, i: int, robot: RobotState) -> None:
+        bat = self.batteries[i]
+        v, w = clamp_command(robot.params, robot.cmd_linear, robot.cmd_angular)
+        if bat.empty:
+            v = w = 0.0  # a flat battery moves nothing
+        if v == 0.0 and w == 0.0:
+            robot.linear = robot.angular = 0.0
+            touching = self.scene.touching(i, robot.x, robot.y)
+        else:
+            old = (robot.x, robot.y, robot.yaw)
+            moved = self.scene.move(i, old, integrate(*old, v, w, self.dt))
+            robot.x, robot.y, robot.yaw = moved.x, moved.y, moved.yaw
+            robot.linear, robot.angular = v * moved.fraction, w
+            touching = moved.touching
+        bat.step(self.dt, robot.linear, robot.angular, self._charge_power(robot))
+        for other in sorted(touching - self._touching[i]):
+            msg = messages.collision(
+                self.time, self._next_seq(i, COLLISION), other, robot.x, robot.y
+            )
+            self._emit(i, COLLISION, msg)
+        self._touching[i] = touching
+
+    def _charge_power(self, robot: RobotState) -> float | None:
+        best: float | None = None
+        for st in self.world.stations:
+            if math.hypot(robot.x - st.x, robot.y - st.y) <= st.radius_m:
+                best = st.charge_power_w if best is None else max(best, st.charge_power_w)
+        return best
+
+    def _sense(self) -> None:
+        now, step = self.time, self.steps
+        if self._schedule[ODOM].due(step):
+            for i, robot in enumerate(self.robots):
+                self._emit(i, ODOM, messages.odom(now, self._next_seq(i, ODOM), robot))
+        if self._schedule[SCAN].due(step):
+            self._scan(now)
+        if self._schedule[BATTERY].due(step):
+            for i, bat in enumerate(self.batteries):
+                self._emit(i, BATTERY, messages.battery(now, self._next_seq(i, BATTERY), bat))
+
+    def _scan(self, now: float) -> None:
+        lidar, n = self.lidar, self.lidar.params.beams
+        poses = np.array([(r.x, r.y, r.yaw) for r in self.robots], dtype=np.float64)
+        # every robot's far segments in one batch...
+        far_hit, far_fraction = self.scene.cast(*lidar.far_rays(poses))
+        # ...and the near segments only of robots with something that close
+        close = [
+            i
+            for i, r in enumerate(self.robots)
+            if self.scene.anything_within(i, r.x, r.y, lidar.far_offset)
+        ]
+        near: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        if close:
+            near_hit, near_fraction = self.scene.cast(*lidar.near_rays(poses[close]))
+            for k, i in enumerate(close):
+                beams = slice(k * n, (k + 1) * n)
+                near[i] = (near_hit[beams], near_fraction[beams])
+        for i in range(len(self.robots)):
+            beams = slice(i * n, (i + 1) * n)
+            ranges = lidar.ranges((far_hit[beams], far_fraction[beams]), near.get(i), self.rng)
+            msg = messages.scan(now, self._next_seq(i, SCAN), lidar.params, ranges)
+            self._emit(i, SCAN, msg)
+
+    def _next_seq(self, i: int, topic: str) -> int:
+        seq = self._seq.get((i, topic), 0)
+        self._seq[(i, topic)] = seq + 1
+        return seq
+
+    def _emit(self, i: int, topic: str, message: dict[str, Any]) -> None:
+        self.counts[topic] += 1
+        self.sink(self.robots[i].robot_id, topic, message)
+
+
+def _start_percent(override: float | None, from_world: float | None) -> float:
+    if override is not None:
+        return override
+    return 100.0 if from_world is None else from_world

@@ -1,0 +1,328 @@
+"""The sim on a real Zenoh router: every payload as CONTRACT.md says, cmd_vel obeyed, the
+clock advancing, the world queryable, --rate max faster with the same scans per sim second,
+and the CLI (env settings, SIGTERM) as a subprocess."""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import pytest
+import zenoh
+
+from common.bus import open_session, pack, unpack
+from common.config import ZenohSettings
+from common.contract import keys
+from services.sim.node import SimNode
+from services.sim.sim import SimConfig
+from services.sim.world import load_world
+
+pytestmark = pytest.mark.timeout(60)
+
+ROOT = Path(__file__).resolve().parents[3]
+OPEN_ROOM = ROOT / "worlds" / "open_room.yaml"  # r1 at (1, 1) facing +x, walls at 0 and 5 m
+
+# CONTRACT.md, "Robot and sim": field -> type
+SCAN = {
+    "stamp": float,
+    "seq": int,
+    "angle_min": float,
+    "angle_increment": float,
+    "range_min": float,
+    "range_max": float,
+    "ranges": list,
+}
+ODOM = {
+    "stamp": float,
+    "seq": int,
+    "x": float,
+    "y": float,
+    "yaw": float,
+    "linear": float,
+    "angular": float,
+}
+BATTERY = {
+    "stamp": float,
+    "seq": int,
+    "energy_wh": float,
+    "capacity_wh": float,
+    "percentage": float,
+    "charging": bool,
+    "power_w": float,
+}
+COLLISION = {"stamp": float, "seq": int, "other": str, "x": float, "y": float}
+CLOCK = {"stamp": float, "rate": float}
+WORLD = {"name": str, "map": dict, "robots": list, "charging_stations": list}
+WORLD_MAP = {
+    "resolution": float,
+    "origin": list,
+    "width": int,
+    "height": int,
+    "grid": bytes,
+    "source": str,
+}
+WORLD_ROBOT = {
+    "robot_id": str,
+    "x": float,
+    "y": float,
+    "yaw": float,
+    "model": str,
+    "wheel_radius_m": float,
+    "wheel_separation_m": float,
+    "max_linear_mps": float,
+    "max_angular_rps": float,
+    "footprint_radius_m": float,
+    "battery_capacity_wh": float,
+}
+WORLD_STATION = {
+    "station_id": str,
+    "x": float,
+    "y": float,
+    "radius_m": float,
+    "charge_power_w": float,
+}
+
+
+def check(payload: Any, schema: dict[str, type]) -> None:
+    assert isinstance(payload, dict)
+    assert set(payload) == set(schema), f"fields {sorted(payload)} != {sorted(schema)}"
+    for field, kind in schema.items():
+        value = payload[field]
+        # bool is an int in Python: an int field must not be a bool, and vice versa
+        assert isinstance(value, kind) and (kind is bool or not isinstance(value, bool)), (
+            f"{field}={value!r} is not {kind.__name__}"
+        )
+
+
+class Listener:
+    """Every sample under pnav/** on its own session, decoded, with its wall arrival time."""
+
+    def __init__(self, settings: ZenohSettings) -> None:
+        self.session = open_session(settings)
+        self.lock = threading.Lock()
+        self.samples: list[tuple[str, Any, float]] = []
+        self._sub = self.session.declare_subscriber("pnav/**", self._on)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        body = unpack(sample.payload.to_bytes())
+        with self.lock:
+            self.samples.append((str(sample.key_expr), body, time.monotonic()))
+
+    def of(self, key: str) -> list[Any]:
+        with self.lock:
+            return [body for k, body, _ in self.samples if k == key]
+
+    def wait(self, what: Callable[[], Any], timeout: float = 10.0) -> Any:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            result = what()
+            if result:
+                return result
+            time.sleep(0.01)
+        raise AssertionError(f"timed out waiting for {what}")
+
+    def send(self, robot: str, body: Any) -> None:
+        self.session.put(keys.robot_key(robot, keys.CMD_VEL), body)
+
+    def close(self) -> None:
+        self._sub.undeclare()
+        self.session.close()
+
+
+@pytest.fixture
+def listener(zenoh_settings: ZenohSettings) -> Iterator[Listener]:
+    bus = Listener(zenoh_settings)
+    try:
+        yield bus
+    finally:
+        bus.close()
+
+
+@contextmanager
+def running_sim(settings: ZenohSettings, rate: float, **config: Any) -> Iterator[SimNode]:
+    session = open_session(settings)
+    node = SimNode(load_world(OPEN_ROOM), SimConfig(**config), session, rate=rate)
+    stop = threading.Event()
+    thread = threading.Thread(target=node.run, args=(stop,), daemon=True)
+    thread.start()
+    try:
+        yield node
+    finally:
+        stop.set()
+        thread.join(10)
+        node.close()
+        session.close()
+    assert not thread.is_alive()
+
+
+def cmd(linear: float, angular: float, command_id: int | None = 1) -> bytes:
+    return pack({"stamp": 0.0, "linear": linear, "angular": angular, "command_id": command_id})
+
+
+def test_payloads_follow_the_contract_and_cmd_vel_moves_the_robot(
+    zenoh_settings: ZenohSettings, listener: Listener
+) -> None:
+    odom_key, scan_key = keys.robot_key("r1", keys.ODOM), keys.robot_key("r1", keys.SCAN)
+    battery_key = keys.robot_key("r1", keys.BATTERY_MSG)
+    with running_sim(zenoh_settings, rate=4.0):
+        listener.wait(lambda: listener.of(scan_key) and listener.of(battery_key))
+        start = listener.wait(lambda: listener.of(odom_key))[-1]
+
+        listener.send("r1", cmd(0.2, 0.0))
+        moved = listener.wait(lambda: [m for m in listener.of(odom_key) if m["x"] > 1.3])[0]
+        assert moved["y"] == pytest.approx(1.0) and moved["linear"] == pytest.approx(0.2)
+
+        # malformed commands are ignored: the robot keeps the last good one
+        for bad in (b"\xc1 not msgpack", pack({"linear": "fast", "angular": 0.0, "stamp": 0.0})):
+            listener.send("r1", bad)
+        listener.send("r1", pack([0.0, 0.0]))
+        listener.send("ghost", cmd(0.0, 0.0))
+        x_then = listener.of(odom_key)[-1]["x"]
+        listener.wait(lambda: listener.of(odom_key)[-1]["x"] > x_then + 0.1)
+
+        # positive angular turns counter-clockwise: yaw increases
+        listener.send("r1", cmd(0.0, 1.0, None))
+        yaw0 = listener.wait(lambda: [m for m in listener.of(odom_key) if m["linear"] == 0.0])
+        turned = listener.wait(
+            lambda: [m for m in listener.of(odom_key) if m["angular"] == 1.0 and m["yaw"] > 0.5]
+        )
+        assert yaw0 and turned[0]["x"] == pytest.approx(turned[-1]["x"])
+        listener.send("r1", cmd(0.0, 0.0))
+        replies = list(listener.session.get(keys.SIM_WORLD, timeout=5.0))
+
+    assert start["x"] == pytest.approx(1.0) and start["yaw"] == pytest.approx(0.0)
+    for key, schema in ((scan_key, SCAN), (odom_key, ODOM), (battery_key, BATTERY)):
+        msgs = listener.of(key)
+        for msg in msgs:
+            check(msg, schema)
+        assert [m["seq"] for m in msgs] == list(range(len(msgs))), key
+    scan = listener.of(scan_key)[0]
+    assert len(scan["ranges"]) == 360
+    assert all(isinstance(r, float) for r in scan["ranges"])
+    assert any(math.isinf(r) for r in scan["ranges"]) and any(r < 3.5 for r in scan["ranges"])
+    assert (scan["range_min"], scan["range_max"]) == (0.12, 3.5)
+    assert scan["angle_increment"] == pytest.approx(2 * math.pi / 360)
+
+    # the clock: >= 20 Hz of wall time, sim time advancing at the rate asked
+    clock = [(body, t) for k, body, t in listener.samples if k == keys.SIM_CLOCK]
+    for body, _ in clock:
+        check(body, CLOCK)
+        assert body["rate"] == 4.0
+    stamps = [body["stamp"] for body, _ in clock]
+    assert stamps == sorted(stamps) and stamps[-1] > stamps[0]
+    wall = clock[-1][1] - clock[0][1]
+    assert len(clock) - 1 >= 20 * wall * 0.9
+    assert (stamps[-1] - stamps[0]) / wall == pytest.approx(4.0, rel=0.25)
+
+    # the world: published at start, and answered to a query with the same payload
+    (world, *_) = listener.of(keys.SIM_WORLD)
+    assert len(replies) == 1 and unpack(replies[0].ok.payload.to_bytes()) == world
+    check(world, WORLD)
+    check(world["map"], WORLD_MAP)
+    assert len(world["map"]["grid"]) == world["map"]["width"] * world["map"]["height"]
+    assert set(world["map"]["grid"]) <= {0, 100, 255}
+    assert [r["robot_id"] for r in world["robots"]] == ["r1"]
+    for robot in world["robots"]:
+        check(robot, WORLD_ROBOT)
+    for station in world["charging_stations"]:
+        check(station, WORLD_STATION)
+
+
+def test_collision_event_on_the_wire(zenoh_settings: ZenohSettings, listener: Listener) -> None:
+    key = keys.robot_key("r1", keys.COLLISION)
+    with running_sim(zenoh_settings, rate=0.0):
+        listener.send("r1", cmd(0.22, 0.0))
+        (event,) = listener.wait(lambda: listener.of(key), timeout=20.0)
+    check(event, COLLISION)
+    assert event["other"] == "wall" and event["seq"] == 0
+    assert event["x"] == pytest.approx(5.0 - 0.105, abs=0.002)
+    # the robot set off between the last odom at rest and the first one moving
+    odom = listener.of(keys.robot_key("r1", keys.ODOM))
+    moving = next(i for i, m in enumerate(odom) if m["linear"] > 0.0)
+    at_rest, set_off = odom[moving - 1]["stamp"], odom[moving]["stamp"]
+    drive = (5.0 - 0.105 - 1.0) / 0.22
+    assert at_rest + drive - 0.01 <= event["stamp"] <= set_off + drive + 0.01
+
+
+def scans_per_sim_second(listener: Listener) -> tuple[float, float]:
+    """(scans received per sim second, sim seconds per wall second) of one run."""
+    scans = listener.of(keys.robot_key("r1", keys.SCAN))
+    clock = [(b["stamp"], t) for k, b, t in listener.samples if k == keys.SIM_CLOCK]
+    assert len(scans) >= 4 and len(clock) >= 2
+    span = scans[-1]["stamp"] - scans[0]["stamp"]
+    speed = (clock[-1][0] - clock[0][0]) / (clock[-1][1] - clock[0][1])
+    return (len(scans) - 1) / span, speed
+
+
+def test_rate_max_is_faster_with_the_same_scans_per_sim_second(
+    zenoh_settings: ZenohSettings, listener: Listener
+) -> None:
+    with running_sim(zenoh_settings, rate=1.0):
+        listener.wait(lambda: len(listener.of(keys.robot_key("r1", keys.SCAN))) >= 6)
+    real_time, real_speed = scans_per_sim_second(listener)
+    with listener.lock:
+        listener.samples.clear()
+    with running_sim(zenoh_settings, rate=0.0):
+        time.sleep(1.0)
+    flat_out, max_speed = scans_per_sim_second(listener)
+    assert real_speed == pytest.approx(1.0, rel=0.2)
+    assert max_speed > 5.0  # well above real time (about 100x when alone on the machine)
+    assert real_time == pytest.approx(5.0, rel=0.01)
+    assert flat_out == pytest.approx(5.0, rel=0.01)
+
+
+def test_cli_reads_the_environment_and_stops_on_sigterm(
+    zenoh_settings: ZenohSettings, listener: Listener
+) -> None:
+    env = {
+        **os.environ,
+        **zenoh_settings.to_env(),
+        "PNAV_SIM_WORLD": str(OPEN_ROOM),
+        "PNAV_SIM_RATE": "max",
+    }
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "services.sim"],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    try:
+        listener.wait(
+            lambda: [b for b in listener.of(keys.SIM_CLOCK) if b["stamp"] > 2.0], timeout=30
+        )
+        assert listener.of(keys.SIM_CLOCK)[-1]["rate"] == 0.0
+        replies = list(listener.session.get(keys.SIM_WORLD, timeout=5.0))
+        assert unpack(replies[0].ok.payload.to_bytes())["name"] == "open_room"
+        tokens = list(listener.session.liveliness().get(keys.alive_watch("sim"), timeout=5.0))
+        assert len(tokens) == 1
+        proc.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=15)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, stderr.decode()
+    assert b"sim stopped" in stderr
+
+
+def test_cli_rejects_a_bad_world_naming_the_file(tmp_path: Path) -> None:
+    bad = tmp_path / "broken.yaml"
+    bad.write_text("map: nowhere.yaml\nrobots: [{id: r1, x: 1, y: 1}]\n")
+    proc = subprocess.run(
+        [sys.executable, "-m", "services.sim", "--world", str(bad)],
+        cwd=ROOT,
+        capture_output=True,
+        timeout=30,
+    )
+    assert proc.returncode == 2
+    assert str(bad).encode() in proc.stderr and b"not found" in proc.stderr
