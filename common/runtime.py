@@ -24,6 +24,7 @@ from common.config import ServiceConfig
 from common.contract import keys
 from common.db import Database, create_pool
 from common.errors import ConnectionFailure, UsageError
+from common.lifeline import die_with_parent
 
 logger = logging.getLogger("pnav.runtime")
 
@@ -117,6 +118,7 @@ def run_service(service: str, main: ServiceMain, argv: list[str] | None = None) 
 
     SIGINT and SIGTERM set ``stop_event``; ``main`` is expected to drain and return.
     """
+    die_with_parent()
     try:
         config = ServiceConfig.from_env(service)
     except UsageError as exc:

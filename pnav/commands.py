@@ -1,0 +1,197 @@
+"""``pnav goal | strategy | cancel | status | down``: drive a running stack from any terminal.
+
+Each command writes contract rows as a person's tool would (with their notifications) and
+reads the answers back from the tables; none talks to a service directly.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import os
+import signal
+import sys
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from common.config import ServiceConfig
+from common.contract import keys
+from common.errors import UsageError
+from common.runtime import Runtime
+from pnav import stackfile
+
+
+async def open_runtime() -> Runtime:
+    url, zenoh = stackfile.connection()
+    config = ServiceConfig(service="cli", database_url=url, zenoh=zenoh, db_wait_s=3.0)
+    return await Runtime.open(config)
+
+
+async def robot_ids(rt: Runtime, wait_s: float = 10.0) -> list[str]:
+    """Robots known to the contract, waiting a little for the bridge to register them."""
+    deadline = time.monotonic() + wait_s
+    while True:
+        rows = await rt.database.pool.fetch("SELECT robot_id FROM robot ORDER BY robot_id")
+        if rows or time.monotonic() > deadline:
+            return [r["robot_id"] for r in rows]
+        await asyncio.sleep(0.2)
+
+
+async def pick_robots(rt: Runtime, robot: str | None, *, one: bool) -> list[str]:
+    known = await robot_ids(rt)
+    if robot is not None:
+        if robot not in known:
+            raise UsageError(f"no robot {robot!r}; known robots: {', '.join(known) or 'none'}")
+        return [robot]
+    if not known:
+        raise UsageError("no robot is registered yet: is the sim running?")
+    if one and len(known) > 1:
+        raise UsageError(f"several robots ({', '.join(known)}): name one with --robot")
+    return known
+
+
+async def set_goal(
+    rt: Runtime, robot: str, x: float, y: float, tolerance: float | None = None
+) -> int:
+    """Supersede the robot's active goal and set a new one, in one transaction."""
+    async with rt.database.transaction() as tx:
+        await tx.conn.execute(
+            "UPDATE goal SET status = 'superseded', reason = 'replaced by a new goal' "
+            "WHERE robot_id = $1 AND status = 'active'",
+            robot,
+        )
+        goal_id = await tx.conn.fetchval(
+            "INSERT INTO goal (robot_id, x, y, tolerance_m) "
+            "VALUES ($1, $2, $3, coalesce($4, 0.15)) RETURNING id",
+            robot,
+            x,
+            y,
+            tolerance,
+        )
+        tx.changed(keys.GOAL, robot, goal_id)
+    return int(goal_id)
+
+
+async def cancel_goal(rt: Runtime, robot: str) -> int | None:
+    async with rt.database.transaction() as tx:
+        goal_id = await tx.conn.fetchval(
+            "UPDATE goal SET status = 'cancelled', reason = 'cancelled by user' "
+            "WHERE robot_id = $1 AND status = 'active' RETURNING id",
+            robot,
+        )
+        if goal_id is not None:
+            tx.changed(keys.GOAL, robot, goal_id)
+    return None if goal_id is None else int(goal_id)
+
+
+async def send_user_command(
+    rt: Runtime, robot: str, command: str, argument: str | None, wait_s: float = 5.0
+) -> tuple[str, str]:
+    """Insert a user_command and wait for the strategy service's verdict (status, reason)."""
+    command_id = await rt.database.write(
+        keys.USER_COMMAND,
+        robot,
+        "INSERT INTO user_command (robot_id, command, argument) VALUES ($1, $2, $3) RETURNING id",
+        robot,
+        command,
+        argument,
+    )
+    deadline = time.monotonic() + wait_s
+    while time.monotonic() < deadline:
+        row = await rt.database.pool.fetchrow(
+            "SELECT status, reason FROM user_command WHERE id = $1", command_id
+        )
+        if row["status"] != "pending":
+            return row["status"], row["reason"] or ""
+        await asyncio.sleep(0.05)
+    return "pending", f"no answer from the strategy service within {wait_s:.0f} s"
+
+
+STATUS_SQL = """
+SELECT r.robot_id,
+       o.stamp, o.x, o.y, o.yaw, o.linear_mps, o.angular_rps,
+       g.id AS goal_id, g.x AS gx, g.y AS gy,
+       a.strategy_code, a.resume_code,
+       b.percentage, b.charging,
+       c.linear_mps AS cmd_v, c.angular_rps AS cmd_w, c.source AS cmd_source, c.reason,
+       (SELECT count(*) FROM collision_event e WHERE e.robot_id = r.robot_id) AS collisions
+FROM robot r
+LEFT JOIN LATERAL (SELECT * FROM odometry WHERE robot_id = r.robot_id
+                   ORDER BY id DESC LIMIT 1) o ON true
+LEFT JOIN goal g ON g.robot_id = r.robot_id AND g.status = 'active'
+LEFT JOIN active_strategy a ON a.robot_id = r.robot_id
+LEFT JOIN LATERAL (SELECT * FROM battery WHERE robot_id = r.robot_id
+                   ORDER BY id DESC LIMIT 1) b ON true
+LEFT JOIN LATERAL (SELECT * FROM command2robot WHERE robot_id = r.robot_id
+                   ORDER BY id DESC LIMIT 1) c ON true
+ORDER BY r.robot_id
+"""
+
+
+def _fmt(value: Any, spec: str, missing: str = "-") -> str:
+    return missing if value is None else format(value, spec)
+
+
+def status_lines(rows: Sequence[Any], width: int = 160) -> list[str]:
+    header = (
+        f"{'robot':<6} {'sim t':>7} {'x':>6} {'y':>6} {'yaw':>5} {'goal':>13} {'left':>5} "
+        f"{'strategy':<12} {'batt':>6} {'cmd v':>6} {'cmd w':>6} {'coll':>4}  last decision"
+    )
+    lines = [header]
+    for r in rows:
+        goal = "-" if r["goal_id"] is None else f"({r['gx']:.1f},{r['gy']:.1f})"
+        left = None
+        if r["goal_id"] is not None and r["x"] is not None:
+            left = math.hypot(r["gx"] - r["x"], r["gy"] - r["y"])
+        strategy = r["strategy_code"] or "-"
+        if r["resume_code"]:
+            strategy += "*"
+        batt = "-" if r["percentage"] is None else f"{r['percentage']:.1f}%"
+        if r["charging"]:
+            batt += "+"
+        decision = (
+            "-"
+            if r["cmd_source"] is None and r["reason"] is None
+            else (f"{r['cmd_source'] or 'stop'}: {r['reason'] or ''}")
+        )
+        line = (
+            f"{r['robot_id']:<6} {_fmt(r['stamp'], '7.1f')} {_fmt(r['x'], '6.2f')} "
+            f"{_fmt(r['y'], '6.2f')} {_fmt(r['yaw'], '5.2f')} {goal:>13} {_fmt(left, '5.2f')} "
+            f"{strategy:<12} {batt:>6} {_fmt(r['cmd_v'], '6.2f')} {_fmt(r['cmd_w'], '6.2f')} "
+            f"{r['collisions']:>4}  {decision}"
+        )
+        lines.append(line[:width])
+    return lines
+
+
+async def status(once: bool, interval_s: float = 1.0) -> int:
+    rt = await open_runtime()
+    try:
+        while True:
+            rows = await rt.database.pool.fetch(STATUS_SQL)
+            width = os.get_terminal_size().columns if sys.stdout.isatty() else 200
+            text = "\n".join(status_lines(rows, width))
+            if once:
+                print(text)
+                return 0
+            print("\x1b[2J\x1b[H" + text, flush=True)  # clear screen, home
+            await asyncio.sleep(interval_s)
+    finally:
+        await rt.close()
+
+
+def down(wait_s: float = 20.0) -> int:
+    info = stackfile.read()
+    if info is None:
+        print("no running stack")
+        return 0
+    os.kill(info.pid, signal.SIGTERM)
+    deadline = time.monotonic() + wait_s
+    while time.monotonic() < deadline:
+        if stackfile.read() is None:
+            print(f"stack {info.pid} stopped")
+            return 0
+        time.sleep(0.1)
+    print(f"stack {info.pid} did not stop within {wait_s:.0f} s", file=sys.stderr)
+    return 1

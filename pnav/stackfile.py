@@ -1,0 +1,92 @@
+"""Where a running ``pnav up`` says how to reach it, so commands in other terminals can.
+
+The file lives at ``$PNAV_STATE_DIR/stack.json`` (default ``$XDG_STATE_HOME/pnav`` or
+``~/.local/state/pnav``). Environment variables win over it: with ``PNAV_DATABASE_URL`` and
+``PNAV_ZENOH_CONNECT`` set, commands talk to that stack (a compose fleet, say) instead.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from common.config import ZenohSettings
+from common.errors import UsageError
+
+
+def state_dir() -> Path:
+    explicit = os.environ.get("PNAV_STATE_DIR")
+    if explicit:
+        return Path(explicit)
+    base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
+    return Path(base) / "pnav"
+
+
+def stack_file() -> Path:
+    return state_dir() / "stack.json"
+
+
+@dataclass(frozen=True)
+class StackInfo:
+    pid: int
+    database_url: str
+    zenoh_connect: str
+    world: str
+    rate: str
+    log_dir: str
+
+    def zenoh(self) -> ZenohSettings:
+        return ZenohSettings(mode="client", connect=(self.zenoh_connect,))
+
+
+def write(info: StackInfo) -> None:
+    path = stack_file()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(asdict(info), indent=2))
+    tmp.replace(path)
+
+
+def remove(pid: int) -> None:
+    """Remove the file if it still describes the stack of ``pid``."""
+    info = read()
+    if info is not None and info.pid == pid:
+        with contextlib.suppress(FileNotFoundError):
+            stack_file().unlink()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def read() -> StackInfo | None:
+    """The running stack, or None (no file, or its launcher is gone)."""
+    try:
+        data = json.loads(stack_file().read_text())
+        info = StackInfo(**data)
+    except (FileNotFoundError, json.JSONDecodeError, TypeError):
+        return None
+    return info if _alive(info.pid) else None
+
+
+def connection() -> tuple[str, ZenohSettings]:
+    """Database URL and Zenoh settings of the stack to talk to; UsageError if there is none."""
+    url = os.environ.get("PNAV_DATABASE_URL", "").strip()
+    if url:
+        return url, ZenohSettings.from_env()
+    info = read()
+    if info is None:
+        raise UsageError(
+            "no running stack: start one with `pnav up` (or set PNAV_DATABASE_URL and "
+            "PNAV_ZENOH_CONNECT to reach another one)"
+        )
+    return info.database_url, info.zenoh()
