@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import AsyncIterator, Iterator
+from pathlib import Path
 
 import asyncpg
 import pytest
@@ -25,6 +26,12 @@ TEMPLATE = "pnav_contract_template"
 
 def pytest_asyncio_loop_factories(config: pytest.Config, item: pytest.Item) -> dict[str, object]:
     return {"uvloop": uvloop.new_event_loop}
+
+
+@pytest.fixture(autouse=True)
+def isolated_state(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A launcher started by a test writes its stack file in the test's own folder."""
+    monkeypatch.setenv("PNAV_STATE_DIR", str(tmp_path / "state"))
 
 
 @pytest.fixture(scope="session")
