@@ -17,7 +17,7 @@ import numpy.typing as npt
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from services.sim.mapserver import write_pgm  # noqa: E402
+from services.sim.mapserver import write_pgm
 
 RES = 0.05
 WALL = 0.10  # wall thickness, m

@@ -126,6 +126,13 @@ def build(args: argparse.Namespace) -> tuple[World, SimConfig, float]:
         world = world.with_robot_count(args.robots)
     if args.battery is not None and not 0.0 <= args.battery <= 100.0:
         raise ConfigError(f"--battery {args.battery} must be a percentage within [0, 100]")
+    if (
+        args.gui
+        and sys.platform.startswith("linux")
+        and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    ):
+        # pybullet's GUI would call exit(1) from C with no display; say why instead
+        raise ConfigError("--gui needs a display (DISPLAY is not set); run headless without it")
     if not args.physics_hz > 0 or not args.scan_hz > 0:
         raise ConfigError("--physics-hz and --scan-hz must be positive")
     config = SimConfig(

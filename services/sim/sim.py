@@ -21,7 +21,7 @@ from services.sim import messages
 from services.sim.battery import Battery, BatteryModel
 from services.sim.clock import Every
 from services.sim.lidar import Lidar, LidarParams
-from services.sim.physics import Scene
+from services.sim.physics import CONTACT_TOLERANCE_M, Scene
 from services.sim.robot import RobotState, clamp_command, integrate
 from services.sim.world import World
 
@@ -66,7 +66,7 @@ class Simulation:
             Battery.at_percent(model, _start_percent(config.battery_percent, r.battery_percent))
             for r in world.robots
         ]
-        self.lidar = Lidar(config.lidar, params.lidar_height_m, params.footprint_radius_m)
+        self.lidar = Lidar(config.lidar, params.lidar_height_m)
         self.scene = Scene(world, gui=config.gui)
         self._touching: list[frozenset[str]] = [frozenset() for _ in self.robots]
         self._seq: dict[tuple[int, str], int] = {}
@@ -79,8 +79,12 @@ class Simulation:
         self._lock = threading.Lock()
         self._pending: dict[int, tuple[float, float]] = {}
         self.counts: dict[str, int] = {SCAN: 0, ODOM: 0, BATTERY: 0, COLLISION: 0}
-        for i in range(len(self.robots)):
-            self._touching[i] = self.scene.touching(i, self.robots[i].x, self.robots[i].y)
+        # contact tests skipped per robot while its clearance lasts; the closing speed bound
+        # is two robots driving at each other flat out
+        self._unchecked = [0 for _ in self.robots]
+        self._closing = 2.0 * params.max_linear_mps * self.dt
+        for i, r in enumerate(self.robots):
+            self._touching[i] = self.scene.probe(i, r.x, r.y)[0]
 
     @property
     def time(self) -> float:
@@ -122,15 +126,27 @@ class Simulation:
         v, w = clamp_command(robot.params, robot.cmd_linear, robot.cmd_angular)
         if bat.empty:
             v = w = 0.0  # a flat battery moves nothing
-        if v == 0.0 and w == 0.0:
-            robot.linear = robot.angular = 0.0
-            touching = self.scene.touching(i, robot.x, robot.y)
+        if self._unchecked[i] > 0:
+            # nothing was near enough to be reached by now: move without the contact test
+            self._unchecked[i] -= 1
+            if v != 0.0 or w != 0.0:
+                robot.x, robot.y, robot.yaw = integrate(robot.x, robot.y, robot.yaw, v, w, self.dt)
+                self.scene.place(i, robot.x, robot.y, robot.yaw)
+            robot.linear, robot.angular = v, w
+            touching: frozenset[str] = frozenset()
         else:
-            old = (robot.x, robot.y, robot.yaw)
-            moved = self.scene.move(i, old, integrate(*old, v, w, self.dt))
-            robot.x, robot.y, robot.yaw = moved.x, moved.y, moved.yaw
-            robot.linear, robot.angular = v * moved.fraction, w
-            touching = moved.touching
+            if v == 0.0 and w == 0.0:
+                robot.linear = robot.angular = 0.0
+                touching, clearance = self.scene.probe(i, robot.x, robot.y)
+            else:
+                old = (robot.x, robot.y, robot.yaw)
+                moved = self.scene.move(i, old, integrate(*old, v, w, self.dt))
+                robot.x, robot.y, robot.yaw = moved.x, moved.y, moved.yaw
+                robot.linear, robot.angular = v * moved.fraction, w
+                touching, clearance = moved.touching, moved.clearance
+            # this robot and any other close in by at most _closing per step, and the walls
+            # not at all: until the clearance is used up, the test cannot find anything
+            self._unchecked[i] = max(0, int((clearance - CONTACT_TOLERANCE_M) / self._closing) - 1)
         bat.step(self.dt, robot.linear, robot.angular, self._charge_power(robot))
         for other in sorted(touching - self._touching[i]):
             msg = messages.collision(
@@ -158,25 +174,11 @@ class Simulation:
                 self._emit(i, BATTERY, messages.battery(now, self._next_seq(i, BATTERY), bat))
 
     def _scan(self, now: float) -> None:
-        lidar, n = self.lidar, self.lidar.params.beams
-        poses = np.array([(r.x, r.y, r.yaw) for r in self.robots], dtype=np.float64)
-        # every robot's far segments in one batch...
-        far_hit, far_fraction = self.scene.cast(*lidar.far_rays(poses))
-        # ...and the near segments only of robots with something that close
-        close = [
-            i
-            for i, r in enumerate(self.robots)
-            if self.scene.anything_within(i, r.x, r.y, lidar.far_offset)
-        ]
-        near: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-        if close:
-            near_hit, near_fraction = self.scene.cast(*lidar.near_rays(poses[close]))
-            for k, i in enumerate(close):
-                beams = slice(k * n, (k + 1) * n)
-                near[i] = (near_hit[beams], near_fraction[beams])
-        for i in range(len(self.robots)):
-            beams = slice(i * n, (i + 1) * n)
-            ranges = lidar.ranges((far_hit[beams], far_fraction[beams]), near.get(i), self.rng)
+        lidar = self.lidar
+        for i, r in enumerate(self.robots):
+            pose = (r.x, r.y, r.yaw)
+            hit, fraction = self.scene.cast_from(i, pose, *lidar.rays(*pose))
+            ranges = lidar.ranges(hit, fraction, self.rng)
             msg = messages.scan(now, self._next_seq(i, SCAN), lidar.params, ranges)
             self._emit(i, SCAN, msg)
 
