@@ -9,7 +9,8 @@ Model (documented in docs/SIM.md), per physics step of ``dt`` seconds:
 The defaults suit a TurtleBot3 Burger: a Raspberry Pi, the OpenCR board and the LDS-01 lidar
 draw about 1.5 W at rest; two Dynamixel XL430 motors add about 2.2 W at 0.22 m/s
 (k_linear 10 W per m/s) and about 1.4 W turning at 2.84 rad/s (k_angular 0.5 W per rad/s).
-A full 19.98 Wh battery then lasts about 13 h idle and about 5 h driving flat out.
+A full 19.98 Wh battery then lasts about 13 h idle and about 4 h driving and turning flat
+out (5.12 W).
 """
 
 from __future__ import annotations

@@ -11,11 +11,12 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+import msgpack
 import pytest
 import zenoh
 
@@ -92,7 +93,7 @@ WORLD_STATION = {
 }
 
 
-def check(payload: Any, schema: dict[str, type]) -> None:
+def check(payload: Any, schema: Mapping[str, type]) -> None:
     assert isinstance(payload, dict)
     assert set(payload) == set(schema), f"fields {sorted(payload)} != {sorted(schema)}"
     for field, kind in schema.items():
@@ -164,6 +165,11 @@ def running_sim(settings: ZenohSettings, rate: float, **config: Any) -> Iterator
     assert not thread.is_alive()
 
 
+def reply_body(reply: zenoh.Reply) -> Any:
+    assert reply.ok is not None, reply.err
+    return unpack(reply.ok.payload.to_bytes())
+
+
 def cmd(linear: float, angular: float, command_id: int | None = 1) -> bytes:
     return pack({"stamp": 0.0, "linear": linear, "angular": angular, "command_id": command_id})
 
@@ -184,7 +190,7 @@ def test_payloads_follow_the_contract_and_cmd_vel_moves_the_robot(
         # malformed commands are ignored: the robot keeps the last good one
         for bad in (b"\xc1 not msgpack", pack({"linear": "fast", "angular": 0.0, "stamp": 0.0})):
             listener.send("r1", bad)
-        listener.send("r1", pack([0.0, 0.0]))
+        listener.send("r1", msgpack.packb([0.0, 0.0]))
         listener.send("ghost", cmd(0.0, 0.0))
         x_then = listener.of(odom_key)[-1]["x"]
         listener.wait(lambda: listener.of(odom_key)[-1]["x"] > x_then + 0.1)
@@ -225,7 +231,7 @@ def test_payloads_follow_the_contract_and_cmd_vel_moves_the_robot(
 
     # the world: published at start, and answered to a query with the same payload
     (world, *_) = listener.of(keys.SIM_WORLD)
-    assert len(replies) == 1 and unpack(replies[0].ok.payload.to_bytes()) == world
+    assert len(replies) == 1 and reply_body(replies[0]) == world
     check(world, WORLD)
     check(world["map"], WORLD_MAP)
     assert len(world["map"]["grid"]) == world["map"]["width"] * world["map"]["height"]
@@ -302,7 +308,7 @@ def test_cli_reads_the_environment_and_stops_on_sigterm(
         )
         assert listener.of(keys.SIM_CLOCK)[-1]["rate"] == 0.0
         replies = list(listener.session.get(keys.SIM_WORLD, timeout=5.0))
-        assert unpack(replies[0].ok.payload.to_bytes())["name"] == "open_room"
+        assert reply_body(replies[0])["name"] == "open_room"
         tokens = list(listener.session.liveliness().get(keys.alive_watch("sim"), timeout=5.0))
         assert len(tokens) == 1
         proc.send_signal(signal.SIGTERM)

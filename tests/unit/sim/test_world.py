@@ -204,7 +204,7 @@ def reachable(world: World, start: tuple[float, float], half_width: float) -> np
             xs, xd = slice(max(0, -dx), min(w, w - dx)), slice(max(0, dx), min(w, w + dx))
             shifted[yd, xd] = blocked[ys, xs]
             inflated |= shifted
-    seen = np.zeros_like(blocked)
+    seen = np.zeros(blocked.shape, dtype=bool)
     col, row = (int(v) for v in g.world_to_cell(*start))
     queue = deque([(row, col)])
     seen[row, col] = True
