@@ -24,6 +24,7 @@ from types import FrameType
 from common.bus import open_session
 from common.config import ZenohSettings, default_instance
 from common.errors import ConfigError, ConnectionFailure, UsageError
+from common.lifeline import die_with_parent
 from common.log import event, setup
 from services.sim.bench import report, run_bench
 from services.sim.clock import parse_rate
@@ -172,6 +173,7 @@ def serve(world: World, config: SimConfig, rate: float) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    die_with_parent()
     setup("sim")
     try:
         args = parse_args(argv)
