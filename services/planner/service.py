@@ -1,0 +1,35 @@
+"""The planner service: its own Proactive Engine, seeded with the meta-planner.
+
+``python -m services.planner``. The planner is the only service that knows the goal: it
+reads robots, maps, charging stations, goals, strategies, odometry and the battery, and
+writes velocity recommendations (turn_then_move, move_while_turning), system
+recommendations (battery_check, charge_complete) and goal status. See docs/PLANNER.md.
+"""
+
+from __future__ import annotations
+
+from common.runtime import Runtime
+from common.service import ScenarioService, wake_on_notifications
+from services.planner.meta import MetaPlanner
+from services.planner.state import PlannerState
+
+
+class PlannerService(ScenarioService):
+    service = "planner"
+
+    def __init__(self, runtime: Runtime) -> None:
+        super().__init__(runtime)
+        clock = runtime.clock
+        self.state = PlannerState(runtime.database, clock.now, lambda: clock.started)
+
+    def seed(self) -> None:
+        self.engine.add_meta(lambda: MetaPlanner(self.state))
+
+    def watch(self) -> None:
+        # As the base class does, plus an observer that flags robot, map and charger changes,
+        # so the meta-planner re-reads those tables only when they change.
+        subscribers = wake_on_notifications(
+            self.runtime.zenoh, self.engine, self.engine.watched_tables, observer=self.state.note
+        )
+        for subscriber in subscribers:
+            self.runtime.on_close(subscriber.undeclare)

@@ -1,0 +1,328 @@
+"""What the planner's rules share: the world as read from the contract, routes, rule slots.
+
+The meta-planner refreshes this once per activation (the active strategies every time; the
+robots, maps and charging stations only when a notification says they changed, or every
+REFRESH_S as a fallback), so a target rule's own work is two or three small queries.
+
+Service-specific SQL lives here; the common reads (odometry, goal, battery, strategies) come
+from ``common.contract.records``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from common import log
+from common.contract import keys, records
+from common.db import Database
+from services.planner.path import PlanGrid, path_length, plan_grid, plan_path
+from services.planner.tracking import Progress, Route, follow
+
+logger = logging.getLogger("pnav.planner")
+
+REFRESH_S = 2.0  # re-read robots, maps and stations at least this often (wall s)
+INFLATION_MARGIN_M = 0.05  # clearance kept beyond the footprint radius when planning
+STRAY_M = 0.4  # farther than this from the route: plan again from where the robot is
+REPLAN_MIN_S = 0.5  # ...but not more often than this (wall s), so avoidance cannot thrash it
+RETRY_PLAN_S = 2.0  # how long a straight-line fallback stands before A* is tried again
+CHARGER_MARGIN_M = 0.1  # a charger is reached this far inside its radius
+STATIONS_BY_PATH = 3  # nearest stations (straight line) whose path length is compared
+
+_ROBOTS = "SELECT robot_id, world, max_linear_mps, max_angular_rps, footprint_radius_m FROM robot"
+_MAP_VERSIONS = "SELECT map_id, loaded_at FROM map"
+_MAP = (
+    "SELECT resolution_m, origin_x, origin_y, origin_yaw, width, height, grid "
+    "FROM map WHERE map_id = $1"
+)
+_STATIONS = "SELECT station_id, map_id, x, y, radius_m FROM charging_station ORDER BY station_id"
+_MARK_REACHED = (
+    "UPDATE goal SET status = 'reached', finished_stamp = $2 "
+    "WHERE id = $1 AND status = 'active' RETURNING id"
+)
+_LIVE_SYSTEM = (
+    "SELECT max(expires_stamp) FROM command_recommendation WHERE robot_id = $1 "
+    "AND kind = 'system' AND system_command = $2 AND expires_stamp > $3"
+)
+
+
+@dataclass(frozen=True)
+class RobotInfo:
+    robot_id: str
+    world: str | None
+    max_linear_mps: float
+    max_angular_rps: float
+    footprint_radius_m: float
+
+
+@dataclass(frozen=True)
+class Station:
+    station_id: str
+    map_id: str | None
+    x: float
+    y: float
+    radius_m: float
+
+
+@dataclass(frozen=True)
+class Target:
+    """Where the robot is going: the active goal, or the chosen charging station."""
+
+    kind: str  # "goal" or "charger"
+    ref: str  # the goal id or the station id
+    x: float
+    y: float
+    reach_m: float  # closer than this: reached
+    hold_m: float  # once reached, stay stopped while closer than this
+    goal_id: int | None = None
+
+    @property
+    def key(self) -> tuple[Any, ...]:
+        return (self.kind, self.ref, self.x, self.y)
+
+    @property
+    def label(self) -> str:
+        return f"{self.kind} {self.ref}"
+
+    def inputs(self) -> dict[str, Any]:
+        return {"goal": self.goal_id} if self.kind == "goal" else {"charger": self.ref}
+
+    @classmethod
+    def of_goal(cls, goal: records.Goal) -> Target:
+        return cls("goal", str(goal.id), goal.x, goal.y, goal.tolerance_m, 0.0, goal.id)
+
+    @classmethod
+    def of_station(cls, station: Station) -> Target:
+        reach = max(station.radius_m - CHARGER_MARGIN_M, station.radius_m / 2)
+        return cls("charger", station.station_id, station.x, station.y, reach, station.radius_m)
+
+
+class MapData:
+    """One map row, with its planning grids per inflation radius (built on first use)."""
+
+    def __init__(
+        self,
+        map_id: str,
+        version: str,
+        occupied: np.ndarray[Any, np.dtype[np.bool_]],
+        resolution: float,
+        origin: tuple[float, float, float],
+    ) -> None:
+        self.map_id = map_id
+        self.version = version
+        self.occupied = occupied
+        self.resolution = resolution
+        self.origin = origin
+        self._grids: dict[float, PlanGrid] = {}
+
+    def grid(self, footprint_m: float) -> PlanGrid:
+        radius = round(footprint_m + INFLATION_MARGIN_M, 3)
+        grid = self._grids.get(radius)
+        if grid is None:
+            grid = self._grids[radius] = plan_grid(
+                self.occupied, self.resolution, self.origin, radius
+            )
+        return grid
+
+
+@dataclass
+class Slot:
+    """The one live target rule of a kind ("move", "battery") for a robot."""
+
+    spec: tuple[str, str]  # (rule class, strategy code)
+    token: int
+    beat: int  # meta round in which the rule last ran
+
+
+@dataclass
+class RobotState:
+    info: RobotInfo
+    strategy: records.Strategy | None = None
+    route: Route | None = None
+    station: Station | None = None  # charger chosen for the current CHARGE session
+    slots: dict[str, Slot] = field(default_factory=dict)
+
+
+class PlannerState:
+    def __init__(self, db: Database, now: Callable[[], float], started: Callable[[], bool]):
+        self.db = db
+        self.now = now  # sim time
+        self.clock_started = started
+        self.robots: dict[str, RobotState] = {}
+        self.maps: dict[str, MapData] = {}
+        self.stations: list[Station] = []
+        self.meta_round = 0
+        self.dirty = True  # robots, maps or stations changed (set from Zenoh's thread)
+        self._refreshed = 0.0
+        self._warned: set[str] = set()
+
+    # -- reading the world -------------------------------------------------------------------
+    def note(self, key: str, payload: bytes) -> None:
+        """Notification observer (Zenoh's thread): flag the slow-changing tables as dirty."""
+        try:
+            table, _ = keys.parse_notify_key(key)
+        except ValueError:
+            return
+        if table in (keys.ROBOT, keys.MAP, keys.CHARGING_STATION):
+            self.dirty = True
+
+    async def refresh(self) -> None:
+        pool = self.db.pool
+        if self.dirty or time.monotonic() - self._refreshed > REFRESH_S:
+            self.dirty = False
+            self._refreshed = time.monotonic()
+            await self._refresh_world(pool)
+        active = await records.active_strategies(pool)
+        for robot_id, state in self.robots.items():
+            entry = active.get(robot_id)
+            state.strategy = entry.strategy if entry else None
+
+    async def _refresh_world(self, pool: Any) -> None:
+        rows = await pool.fetch(_ROBOTS)
+        seen = set()
+        for row in rows:
+            info = RobotInfo(**dict(row))
+            seen.add(info.robot_id)
+            state = self.robots.get(info.robot_id)
+            if state is None:
+                self.robots[info.robot_id] = RobotState(info)
+            elif state.info != info:
+                state.info = info
+                state.route = None  # new footprint or world: plan again
+        for gone in set(self.robots) - seen:
+            del self.robots[gone]
+        versions = {r["map_id"]: str(r["loaded_at"]) for r in await pool.fetch(_MAP_VERSIONS)}
+        for map_id in set(self.maps) - set(versions):
+            del self.maps[map_id]
+        for map_id, version in versions.items():
+            current = self.maps.get(map_id)
+            if current is None or current.version != version:
+                self.maps[map_id] = await self._load_map(pool, map_id, version)
+        self.stations = [Station(**dict(r)) for r in await pool.fetch(_STATIONS)]
+
+    async def _load_map(self, pool: Any, map_id: str, version: str) -> MapData:
+        row = await pool.fetchrow(_MAP, map_id)
+        cells = np.frombuffer(row["grid"], dtype=np.uint8).reshape(row["height"], row["width"])
+        log.event(logger, logging.INFO, "map loaded", map=map_id, cells=int(cells.size))
+        origin = (row["origin_x"], row["origin_y"], row["origin_yaw"])
+        return MapData(map_id, version, cells >= 50, row["resolution_m"], origin)
+
+    def map_for(self, info: RobotInfo) -> MapData | None:
+        """The robot's world's map; the only map if the robot names none."""
+        if info.world and info.world in self.maps:
+            return self.maps[info.world]
+        if len(self.maps) == 1:
+            return next(iter(self.maps.values()))
+        return None
+
+    def warn_once(self, what: str, message: str, **fields: Any) -> None:
+        if what not in self._warned:
+            self._warned.add(what)
+            log.event(logger, logging.WARNING, message, **fields)
+
+    # -- routes ------------------------------------------------------------------------------
+    def route_for(self, state: RobotState, x: float, y: float, target: Target) -> Progress:
+        """Progress along the robot's cached route to ``target``; plans (again) when the
+        target or the map changed, the robot strayed, or a straight fallback is due a retry."""
+        data = self.map_for(state.info)
+        version = data.version if data else None
+        route = state.route
+        now = time.monotonic()
+        if route is not None and route.target_key == target.key and route.map_version == version:
+            progress = follow(route, x, y)
+            age = now - route.made_at
+            retry = data is not None and not route.planned and age > RETRY_PLAN_S
+            if not retry and (progress.deviation_m <= STRAY_M or age < REPLAN_MIN_S):
+                return progress
+        points = self.plan(state, (x, y), (target.x, target.y), target.label)
+        planned = points is not None
+        if not planned and data is not None:
+            self.warn_once(
+                f"nopath-{state.info.robot_id}-{target.key}",
+                "no path on the map; heading straight (retried every few seconds)",
+                robot=state.info.robot_id,
+                target=target.label,
+            )
+        state.route = Route.of(
+            target.key, version, points or [(x, y), (target.x, target.y)], planned
+        )
+        return follow(state.route, x, y)
+
+    def plan(
+        self, state: RobotState, start: tuple[float, float], goal: tuple[float, float], what: str
+    ) -> list[tuple[float, float]] | None:
+        """A* on the robot's map (None: no map, or no path on it)."""
+        data = self.map_for(state.info)
+        if data is None:
+            return None
+        started = time.perf_counter()
+        points = plan_path(data.grid(state.info.footprint_radius_m), start, goal)
+        elapsed_ms = (time.perf_counter() - started) * 1000
+        log.event(
+            logger,
+            logging.DEBUG,
+            "path planned" if points else "no path",
+            robot=state.info.robot_id,
+            target=what,
+            waypoints=len(points) - 1 if points else 0,
+            length_m=round(path_length(points), 2) if points else None,
+            ms=round(elapsed_ms, 1),
+        )
+        return points
+
+    def distance(self, state: RobotState, a: tuple[float, float], b: tuple[float, float]) -> float:
+        """Path length from a to b on the robot's map; straight line without one."""
+        points = self.plan(state, a, b, "distance")
+        return path_length(points) if points else math.hypot(b[0] - a[0], b[1] - a[1])
+
+    def choose_station(self, state: RobotState, x: float, y: float) -> Station | None:
+        """The nearest charger by path length (among the few nearest in a straight line),
+        chosen once per CHARGE session so the target cannot flip while the robot drives."""
+        if state.station is not None:
+            return state.station
+        data = self.map_for(state.info)
+        here = [s for s in self.stations if data is None or s.map_id in (None, data.map_id)]
+        if not here:
+            here = list(self.stations)
+        if not here:
+            self.warn_once("no-station", "no charging station to go to", robot=state.info.robot_id)
+            return None
+        here.sort(key=lambda s: math.hypot(s.x - x, s.y - y))
+        candidates = here[:STATIONS_BY_PATH] if data is not None else here[:1]
+        state.station = min(candidates, key=lambda s: self.distance(state, (x, y), (s.x, s.y)))
+        log.event(
+            logger,
+            logging.INFO,
+            "charger chosen",
+            robot=state.info.robot_id,
+            station=state.station.station_id,
+        )
+        return state.station
+
+    # -- writes ------------------------------------------------------------------------------
+    async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
+        """Set the goal 'reached' (one statement) and notify; False if it was no longer active."""
+        updated = await self.db.write(keys.GOAL, robot_id, _MARK_REACHED, goal_id, stamp)
+        return updated is not None
+
+    async def live_system(self, robot_id: str, command: str) -> float | None:
+        """Expiry of this robot's newest unexpired ``command`` recommendation, if any."""
+        value = await self.db.pool.fetchval(_LIVE_SYSTEM, robot_id, command, self.now())
+        return float(value) if value is not None else None
+
+    # -- rule slots --------------------------------------------------------------------------
+    def claim(self, robot_id: str, kind: str, token: int) -> RobotState | None:
+        """The robot's state if the rule holding ``token`` is still its ``kind`` rule; it
+        records that the rule is alive (the meta-planner replaces a rule that stops beating)."""
+        state = self.robots.get(robot_id)
+        slot = state.slots.get(kind) if state else None
+        if slot is None or slot.token != token:
+            return None
+        slot.beat = self.meta_round
+        return state

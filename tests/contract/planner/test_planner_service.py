@@ -1,0 +1,194 @@
+"""The planner alone against Postgres and Zenoh: what it recommends, and what it writes."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+
+import numpy as np
+
+from common.contract import keys
+from services.planner.service import PlannerService
+from tests.contract.planner.conftest import ROBOT, World, eventually
+
+
+def live_window(rec: object) -> float:
+    return float(rec["expires_stamp"]) - float(rec["stamp"])  # type: ignore[index]
+
+
+async def test_turns_toward_a_goal_on_the_left_then_follows_a_new_goal_ahead(
+    world: World, planner: PlannerService
+) -> None:
+    await world.strategy("GOTO_AVOID")
+    left = await world.goal(0.0, 2.0)
+    rec = await world.next_recommendation(lambda r: r["inputs"].get("goal") == left)
+    assert rec["source"] == "turn_then_move" and rec["priority"] == 10
+    assert rec["linear_mps"] == 0.0 and rec["angular_rps"] > 0  # turn left, in place
+    assert math.isclose(live_window(rec), 0.5)
+    odom = await world.db.pool.fetchrow(
+        "SELECT stamp FROM odometry WHERE id = $1", rec["inputs"]["odometry"]
+    )
+    assert odom is not None and rec["stamp"] == odom["stamp"]
+    assert "turning toward waypoint 1/1" in rec["reason"] and "heading error" in rec["reason"]
+
+    # A new goal while the robot moves: the recommendations follow it at once.
+    ahead = await world.goal(2.0, 0.0)
+    rec = await world.next_recommendation(lambda r: r["inputs"].get("goal") == ahead)
+    assert rec["linear_mps"] > 0.1 and abs(rec["angular_rps"]) < 0.1
+    assert rec["reason"].startswith("driving to waypoint")
+    superseded = await world.db.pool.fetchval("SELECT status FROM goal WHERE id = $1", left)
+    assert superseded == "superseded"  # the planner left the foreign client's update alone
+
+
+async def test_a_strategy_switch_changes_the_scenario_with_no_restart(
+    world: World, planner: PlannerService
+) -> None:
+    await world.db.pool.execute(
+        "INSERT INTO strategy (code, planner_scenario, params) VALUES "
+        "('GOTO_SMOOTH', 'move_while_turning', '{\"target\": \"goal\"}')"
+    )
+    await world.strategy("GOTO_AVOID")
+    await world.goal(1.0, 1.0)  # 45 degrees to the left
+    first = await world.next_recommendation(lambda r: True)
+    assert first["source"] == "turn_then_move" and first["linear_mps"] == 0.0
+
+    await world.strategy("GOTO_SMOOTH")
+    switched = await world.next_recommendation(
+        lambda r: r["source"] == "move_while_turning", after=first["id"]
+    )
+    assert switched["linear_mps"] > 0 and switched["angular_rps"] > 0  # drives while turning
+    await asyncio.sleep(0.5)
+    later = await world.recommendations(after=switched["id"])
+    assert later and {r["source"] for r in later} == {"move_while_turning"}  # exactly one scenario
+
+
+async def test_reaching_the_goal_marks_it_reached_and_stops_once(
+    world: World, planner: PlannerService
+) -> None:
+    world.pose = (1.0, 0.0, 0.0)
+    await world.strategy("GOTO_AVOID")
+    goal_id = await world.goal(1.5, 0.0, tolerance=0.15)
+    await world.next_recommendation(lambda r: r["linear_mps"] > 0, what="driving to the goal")
+
+    world.pose = (1.45, 0.02, 0.0)  # inside the tolerance
+    row = await eventually(
+        lambda: world.db.pool.fetchrow(
+            "SELECT status, finished_stamp FROM goal WHERE id = $1 AND status <> 'active'",
+            goal_id,
+        ),
+        what="the goal marked reached",
+    )
+    assert row["status"] == "reached" and row["finished_stamp"] > 100.0
+    stop = await world.next_recommendation(lambda r: "reached" in r["reason"])
+    assert stop["linear_mps"] == 0.0 and stop["angular_rps"] == 0.0 and stop["priority"] == 10
+    await asyncio.sleep(0.6)
+    assert await world.recommendations(after=stop["id"]) == []  # no goal, nothing to say
+
+
+async def test_the_path_goes_around_a_wall_on_the_map(
+    world: World, planner: PlannerService
+) -> None:
+    # 3 x 2 m at 5 cm, walls all round, and a wall across x = 1.5 with a gap at y 1.3-1.8
+    grid = np.zeros((40, 60), dtype=np.uint8)
+    grid[0, :] = grid[-1, :] = grid[:, 0] = grid[:, -1] = 100
+    grid[:, 30] = 100
+    grid[26:36, 30] = 0
+    async with world.db.transaction() as tx:
+        await tx.conn.execute(
+            "INSERT INTO map (map_id, resolution_m, origin_x, origin_y, width, height, grid) "
+            "VALUES ('walled', 0.05, 0, 0, 60, 40, $1)",
+            grid.tobytes(),
+        )
+        await tx.conn.execute("UPDATE robot SET world = 'walled' WHERE robot_id = $1", ROBOT)
+        tx.changed(keys.MAP, None)
+        tx.changed(keys.ROBOT, ROBOT)
+    world.pose = (0.5, 0.5, 0.0)
+    await world.strategy("GOTO_AVOID")
+    goal_id = await world.goal(2.5, 0.5)
+    rec = await world.next_recommendation(lambda r: r["inputs"].get("goal") == goal_id)
+    # Straight ahead is the wall: the path bends up to the gap first, so the robot turns left.
+    assert rec["angular_rps"] > 0 and rec["linear_mps"] == 0.0
+    assert "waypoint 1/" in rec["reason"] and "waypoint 1/1" not in rec["reason"]
+    remaining = float(rec["reason"].split(" m to goal")[0].rsplit(" ", 1)[1])
+    assert remaining > 2.5  # longer than the 2 m straight line
+
+
+async def test_battery_too_low_for_the_path_recommends_battsave_once_while_live(
+    world: World, planner: PlannerService
+) -> None:
+    await world.strategy("GOTO_AVOID")
+    await world.goal(10.0, 0.0)  # 10 m x 0.006 Wh/m + 0.05 reserve = 0.11 Wh needed
+    await world.battery(0.5)
+    await world.next_recommendation(lambda r: True, what="the planner driving")
+    assert await world.recommendations(kind="system") == []  # 0.5 Wh is plenty
+
+    await world.battery(0.08)
+    rec = await world.next_recommendation(lambda r: True, kind="system", what="CMD_BATTSAVE")
+    assert rec["system_command"] == "CMD_BATTSAVE" and rec["source"] == "battery_check"
+    assert rec["priority"] == 60 and math.isclose(live_window(rec), 2.0)
+    assert "battery" in rec["inputs"] and "goal" in rec["inputs"]
+    await world.battery(0.07)
+    await asyncio.sleep(0.5)  # well within its 2 s validity: no second one
+    assert len(await world.recommendations(kind="system")) == 1
+
+
+async def test_charge_drives_to_the_nearest_station_then_resumes_once(
+    world: World, planner: PlannerService
+) -> None:
+    await world.execute(
+        keys.CHARGING_STATION,
+        None,
+        "INSERT INTO charging_station (station_id, x, y, radius_m, charge_power_w) VALUES "
+        "('far', -5.0, 0.0, 0.3, 20), ('near', 2.0, 0.0, 0.3, 20)",
+    )
+    await world.goal(0.0, 3.0)  # the mission goal stays active all along
+    await world.battery(0.05)
+    await world.strategy("CHARGE")
+    rec = await world.next_recommendation(lambda r: True, what="driving to the charger")
+    assert rec["inputs"].get("charger") == "near" and "goal" not in rec["inputs"]
+    assert rec["linear_mps"] > 0  # the station is straight ahead
+    assert "charger near" in rec["reason"]
+
+    world.pose = (1.95, 0.0, 0.0)  # inside the station
+    stop = await world.next_recommendation(
+        lambda r: (
+            "charger near" in r["reason"] and r["linear_mps"] == 0.0 and r["angular_rps"] == 0.0
+        ),
+        after=rec["id"],
+        what="a stop at the charger",
+    )
+    assert "charge" in stop["reason"]
+    assert await world.recommendations(kind="system") == []  # no BATTSAVE while charging
+
+    # 3.6 m from the station to the goal x 0.006 + 0.05 = 0.072 Wh; x 3.0 margin = 0.215 Wh
+    await world.battery(0.15)
+    await asyncio.sleep(0.4)
+    assert await world.recommendations(kind="system") == []
+    await world.battery(0.3)
+    rec = await world.next_recommendation(lambda r: True, kind="system", what="CMD_RESUME")
+    assert rec["system_command"] == "CMD_RESUME" and rec["source"] == "charge_complete"
+    assert rec["priority"] == 50 and math.isclose(live_window(rec), 2.0)
+    await world.battery(19.98)
+    await asyncio.sleep(0.5)
+    assert len(await world.recommendations(kind="system")) == 1  # once per session
+    status = await world.db.pool.fetchval("SELECT status FROM goal WHERE robot_id = $1", ROBOT)
+    assert status == "active"
+
+
+async def test_idle_and_unknown_scenarios_recommend_nothing(
+    world: World, planner: PlannerService
+) -> None:
+    await world.db.pool.execute(
+        "INSERT INTO strategy (code, planner_scenario, params) VALUES "
+        "('TELEPORT', 'teleport', '{\"target\": \"goal\"}')"
+    )
+    await world.goal(2.0, 0.0)
+    await world.battery(0.01)  # far too low, but IDLE has no planner and no battery check
+    await world.strategy("IDLE")
+    await asyncio.sleep(0.8)
+    await world.strategy("TELEPORT")  # logged and ignored, no crash
+    await asyncio.sleep(0.8)
+    assert await world.recommendations() == []
+    assert await world.recommendations(kind="system") == []
+    await world.strategy("GOTO_DIRECT")  # still alive: a known scenario starts at once
+    await world.next_recommendation(lambda r: r["source"] == "turn_then_move")

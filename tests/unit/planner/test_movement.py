@@ -1,0 +1,98 @@
+"""Movement selection by angle (the thesis' selectMovement) and move_while_turning."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from services.planner import move_while_turning, turn_then_move
+from services.planner.scenario import Movement
+from services.planner.tracking import Route, follow, heading_error, wrap_angle
+
+MAX_V, MAX_W = 0.22, 2.84
+
+
+def select(error: float, turning: bool = False) -> Movement:
+    return turn_then_move.select_movement(error, 3.0, MAX_V, MAX_W, turning)
+
+
+def test_goal_ahead_drives_forward() -> None:
+    move = select(heading_error(0.0, 0.0, 0.0, (2.0, 0.05)))
+    assert not move.turning
+    assert move.linear == pytest.approx(MAX_V)
+    assert abs(move.angular) < 0.1
+
+
+def test_goal_to_the_left_turns_left() -> None:
+    move = select(heading_error(0.0, 0.0, 0.0, (0.0, 2.0)))  # 90 degrees to the left
+    assert move.turning and move.linear == 0.0 and move.angular > 0
+
+
+def test_goal_to_the_right_turns_right() -> None:
+    move = select(heading_error(0.0, 0.0, 0.0, (0.0, -2.0)))
+    assert move.turning and move.linear == 0.0 and move.angular < 0
+
+
+@pytest.mark.parametrize("yaw", [0.0, 1.0, -2.5, math.pi])
+def test_goal_behind_turns_in_place(yaw: float) -> None:
+    behind = (-2.0 * math.cos(yaw), -2.0 * math.sin(yaw))
+    move = select(heading_error(0.0, 0.0, yaw, behind))
+    assert move.turning and move.linear == 0.0 and move.angular != 0.0
+    assert abs(move.angular) <= MAX_W
+
+
+def test_turning_is_capped_and_never_stalls() -> None:
+    assert select(3.0).angular == pytest.approx(MAX_W)
+    assert select(0.35).angular >= turn_then_move.MIN_TURN_RPS
+    assert turn_then_move.select_movement(3.0, 3.0, MAX_V, 1.0).angular == pytest.approx(1.0)
+
+
+def test_hysteresis_keeps_turning_until_well_aligned() -> None:
+    assert not select(0.25).turning  # under the threshold, was driving: drive
+    assert select(0.25, turning=True).turning  # was turning: finish the turn
+    assert not select(0.1, turning=True).turning
+
+
+def test_driving_slows_near_the_target() -> None:
+    near = turn_then_move.select_movement(0.0, 0.1, MAX_V, MAX_W)
+    far = turn_then_move.select_movement(0.0, 3.0, MAX_V, MAX_W)
+    assert 0 < near.linear < far.linear == pytest.approx(MAX_V)
+
+
+@given(st.floats(-math.pi, math.pi), st.floats(0.0, 20.0))
+def test_move_while_turning_never_drives_backward(error: float, remaining: float) -> None:
+    move = move_while_turning.select_movement(error, remaining, MAX_V, MAX_W)
+    assert 0.0 <= move.linear <= MAX_V
+    assert abs(move.angular) <= MAX_W
+    if abs(error) > 1e-6:
+        assert math.copysign(1.0, move.angular) == math.copysign(1.0, error)
+
+
+def test_move_while_turning_turns_on_the_spot_for_a_goal_behind() -> None:
+    move = move_while_turning.select_movement(math.pi * 0.9, 2.0, MAX_V, MAX_W)
+    assert move.linear == 0.0 and move.angular > 0
+    ahead = move_while_turning.select_movement(0.2, 2.0, MAX_V, MAX_W)
+    assert ahead.linear > 0.2 and ahead.angular > 0
+
+
+def test_wrap_angle() -> None:
+    assert wrap_angle(3 * math.pi / 2) == pytest.approx(-math.pi / 2)
+    assert wrap_angle(-math.pi) == pytest.approx(math.pi)
+
+
+def test_the_follower_steers_along_the_segment_and_moves_on_at_a_vertex() -> None:
+    route = Route.of(("goal", "1"), None, [(0.0, 0.0), (2.0, 0.0), (2.0, 2.0)], planned=True)
+    progress = follow(route, 0.5, 0.1)
+    assert progress.waypoint == 1 and progress.waypoints == 2
+    assert progress.lookahead == pytest.approx((0.85, 0.0))
+    assert progress.deviation_m == pytest.approx(0.1)
+    assert progress.remaining_m == pytest.approx(0.1 + 1.5 + 2.0)
+    near_corner = follow(route, 1.8, 0.0)
+    assert near_corner.lookahead == pytest.approx((2.0, 0.0))  # never cuts the corner
+    past = follow(route, 1.95, 0.05)
+    assert past.waypoint == 2 and past.lookahead[1] > 0.0
+    # progress is monotone: back near the start, the follower stays on the second segment
+    assert follow(route, 0.2, 0.0).waypoint == 2
