@@ -1,0 +1,112 @@
+"""What avoid_left and avoid_right share: one decision, so they never contradict each other.
+
+The thesis' controller (section 5, ``actions Controller``) compares a few beams with
+OBJ_DISTANCE and turns away from the side that is too close. Here, with the default params:
+
+- the *front-right* sector is -60 to -5 deg, the *front-left* 5 to 60 deg, the *dead-ahead*
+  cone -5 to 5 deg (angles counter-clockwise from the heading);
+- an obstacle closer than ``avoid_distance_m`` only on the front-right: turn left
+  (avoid_left); only on the front-left: turn right (avoid_right);
+- dead ahead, or on both sides at once: turn toward the freer half, where the closer closest
+  obstacle loses, then the less open half, then (a perfect tie) left. :func:`decide_turn`
+  computes this once for both scenarios, so exactly one of them recommends: never a left and a
+  right of equal priority that would leave the robot to whichever the decision saw last.
+
+The recommendation: ``avoid_angular_rps`` toward the chosen side, forward at
+``avoid_linear_mps``, or turning in place when the obstacle is nearer than
+``avoid_stop_distance_m``; both clamped to the robot's limits.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from common.contract.records import LaserScan, Odometry, Robot
+from services.controller.params import number
+from services.controller.scenario import Command, ControllerScenario
+from services.controller.sectors import Hit, ScanView, Sector, clamp, deg, describe_sector
+
+LEFT, RIGHT = 1, -1
+
+
+@dataclass(frozen=True)
+class AvoidParams:
+    distance_m: float = 0.40
+    sector_deg: float = 60.0
+    front_deg: float = 5.0
+    linear_mps: float = 0.05
+    angular_rps: float = 1.0
+    stop_distance_m: float = 0.20
+
+    @classmethod
+    def read(cls, params: Mapping[str, Any]) -> AvoidParams:
+        d = cls()
+        sector = number(params, "avoid_sector_deg", d.sector_deg, low=1.0, high=180.0)
+        return cls(
+            distance_m=number(params, "avoid_distance_m", d.distance_m, high=10.0),
+            sector_deg=sector,
+            front_deg=number(params, "avoid_front_deg", d.front_deg, high=sector),
+            linear_mps=number(params, "avoid_linear_mps", d.linear_mps, high=10.0),
+            angular_rps=number(params, "avoid_angular_rps", d.angular_rps, high=100.0),
+            stop_distance_m=number(params, "avoid_stop_distance_m", d.stop_distance_m, high=10.0),
+        )
+
+
+@dataclass(frozen=True)
+class Turn:
+    """Which way to turn, and the obstacle and sector that call for it."""
+
+    side: int  # LEFT (counter-clockwise, positive angular) or RIGHT
+    hit: Hit
+    where: str  # for the reason, e.g. "front-right [-60, -5] deg"
+
+
+def decide_turn(view: ScanView, p: AvoidParams) -> Turn | None:
+    outer, inner = deg(p.sector_deg), deg(p.front_deg)
+    right_sector: Sector = (-outer, -inner)
+    left_sector: Sector = (inner, outer)
+    ahead_sector: Sector = (-inner, inner)
+    right, left = view.closest(right_sector), view.closest(left_sector)
+    ahead = view.closest(ahead_sector)
+    near_right, near_left = right.range_m < p.distance_m, left.range_m < p.distance_m
+    near_ahead = ahead.range_m < p.distance_m
+    if near_ahead or (near_right and near_left):
+        freer_left = view.left_is_freer((0.0, outer), (-outer, 0.0), horizon_m=2 * p.distance_m)
+        hit = min((ahead, right, left), key=lambda h: h.range_m)
+        where = f"dead ahead {describe_sector(ahead_sector)}" if near_ahead else "on both sides"
+        freer = "left" if freer_left else "right"
+        return Turn(LEFT if freer_left else RIGHT, hit, f"{where} (the {freer} half is freer)")
+    if near_right:
+        return Turn(LEFT, right, f"front-right {describe_sector(right_sector)}")
+    if near_left:
+        return Turn(RIGHT, left, f"front-left {describe_sector(left_sector)}")
+    return None
+
+
+class AvoidScenario(ControllerScenario):
+    """avoid_left or avoid_right: recommends only when :func:`decide_turn` picks its side."""
+
+    side: ClassVar[int] = LEFT
+    priority = 50
+
+    @classmethod
+    def decide(
+        cls, scan: LaserScan, odom: Odometry | None, robot: Robot, params: Mapping[str, Any]
+    ) -> Command | None:
+        p = AvoidParams.read(params)
+        turn = decide_turn(ScanView(scan), p)
+        if turn is None or turn.side != cls.side:
+            return None
+        close = turn.hit.range_m < p.stop_distance_m
+        linear = 0.0 if close else clamp(p.linear_mps, robot.max_linear_mps)
+        angular = cls.side * clamp(p.angular_rps, robot.max_angular_rps)
+        action = "turn in place" if close else "slow down and turn"
+        direction = "left" if cls.side == LEFT else "right"
+        return Command(
+            linear,
+            angular,
+            f"obstacle {turn.hit.describe()} {turn.where}, closer than "
+            f"{p.distance_m:.2f} m: {action} {direction}",
+        )

@@ -1,0 +1,94 @@
+"""safety_stop: never drive into something inside the footprint plus a margin.
+
+The direction of travel comes from the newest odometry's measured velocity:
+
+- moving forward (linear > 0.01 m/s): the obstacles the round body would sweep driving
+  straight ahead (beams within ``footprint + safety_margin_m + |v| * safety_lookahead_s`` of
+  the centre, in front of it, and within one footprint radius of its path);
+- moving backward: the same behind the robot;
+- not translating (stopped, or turning in place, which a round robot does without sweeping
+  anything new): nothing, unless the robot is boxed in (an obstacle inside footprint + margin
+  in each quadrant), when it recommends a full stop.
+
+The look-ahead term counts the distance covered until the next scan (0.2 s at 5 Hz), so the
+stop comes before the margin is used up rather than after.
+
+When it fires it recommends zero linear velocity and a turn in place that swings the
+direction of travel toward the freer side (``safety_turn_rps``): the robot recovers instead
+of freezing with an obstacle in front of it forever. Priority 100: above every other
+shipped scenario, so nothing overrides it while it is live.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from common.contract.records import LaserScan, Odometry, Robot
+from services.controller.params import number
+from services.controller.scenario import Command, ControllerScenario
+from services.controller.sectors import ScanView, clamp, deg
+
+MOVING_MPS = 0.01  # below this the robot is not translating (odometry noise, creeping)
+# How far the freer side is judged: where the robot can go once it has turned.
+FREER_HORIZON_M = 1.0
+
+
+@dataclass(frozen=True)
+class SafetyParams:
+    margin_m: float = 0.06
+    lookahead_s: float = 0.2
+    turn_rps: float = 0.8
+
+    @classmethod
+    def read(cls, params: Mapping[str, Any]) -> SafetyParams:
+        d = cls()
+        return cls(
+            margin_m=number(params, "safety_margin_m", d.margin_m, high=2.0),
+            lookahead_s=number(params, "safety_lookahead_s", d.lookahead_s, high=5.0),
+            turn_rps=number(params, "safety_turn_rps", d.turn_rps, high=100.0),
+        )
+
+
+class SafetyStop(ControllerScenario):
+    scenario = "safety_stop"
+    priority = 100
+    needs_odometry = True
+
+    @classmethod
+    def decide(
+        cls, scan: LaserScan, odom: Odometry | None, robot: Robot, params: Mapping[str, Any]
+    ) -> Command | None:
+        p = SafetyParams.read(params)
+        view = ScanView(scan)
+        stop_m = robot.footprint_radius_m + p.margin_m
+        linear = odom.linear_mps if odom is not None else 0.0
+        if abs(linear) <= MOVING_MPS:
+            if view.boxed_in(stop_m):
+                return Command(0.0, 0.0, f"boxed in: obstacles within {stop_m:.2f} m all around")
+            return None
+        direction = 1 if linear > 0 else -1
+        reach_m = stop_m + abs(linear) * p.lookahead_s
+        hit = view.swept(direction, robot.footprint_radius_m, reach_m)
+        if not hit.found:
+            return None
+        turn = clamp(p.turn_rps, robot.max_angular_rps)
+        if direction > 0:
+            # A positive (counter-clockwise) turn swings the front toward the left.
+            toward_left = view.left_is_freer((0.0, deg(90)), (-deg(90), 0.0), FREER_HORIZON_M)
+            angular, side = (turn, "left") if toward_left else (-turn, "right")
+        else:
+            # A positive turn swings the back toward the back-right.
+            back_right_freer = not view.left_is_freer(
+                (deg(90), deg(180)), (-deg(180), -deg(90)), FREER_HORIZON_M
+            )
+            angular, side = (turn, "back-right") if back_right_freer else (-turn, "back-left")
+        way = "forward" if direction > 0 else "backward"
+        return Command(
+            0.0,
+            angular,
+            f"moving {way} at {abs(linear):.2f} m/s: obstacle {hit.describe()} within "
+            f"{reach_m:.2f} m (footprint {robot.footprint_radius_m:.3f} + margin "
+            f"{p.margin_m:.2f} + look-ahead): stop, turn toward the freer {side}",
+        )

@@ -1,0 +1,132 @@
+"""Geometry on one laser scan: the closest obstacle in a sector, how open a sector is, and
+what the robot's round body would sweep driving forward or backward. Pure numpy, no I/O.
+
+Angles are radians relative to the robot's heading, counter-clockwise, in (-pi, pi] (the
+contract's laser_scan convention); a sector is ``(low, high)`` with ``low <= high`` and may
+cross +-pi (it is matched by its centre and half-width, wrapped).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from common.contract.records import LaserScan
+
+FloatArray = npt.NDArray[np.float64]
+Sector = tuple[float, float]
+
+# Ranges are stored as float32: 0.12 m (the sensor's range_min, where the sim reports anything
+# closer) reads back as 0.1199999..., which is a real obstacle, not an invalid beam.
+_RANGE_TOLERANCE_M = 1e-5
+# Two clearances closer than this are a tie: the lidar's noise (sigma 0.01 m) must not flip
+# the turn direction from one scan to the next in front of a symmetric obstacle.
+TIE_M = 0.03
+_OPENNESS_TIE_M = 0.02
+
+
+def deg(value: float) -> float:
+    return math.radians(value)
+
+
+@dataclass(frozen=True)
+class Hit:
+    """The closest beam of a query: its range (inf when nothing) and angle."""
+
+    range_m: float
+    angle_rad: float
+
+    @property
+    def found(self) -> bool:
+        return math.isfinite(self.range_m)
+
+    @property
+    def angle_deg(self) -> float:
+        return math.degrees(self.angle_rad)
+
+    def describe(self) -> str:
+        return f"{self.range_m:.2f} m at {self.angle_deg:+.0f} deg"
+
+
+NOTHING = Hit(math.inf, 0.0)
+
+
+class ScanView:
+    """One scan prepared once (angles, invalid beams) for any number of sector queries."""
+
+    def __init__(self, scan: LaserScan) -> None:
+        ranges = np.asarray(scan.ranges, dtype=np.float64)
+        # Below range_min (or NaN) a beam carries no information: it counts as free space;
+        # inf already means "nothing within range_max".
+        valid = ranges >= scan.range_min - _RANGE_TOLERANCE_M
+        self.ranges: FloatArray = np.where(valid, ranges, np.inf)
+        self.angles: FloatArray = scan.angles()
+        self.range_max = float(scan.range_max)
+
+    def _mask(self, sector: Sector) -> npt.NDArray[np.bool_]:
+        low, high = sector
+        centre, half = (low + high) / 2.0, (high - low) / 2.0
+        delta = (self.angles - centre + math.pi) % (2.0 * math.pi) - math.pi  # wrapped
+        return np.asarray(np.abs(delta) <= half + 1e-9)
+
+    def _closest(self, mask: npt.NDArray[np.bool_]) -> Hit:
+        if not mask.any():
+            return NOTHING
+        index = np.flatnonzero(mask)
+        best = int(index[np.argmin(self.ranges[index])])
+        value = float(self.ranges[best])
+        return Hit(value, float(self.angles[best])) if math.isfinite(value) else NOTHING
+
+    def closest(self, sector: Sector) -> Hit:
+        """The closest obstacle with its angle in ``sector``."""
+        return self._closest(self._mask(sector))
+
+    def openness(self, sector: Sector, horizon_m: float) -> float:
+        """Mean range in ``sector``, each beam clipped at ``horizon_m``: higher is freer."""
+        mask = self._mask(sector)
+        if not mask.any():
+            return horizon_m
+        return float(np.minimum(self.ranges[mask], horizon_m).mean())
+
+    def swept(self, direction: int, half_width_m: float, reach_m: float) -> Hit:
+        """The closest obstacle the body (a disc of radius ``half_width_m``) would hit moving
+        straight ahead (``direction`` +1) or back (-1) within ``reach_m`` of its centre."""
+        with np.errstate(invalid="ignore"):  # inf * cos(pi/2) is nan: never a hit
+            along = direction * self.ranges * np.cos(self.angles)
+            lateral = np.abs(self.ranges * np.sin(self.angles))
+            mask = (self.ranges <= reach_m) & (along > 0.0) & (lateral <= half_width_m)
+        return self._closest(np.asarray(mask))
+
+    def boxed_in(self, reach_m: float) -> bool:
+        """Obstacles within ``reach_m`` in each of the four quadrants (front, left, back, right)."""
+        quadrants: tuple[Sector, ...] = (
+            (-deg(45), deg(45)),
+            (deg(45), deg(135)),
+            (deg(135), deg(225)),
+            (-deg(135), -deg(45)),
+        )
+        return all(self.closest(q).range_m <= reach_m for q in quadrants)
+
+    def left_is_freer(self, left: Sector, right: Sector, horizon_m: float) -> bool:
+        """Whether ``left`` is less obstructed than ``right``: the closer closest obstacle
+        loses; on a tie, the less open sector loses; on a tie again, left wins. Every
+        scenario that must agree on a side (avoid_left and avoid_right) calls this one
+        function, so they can never both claim the same obstacle."""
+        near_l, near_r = self.closest(left).range_m, self.closest(right).range_m
+        if min(near_l, near_r) < math.inf and not abs(near_l - near_r) <= TIE_M:
+            return near_l > near_r
+        open_l, open_r = self.openness(left, horizon_m), self.openness(right, horizon_m)
+        if abs(open_l - open_r) > _OPENNESS_TIE_M:
+            return open_l > open_r
+        return True  # a symmetric obstacle: turn left (counter-clockwise), by convention
+
+
+def describe_sector(sector: Sector) -> str:
+    return f"[{math.degrees(sector[0]):+.0f}, {math.degrees(sector[1]):+.0f}] deg"
+
+
+def clamp(value: float, limit: float) -> float:
+    return max(-limit, min(limit, value))

@@ -1,0 +1,172 @@
+"""The controller under test, and a foreign client that feeds it as the bridge, the strategy
+service and the sim would: plain SQL, a change notification after each write, sim time on
+``pnav/sim/clock``. Tests assert on table contents only, so another implementation of the
+controller that speaks the contract passes them by swapping the ``controller`` fixture.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import time
+from collections.abc import AsyncIterator, Awaitable, Callable
+from typing import Any, TypeVar
+
+import asyncpg
+import pytest
+
+from common import bus
+from common.config import EngineSettings, ServiceConfig, ZenohSettings
+from common.contract import keys
+from common.db import connect
+from common.testing import publish_clock, running_service
+
+T = TypeVar("T")
+
+SIM_START = 100.0
+ROBOT = "r1"
+BEAMS = 360
+Obstacle = tuple[float, float, float]  # (from deg, to deg, range m), in (-180, 180], CCW
+
+
+@pytest.fixture
+async def controller(db_url: str, zenoh_settings: ZenohSettings) -> AsyncIterator[None]:
+    """The controller service, running until the test ends (in-process for this one)."""
+    from services.controller.service import ControllerService
+
+    config = ServiceConfig(
+        service="controller",
+        database_url=db_url,
+        zenoh=zenoh_settings,
+        engine=EngineSettings(period_s=0.05),
+        stats_period_s=30.0,
+        instance="controller-under-test",
+    )
+    async with running_service(ControllerService, config, settle_s=0.5):
+        yield
+
+
+class Feeder:
+    """Writes what the controller reads, as a client in any language would."""
+
+    def __init__(self, conn: asyncpg.Connection, session: Any) -> None:
+        self.conn = conn
+        self.session = session
+        self.notifier = bus.Notifier(session)
+        self.started = time.monotonic()
+
+    def now(self) -> float:
+        """Sim time: runs at rate 1 from SIM_START."""
+        return SIM_START + (time.monotonic() - self.started)
+
+    async def run_clock(self) -> None:
+        while True:  # the sim publishes its clock at 20 Hz or more
+            publish_clock(self.session, self.now())
+            await asyncio.sleep(0.05)
+
+    async def add_robot(self) -> None:
+        await self.conn.execute("INSERT INTO robot (robot_id, world) VALUES ($1, 'test')", ROBOT)
+        self.notifier.notify(keys.ROBOT, ROBOT, None)
+
+    async def set_strategy(self, code: str) -> None:
+        await self.conn.execute(
+            "INSERT INTO active_strategy (robot_id, strategy_code, source, stamp) "
+            "VALUES ($1, $2, 'user', $3) ON CONFLICT (robot_id) DO UPDATE SET "
+            "strategy_code = EXCLUDED.strategy_code, source = 'user', stamp = EXCLUDED.stamp, "
+            "updated_at = now()",
+            ROBOT,
+            code,
+            self.now(),
+        )
+        self.notifier.notify(keys.ACTIVE_STRATEGY, ROBOT, None)
+
+    async def add_strategy(self, code: str, scenarios: list[str], params: dict[str, Any]) -> None:
+        await self.conn.execute(
+            "INSERT INTO strategy (code, planner_scenario, controller_scenarios, params) "
+            "VALUES ($1, NULL, $2, $3)",
+            code,
+            scenarios,
+            params,
+        )
+        self.notifier.notify(keys.STRATEGY, None, None)
+
+    async def odometry(self, linear: float, angular: float = 0.0) -> int:
+        row_id: int = await self.conn.fetchval(
+            "INSERT INTO odometry (robot_id, stamp, x, y, yaw, linear_mps, angular_rps) "
+            "VALUES ($1, $2, 0, 0, 0, $3, $4) RETURNING id",
+            ROBOT,
+            self.now(),
+            linear,
+            angular,
+        )
+        self.notifier.notify(keys.ODOMETRY, ROBOT, row_id)
+        return row_id
+
+    async def scan(self, *obstacles: Obstacle, age_s: float = 0.0) -> int:
+        """A 360-beam sweep (beam 0 ahead, CCW), inf except the obstacles; returns its id."""
+        ranges = [math.inf] * BEAMS
+        for beam in range(BEAMS):
+            angle = beam if beam <= 180 else beam - 360
+            for low, high, distance in obstacles:
+                if low <= angle <= high:
+                    ranges[beam] = min(ranges[beam], distance)
+        row_id: int = await self.conn.fetchval(
+            "INSERT INTO laser_scan (robot_id, stamp, angle_min, angle_increment, range_min, "
+            "range_max, ranges) VALUES ($1, $2, 0, $3, 0.12, 3.5, $4) RETURNING id",
+            ROBOT,
+            self.now() - age_s,
+            2 * math.pi / BEAMS,
+            ranges,
+        )
+        self.notifier.notify(keys.LASER_SCAN, ROBOT, row_id)
+        return row_id
+
+    async def recommendations(self, *sources: str) -> list[asyncpg.Record]:
+        return list(
+            await self.conn.fetch(
+                "SELECT * FROM command_recommendation WHERE robot_id = $1 "
+                "AND (cardinality($2::text[]) = 0 OR source = ANY($2)) ORDER BY id",
+                ROBOT,
+                list(sources),
+            )
+        )
+
+    async def sources_for(self, scan_id: int) -> set[str]:
+        rows = await self.conn.fetch(
+            "SELECT source FROM command_recommendation WHERE (inputs->>'laser_scan')::bigint = $1",
+            scan_id,
+        )
+        return {r["source"] for r in rows}
+
+
+@pytest.fixture
+async def feeder(db_url: str, zenoh_settings: ZenohSettings) -> AsyncIterator[Feeder]:
+    conn = await connect(db_url)
+    session = await asyncio.to_thread(bus.open_session, zenoh_settings)
+    feed = Feeder(conn, session)
+    clock = asyncio.create_task(feed.run_clock())
+    try:
+        await feed.add_robot()
+        yield feed
+    finally:
+        clock.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await clock
+        feed.notifier.close()
+        await conn.close()
+        await asyncio.to_thread(session.close)
+
+
+async def eventually(
+    check: Callable[[], Awaitable[T | None]], what: str, limit_s: float = 15.0
+) -> T:
+    """Poll ``check`` until it returns something truthy; fail after ``limit_s``."""
+    deadline = time.monotonic() + limit_s
+    while True:
+        result = await check()
+        if result:
+            return result
+        if time.monotonic() > deadline:
+            raise AssertionError(f"not within {limit_s} s: {what}")
+        await asyncio.sleep(0.05)

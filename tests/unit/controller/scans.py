@@ -1,0 +1,54 @@
+"""Synthetic scans, odometry and robots for the controller's unit tests."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from common.contract.records import LaserScan, Odometry, Robot
+
+BEAMS = 360
+BURGER = Robot(
+    "r1",
+    max_linear_mps=0.22,
+    max_angular_rps=2.84,
+    footprint_radius_m=0.105,
+    battery_capacity_wh=19.98,
+)
+
+Obstacle = tuple[float, float, float]  # (from deg, to deg, range m), in (-180, 180], CCW
+
+
+def scan(
+    *obstacles: Obstacle,
+    scan_id: int = 1,
+    stamp: float = 10.0,
+    noise: float = 0.0,
+    seed: int = 0,
+) -> LaserScan:
+    """A TurtleBot3-like sweep (beam 0 ahead, 1 deg apart, CCW), inf except the obstacles."""
+    ranges = np.full(BEAMS, np.inf)
+    beam_deg = np.arange(BEAMS, dtype=np.float64)
+    angles = np.where(beam_deg > 180.0, beam_deg - 360.0, beam_deg)  # (-180, 180]
+    for low, high, distance in obstacles:
+        mask = (angles >= low) & (angles <= high)
+        ranges[mask] = np.minimum(ranges[mask], distance)
+    if noise:
+        ranges = ranges + np.random.default_rng(seed).normal(0.0, noise, BEAMS)
+    return LaserScan(
+        id=scan_id,
+        robot_id="r1",
+        stamp=stamp,
+        angle_min=0.0,
+        angle_increment=2 * math.pi / BEAMS,
+        range_min=0.12,
+        range_max=3.5,
+        ranges=ranges.astype(np.float32),
+    )
+
+
+def odom(
+    linear: float = 0.0, angular: float = 0.0, odom_id: int = 1, stamp: float = 10.0
+) -> Odometry:
+    return Odometry(odom_id, "r1", stamp, 0.0, 0.0, 0.0, linear, angular)
