@@ -61,7 +61,9 @@ class LaserScan:
     def sector_min(self, low: float, high: float) -> float:
         """Closest valid range among beams with angle in [low, high] (rad); inf if none."""
         angles = self.angles()
-        mask = (angles >= low) & (angles <= high) & (self.ranges >= self.range_min)
+        # ranges are float32: a hit at exactly range_min (the sim's reading for anything
+        # closer) must not be lost to rounding against the float64 range_min.
+        mask = (angles >= low) & (angles <= high) & (self.ranges >= self.range_min - 1e-4)
         return float(self.ranges[mask].min()) if mask.any() else math.inf
 
 

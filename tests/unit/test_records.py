@@ -22,7 +22,7 @@ async def seeded(conn: asyncpg.Connection) -> asyncpg.Connection:
         "('r1', 1.0, 0, 0, 0, 0, 0), ('r1', 2.0, 1.5, -0.5, 0.3, 0.2, 0.1)"
     )
     ranges = [math.inf] * 360
-    ranges[0], ranges[90], ranges[270] = 0.5, 1.0, 2.0
+    ranges[0], ranges[90], ranges[270], ranges[180] = 0.5, 1.0, 2.0, 0.12
     await conn.execute(
         "INSERT INTO laser_scan (robot_id, stamp, angle_min, angle_increment, range_min, "
         "range_max, ranges) VALUES ('r1', 2.0, 0, $1, 0.12, 3.5, $2)",
@@ -46,6 +46,8 @@ async def test_scan_sectors_use_angles_relative_to_the_heading(seeded: asyncpg.C
     assert scan.sector_min(1.4, 1.7) == pytest.approx(1.0)  # beam 90: left
     assert scan.sector_min(-1.7, -1.4) == pytest.approx(2.0)  # beam 270: right, wrapped
     assert scan.sector_min(2.0, 3.0) == math.inf
+    # a hit at range_min (anything closer reads range_min) is the most important one to keep
+    assert scan.sector_min(3.1, math.pi) == pytest.approx(0.12)
 
 
 async def test_strategies_and_active_strategy(seeded: asyncpg.Connection) -> None:
