@@ -1,0 +1,45 @@
+"""Target rule: write one decided system command (the feedback loop to the strategy).
+
+Created by the meta-decision rule for a new winning system recommendation; writes the
+pending system_command row and ``treated_by`` of the system recommendations considered, in
+one statement, then notifies system_command so the strategy service applies it at once.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import TYPE_CHECKING
+
+from common import log
+from common.engine import Rule
+from services.decision import store
+from services.decision.arbitration import SystemDecision
+
+if TYPE_CHECKING:
+    from services.decision.service import DecisionService
+
+logger = logging.getLogger("pnav.decision")
+
+
+class IssueSystemCommand(Rule):
+    scenario = "decision"
+
+    def __init__(self, service: DecisionService, decision: SystemDecision) -> None:
+        self.service = service
+        self.decision = decision
+
+    async def actions(self) -> None:
+        d = self.decision
+        row_id = await store.write_system_command(self.service.runtime.database, d)
+        log.event(
+            logger,
+            logging.INFO,
+            "system_command",
+            robot=d.robot_id,
+            id=row_id,
+            command=d.command,
+            stamp=round(d.stamp, 3),
+            recommendation_id=d.recommendation_id,
+            considered=list(d.considered_ids),
+            reason=d.reason,
+        )
