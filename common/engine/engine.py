@@ -49,6 +49,7 @@ class Engine:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stopping = False
         self._woken = False
+        self._hurried = False
         self._running = False
         self.clock: Callable[[], float] = time.monotonic
 
@@ -222,6 +223,16 @@ class Engine:
         if self._wake is not None:
             self._wake.set()
 
+    def hurry(self) -> None:
+        """Start the next activation as soon as the one under way ends.
+
+        For a rule that generated target rules which should not wait for the next
+        notification or for F (they go to ``next``, so they run in the next activation).
+        """
+        self._hurried = True
+        if self._wake is not None:
+            self._wake.set()
+
     def wake_threadsafe(self) -> None:
         """:meth:`wake` from any thread, e.g. a Zenoh callback."""
         loop = self._loop
@@ -242,14 +253,14 @@ class Engine:
         try:
             while not self._stopping:
                 self._wake.clear()
-                self._woken = False
+                self._woken = self._hurried = False
                 started = self.clock()
                 await self.activation()
                 if pause > 0:
                     await asyncio.sleep(pause)
                 if self._stopping:
                     break
-                if not self._woken:
+                if not (self._woken or self._hurried):
                     remaining = started + period - self.clock()
                     if remaining > 0:
                         try:
@@ -258,6 +269,8 @@ class Engine:
                             pass
                 if self._woken:
                     self.counters.woken_by_notification += 1
+                elif self._hurried:
+                    self.counters.woken_by_rule += 1
                 else:
                     self.counters.woken_by_period += 1
         finally:

@@ -44,6 +44,7 @@ class EngineCounters:
     activations: int = 0
     woken_by_notification: int = 0
     woken_by_period: int = 0
+    woken_by_rule: int = 0
     rules_run: int = 0
     capped_by_n: int = 0
     capped_by_f: int = 0

@@ -85,7 +85,7 @@ class MetaDecision(Rule):
         for robot_id in [r for r in issued if r not in self.live]:
             del issued[robot_id]
         if self.targets:
-            self.service.engine.wake()
+            self.service.engine.hurry()
 
     def rule_generation(self) -> Iterable[Rule]:
         return [*self.targets, self.clone()]

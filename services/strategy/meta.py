@@ -88,7 +88,7 @@ class MetaStrategy(Rule):
         self.targets = plan(self.service, self.pending)
         if self.targets:
             # Run them in the very next activation instead of waiting for the period F.
-            self.service.engine.wake()
+            self.service.engine.hurry()
 
     def rule_generation(self) -> Iterable[Rule]:
         return [*self.targets, self.clone()]

@@ -426,3 +426,26 @@ async def test_the_engine_runs_under_uvloop() -> None:
     import uvloop
 
     assert isinstance(asyncio.get_running_loop(), uvloop.Loop)
+
+
+async def test_hurry_runs_generated_targets_without_waiting_for_f() -> None:
+    journal: list[str] = []
+    e = engine(period_s=30.0)
+
+    class Spawner(Rule):
+        """Generates one target rule and asks for the next activation at once."""
+
+        def actions(self) -> None:
+            e.hurry()
+
+        def rule_generation(self) -> list[Rule]:
+            return [Probe("target", journal)]
+
+    e.add(Spawner())
+    task = asyncio.create_task(e.run())
+    await asyncio.sleep(0.1)
+    # activation 1: Spawner (target -> next); activation 2 at once: target runs
+    assert ran(journal) == ["target"]
+    assert e.counters.woken_by_rule == 1 and e.counters.woken_by_notification == 0
+    e.stop()
+    await asyncio.wait_for(task, 2)
