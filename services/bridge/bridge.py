@@ -1,0 +1,216 @@
+"""The bridge: the one service that talks to the robot (DESIGN.md section 4, "bridge").
+
+Wiring only; each concern lives in its own module:
+
+- sensors: ``pnav/robot/*/{scan,odom,battery,collision}`` -> :mod:`.messages` (validate)
+  -> :mod:`.writer` (batched INSERTs + notifications). Zenoh callbacks only hand the bytes
+  to the loop (``bus.subscribe``), so a slow INSERT never stalls Zenoh's threads;
+- world: :mod:`.world` (robot, map and charging_station rows);
+- commands: :mod:`.commands` (command2robot -> cmd_vel, clamp, :mod:`.watchdog`);
+- housekeeping here: ``prune_sensor_rows()`` every ``prune_period_s``, the counters logged
+  every ``stats_period_s``.
+
+A malformed message is counted, logged (rate-limited) and dropped; nothing a publisher sends
+can stop the bridge or reach the database.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import functools
+import logging
+import time
+
+import zenoh
+
+from common import bus, log
+from common.config import ServiceConfig
+from common.contract import keys
+from common.runtime import Runtime, run_service
+from services.bridge.commands import CommandRelay
+from services.bridge.counters import Counters, RateLimitedLog
+from services.bridge.messages import UNKNOWN_ROBOT, MalformedMessage, parse_sensor
+from services.bridge.settings import BridgeSettings
+from services.bridge.world import World, WorldSync
+from services.bridge.writer import SensorWriter
+
+logger = logging.getLogger("pnav.bridge")
+
+SERVICE = "bridge"
+# after an unknown robot's message, look at the robot table again at most this often
+_ROBOT_RELOAD_S = 1.0
+
+
+class Bridge:
+    def __init__(self, runtime: Runtime, settings: BridgeSettings | None = None) -> None:
+        self.runtime = runtime
+        self.settings = settings or BridgeSettings()
+        self.counters = Counters()
+        # robot ids sensors may come from: the robot table, kept up to date
+        self.robots: frozenset[str] = frozenset()
+        db = runtime.database
+        self.writer = SensorWriter(
+            runtime.config.database_url,
+            db.notifier,
+            self.counters,
+            max_pending=self.settings.max_pending_rows,
+        )
+        self.world = WorldSync(
+            runtime.zenoh,
+            db,
+            self.counters,
+            retry_s=self.settings.world_retry_s,
+            on_applied=self._on_world,
+        )
+        self.commands = CommandRelay(
+            runtime.zenoh, db.pool, runtime.clock, self.counters, self.settings
+        )
+        self._malformed_log = RateLimitedLog(logger)
+        self._subscribers: list[zenoh.Subscriber[None]] = []
+        self._tasks: list[asyncio.Task[None]] = []
+        self._last_reload = 0.0
+        self._reload: asyncio.Task[None] | None = None
+        self._stopped = False
+
+    # -- lifecycle -----------------------------------------------------------------------
+    async def start(self) -> None:
+        session = self.runtime.zenoh
+        await self._load_robots()
+        await self.writer.start()
+        for topic in keys.SENSOR_TOPICS:
+            handler = functools.partial(self._on_sensor, topic)
+            self._subscribers.append(bus.subscribe(session, keys.robot_watch(topic), handler))
+        self._subscribers.append(
+            bus.subscribe(session, keys.notify_watch(keys.ROBOT), self._on_robot_notification)
+        )
+        self.world.start()
+        await self.commands.start()
+        self._tasks = [
+            asyncio.create_task(self._prune_loop(), name="prune"),
+            asyncio.create_task(self._stats_loop(), name="bridge-stats"),
+        ]
+        log.event(
+            logger,
+            logging.INFO,
+            "bridge started",
+            robots=",".join(sorted(self.robots)),
+            watchdog_s=self.settings.watchdog_s,
+        )
+
+    async def stop(self) -> None:
+        """Stop listening, write what is queued, send every robot a zero velocity."""
+        if self._stopped:
+            return
+        self._stopped = True
+        for subscriber in self._subscribers:
+            with contextlib.suppress(Exception):
+                subscriber.undeclare()
+        self._subscribers.clear()
+        tasks = [*self._tasks, *([self._reload] if self._reload else [])]
+        for task in tasks:
+            task.cancel()
+        for task in tasks:
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        self._tasks.clear()
+        await self.world.close()
+        await self.writer.close()
+        await self.commands.close(self.robots)
+        log.event(logger, logging.INFO, "bridge counters", **self.counters.snapshot())
+
+    async def run(self, stop: asyncio.Event) -> None:
+        try:
+            await self.start()
+            await stop.wait()
+        finally:
+            await self.stop()
+
+    # -- sensors -------------------------------------------------------------------------
+    def _on_sensor(self, topic: str, key: str, payload: bytes) -> None:
+        self.counters.messages_in[topic] += 1
+        try:
+            record = parse_sensor(topic, key, payload, self.robots)
+        except MalformedMessage as exc:
+            self._malformed(topic, exc.reason, exc.detail, key)
+            if exc.reason == UNKNOWN_ROBOT:
+                self._reload_robots_soon()
+            return
+        except Exception as exc:  # a bug in validation: still never let it through
+            self._malformed(topic, "internal_error", repr(exc), key)
+            return
+        self.writer.add(record)
+
+    def _malformed(self, topic: str, reason: str, detail: str, key: str) -> None:
+        self.counters.malformed[(topic, reason)] += 1
+        self._malformed_log.warning(
+            (topic, reason),
+            "malformed message dropped",
+            topic=topic,
+            reason=reason,
+            detail=detail[:200],
+            key=key[:120],
+        )
+
+    # -- robots --------------------------------------------------------------------------
+    def _on_world(self, world: World) -> None:
+        self.robots = self.robots | {r.robot_id for r in world.robots}
+
+    def _on_robot_notification(self, key: str, payload: bytes) -> None:
+        self._reload_robots_soon(force=True)
+
+    def _reload_robots_soon(self, *, force: bool = False) -> None:
+        if self._reload is not None and not self._reload.done():
+            return
+        if not force and time.monotonic() - self._last_reload < _ROBOT_RELOAD_S:
+            return
+        self._reload = asyncio.create_task(self._load_robots_safely(), name="robots")
+
+    async def _load_robots(self) -> None:
+        self._last_reload = time.monotonic()
+        async with self.runtime.database.pool.acquire() as conn:
+            rows = await conn.fetch(f"SELECT robot_id FROM {keys.ROBOT}")
+        self.robots = frozenset(r[0] for r in rows)
+
+    async def _load_robots_safely(self) -> None:
+        try:
+            await self._load_robots()
+        except Exception as exc:
+            self._malformed_log.warning("robots", "robot table read failed", error=repr(exc))
+
+    # -- housekeeping --------------------------------------------------------------------
+    async def prune(self) -> int:
+        """Run ``prune_sensor_rows()`` once; return the rows it deleted."""
+        async with self.runtime.database.pool.acquire() as conn:
+            deleted: int = await conn.fetchval("SELECT prune_sensor_rows()")
+        self.counters.rows_pruned += deleted
+        return deleted
+
+    async def _prune_loop(self) -> None:
+        while True:
+            await asyncio.sleep(self.settings.prune_period_s)
+            try:
+                deleted = await self.prune()
+            except Exception as exc:
+                self._malformed_log.warning("prune", "prune_sensor_rows failed", error=repr(exc))
+                continue
+            if deleted:
+                log.event(logger, logging.DEBUG, "sensor rows pruned", deleted=deleted)
+
+    async def _stats_loop(self) -> None:
+        while True:
+            await asyncio.sleep(self.settings.stats_period_s)
+            log.event(logger, logging.INFO, "bridge counters", **self.counters.snapshot())
+
+
+async def serve(config: ServiceConfig, stop: asyncio.Event) -> None:
+    settings = BridgeSettings.from_env()
+    runtime = await Runtime.open(config)
+    try:
+        await Bridge(runtime, settings).run(stop)
+    finally:
+        await runtime.close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_service(SERVICE, serve, argv)

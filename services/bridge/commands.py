@@ -1,0 +1,271 @@
+"""command2robot -> ``pnav/robot/{robot}/cmd_vel``: the newest decision, clamped, watched.
+
+When a command2robot notification arrives (or every ``command_period_s`` of wall time, in
+case one was lost) the relay reads the newest row of the robots concerned, joined with the
+robot's limits, and publishes each row it has not sent yet, clamped to
+``max_linear_mps``/``max_angular_rps`` (NaN becomes 0: a NaN reaching the motors is never
+what the decision meant). Every row sent feeds the :class:`Watchdog`; a robot whose command
+stream goes quiet for ``watchdog_s`` of sim time is sent one zero velocity
+(``command_id`` nil), and every known robot is sent one on shutdown.
+
+At start-up the newest rows already in the table are not replayed blindly: a row written
+before this bridge started may be minutes old, and driving a robot on it would be a
+surprise. Only a row whose ``stamp`` is within ``watchdog_s`` of the current sim time counts.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import asyncpg
+import zenoh
+
+from common import bus, log
+from common.clock import SimClock
+from common.contract import keys
+from services.bridge.counters import Counters, RateLimitedLog
+from services.bridge.settings import BridgeSettings
+from services.bridge.watchdog import Watchdog
+
+logger = logging.getLogger("pnav.bridge.commands")
+
+# LATERAL + LIMIT 1 walks the (robot_id, id DESC) index once per robot: the cost stays flat
+# however long command2robot grows (it is not a pruned sensor table).
+_NEWEST = f"""
+SELECT r.robot_id, c.id, c.stamp, c.linear_mps, c.angular_rps,
+       r.max_linear_mps, r.max_angular_rps
+FROM {keys.ROBOT} r
+CROSS JOIN LATERAL (
+    SELECT id, stamp, linear_mps, angular_rps FROM {keys.COMMAND2ROBOT} c
+    WHERE c.robot_id = r.robot_id ORDER BY c.id DESC LIMIT 1
+) c"""
+_NEWEST_OF = _NEWEST + "\nWHERE r.robot_id = ANY($1::text[])"
+
+
+def clamp(value: float, limit: float) -> float:
+    """``value`` limited to [-limit, limit]; NaN (or a NaN/negative limit) gives 0."""
+    if not limit >= 0:
+        limit = 0.0
+    if math.isnan(value):
+        return 0.0
+    result = max(-limit, min(limit, value))
+    return result if math.isfinite(result) else 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    robot_id: str
+    id: int
+    stamp: float
+    linear: float
+    angular: float
+    max_linear: float
+    max_angular: float
+
+    @classmethod
+    def from_row(cls, row: asyncpg.Record) -> Command:
+        return cls(*row)
+
+
+class CommandRelay:
+    def __init__(
+        self,
+        session: zenoh.Session,
+        pool: asyncpg.Pool,
+        clock: SimClock,
+        counters: Counters,
+        settings: BridgeSettings,
+    ) -> None:
+        self.session = session
+        self.pool = pool
+        self.clock = clock
+        self.counters = counters
+        self.settings = settings
+        self.watchdog = Watchdog(settings.watchdog_s)
+        self.last_sent: dict[str, int] = {}  # newest command2robot id handled, per robot
+        self._stopped: set[str] = set()  # robots the watchdog stopped
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._wake = asyncio.Event()
+        self._want_all = False
+        self._wanted: set[str] = set()
+        self._alerts = RateLimitedLog(logger)
+        self._subscriber: zenoh.Subscriber[None] | None = None
+        self._tasks: list[asyncio.Task[None]] = []
+
+    async def start(self) -> None:
+        # Subscribe before the first read, so a command written in between is not missed.
+        self._subscriber = bus.subscribe(
+            self.session, keys.notify_watch(keys.COMMAND2ROBOT), self._on_notification
+        )
+        async with self.pool.acquire() as conn:
+            rows = await conn.fetch(_NEWEST)
+        for row in rows:
+            self._consider(Command.from_row(row), at_start=True)
+        self._tasks = [
+            asyncio.create_task(self._poller(), name="command-poller"),
+            asyncio.create_task(self._ticker(), name="command-ticker"),
+        ]
+
+    async def close(self, robots: Iterable[str] = ()) -> None:
+        """Stop listening, then send every robot (``robots`` and those commanded) a zero."""
+        if self._subscriber is not None:
+            self._subscriber.undeclare()
+            self._subscriber = None
+        for task in self._tasks:
+            task.cancel()
+        for task in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        self._tasks = []
+        targets = sorted(set(robots) | set(self.last_sent))
+        for robot in targets:
+            self._send(robot, 0.0, 0.0, None, reliable=True)
+            self.counters.shutdown_stops += 1
+        if targets:
+            log.event(logger, logging.INFO, "stop sent on shutdown", robots=",".join(targets))
+        for publisher in self._publishers.values():
+            with contextlib.suppress(Exception):
+                publisher.undeclare()
+        self._publishers.clear()
+
+    # -- reading -------------------------------------------------------------------------
+    def _on_notification(self, key: str, payload: bytes) -> None:
+        try:
+            note = bus.Notification.decode(key, payload)
+        except ValueError:
+            return  # not ours to judge; the periodic read still covers the table
+        if note.robot is None:
+            self._want_all = True
+        elif note.id is not None and note.id <= self.last_sent.get(note.robot, 0):
+            return  # already sent
+        else:
+            self._wanted.add(note.robot)
+        self._wake.set()
+
+    async def _poller(self) -> None:
+        while True:
+            await self._wake.wait()
+            self._wake.clear()
+            wanted = None if self._want_all else list(self._wanted)
+            self._want_all = False
+            self._wanted.clear()
+            try:
+                async with self.pool.acquire() as conn:
+                    if wanted is None:
+                        rows = await conn.fetch(_NEWEST)
+                    else:
+                        rows = await conn.fetch(_NEWEST_OF, wanted)
+                for row in rows:
+                    self._consider(Command.from_row(row))
+            except Exception as exc:  # Postgres away: the watchdog still stops the robots
+                self._alerts.warning("read", "command2robot read failed", error=repr(exc))
+                await asyncio.sleep(0.1)
+
+    async def _ticker(self) -> None:
+        """Runs the watchdog every tick and asks for a full re-read every period."""
+        tick = min(self.settings.watchdog_tick_s, self.settings.command_period_s)
+        next_read = time.monotonic() + self.settings.command_period_s
+        while True:
+            await asyncio.sleep(tick)
+            if self.clock.started:
+                for robot, age in self.watchdog.expired(self.clock.now()):
+                    self._watchdog_stop(robot, age)
+            now = time.monotonic()
+            if now >= next_read:
+                next_read = now + self.settings.command_period_s
+                self._want_all = True
+                self._wake.set()
+
+    # -- sending -------------------------------------------------------------------------
+    def _consider(self, cmd: Command, *, at_start: bool = False) -> None:
+        robot = cmd.robot_id
+        if cmd.id <= self.last_sent.get(robot, 0):
+            return
+        self.last_sent[robot] = cmd.id
+        if at_start and not self._current(cmd):
+            log.event(
+                logger,
+                logging.INFO,
+                "stale command at start-up not sent",
+                robot=robot,
+                command_id=cmd.id,
+                stamp=cmd.stamp,
+                sim_now=self.clock.now(),
+            )
+            return
+        linear = clamp(cmd.linear, cmd.max_linear)
+        angular = clamp(cmd.angular, cmd.max_angular)
+        try:
+            self._send(robot, linear, angular, cmd.id)
+        except Exception as exc:  # Zenoh closing
+            self._alerts.warning("send", "cmd_vel publish failed", error=repr(exc))
+            return
+        self.counters.commands_out += 1
+        self.watchdog.feed(robot, self.clock.now() if self.clock.started else None)
+        if robot in self._stopped:
+            self._stopped.discard(robot)
+            log.event(logger, logging.INFO, "commands resumed", robot=robot, command_id=cmd.id)
+
+    def _current(self, cmd: Command) -> bool:
+        return self.clock.started and abs(self.clock.now() - cmd.stamp) <= self.watchdog.timeout_s
+
+    def _watchdog_stop(self, robot: str, age: float) -> None:
+        try:
+            self._send(robot, 0.0, 0.0, None, reliable=True)
+        except Exception as exc:
+            self._alerts.warning("send", "cmd_vel publish failed", error=repr(exc))
+            return
+        self._stopped.add(robot)
+        self.counters.watchdog_stops += 1
+        log.event(
+            logger,
+            logging.WARNING,
+            "watchdog stop: no fresh command",
+            robot=robot,
+            silent_sim_s=round(age, 3),
+            last_command_id=self.last_sent.get(robot),
+        )
+
+    def _send(
+        self,
+        robot: str,
+        linear: float,
+        angular: float,
+        command_id: int | None,
+        *,
+        reliable: bool = False,
+    ) -> None:
+        payload = bus.pack(
+            {
+                "stamp": self.clock.now(),
+                "linear": linear,
+                "angular": angular,
+                "command_id": command_id,
+            }
+        )
+        if reliable:
+            # A stop is sent once: let it wait for a full queue rather than be dropped.
+            self.session.put(
+                keys.robot_key(robot, keys.CMD_VEL),
+                payload,
+                congestion_control=zenoh.CongestionControl.BLOCK,
+                priority=zenoh.Priority.REAL_TIME,
+                express=True,
+            )
+            return
+        publisher = self._publishers.get(robot)
+        if publisher is None:
+            # Drop under congestion: the next decision supersedes this one 50 ms later.
+            publisher = self.session.declare_publisher(
+                keys.robot_key(robot, keys.CMD_VEL),
+                priority=zenoh.Priority.REAL_TIME,
+                express=True,
+            )
+            self._publishers[robot] = publisher
+        publisher.put(payload)

@@ -1,0 +1,88 @@
+"""The bridge's counters, and a logger that cannot be flooded.
+
+Counters are plain integers touched only on the event loop's thread, so they need no lock.
+Tests read them through :meth:`Counters.snapshot`; the bridge logs the same snapshot every
+``stats_period_s``.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections import Counter
+from collections.abc import Hashable
+from dataclasses import dataclass, field
+from typing import Any
+
+from common import log
+
+
+@dataclass
+class Counters:
+    messages_in: Counter[str] = field(default_factory=Counter)  # per sensor topic
+    rows_written: Counter[str] = field(default_factory=Counter)  # per table
+    batches: Counter[str] = field(default_factory=Counter)  # INSERT statements, per table
+    largest_batch: Counter[str] = field(default_factory=Counter)  # rows, per table
+    malformed: Counter[tuple[str, str]] = field(default_factory=Counter)  # (topic, reason)
+    rejected_by_db: Counter[str] = field(default_factory=Counter)  # rows Postgres refused
+    dropped: Counter[str] = field(default_factory=Counter)  # rows lost (db down, overflow)
+    rows_pruned: int = 0
+    commands_out: int = 0
+    watchdog_stops: int = 0
+    shutdown_stops: int = 0
+    worlds_applied: int = 0
+    worlds_unchanged: int = 0
+    worlds_malformed: int = 0
+
+    def malformed_total(self, topic: str | None = None) -> int:
+        return sum(n for (t, _), n in self.malformed.items() if topic is None or t == topic)
+
+    def snapshot(self) -> dict[str, Any]:
+        """A JSON-friendly copy; ``malformed`` keys are ``topic/reason``."""
+        return {
+            "messages_in": dict(self.messages_in),
+            "rows_written": dict(self.rows_written),
+            "batches": dict(self.batches),
+            "largest_batch": dict(self.largest_batch),
+            "malformed": {f"{t}/{r}": n for (t, r), n in sorted(self.malformed.items())},
+            "rejected_by_db": dict(self.rejected_by_db),
+            "dropped": dict(self.dropped),
+            "rows_pruned": self.rows_pruned,
+            "commands_out": self.commands_out,
+            "watchdog_stops": self.watchdog_stops,
+            "shutdown_stops": self.shutdown_stops,
+            "worlds_applied": self.worlds_applied,
+            "worlds_unchanged": self.worlds_unchanged,
+            "worlds_malformed": self.worlds_malformed,
+        }
+
+
+class RateLimitedLog:
+    """Logs an event at most once per ``period_s`` per key, then says how many it swallowed.
+
+    The key must come from a small set (topic and reason, never a robot id taken from the
+    wire), or the table of keys itself becomes the flood.
+    """
+
+    def __init__(self, logger: logging.Logger, period_s: float = 5.0) -> None:
+        self.logger = logger
+        self.period_s = period_s
+        self._last: dict[Hashable, float] = {}
+        self._suppressed: Counter[Hashable] = Counter()
+
+    def log(self, level: int, key: Hashable, msg: str, /, **fields: Any) -> bool:
+        """Log now unless ``key`` was logged less than ``period_s`` ago; True if logged."""
+        now = time.monotonic()
+        last = self._last.get(key)
+        if last is not None and now - last < self.period_s:
+            self._suppressed[key] += 1
+            return False
+        self._last[key] = now
+        suppressed = self._suppressed.pop(key, 0)
+        if suppressed:
+            fields["suppressed"] = suppressed
+        log.event(self.logger, level, msg, **fields)
+        return True
+
+    def warning(self, key: Hashable, msg: str, /, **fields: Any) -> bool:
+        return self.log(logging.WARNING, key, msg, **fields)

@@ -1,0 +1,71 @@
+"""The bridge's own tunables, with the defaults DESIGN.md asks for.
+
+The connections (Postgres, Zenoh) come from :class:`common.config.ServiceConfig`; these are
+the few knobs specific to the bridge, read from optional ``PNAV_BRIDGE_*`` variables:
+
+==============================  =============================================  =======
+variable                        meaning                                        default
+==============================  =============================================  =======
+PNAV_BRIDGE_WATCHDOG_S          sim seconds without a fresh command before     0.5
+                                the robot is sent a zero velocity
+PNAV_BRIDGE_COMMAND_PERIOD_MS   wall period of the command2robot re-read that  50
+                                covers lost notifications
+PNAV_BRIDGE_PRUNE_PERIOD_S      wall period of ``prune_sensor_rows()``         5
+PNAV_BRIDGE_STATS_PERIOD_S      wall period of the counters log line           10
+==============================  =============================================  =======
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from common.errors import ConfigError
+
+
+def _positive(env: Mapping[str, str], name: str, default: float, scale: float = 1.0) -> float:
+    raw = env.get(name, "").strip()
+    if not raw:
+        return default
+    try:
+        value = float(raw) * scale
+    except ValueError:
+        raise ConfigError(f"{name}={raw!r} is not a number") from None
+    if not value > 0:  # also refuses NaN
+        raise ConfigError(f"{name}={raw!r} must be positive")
+    return value
+
+
+@dataclass(frozen=True)
+class BridgeSettings:
+    # The TurtleBot3 firmware's heartbeat and ROS diff_drive_controller both time out at 0.5 s.
+    watchdog_s: float = 0.5
+    command_period_s: float = 0.05
+    # how often the watchdog looks at the clock (wall); bounds how late a stop can be
+    watchdog_tick_s: float = 0.02
+    prune_period_s: float = 5.0
+    stats_period_s: float = 10.0
+    # while no world has been applied, ask the sim's queryable again this often
+    world_retry_s: float = 2.0
+    # rows waiting per table while Postgres is slow; beyond it the oldest are dropped
+    max_pending_rows: int = 10_000
+
+    def __post_init__(self) -> None:
+        for name in ("watchdog_s", "command_period_s", "watchdog_tick_s", "prune_period_s"):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"bridge setting {name} must be positive")
+        if self.max_pending_rows < 1:
+            raise ConfigError("bridge setting max_pending_rows must be at least 1")
+
+    @classmethod
+    def from_env(cls, env: Mapping[str, str] | None = None) -> BridgeSettings:
+        env = os.environ if env is None else env
+        return cls(
+            watchdog_s=_positive(env, "PNAV_BRIDGE_WATCHDOG_S", cls.watchdog_s),
+            command_period_s=_positive(
+                env, "PNAV_BRIDGE_COMMAND_PERIOD_MS", cls.command_period_s, 1e-3
+            ),
+            prune_period_s=_positive(env, "PNAV_BRIDGE_PRUNE_PERIOD_S", cls.prune_period_s),
+            stats_period_s=_positive(env, "PNAV_BRIDGE_STATS_PERIOD_S", cls.stats_period_s),
+        )
