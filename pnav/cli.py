@@ -4,6 +4,21 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
+
+import uvloop
+
+from common.errors import PnavError, UsageError
+
+
+def _stack_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--world", default="warehouse", help="world name or file (warehouse)")
+    parser.add_argument(
+        "--rate", default="1", help="sim seconds per wall second, or 'max' (default 1)"
+    )
+    parser.add_argument("--gui", action="store_true", help="open the pybullet window")
+    parser.add_argument("--robots", type=int, help="run exactly N robots")
+    parser.add_argument("--battery", type=float, help="start charge of every robot, percent")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -12,8 +27,34 @@ def build_parser() -> argparse.ArgumentParser:
     )
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
-    demo = commands.add_parser("demo", help="run the demo (see README)")
+    up = commands.add_parser("up", help="run the whole stack until Ctrl-C")
+    _stack_options(up)
+    up.add_argument("--data-dir", type=Path, help="keep Postgres data here (default: fresh)")
+    up.add_argument("--zenoh-port", type=int, default=7447, help="router port (7447)")
+    up.add_argument("--log-dir", type=Path, help="service logs (default: a temp dir)")
+    up.add_argument("--quiet", action="store_true", help="do not echo the services' logs")
+
+    goal = commands.add_parser("goal", help="send a robot to X Y (replaces its goal)")
+    goal.add_argument("x", type=float)
+    goal.add_argument("y", type=float)
+    goal.add_argument("--robot", help="robot id (needed when there are several)")
+    goal.add_argument("--tolerance", type=float, help="metres (default 0.15)")
+
+    strategy = commands.add_parser("strategy", help="switch strategy (GOTO_AVOID, ...)")
+    strategy.add_argument("code")
+    strategy.add_argument("--robot", help="robot id (default: every robot)")
+
+    cancel = commands.add_parser("cancel", help="cancel the active goal")
+    cancel.add_argument("--robot", help="robot id (default: every robot)")
+
+    status = commands.add_parser("status", help="a live table per robot")
+    status.add_argument("--once", action="store_true", help="print once and exit")
+
+    commands.add_parser("down", help="stop the stack started by `pnav up`")
+
+    demo = commands.add_parser("demo", help="the demo mission (see README)")
     demo.add_argument("--json", metavar="FILE", help="also write the summary as JSON")
+    demo.add_argument("--rate", default=None, help="sim rate (default: the demo's own)")
 
     bench = commands.add_parser("bench", help="benchmarks: print figures and JSON")
     benches = bench.add_subparsers(dest="bench", metavar="BENCH", required=True)
@@ -23,20 +64,91 @@ def build_parser() -> argparse.ArgumentParser:
     engine.add_argument(
         "--notifications", type=int, default=1000, help="notifications for the latency run"
     )
+    startup = benches.add_parser("startup", help="start-up time to first command, and memory")
+    startup.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
+    startup.add_argument("--runs", type=int, default=3, help="how many start-ups to time")
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    try:
+        return dispatch(args)
+    except UsageError as exc:
+        print(f"pnav: {exc}", file=sys.stderr)
+        return 2
+    except PnavError as exc:
+        print(f"pnav: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+
+
+def dispatch(args: argparse.Namespace) -> int:
+    from pnav import commands
+
+    if args.command == "up":
+        from pnav.launcher import StackOptions
+        from pnav.up import up
+
+        options = StackOptions(
+            world=args.world,
+            rate=args.rate,
+            gui=args.gui,
+            robots=args.robots,
+            battery=args.battery,
+            data_dir=args.data_dir,
+            zenoh_port=args.zenoh_port,
+            log_dir=args.log_dir,
+            echo=not args.quiet,
+        )
+        return uvloop.run(up(options))
+    if args.command == "down":
+        return commands.down()
+    if args.command == "status":
+        return uvloop.run(commands.status(args.once or not sys.stdout.isatty()))
+    if args.command in ("goal", "strategy", "cancel"):
+        return uvloop.run(_drive(args))
+    if args.command == "demo":
+        from pnav import demo
+
+        return demo.run(args.json, args.rate)
     if args.command == "bench" and args.bench == "engine":
         from pnav.bench import engine
 
         return engine.run(args.json, args.seconds, args.notifications)
-    if args.command == "demo":
-        from pnav import demo
+    if args.command == "bench" and args.bench == "startup":
+        from pnav.bench import startup
 
-        return demo.run(args.json)
+        return startup.run(args.json, args.runs)
     raise AssertionError(f"unhandled command {args.command}")  # argparse enforces the choices
+
+
+async def _drive(args: argparse.Namespace) -> int:
+    from pnav import commands
+
+    rt = await commands.open_runtime()
+    try:
+        if args.command == "goal":
+            (robot,) = await commands.pick_robots(rt, args.robot, one=True)
+            goal_id = await commands.set_goal(rt, robot, args.x, args.y, args.tolerance)
+            print(f"{robot}: goal {goal_id} set to ({args.x}, {args.y})")
+            return 0
+        if args.command == "cancel":
+            for robot in await commands.pick_robots(rt, args.robot, one=False):
+                cancelled = await commands.cancel_goal(rt, robot)
+                print(f"{robot}: " + (f"goal {cancelled} cancelled" if cancelled else "no goal"))
+            return 0
+        failed = 0
+        for robot in await commands.pick_robots(rt, args.robot, one=False):
+            verdict, reason = await commands.send_user_command(
+                rt, robot, "SET_STRATEGY", args.code.upper()
+            )
+            print(f"{robot}: {verdict}: {reason}")
+            failed += verdict != "accepted"
+        return 1 if failed else 0
+    finally:
+        await rt.close()
 
 
 if __name__ == "__main__":

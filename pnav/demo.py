@@ -1,176 +1,191 @@
-"""``pnav demo``: the Proactive Engine on real Postgres and Zenoh, in under a minute.
+"""``pnav demo``: the thesis' mission, end to end, in well under two minutes.
 
-This is the foundation's demo, not yet the navigation mission (that arrives with the
-scenario services). It starts an embedded Postgres with the contract and a Zenoh router,
-runs a scenario service whose meta rule watches the ``goal`` table, and shows:
+On the warehouse world, at an accelerated sim rate, one robot:
 
-1. a goal written with its notification wakes the engine within a millisecond or so, and the
-   meta rule creates a target rule that runs once and ends;
-2. a goal written *without* a notification is still picked up, by the period F fallback;
-3. the engine's statistics, as the service wrote them to ``engine_stats``.
+1. gets a goal in the first aisle and drives toward it (GOTO_AVOID);
+2. has its strategy switched at run time to GOTO_DIRECT, then back to GOTO_AVOID;
+3. has its goal changed in motion to the far corner, past a pallet that is not on the map;
+4. finds its battery (started low) will not cover the new path: the planner recommends
+   CMD_BATTSAVE, the decision service passes it to the strategy service, CHARGE takes over;
+5. drives to the nearest charger, charges, and resumes GOTO_AVOID by itself (CMD_RESUME);
+6. reaches the goal.
+
+Nobody intervenes after step 3. The demo then prints a mission summary (and writes it as
+JSON with ``--json``) and exits 0 on success, 1 with the reason otherwise.
 """
 
 from __future__ import annotations
 
-import asyncio
 import json
+import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import uvloop
 
-from common.config import EngineSettings, ServiceConfig
-from common.contract import keys
-from common.engine import Rule
+from common.config import ServiceConfig
 from common.runtime import Runtime
-from common.service import ScenarioService
-from common.stack import local_stack
+from pnav import commands
+from pnav.launcher import StackOptions, launched
+from pnav.mission import MissionLog, MissionMonitor
 
-PERIOD_S = 0.5
+ROBOT = "r1"
+WORLD = "warehouse"
+RATE = "10"
+# 0.45 % of 19.98 Wh = 0.09 Wh: enough for the first goal, not for the far one.
+START_BATTERY_PCT = 0.45
+GOAL_NEAR = (3.7, 2.5)
+GOAL_FAR = (8.8, 6.6)
+WALL_LIMIT_S = 105.0
 
 
-class NewGoals(Rule):
-    """Meta scenario: detect goals not seen yet and create one target rule per goal."""
-
-    scenario = "demo_meta"
-    meta = True
-    watches = (keys.GOAL,)
-
-    def __init__(self, demo: DemoService) -> None:
-        self.demo = demo
-
-    async def data_acquisition(self) -> None:
+class Demo:
+    def __init__(self, monitor: MissionMonitor, rt: Runtime) -> None:
+        self.monitor, self.rt = monitor, rt
+        self.events: list[dict[str, Any]] = []
         self.started = time.monotonic()
-        async with self.demo.runtime.database.pool.acquire() as conn:
-            self.goals = await conn.fetch(
-                "SELECT id, x, y FROM goal WHERE id > $1 ORDER BY id", self.demo.last_goal
-            )
+        self.tty = sys.stdout.isatty()
+        self._last_print = 0.0
 
-    def activation_guards(self) -> bool:
-        return bool(self.goals)
-
-    def actions(self) -> None:
-        self.demo.last_goal = self.goals[-1]["id"]
-
-    def rule_generation(self) -> list[Rule]:
-        targets: list[Rule] = [
-            ReportGoal(self.demo, g["id"], g["x"], g["y"], self.started) for g in self.goals
-        ]
-        return [*targets, self.clone()] if self.activated else [self.clone()]
-
-
-class ReportGoal(Rule):
-    """Target scenario: report one goal, then end (it does not clone itself)."""
-
-    scenario = "demo_target"
-
-    def __init__(self, demo: DemoService, goal_id: int, x: float, y: float, seen: float) -> None:
-        self.demo, self.goal_id, self.x, self.y, self.seen = demo, goal_id, x, y, seen
-
-    def actions(self) -> None:
-        self.demo.seen[self.goal_id] = self.seen
-        print(f"    target rule ran for goal {self.goal_id} at ({self.x:.1f}, {self.y:.1f})")
-
-
-class DemoService(ScenarioService):
-    service = "demo"
-
-    def __init__(self, runtime: Runtime) -> None:
-        super().__init__(runtime)
-        self.last_goal = 0
-        self.seen: dict[int, float] = {}
-
-    def seed(self) -> None:
-        self.engine.add_meta(lambda: NewGoals(self))
-
-
-async def wait_for(service: DemoService, goal_id: int, limit_s: float = 10.0) -> float:
-    deadline = time.monotonic() + limit_s
-    while goal_id not in service.seen:
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"goal {goal_id} was never picked up")
-        await asyncio.sleep(0.0005)
-    return service.seen[goal_id]
-
-
-async def demo(json_path: str | None) -> dict[str, Any]:
-    summary: dict[str, Any] = {"demo": "engine", "wake_ms": [], "fallback_ms": None}
-    print("proactive-nav engine demo (the navigation mission arrives with the scenario services)")
-    started = time.monotonic()
-    async with local_stack() as stack:
-        print(f"  Postgres + contract + Zenoh router up in {time.monotonic() - started:.2f} s")
-        config = ServiceConfig(
-            service="demo",
-            database_url=stack.database_url,
-            zenoh=stack.zenoh,
-            engine=EngineSettings(period_s=PERIOD_S),
-            stats_period_s=0.5,
-            instance="demo-1",
-        )
-        service_rt = await Runtime.open(config)
-        writer = await Runtime.open(
-            ServiceConfig(service="cli", database_url=stack.database_url, zenoh=stack.zenoh)
-        )
-        service = DemoService(service_rt)
-        stop = asyncio.Event()
-        task = asyncio.create_task(service.run(stop))
-        try:
-            await writer.database.write(
-                keys.ROBOT,
-                "r1",
-                "INSERT INTO robot (robot_id) VALUES ('r1') ON CONFLICT DO NOTHING",
-            )
-            await asyncio.sleep(0.5)
-            insert = (
-                "INSERT INTO goal (robot_id, x, y, status) "
-                "VALUES ('r1', $1, $2, 'reached') RETURNING id"
-            )
-            f_ms = PERIOD_S * 1000
-            print(f"  1. goals written with a notification (engine period F = {f_ms:.0f} ms):")
-            for x, y in ((1.0, 2.0), (3.0, -1.0), (0.5, 0.5)):
-                await asyncio.sleep(0.2)
-                written = time.monotonic()
-                goal_id = await writer.database.write(keys.GOAL, "r1", insert, x, y)
-                latency_ms = (await wait_for(service, goal_id) - written) * 1000
-                summary["wake_ms"].append(round(latency_ms, 3))
-                print(f"    woken {latency_ms:.2f} ms after the write (F: up to {f_ms:.0f} ms)")
-            print("  2. a goal written with NO notification (a lost hint):")
-            async with writer.database.pool.acquire() as conn:
-                written = time.monotonic()
-                goal_id = await conn.fetchval(insert, 9.0, 9.0)
-            latency_ms = (await wait_for(service, goal_id) - written) * 1000
-            summary["fallback_ms"] = round(latency_ms, 1)
-            print(f"    picked up {latency_ms:.0f} ms later by the period F fallback")
-        finally:
-            stop.set()
-            await task
-            await service_rt.close()
-        print("  3. engine_stats, as the service wrote it:")
-        async with writer.database.pool.acquire() as conn:
-            rows = await conn.fetch(
-                "SELECT rule_type, scenario, executed, activated, acted, errors, "
-                "total_time_s * 1e6 / greatest(executed, 1) AS mean_us "
-                "FROM engine_stats WHERE service = 'demo' ORDER BY rule_type"
-            )
+    def event(self, text: str) -> None:
+        log = self.monitor.log
+        self.events.append({"sim_s": round(log.now.stamp, 2), "event": text})
         print(
-            f"    {'rule':<12}{'scenario':<14}{'executed':>9}{'activated':>10}"
-            f"{'acted':>7}{'errors':>7}{'mean us':>9}"
+            f"\r\x1b[K[sim {log.now.stamp:6.1f} s] {text}"
+            if self.tty
+            else f"[sim {log.now.stamp:6.1f} s] {text}",
+            flush=True,
         )
-        for r in rows:
-            print(
-                f"    {r['rule_type']:<12}{r['scenario']:<14}{r['executed']:>9}{r['activated']:>10}"
-                f"{r['acted']:>7}{r['errors']:>7}{r['mean_us']:>9.0f}"
+
+    def progress(self, log: MissionLog) -> None:
+        now = time.monotonic()
+        if now - self._last_print < (0.2 if self.tty else 5.0):
+            return
+        self._last_print = now
+        n = log.now
+        goal = "-" if n.goal is None else f"({n.goal[0]:.1f}, {n.goal[1]:.1f})"
+        line = (
+            f"  sim {n.stamp:6.1f} s  pose ({n.x:5.2f}, {n.y:5.2f})  goal {goal}  "
+            f"{n.strategy:<11} battery {n.battery_pct:5.2f}%{'+' if n.charging else ' '} "
+            f"| {n.decision}"
+        )
+        if self.tty:
+            print("\r\x1b[K" + line[:150], end="", flush=True)
+        else:
+            print(line, flush=True)
+
+    def remaining(self) -> float:
+        return max(1.0, WALL_LIMIT_S - (time.monotonic() - self.started))
+
+    async def until(self, what: str, predicate: Callable[[MissionLog], bool]) -> None:
+        ok = await self.monitor.wait_for(predicate, self.remaining(), on_poll=self.progress)
+        if not ok:
+            raise MissionFailed(f"{what} did not happen within the demo's time limit")
+
+    async def after_sim(self, seconds: float) -> None:
+        start = self.monitor.log.now.stamp
+        await self.until(f"{seconds} s of sim time", lambda log: log.now.stamp >= start + seconds)
+
+    async def strategy(self, code: str) -> None:
+        verdict, reason = await commands.send_user_command(self.rt, ROBOT, "SET_STRATEGY", code)
+        if verdict != "accepted":
+            raise MissionFailed(f"SET_STRATEGY {code} was {verdict}: {reason}")
+        self.event(f"user: strategy {code} ({reason})")
+
+    async def run(self) -> int:
+        await self.until("the robot's first odometry", lambda log: log.now.stamp > 0)
+        await self.until("the default strategy", lambda log: log.now.strategy == "GOTO_AVOID")
+        near = await commands.set_goal(self.rt, ROBOT, *GOAL_NEAR)
+        self.event(f"user: goal {near} at {GOAL_NEAR} (GOTO_AVOID)")
+        await self.after_sim(3.0)
+        await self.strategy("GOTO_DIRECT")
+        await self.after_sim(3.0)
+        await self.strategy("GOTO_AVOID")
+        await self.after_sim(1.0)
+        if self.monitor.log.goals.get(near) != "active":
+            raise MissionFailed("the first goal ended before the goal change")
+        far = await commands.set_goal(self.rt, ROBOT, *GOAL_FAR)
+        self.event(f"user: goal changed in motion to {far} at {GOAL_FAR}; hands off from now")
+        await self.until("the battery detour (CHARGE)", lambda log: log.now.strategy == "CHARGE")
+        self.event(f"system: CMD_BATTSAVE -> CHARGE at {self.monitor.log.now.battery_pct:.2f}%")
+        await self.until("charging at a station", lambda log: log.now.charging)
+        self.event("robot: charging")
+        await self.until("CMD_RESUME", lambda log: log.now.strategy == "GOTO_AVOID")
+        self.event(f"system: CMD_RESUME -> GOTO_AVOID at {self.monitor.log.now.battery_pct:.2f}%")
+        await self.until("the goal", lambda log: log.goals.get(far) == "reached")
+        self.event(f"robot: goal {far} reached")
+        return far
+
+
+class MissionFailed(Exception):
+    pass
+
+
+def summary_text(summary: dict[str, Any]) -> str:
+    timeline = " -> ".join(f"{code}@{t:.1f}s" for t, code in summary["strategy_timeline"])
+    return "\n".join(
+        [
+            "",
+            "mission summary",
+            f"  outcome          {summary['outcome']}",
+            f"  sim time         {summary['sim_s']:.1f} s   wall time {summary['wall_s']:.1f} s"
+            f"   (rate {summary['rate']})",
+            f"  distance         {summary['distance_m']:.2f} m",
+            f"  collisions       {summary['collisions']}",
+            f"  decisions        {summary['decisions']} command2robot rows",
+            f"  battery          min {summary['min_battery_pct']:.2f}%  "
+            f"max {summary['max_battery_pct']:.2f}%",
+            f"  strategy         {timeline}",
+        ]
+    )
+
+
+async def demo(rate: str) -> dict[str, Any]:
+    wall_start = time.monotonic()
+    print(f"proactive-nav demo: {WORLD} world, sim rate {rate}, robot {ROBOT}")
+    options = StackOptions(
+        world=WORLD, rate=rate, robots=1, battery=START_BATTERY_PCT, zenoh_port=None
+    )
+    async with launched(options) as stack:
+        print(f"  stack up in {time.monotonic() - wall_start:.1f} s; logs in {stack.log_dir}")
+        rt = await Runtime.open(
+            ServiceConfig(
+                service="demo", database_url=stack.local.database_url, zenoh=stack.local.zenoh
             )
-        summary["engine_stats"] = [dict(r) for r in rows]
-        await writer.close()
-    summary["wall_s"] = round(time.monotonic() - started, 2)
-    print(f"  done in {summary['wall_s']} s")
+        )
+        monitor = MissionMonitor(rt.database.pool, ROBOT)
+        runner = Demo(monitor, rt)
+        outcome = "success"
+        try:
+            await runner.run()
+            if monitor.log.collisions:
+                outcome = f"failed: {monitor.log.collisions} collision(s)"
+        except MissionFailed as exc:
+            outcome = f"failed: {exc}"
+        finally:
+            log = await monitor.poll()
+            await rt.close()
+        if runner.tty:
+            print()
+        restarts = {n: c.restarts for n, c in stack.supervisor.children.items() if c.restarts}
+    summary: dict[str, Any] = {
+        "outcome": outcome,
+        "world": WORLD,
+        "rate": rate,
+        "sim_s": log.now.stamp,
+        "wall_s": round(time.monotonic() - wall_start, 2),
+        "events": runner.events,
+        "restarts": restarts,
+        **{k: v for k, v in log.as_dict().items() if k != "now"},
+    }
+    print(summary_text(summary))
     return summary
 
 
-def run(json_path: str | None = None) -> int:
-    summary = uvloop.run(demo(json_path))
+def run(json_path: str | None = None, rate: str | None = None) -> int:
+    summary = uvloop.run(demo(rate or RATE))
     if json_path:
         Path(json_path).write_text(json.dumps(summary, indent=2, default=str) + "\n")
-    return 0
+    return 0 if summary["outcome"] == "success" else 1
