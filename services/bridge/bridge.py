@@ -5,7 +5,7 @@ Wiring only; each concern lives in its own module:
 - sensors: ``pnav/robot/*/{scan,odom,battery,collision}`` -> :mod:`.messages` (validate)
   -> :mod:`.writer` (batched INSERTs + notifications). Zenoh callbacks only hand the bytes
   to the loop (``bus.subscribe``), so a slow INSERT never stalls Zenoh's threads;
-- world: :mod:`.world` (robot, map and charging_station rows);
+- world: :mod:`.world_sync` and :mod:`.world` (robot, map and charging_station rows);
 - commands: :mod:`.commands` (command2robot -> cmd_vel, clamp, :mod:`.watchdog`);
 - housekeeping here: ``prune_sensor_rows()`` every ``prune_period_s``, the counters logged
   every ``stats_period_s``.
@@ -32,7 +32,8 @@ from services.bridge.commands import CommandRelay
 from services.bridge.counters import Counters, RateLimitedLog
 from services.bridge.messages import UNKNOWN_ROBOT, MalformedMessage, parse_sensor
 from services.bridge.settings import BridgeSettings
-from services.bridge.world import World, WorldSync
+from services.bridge.world import World
+from services.bridge.world_sync import WorldSync
 from services.bridge.writer import SensorWriter
 
 logger = logging.getLogger("pnav.bridge")
@@ -99,7 +100,7 @@ class Bridge:
         )
 
     async def stop(self) -> None:
-        """Stop listening, write what is queued, send every robot a zero velocity."""
+        """Stop listening, send every robot a zero velocity, write what is queued."""
         if self._stopped:
             return
         self._stopped = True
@@ -115,8 +116,9 @@ class Bridge:
                 await task
         self._tasks.clear()
         await self.world.close()
-        await self.writer.close()
+        # the robots' stop first: it must not wait behind a slow Postgres draining sensor rows
         await self.commands.close(self.robots)
+        await self.writer.close()
         log.event(logger, logging.INFO, "bridge counters", **self.counters.snapshot())
 
     async def run(self, stop: asyncio.Event) -> None:

@@ -1,11 +1,9 @@
-"""The sim's world message -> robot, map and charging_station rows, once per distinct world.
+"""The sim's world message (``pnav/sim/world``) -> robot, map and charging_station rows.
 
-The sim answers a query on ``pnav/sim/world`` and republishes the world every second or so.
-:class:`WorldSync` asks once at start (and again every ``world_retry_s`` until a world is
-in), listens to the republications, and upserts the rows in one transaction only when the
-content differs from what it last applied: a byte-identical payload is skipped without even
-decoding it, a re-encoded but equal one after decoding. Notifications go out after the
-commit: ``pnav/db/robot/{robot}`` per robot, ``pnav/db/map/_``, ``pnav/db/charging_station/_``.
+:func:`parse_world` validates a payload into a :class:`World`; :func:`upsert_world` writes
+it in one transaction, notifications after the commit: ``pnav/db/robot/{robot}`` per robot,
+``pnav/db/map/_``, ``pnav/db/charging_station/_``. When to do it is
+:mod:`services.bridge.world_sync`'s business.
 
 Stations of this map that the new world no longer has are deleted, so the planner never
 sends a robot to a charger that is gone. Robots are never deleted: that would cascade into
@@ -14,19 +12,12 @@ their whole history.
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
-import logging
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-import zenoh
-
-from common import bus, log
+from common import bus
 from common.contract import keys
 from common.db import Database
-from services.bridge.counters import Counters, RateLimitedLog
 from services.bridge.messages import (
     BAD_MSGPACK,
     MISSING_FIELD,
@@ -38,8 +29,6 @@ from services.bridge.messages import (
     number,
     text,
 )
-
-logger = logging.getLogger("pnav.bridge.world")
 
 MAX_CELLS = 100_000_000  # a 10 km x 10 km map at 1 m, or 1 km x 1 km at 10 cm
 
@@ -268,121 +257,3 @@ async def upsert_world(db: Database, world: World) -> None:
             _DELETE_GONE_STATIONS, world.name, [s.station_id for s in world.stations]
         )
         tx.changed(keys.CHARGING_STATION, None)
-
-
-class WorldSync:
-    """Keeps the world's rows in step with the sim (see the module docstring)."""
-
-    def __init__(
-        self,
-        session: zenoh.Session,
-        db: Database,
-        counters: Counters,
-        *,
-        retry_s: float,
-        on_applied: Callable[[World], None],
-    ) -> None:
-        self.session = session
-        self.db = db
-        self.counters = counters
-        self.retry_s = retry_s
-        self.on_applied = on_applied
-        self.world: World | None = None
-        self._applied_payload: bytes | None = None
-        self._refused_payload: bytes | None = None
-        self._latest: bytes | None = None
-        self._wake = asyncio.Event()
-        self._alerts = RateLimitedLog(logger, period_s=30.0)
-        self._subscriber: zenoh.Subscriber[None] | None = None
-        self._tasks: list[asyncio.Task[None]] = []
-
-    def start(self) -> None:
-        self._subscriber = bus.subscribe(self.session, keys.SIM_WORLD, self.offer)
-        self._tasks = [
-            asyncio.create_task(self._apply_loop(), name="world-apply"),
-            asyncio.create_task(self._query_loop(), name="world-query"),
-        ]
-
-    async def close(self) -> None:
-        if self._subscriber is not None:
-            self._subscriber.undeclare()
-            self._subscriber = None
-        for task in self._tasks:
-            task.cancel()
-        for task in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
-        self._tasks = []
-
-    def offer(self, key: str, payload: bytes) -> None:
-        """A world payload arrived (publication or query reply); runs on the loop."""
-        if payload == self._applied_payload:
-            self.counters.worlds_unchanged += 1
-            return
-        if payload == self._refused_payload:
-            self.counters.worlds_malformed += 1
-            return
-        self._latest = payload  # only the newest matters if several queue up
-        self._wake.set()
-
-    def query(self) -> None:
-        """Ask the sim's queryable for its world; replies arrive through :meth:`offer`."""
-        loop = asyncio.get_running_loop()
-
-        def on_reply(reply: zenoh.Reply) -> None:  # on a Zenoh thread
-            sample = reply.ok
-            if sample is None:
-                return
-            with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
-                loop.call_soon_threadsafe(
-                    self.offer, str(sample.key_expr), sample.payload.to_bytes()
-                )
-
-        self.session.get(keys.SIM_WORLD, on_reply, timeout=max(self.retry_s, 1.0))
-
-    async def _query_loop(self) -> None:
-        while self.world is None:
-            try:
-                self.query()
-            except Exception as exc:
-                self._alerts.warning("query", "world query failed", error=repr(exc))
-            await asyncio.sleep(self.retry_s)
-
-    async def _apply_loop(self) -> None:
-        while True:
-            await self._wake.wait()
-            self._wake.clear()
-            payload, self._latest = self._latest, None
-            if payload is None or payload == self._applied_payload:
-                continue
-            try:
-                world = parse_world(payload)
-            except MalformedMessage as exc:
-                self._refused_payload = payload
-                self.counters.worlds_malformed += 1
-                self._alerts.warning(exc.reason, "malformed world ignored", reason=exc.reason)
-                continue
-            if world == self.world:
-                self._applied_payload = payload
-                self.counters.worlds_unchanged += 1
-                continue
-            try:
-                await upsert_world(self.db, world)
-            except Exception as exc:
-                # Postgres away or refusing: try again with the next republication
-                self._alerts.warning("upsert", "world not written", error=repr(exc))
-                await asyncio.sleep(1.0)
-                continue
-            self.world = world
-            self._applied_payload = payload
-            self.counters.worlds_applied += 1
-            log.event(
-                logger,
-                logging.INFO,
-                "world applied",
-                world=world.name,
-                robots=",".join(r.robot_id for r in world.robots),
-                stations=len(world.stations),
-                map=f"{world.map.width}x{world.map.height}@{world.map.resolution}",
-            )
-            self.on_applied(world)
