@@ -2,11 +2,13 @@
 
 The sim publishes its clock at about 20 Hz of wall time. Between two messages the clock is
 extrapolated at the advertised rate, capped at 0.1 s of wall time, so expiry checks stay
-smooth at ``--rate 10`` without running ahead of a sim that stalled.
+smooth at ``--rate 10`` without running ahead of a sim that stalled. Older stamps are
+ignored (reordering), unless more than a second older: that is a restarted sim.
 """
 
 from __future__ import annotations
 
+import logging
 import time
 from typing import Any
 
@@ -16,6 +18,10 @@ from common import bus
 from common.contract import keys
 
 _MAX_EXTRAPOLATION_WALL_S = 0.1
+# A clock this far behind the last one is a restarted sim, not a reordered message.
+_RESTART_JUMP_S = 1.0
+
+log = logging.getLogger(__name__)
 
 
 class SimClock:
@@ -42,7 +48,13 @@ class SimClock:
 
     def update(self, stamp: float, rate: float = 1.0) -> None:
         if self._stamp is not None and stamp < self._stamp:
-            return  # a late, reordered message
+            if self._stamp - stamp < _RESTART_JUMP_S:
+                return  # a late, reordered message
+            # Far back: the sim restarted. Follow it, or every sim-time rule (the bridge's
+            # watchdog first) would stay frozen until the new run caught up.
+            log.warning(
+                "sim clock jumped back from %.3f to %.3f s: sim restarted", self._stamp, stamp
+            )
         self._received = time.monotonic()
         self._rate = rate
         self._stamp = stamp

@@ -29,14 +29,30 @@ async def _init_connection(conn: asyncpg.Connection) -> None:
 
 
 async def create_pool(
-    url: str, *, min_size: int = 1, max_size: int = 4, wait_s: float = 10.0
+    url: str,
+    *,
+    min_size: int = 1,
+    max_size: int = 4,
+    wait_s: float = 10.0,
+    server_settings: dict[str, str] | None = None,
+    max_inactive_connection_lifetime: float = 300.0,
 ) -> asyncpg.Pool:
-    """Open a pool, retrying for ``wait_s`` while Postgres is still starting up."""
+    """Open a pool, retrying for ``wait_s`` while Postgres is still starting up.
+
+    ``server_settings`` are session settings for every connection (e.g.
+    ``{"synchronous_commit": "off"}`` for a writer of sensor rows that may lose the last
+    few hundred milliseconds if Postgres itself crashes).
+    """
     deadline = time.monotonic() + wait_s
     while True:
         try:
             pool: asyncpg.Pool = await asyncpg.create_pool(
-                url, min_size=min_size, max_size=max_size, init=_init_connection
+                url,
+                min_size=min_size,
+                max_size=max_size,
+                init=_init_connection,
+                server_settings=server_settings,
+                max_inactive_connection_lifetime=max_inactive_connection_lifetime,
             )
             return pool
         except (OSError, asyncpg.CannotConnectNowError, asyncpg.ConnectionDoesNotExistError) as exc:

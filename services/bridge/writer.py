@@ -34,6 +34,7 @@ import asyncpg
 
 from common.bus import Notifier
 from common.contract import keys
+from common.db import create_pool
 from common.errors import ConnectionFailure
 from services.bridge.counters import Counters, RateLimitedLog
 from services.bridge.messages import BatteryState, Collision, LaserScan, Odometry, SensorRecord
@@ -196,7 +197,7 @@ class SensorWriter:
             # now and never retired for idleness: a cold connection's first INSERT costs
             # ~10 ms (catalog caches, planning), which would land on a sensor message.
             size = len(self._tables)
-            self.pool = await asyncpg.create_pool(
+            self.pool = await create_pool(
                 self.database_url,
                 min_size=size,
                 max_size=size,

@@ -57,3 +57,15 @@ def test_a_bad_value_names_its_variable(name: str, value: str, message: str) -> 
 def test_zenoh_settings_round_trip_through_the_environment() -> None:
     settings = ZenohSettings(mode="client", connect=("tcp/127.0.0.1:9999",), multicast=False)
     assert ZenohSettings.from_env(settings.to_env()) == settings
+
+
+def test_the_sim_clock_ignores_reordering_but_follows_a_restarted_sim() -> None:
+    from common.clock import SimClock
+
+    clock = SimClock()
+    assert clock.now() == 0.0 and not clock.started
+    clock.update(100.0, rate=0.0)
+    clock.update(99.8, rate=0.0)  # a late message: ignored
+    assert clock.now() == 100.0
+    clock.update(0.5, rate=0.0)  # far back: the sim restarted
+    assert clock.now() == 0.5

@@ -23,7 +23,7 @@ from services.bridge import Bridge, BridgeSettings
 from tests.unit.bridge.payloads import pack
 
 # Zenoh needs a moment for a new subscription to reach the router.
-SETTLE_S = 0.3
+SETTLE_S = 1.0  # generous: on a loaded 2-core machine declarations take a while
 # Short periods keep the tests quick; the watchdog stays at the contract's 0.5 s (sim time).
 FAST = BridgeSettings(command_period_s=0.05, prune_period_s=0.3, world_retry_s=0.5)
 
