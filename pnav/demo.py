@@ -33,7 +33,7 @@ from pnav.mission import MissionLog, MissionMonitor
 
 ROBOT = "r1"
 WORLD = "warehouse"
-RATE = "10"
+RATE = "5"
 # 0.45 % of 19.98 Wh = 0.09 Wh: enough for the first goal, not for the far one.
 START_BATTERY_PCT = 0.45
 GOAL_NEAR = (3.7, 2.5)
