@@ -14,7 +14,7 @@ import socket
 import tempfile
 import time
 import uuid
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -132,3 +132,64 @@ def publish_clock(session: Any, stamp: float, rate: float = 1.0) -> None:
     from common.contract import keys
 
     session.put(keys.SIM_CLOCK, bus.pack({"stamp": stamp, "rate": rate}))
+
+
+async def eventually(
+    check: Callable[[], Any], within: float = 10.0, interval: float = 0.02, what: str = ""
+) -> Any:
+    """Wait until ``check()`` (sync or async) is truthy; return it, or fail after ``within`` s.
+
+    Tests wait for outcomes this way instead of sleeping a fixed time: fast on an idle
+    machine, still correct on a loaded one.
+    """
+    import asyncio
+
+    deadline = time.monotonic() + within
+    while True:
+        value = check()
+        if isinstance(value, Awaitable):
+            value = await value
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {within} s waiting for {what or check}")
+        await asyncio.sleep(interval)
+
+
+class ClockPlayer:
+    """Plays the sim's clock for a test: publishes ``stamp`` every ``tick_s`` of wall time.
+
+    ``rate`` (sim seconds per wall second) is 0 by default: sim time holds still, so the
+    service under test sees exactly the stamp the test sets.
+    """
+
+    def __init__(self, session: Any, stamp: float, tick_s: float = 0.02) -> None:
+        self.session = session
+        self.stamp = stamp
+        self.rate = 0.0
+        self.tick_s = tick_s
+        self._task: Any = None
+
+    async def _run(self) -> None:
+        import asyncio
+
+        last = time.monotonic()
+        while True:
+            now = time.monotonic()
+            self.stamp += (now - last) * self.rate
+            last = now
+            publish_clock(self.session, self.stamp, rate=0.0)
+            await asyncio.sleep(self.tick_s)
+
+    def start(self) -> None:
+        import asyncio
+
+        self._task = asyncio.create_task(self._run())
+
+    async def stop(self) -> None:
+        import asyncio
+
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task

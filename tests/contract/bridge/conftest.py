@@ -19,6 +19,7 @@ from common import bus
 from common.config import ServiceConfig, ZenohSettings
 from common.contract import keys
 from common.runtime import Runtime
+from common.testing import eventually
 from services.bridge import Bridge, BridgeSettings
 from tests.unit.bridge.payloads import pack
 
@@ -26,22 +27,6 @@ from tests.unit.bridge.payloads import pack
 SETTLE_S = 1.0  # generous: on a loaded 2-core machine declarations take a while
 # Short periods keep the tests quick; the watchdog stays at the contract's 0.5 s (sim time).
 FAST = BridgeSettings(command_period_s=0.05, prune_period_s=0.3, world_retry_s=0.5)
-
-
-async def eventually(
-    check: Callable[[], Any], within: float = 5.0, interval: float = 0.02, what: str = ""
-) -> Any:
-    """Wait until ``check()`` (sync or async) is truthy; return it, or fail after ``within`` s."""
-    deadline = time.monotonic() + within
-    while True:
-        value = check()
-        if isinstance(value, Awaitable):
-            value = await value
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {within} s waiting for {what or check}")
-        await asyncio.sleep(interval)
 
 
 class Inbox:

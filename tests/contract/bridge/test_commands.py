@@ -10,6 +10,7 @@ import asyncpg
 import pytest
 
 from common.contract import keys
+from common.testing import eventually
 from services.bridge import Bridge
 from tests.contract.bridge.conftest import (
     SETTLE_S,
@@ -17,7 +18,6 @@ from tests.contract.bridge.conftest import (
     FakeSim,
     Inbox,
     bridge_with_world,
-    eventually,
 )
 from tests.unit.bridge import payloads
 

@@ -10,13 +10,13 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 
 from common.contract import keys
+from common.testing import eventually
 from services.bridge import messages
 from tests.contract.bridge.conftest import (
     BridgeFactory,
     FakeSim,
     bridge_with_world,
     count,
-    eventually,
 )
 from tests.unit.bridge import payloads
 from tests.unit.bridge.payloads import Bad, bad_messages

@@ -12,7 +12,8 @@ import pytest
 
 from common.config import ZenohSettings
 from common.contract import keys
-from tests.contract.bridge.conftest import SETTLE_S, FakeSim, eventually
+from common.testing import eventually
+from tests.contract.bridge.conftest import SETTLE_S, FakeSim
 from tests.unit.bridge import payloads
 
 pytestmark = pytest.mark.timeout(60)

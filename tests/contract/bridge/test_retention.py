@@ -6,12 +6,12 @@ import asyncpg
 import pytest
 
 from common.contract import keys
+from common.testing import eventually
 from tests.contract.bridge.conftest import (
     BridgeFactory,
     FakeSim,
     bridge_with_world,
     count,
-    eventually,
 )
 from tests.unit.bridge import payloads
 

@@ -12,7 +12,7 @@ import pytest
 
 from common.config import EngineSettings, ServiceConfig, ZenohSettings
 from common.runtime import Runtime
-from tests.contract.decision.helpers import ClockPlayer
+from common.testing import ClockPlayer
 
 
 @pytest.fixture

@@ -12,9 +12,8 @@ import pytest
 from common.config import ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime
-from common.testing import running_service
+from common.testing import ClockPlayer, eventually, running_service
 from services.decision.service import DecisionService
-from tests.contract.decision.helpers import ClockPlayer, wait_until
 
 RECOMMEND_SQL = """
 INSERT INTO command_recommendation (robot_id, kind, source, priority, linear_mps, angular_rps,
@@ -81,14 +80,16 @@ async def newest_from(client: Runtime, recommendation_id: int | None) -> dict[st
             return rows[-1]
         return None
 
-    return await wait_until(probe, f"a command2robot row from recommendation {recommendation_id}")
+    return await eventually(
+        probe, what=f"a command2robot row from recommendation {recommendation_id}"
+    )
 
 
 async def clock_at(service: Any, stamp: float) -> None:
     async def probe() -> bool:
         return bool(service.runtime.clock.now() >= stamp)
 
-    await wait_until(probe, f"the service to see sim time {stamp}")
+    await eventually(probe, what=f"the service to see sim time {stamp}")
 
 
 async def more_activations(service: Any, n: int) -> None:
@@ -98,7 +99,7 @@ async def more_activations(service: Any, n: int) -> None:
     async def probe() -> bool:
         return bool(service.engine.counters.activations - start >= n)
 
-    await wait_until(probe, f"{n} more activations")
+    await eventually(probe, what=f"{n} more activations")
 
 
 async def treated_by(client: Runtime, ids: Sequence[int]) -> list[int | None]:
@@ -249,7 +250,7 @@ async def test_system_recommendations_become_one_system_command_each(
             system("battery_check", 60, "CMD_BATTSAVE", expires=10.5),
             system("charge_complete", 50, "CMD_RESUME"),
         )
-        first = (await wait_until(system_commands, "a system_command row"))[0]
+        first = (await eventually(system_commands, what="a system_command row"))[0]
         assert (first["command"], first["recommendation_id"], first["status"]) == (
             "CMD_BATTSAVE",
             save,
@@ -272,8 +273,8 @@ async def test_system_recommendations_become_one_system_command_each(
         await more_activations(service, 5)
         assert len(await system_commands()) == 1
         (fresh,) = await recommend(client, system("charge_complete", 50, "CMD_RESUME", stamp=11.0))
-        rows = await wait_until(
-            lambda: _at_least(system_commands, 2), "a second system_command row"
+        rows = await eventually(
+            lambda: _at_least(system_commands, 2), what="a second system_command row"
         )
         second = rows[1]
         assert (second["command"], second["recommendation_id"]) == ("CMD_RESUME", fresh)

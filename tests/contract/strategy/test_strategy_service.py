@@ -13,9 +13,8 @@ from common import bus
 from common.config import ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime
-from common.testing import running_service
+from common.testing import ClockPlayer, eventually, running_service
 from services.strategy.service import StrategyService
-from tests.contract.strategy.helpers import ClockPlayer, wait_until
 
 USER_SQL = "INSERT INTO user_command (robot_id, command, argument) VALUES ($1, $2, $3) RETURNING id"
 SYSTEM_SQL = (
@@ -60,11 +59,11 @@ async def treated(client: Runtime, table: str, command_id: int) -> dict[str, Any
         )
         return dict(row) if row else None
 
-    return await wait_until(probe, f"{table} {command_id} to be treated")
+    return await eventually(probe, what=f"{table} {command_id} to be treated")
 
 
 async def default_applied(client: Runtime, robot_id: str) -> dict[str, Any]:
-    return await wait_until(lambda: active(client, robot_id), f"{robot_id}'s default strategy")
+    return await eventually(lambda: active(client, robot_id), what=f"{robot_id}'s default strategy")
 
 
 async def started(service: StrategyService) -> None:
@@ -73,7 +72,7 @@ async def started(service: StrategyService) -> None:
     async def probe() -> bool:
         return service.runtime.clock.started
 
-    await wait_until(probe, "the service to hear the sim clock")
+    await eventually(probe, what="the service to hear the sim clock")
 
 
 async def test_a_new_robot_gets_the_default_strategy(
@@ -108,7 +107,9 @@ async def test_set_strategy_is_accepted_and_notified(
             await started(service)
             await default_applied(client, "r1")
             clock.stamp = 20.0
-            await wait_until(lambda: _clock_at(service, 20.0), "the service to see sim time 20")
+            await eventually(
+                lambda: _clock_at(service, 20.0), what="the service to see sim time 20"
+            )
             command_id = await user_command(client, "r1", "SET_STRATEGY", "GOTO_DIRECT")
             row = await treated(client, keys.USER_COMMAND, command_id)
             assert row["status"] == "accepted"
@@ -127,8 +128,8 @@ async def test_set_strategy_is_accepted_and_notified(
                 with lock:
                     return len(notes)
 
-            await wait_until(notified, "active_strategy notifications")  # default, then user
-            await wait_until(lambda: _at_least(notified, 2), "the second notification")
+            await eventually(notified, what="active_strategy notifications")  # default, then user
+            await eventually(lambda: _at_least(notified, 2), what="the second notification")
             with lock:
                 assert all(n.robot == "r1" and n.table == keys.ACTIVE_STRATEGY for n in notes)
     finally:
