@@ -5,8 +5,14 @@ OBJ_DISTANCE and turns away from the side that is too close. Here, with the defa
 
 - the *front-right* sector is -60 to -5 deg, the *front-left* 5 to 60 deg, the *dead-ahead*
   cone -5 to 5 deg (angles counter-clockwise from the heading);
-- an obstacle closer than ``avoid_distance_m`` only on the front-right: turn left
-  (avoid_left); only on the front-left: turn right (avoid_right);
+- a beam counts as an obstacle when it is closer than ``avoid_distance_m`` (0.40 m) *and*
+  its lateral offset from the robot's line of travel, range x |sin(angle)|, is below
+  ``avoid_lateral_m`` (0.25 m): something in or near the robot's way. A wall the robot is
+  merely passing (in the middle of an aisle 0.9 m wide or more, heading along it, the walls
+  are 0.45 m to either side) does not count, so the robot is not pushed off its path in
+  every aisle; an unmapped pallet or crate ahead still does;
+- an obstacle only on the front-right: turn left (avoid_left); only on the front-left: turn
+  right (avoid_right);
 - dead ahead, or on both sides at once: turn toward the freer half, where the closer closest
   obstacle loses, then the less open half, then (a perfect tie) left. :func:`decide_turn`
   computes this once for both scenarios, so exactly one of them recommends: never a left and a
@@ -34,6 +40,7 @@ LEFT, RIGHT = 1, -1
 @dataclass(frozen=True)
 class AvoidParams:
     distance_m: float = 0.40
+    lateral_m: float = 0.25
     sector_deg: float = 60.0
     front_deg: float = 5.0
     linear_mps: float = 0.05
@@ -46,6 +53,7 @@ class AvoidParams:
         sector = number(params, "avoid_sector_deg", d.sector_deg, low=1.0, high=180.0)
         return cls(
             distance_m=number(params, "avoid_distance_m", d.distance_m, high=10.0),
+            lateral_m=number(params, "avoid_lateral_m", d.lateral_m, high=10.0),
             sector_deg=sector,
             front_deg=number(params, "avoid_front_deg", d.front_deg, high=sector),
             linear_mps=number(params, "avoid_linear_mps", d.linear_mps, high=10.0),
@@ -68,10 +76,10 @@ def decide_turn(view: ScanView, p: AvoidParams) -> Turn | None:
     right_sector: Sector = (-outer, -inner)
     left_sector: Sector = (inner, outer)
     ahead_sector: Sector = (-inner, inner)
-    right, left = view.closest(right_sector), view.closest(left_sector)
-    ahead = view.closest(ahead_sector)
-    near_right, near_left = right.range_m < p.distance_m, left.range_m < p.distance_m
-    near_ahead = ahead.range_m < p.distance_m
+    band = (p.distance_m, p.lateral_m)
+    right, left = view.closest(right_sector, *band), view.closest(left_sector, *band)
+    ahead = view.closest(ahead_sector, *band)
+    near_right, near_left, near_ahead = right.found, left.found, ahead.found
     if near_ahead or (near_right and near_left):
         freer_left = view.left_is_freer((0.0, outer), (-outer, 0.0), horizon_m=2 * p.distance_m)
         hit = min((ahead, right, left), key=lambda h: h.range_m)
@@ -108,5 +116,6 @@ class AvoidScenario(ControllerScenario):
             linear,
             angular,
             f"obstacle {turn.hit.describe()} {turn.where}, closer than "
-            f"{p.distance_m:.2f} m: {action} {direction}",
+            f"{p.distance_m:.2f} m and within {p.lateral_m:.2f} m of the way ahead: "
+            f"{action} {direction}",
         )

@@ -80,9 +80,18 @@ class ScanView:
         value = float(self.ranges[best])
         return Hit(value, float(self.angles[best])) if math.isfinite(value) else NOTHING
 
-    def closest(self, sector: Sector) -> Hit:
-        """The closest obstacle with its angle in ``sector``."""
-        return self._closest(self._mask(sector))
+    def closest(
+        self, sector: Sector, within_m: float = math.inf, lateral_m: float = math.inf
+    ) -> Hit:
+        """The closest obstacle with its angle in ``sector``; with ``within_m``, only one
+        closer than that, and with ``lateral_m``, only one whose offset from the line of
+        travel (range x |sin angle|) is below that (NOTHING if there is none)."""
+        mask = self._mask(sector)
+        if math.isfinite(within_m) or math.isfinite(lateral_m):
+            with np.errstate(invalid="ignore"):  # inf * sin(0) is nan: never a hit
+                lateral = np.abs(self.ranges * np.sin(self.angles))
+            mask = mask & (self.ranges < within_m) & (lateral < lateral_m)
+        return self._closest(np.asarray(mask))
 
     def openness(self, sector: Sector, horizon_m: float) -> float:
         """Mean range in ``sector``, each beam clipped at ``horizon_m``: higher is freer."""

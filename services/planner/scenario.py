@@ -8,9 +8,12 @@ robot's planner scenario (its slot token matches). Per activation:
    charging station, per the strategy's ``target`` param);
 2. guards: still the robot's scenario, fresh odometry (within ODOM_MAX_AGE_S of sim time),
    a target;
-3. conditions: something new to say (a new odometry row or a new target);
-4. actions: reached? mark the goal reached and recommend one zero velocity; else follow the
-   cached route and recommend the scenario's velocity (priority 10, valid 0.5 s).
+3. conditions: something new to say: a new odometry row or a new target, and then either
+   the target was reached, or the velocity for it is worth sending (see ``due``): a new
+   target, a material change from the last recommendation, or RECOMMEND_PERIOD_S of sim time
+   since it (the odometry comes at 30 Hz; most rows change nothing worth a write);
+4. actions: reached? mark the goal reached and recommend one zero velocity; else recommend
+   the scenario's velocity on the cached route (priority 10, valid 0.5 s).
 """
 
 from __future__ import annotations
@@ -35,6 +38,14 @@ VALIDITY_S = 0.5
 ODOM_MAX_AGE_S = 1.0
 SLOW_RADIUS_M = 0.6  # closer than this to the target: slow down in proportion
 MIN_SPEED_FRACTION = 0.25  # ...but never below this fraction of max_linear
+# Recommend again at least this often (sim s) while nothing changes: well inside VALIDITY_S,
+# and as often as the decision service re-issues its winner anyway.
+RECOMMEND_PERIOD_S = 0.1
+# A velocity differing from the last recommendation by more than this is sent at once.
+CHANGE_LINEAR_MPS = 0.02
+CHANGE_ANGULAR_RPS = 0.1
+# How often (sim s) the newest laser scan is read, for unmapped obstacles (2 of its 5 Hz).
+SCAN_PERIOD_S = 0.4
 
 
 @dataclass(frozen=True)
@@ -42,6 +53,30 @@ class Movement:
     linear: float
     angular: float
     turning: bool  # turning in place (turn_then_move) rather than driving
+
+
+@dataclass(frozen=True)
+class Said:
+    """The last velocity recommended: what a new one is compared with."""
+
+    stamp: float
+    target_key: tuple[Any, ...]
+    move: Movement
+
+
+def due(last: Said | None, stamp: float, target_key: tuple[Any, ...], move: Movement) -> bool:
+    """Whether ``move`` (for the odometry at ``stamp``) is worth a recommendation: a first one,
+    a new target, a switch between turning and driving, a material change of velocity, or
+    RECOMMEND_PERIOD_S since the last one (or sim time went back: the sim restarted)."""
+    if last is None or last.target_key != target_key or last.move.turning != move.turning:
+        return True
+    if not last.stamp <= stamp < last.stamp + RECOMMEND_PERIOD_S - 1e-9:
+        return True
+    return (
+        abs(move.linear - last.move.linear) > CHANGE_LINEAR_MPS
+        or abs(move.angular - last.move.angular) > CHANGE_ANGULAR_RPS
+        or (move.angular == 0.0) != (last.move.angular == 0.0)
+    )
 
 
 def clamp(value: float, limit: float) -> float:
@@ -75,16 +110,24 @@ class MoveScenario(Rule):
         self.robot_id = robot_id
         self.token = token
         self.turning = False  # turn_then_move's hysteresis: turning in place last time
-        self.last_said: tuple[Any, ...] | None = None
+        self.last_said: tuple[Any, ...] | None = None  # (odometry id, target key) handled
+        self.said: Said | None = None  # the last velocity recommended
         self.held: set[tuple[Any, ...]] = set()  # targets reached and stopped at
         self.robot: RobotState | None = None
         self.odom: records.Odometry | None = None
         self.target: Target | None = None
         self.sim_now = 0.0
+        # What this activation found (conditions) for actions to write.
+        self.arrived: float | None = None  # the distance to the target when it is reached
+        self.move: Movement | None = None
+        self.why = ""
 
     @abstractmethod
-    def select(self, error: float, remaining_m: float, info: RobotInfo) -> Movement:
-        """The velocity for a heading error (rad, CCW positive) and the distance left."""
+    def select(
+        self, error: float, remaining_m: float, info: RobotInfo, turn_rate: float = 0.0
+    ) -> Movement:
+        """The velocity for a heading error (rad, CCW positive), the distance left and the
+        measured turn rate (rad/s, from the odometry)."""
 
     async def data_acquisition(self) -> None:
         self.robot = self.state.claim(self.robot_id, self.kind, self.token)
@@ -92,9 +135,19 @@ class MoveScenario(Rule):
         if self.robot is None:
             return
         self.sim_now = self.state.now()
-        self.odom = await records.newest_odometry(self.state.db.pool, self.robot_id)
-        if self.odom is not None:
-            self.target = await target_of(self.state, self.robot, self.odom.x, self.odom.y)
+        pool = self.state.db.pool
+        self.odom = await records.newest_odometry(pool, self.robot_id)
+        if self.odom is None:
+            return
+        robot = self.robot
+        robot.note_pose(self.odom)
+        self.target = await target_of(self.state, robot, self.odom.x, self.odom.y)
+        if self.target is not None and abs(self.sim_now - robot.scan_read_at) >= SCAN_PERIOD_S:
+            # The lidar, for the unmapped obstacles the route should go around (state.see).
+            robot.scan_read_at = self.sim_now
+            scan = await records.newest_scan(pool, self.robot_id)
+            if scan is not None and scan.id != (robot.seen.scan_id if robot.seen else None):
+                self.state.see(robot, scan)
 
     def activation_guards(self) -> Iterator[bool]:
         yield self.robot is not None
@@ -104,25 +157,35 @@ class MoveScenario(Rule):
         yield self.target is not None
 
     def conditions(self) -> Iterator[bool]:
-        assert self.odom is not None and self.target is not None
-        yield (self.odom.id, self.target.key) != self.last_said
-
-    async def actions(self) -> None:
         odom, target, robot = self.odom, self.target, self.robot
         assert odom is not None and target is not None and robot is not None
+        yield (odom.id, target.key) != self.last_said
         self.last_said = (odom.id, target.key)
+        self.arrived, self.move = None, None
         distance = math.hypot(target.x - odom.x, target.y - odom.y)
         if distance <= target.reach_m or (target.key in self.held and distance <= target.hold_m):
-            await self._arrived(odom, target, distance)
+            self.arrived = distance
+            yield target.key not in self.held  # stopped there already: nothing more to say
             return
         self.held.discard(target.key)
-        progress = self.state.route_for(robot, odom.x, odom.y, target)
+        progress = self.state.route_for(robot, odom.x, odom.y, target, odom.stamp)
         error = heading_error(odom.x, odom.y, odom.yaw, progress.lookahead)
-        move = self.select(error, progress.remaining_m, robot.info)
+        move = self.select(error, progress.remaining_m, robot.info, odom.angular_rps)
+        self.move = move
+        self.why = self._reason(move, error, progress, target)
+        yield due(self.said, odom.stamp, target.key, move)
+
+    async def actions(self) -> None:
+        odom, target = self.odom, self.target
+        assert odom is not None and target is not None
+        if self.arrived is not None:
+            await self._arrived(odom, target, self.arrived)
+            return
+        move = self.move
+        assert move is not None
         self.turning = move.turning
-        await self._recommend(
-            odom, target, move.linear, move.angular, self._reason(move, error, progress, target)
-        )
+        self.said = Said(odom.stamp, target.key, move)
+        await self._recommend(odom, target, move.linear, move.angular, self.why)
 
     async def _arrived(self, odom: records.Odometry, target: Target, distance: float) -> None:
         if target.key in self.held:
@@ -137,6 +200,7 @@ class MoveScenario(Rule):
             reason = f"{target.label} reached ({distance:.2f} m away): stop"
         else:
             reason = f"at {target.label} ({distance:.2f} m from its centre): stop and charge"
+        self.said = Said(odom.stamp, target.key, Movement(0.0, 0.0, False))
         await self._recommend(odom, target, 0.0, 0.0, reason)
 
     async def _recommend(

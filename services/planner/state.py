@@ -13,6 +13,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -22,7 +23,7 @@ import numpy as np
 from common import log
 from common.contract import keys, records
 from common.db import Database
-from services.planner.path import PlanGrid, path_length, plan_grid, plan_path
+from services.planner.path import PlanGrid, path_length, plan_grid, plan_path, with_obstacles
 from services.planner.tracking import Progress, Route, follow
 
 logger = logging.getLogger("pnav.planner")
@@ -34,6 +35,16 @@ REPLAN_MIN_S = 0.5  # ...but not more often than this (wall s), so avoidance can
 RETRY_PLAN_S = 2.0  # how long a straight-line fallback stands before A* is tried again
 CHARGER_MARGIN_M = 0.1  # a charger is reached this far inside its radius
 STATIONS_BY_PATH = 3  # nearest stations (straight line) whose path length is compared
+# Unmapped obstacles, from the lidar (see ``PlannerState.see``):
+SEEN_RANGE_M = 2.5  # lidar hits farther than this are not used (pose error grows with range)
+UNMAPPED_M = 0.15  # a hit farther than this from every mapped obstacle is an unmapped one
+SEEN_MAX_AGE_S = 1.0  # sim s: older obstacles are not planned around
+POSE_MATCH_S = 0.05  # the scan's pose: odometry within this (sim s) of the scan's stamp
+POSES_KEPT = 90  # odometry poses remembered per robot (3 s at 30 Hz)
+BLOCKED_M = 0.3  # a new obstacle closer than this to the route ahead: plan again...
+BLOCKED_RANGE_M = 2.0  # ...if it is within this of the robot
+REPLAN_BLOCKED_S = 0.5  # ...at most this often (sim s)
+OBSTACLE_BUCKET_M = 0.1  # obstacles within about this of one planned around are not new
 
 _ROBOTS = "SELECT robot_id, world, max_linear_mps, max_angular_rps, footprint_radius_m FROM robot"
 _MAP_VERSIONS = "SELECT map_id, loaded_at FROM map"
@@ -140,6 +151,19 @@ class Slot:
     beat: int  # meta round in which the rule last ran
 
 
+@dataclass(frozen=True)
+class Seen:
+    """The unmapped obstacles of one laser scan: its hits farther than UNMAPPED_M from every
+    obstacle of the map, in the world frame (an (n, 2) array)."""
+
+    scan_id: int
+    stamp: float
+    points: np.ndarray[Any, np.dtype[np.float64]]
+
+
+Pose = tuple[float, float, float, float]  # (stamp, x, y, yaw)
+
+
 @dataclass
 class RobotState:
     info: RobotInfo
@@ -147,6 +171,56 @@ class RobotState:
     route: Route | None = None
     station: Station | None = None  # charger chosen for the current CHARGE session
     slots: dict[str, Slot] = field(default_factory=dict)
+    poses: deque[Pose] = field(default_factory=lambda: deque(maxlen=POSES_KEPT))
+    seen: Seen | None = None
+    scan_read_at: float = -math.inf  # sim time the newest scan was last read
+
+    def note_pose(self, odom: records.Odometry) -> None:
+        if not self.poses or odom.stamp > self.poses[-1][0]:
+            self.poses.append((odom.stamp, odom.x, odom.y, odom.yaw))
+        elif odom.stamp < self.poses[-1][0] - 1.0:  # sim time went back: the sim restarted
+            self.poses.clear()
+            self.poses.append((odom.stamp, odom.x, odom.y, odom.yaw))
+
+    def pose_at(self, stamp: float) -> tuple[float, float, float] | None:
+        """The robot's pose at sim time ``stamp``, interpolated between the odometry rows
+        around it; None if no row is within POSE_MATCH_S of it."""
+        before = after = None
+        for pose in reversed(self.poses):
+            if pose[0] <= stamp:
+                before = pose
+                break
+            after = pose
+        if before is not None and after is not None and after[0] - before[0] <= 2 * POSE_MATCH_S:
+            f = (stamp - before[0]) / max(after[0] - before[0], 1e-9)
+            turn = math.atan2(math.sin(after[3] - before[3]), math.cos(after[3] - before[3]))
+            return (
+                before[1] + f * (after[1] - before[1]),
+                before[2] + f * (after[2] - before[2]),
+                before[3] + f * turn,
+            )
+        near = [p for p in (before, after) if p is not None and abs(p[0] - stamp) <= POSE_MATCH_S]
+        if not near:
+            return None
+        best = min(near, key=lambda p: abs(p[0] - stamp))
+        return best[1], best[2], best[3]
+
+
+_NO_POINTS: np.ndarray[Any, np.dtype[np.float64]] = np.zeros((0, 2))
+
+
+def _bucket(x: float, y: float) -> tuple[int, int]:
+    return math.floor(x / OBSTACLE_BUCKET_M), math.floor(y / OBSTACLE_BUCKET_M)
+
+
+def _buckets(points: np.ndarray[Any, np.dtype[np.float64]]) -> set[tuple[int, int]]:
+    return {_bucket(float(px), float(py)) for px, py in points}
+
+
+def _known(avoided: set[tuple[int, int]], x: float, y: float) -> bool:
+    """Whether (x, y) is within a bucket of an obstacle the route was planned around."""
+    bx, by = _bucket(x, y)
+    return any((bx + i, by + j) in avoided for i in (-1, 0, 1) for j in (-1, 0, 1))
 
 
 class PlannerState:
@@ -227,20 +301,56 @@ class PlannerState:
             log.event(logger, logging.WARNING, message, **fields)
 
     # -- routes ------------------------------------------------------------------------------
-    def route_for(self, state: RobotState, x: float, y: float, target: Target) -> Progress:
+    def see(self, state: RobotState, scan: records.LaserScan) -> None:
+        """Remember the unmapped obstacles of ``scan``: hits within SEEN_RANGE_M that are
+        farther than UNMAPPED_M from every obstacle of the robot's map, placed in the world with
+        the robot's pose at the scan's stamp. Nav2 calls this an obstacle layer: the route is
+        then planned around a pallet or a crate the map does not show, rather than through it
+        for the controllers to fight over."""
+        data = self.map_for(state.info)
+        pose = state.pose_at(scan.stamp)
+        if data is None or pose is None:
+            return
+        x, y, yaw = pose
+        ranges = np.asarray(scan.ranges, dtype=np.float64)
+        with np.errstate(invalid="ignore"):
+            valid = (ranges >= scan.range_min - 1e-4) & (ranges <= SEEN_RANGE_M)
+        angles = scan.angles()[valid] + yaw
+        hits = np.column_stack(
+            (x + ranges[valid] * np.cos(angles), y + ranges[valid] * np.sin(angles))
+        )
+        grid = data.grid(state.info.footprint_radius_m)
+        if grid.clearance is not None and len(hits):
+            cells = np.array([grid.cell_of(px, py) for px, py in hits], dtype=np.int64)
+            h, w = grid.shape
+            inside = (cells[:, 0] >= 0) & (cells[:, 1] >= 0) & (cells[:, 0] < w)
+            inside &= cells[:, 1] < h
+            hits, cells = hits[inside], cells[inside]
+            hits = hits[grid.clearance[cells[:, 1], cells[:, 0]] > UNMAPPED_M]
+        state.seen = Seen(scan.id, scan.stamp, hits)
+
+    def route_for(
+        self, state: RobotState, x: float, y: float, target: Target, now: float | None = None
+    ) -> Progress:
         """Progress along the robot's cached route to ``target``; plans (again) when the
-        target or the map changed, the robot strayed, or a straight fallback is due a retry."""
+        target or the map changed, the robot strayed, a straight fallback is due a retry, or
+        a newly seen unmapped obstacle is close to the route ahead. ``now``: sim time."""
         data = self.map_for(state.info)
         version = data.version if data else None
         route = state.route
-        now = time.monotonic()
+        wall = time.monotonic()
         if route is not None and route.target_key == target.key and route.map_version == version:
             progress = follow(route, x, y)
-            age = now - route.made_at
+            age = wall - route.made_at
             retry = data is not None and not route.planned and age > RETRY_PLAN_S
-            if not retry and (progress.deviation_m <= STRAY_M or age < REPLAN_MIN_S):
+            blocked = data is not None and self._blocked(state, route, x, y, now)
+            if not retry and not blocked and (progress.deviation_m <= STRAY_M or age < REPLAN_MIN_S):
                 return progress
-        points = self.plan(state, (x, y), (target.x, target.y), target.label)
+        obstacles = self._obstacles(state, now)
+        points = self.plan(state, (x, y), (target.x, target.y), target.label, obstacles)
+        if points is None and len(obstacles):
+            points = self.plan(state, (x, y), (target.x, target.y), target.label)
+            obstacles = _NO_POINTS  # nothing was avoided after all
         planned = points is not None
         if not planned and data is not None:
             self.warn_once(
@@ -252,17 +362,60 @@ class PlannerState:
         state.route = Route.of(
             target.key, version, points or [(x, y), (target.x, target.y)], planned
         )
+        state.route.made_stamp = now if now is not None else 0.0
+        state.route.avoided = _buckets(obstacles)
+        state.route.checked_scan = state.seen.scan_id if state.seen is not None else None
         return follow(state.route, x, y)
 
+    def _obstacles(
+        self, state: RobotState, now: float | None
+    ) -> np.ndarray[Any, np.dtype[np.float64]]:
+        """The unmapped obstacles to plan around: the newest scan's, unless it is stale."""
+        seen = state.seen
+        if seen is None or (now is not None and now - seen.stamp > SEEN_MAX_AGE_S):
+            return _NO_POINTS
+        return seen.points
+
+    def _blocked(
+        self, state: RobotState, route: Route, x: float, y: float, now: float | None
+    ) -> bool:
+        """Whether a scan not yet checked against ``route`` shows an obstacle it was not
+        planned around within BLOCKED_M of the route ahead (and BLOCKED_RANGE_M of the
+        robot). At most one such replan every REPLAN_BLOCKED_S; a scan is checked once."""
+        seen = state.seen
+        if seen is None or seen.scan_id == route.checked_scan or now is None:
+            return False
+        if now - route.made_stamp < REPLAN_BLOCKED_S:
+            return False  # checked again once the interval is over
+        route.checked_scan = seen.scan_id
+        points = self._obstacles(state, now)
+        if not len(points):
+            return False
+        near = np.hypot(points[:, 0] - x, points[:, 1] - y) <= BLOCKED_RANGE_M
+        points = points[near]
+        if not len(points):
+            return False
+        close = points[route.clearance_ahead(x, y, points) < BLOCKED_M]
+        return any(not _known(route.avoided, px, py) for px, py in close)
+
     def plan(
-        self, state: RobotState, start: tuple[float, float], goal: tuple[float, float], what: str
+        self,
+        state: RobotState,
+        start: tuple[float, float],
+        goal: tuple[float, float],
+        what: str,
+        obstacles: np.ndarray[Any, np.dtype[np.float64]] | None = None,
     ) -> list[tuple[float, float]] | None:
-        """A* on the robot's map (None: no map, or no path on it)."""
+        """A* on the robot's map, around ``obstacles`` too if given (None: no map, or no path
+        on it)."""
         data = self.map_for(state.info)
         if data is None:
             return None
         started = time.perf_counter()
-        points = plan_path(data.grid(state.info.footprint_radius_m), start, goal)
+        grid = data.grid(state.info.footprint_radius_m)
+        if obstacles is not None and len(obstacles):
+            grid = with_obstacles(grid, obstacles)
+        points = plan_path(grid, start, goal)
         elapsed_ms = (time.perf_counter() - started) * 1000
         log.event(
             logger,
@@ -272,6 +425,7 @@ class PlannerState:
             target=what,
             waypoints=len(points) - 1 if points else 0,
             length_m=round(path_length(points), 2) if points else None,
+            unmapped=len(obstacles) if obstacles is not None else 0,
             ms=round(elapsed_ms, 1),
         )
         return points

@@ -13,6 +13,7 @@ on to the next segment.
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from dataclasses import dataclass, field
@@ -47,6 +48,11 @@ class Route:
     planned: bool  # False: a straight line (no map, or no path found on it)
     segment: int = 0
     made_at: float = field(default_factory=time.monotonic)
+    made_stamp: float = 0.0  # sim time it was planned at
+    # The unmapped obstacles (lidar hits) it was planned around, as OBSTACLE_BUCKET_M buckets,
+    # and the newest scan checked against it: only new obstacles near it call for a new plan.
+    avoided: set[tuple[int, int]] = field(default_factory=set)
+    checked_scan: int | None = None
 
     @classmethod
     def of(
@@ -58,6 +64,22 @@ class Route:
     def waypoints(self) -> int:
         """Vertices after the start: the turns and the target."""
         return len(self.points) - 1
+
+    def clearance_ahead(
+        self, x: float, y: float, obstacles: np.ndarray[Any, np.dtype[np.float64]]
+    ) -> np.ndarray[Any, np.dtype[np.float64]]:
+        """Per obstacle point, its distance to what is left of the route: from the robot at
+        (x, y) to the current segment's end vertex, then on along the route."""
+        ahead = np.vstack([[x, y], self.points[self.segment + 1 :]])
+        best = np.full(len(obstacles), math.inf)
+        for a, b in itertools.pairwise(ahead):
+            ab = b - a
+            length2 = float(ab @ ab)
+            rel = obstacles - a
+            t = np.clip(rel @ ab / length2, 0.0, 1.0) if length2 > 1e-12 else np.zeros(len(rel))
+            gap = rel - t[:, None] * ab
+            np.minimum(best, np.hypot(gap[:, 0], gap[:, 1]), out=best)
+        return best
 
 
 @dataclass(frozen=True)

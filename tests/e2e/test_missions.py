@@ -19,12 +19,12 @@ from pnav.mission import MissionLog, MissionMonitor
 
 pytestmark = pytest.mark.timeout(240)
 
-RATE = "10"
+RATE = "5"
 ROBOT = "r1"
 MISSIONS = {
     "open_room": (4.0, 4.0),
     "cluttered_room": (4.8, 5.6),
-    "warehouse": (9.3, 7.3),
+    "warehouse": (8.8, 6.6),
 }
 
 

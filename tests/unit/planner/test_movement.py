@@ -45,7 +45,11 @@ def test_goal_behind_turns_in_place(yaw: float) -> None:
 
 
 def test_turning_is_capped_and_never_stalls() -> None:
-    assert select(3.0).angular == pytest.approx(MAX_W)
+    # Far from the target heading: the turn-in-place cap (below the robot's maximum, which
+    # a delayed loop would overshoot); near it, a smaller cap; never below the minimum.
+    assert select(3.0).angular == pytest.approx(min(MAX_W, turn_then_move.MAX_TURN_RPS))
+    assert select(-3.0).angular == pytest.approx(-min(MAX_W, turn_then_move.MAX_TURN_RPS))
+    assert select(0.45).angular <= turn_then_move.FINE_TURN_RPS
     assert select(0.35).angular >= turn_then_move.MIN_TURN_RPS
     assert turn_then_move.select_movement(3.0, 3.0, MAX_V, 1.0).angular == pytest.approx(1.0)
 
