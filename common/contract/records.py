@@ -203,6 +203,11 @@ RETURNING id
 """
 
 
+async def _recommend(db: Database, robot_id: str, *values: Any) -> int:
+    value = await db.write(keys.COMMAND_RECOMMENDATION, robot_id, _RECOMMEND, robot_id, *values)
+    return int(value)
+
+
 async def recommend_velocity(
     db: Database,
     robot_id: str,
@@ -217,23 +222,10 @@ async def recommend_velocity(
     inputs: dict[str, Any] | None = None,
 ) -> int:
     """Write a robot recommendation valid until ``stamp + ttl_s`` (sim time) and notify."""
-    value = await db.write(
-        keys.COMMAND_RECOMMENDATION,
-        robot_id,
-        _RECOMMEND,
-        robot_id,
-        "robot",
-        source,
-        priority,
-        float(linear),
-        float(angular),
-        None,
-        stamp,
-        stamp + ttl_s,
-        inputs or {},
-        reason,
-    )
-    return int(value)
+    return await _recommend(
+        db, robot_id, "robot", source, priority, float(linear), float(angular), None,
+        stamp, stamp + ttl_s, inputs or {}, reason,
+    )  # fmt: skip
 
 
 async def recommend_system(
@@ -249,20 +241,7 @@ async def recommend_system(
     inputs: dict[str, Any] | None = None,
 ) -> int:
     """Write a system recommendation (e.g. CMD_BATTSAVE) and notify."""
-    value = await db.write(
-        keys.COMMAND_RECOMMENDATION,
-        robot_id,
-        _RECOMMEND,
-        robot_id,
-        "system",
-        source,
-        priority,
-        None,
-        None,
-        command,
-        stamp,
-        stamp + ttl_s,
-        inputs or {},
-        reason,
-    )
-    return int(value)
+    return await _recommend(
+        db, robot_id, "system", source, priority, None, None, command,
+        stamp, stamp + ttl_s, inputs or {}, reason,
+    )  # fmt: skip

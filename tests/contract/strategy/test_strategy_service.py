@@ -15,6 +15,7 @@ from common.contract import keys
 from common.runtime import Runtime
 from common.testing import ClockPlayer, eventually, running_service
 from services.strategy.service import StrategyService
+from tests.contract.conftest import CLOCK_START
 
 USER_SQL = "INSERT INTO user_command (robot_id, command, argument) VALUES ($1, $2, $3) RETURNING id"
 SYSTEM_SQL = (
@@ -86,7 +87,7 @@ async def test_a_new_robot_gets_the_default_strategy(
         assert row["strategy_code"] == "GOTO_AVOID"
         assert row["source"] == "default"
         assert row["resume_code"] is None and row["command_id"] is None
-        assert row["stamp"] == pytest.approx(12.5)
+        assert row["stamp"] == pytest.approx(CLOCK_START)
 
 
 async def test_set_strategy_is_accepted_and_notified(

@@ -1,0 +1,41 @@
+"""Fixtures shared by the contract tests: a foreign client and the sim clock.
+
+The client plays everyone else around the service under test: it writes rows with plain SQL
+and publishes the change notifications a writer must publish, and it plays the sim's clock.
+"""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+
+import pytest
+
+from common.config import ServiceConfig, ZenohSettings
+from common.runtime import Runtime
+from common.testing import ClockPlayer
+
+CLOCK_START = 10.0
+
+
+@pytest.fixture
+async def client(db_url: str, zenoh_settings: ZenohSettings) -> AsyncIterator[Runtime]:
+    runtime = await Runtime.open(
+        ServiceConfig(
+            service="tester", database_url=db_url, zenoh=zenoh_settings, instance="tester-1"
+        )
+    )
+    try:
+        yield runtime
+    finally:
+        await runtime.close()
+
+
+@pytest.fixture
+async def clock(client: Runtime) -> AsyncIterator[ClockPlayer]:
+    """Sim time held at CLOCK_START until a test moves it (``clock.stamp = ...``)."""
+    player = ClockPlayer(client.zenoh, stamp=CLOCK_START)
+    player.start()
+    try:
+        yield player
+    finally:
+        await player.stop()
