@@ -52,6 +52,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     commands.add_parser("down", help="stop the stack started by `pnav up`")
 
+    migrate = commands.add_parser(
+        "migrate", help="apply the contract to PNAV_DATABASE_URL (waits for the server)"
+    )
+    migrate.add_argument("--wait", type=float, default=60.0, help="seconds to wait for Postgres")
+
     demo = commands.add_parser("demo", help="the demo mission (see README)")
     demo.add_argument("--json", metavar="FILE", help="also write the summary as JSON")
     demo.add_argument("--rate", default=None, help="sim rate (default: the demo's own)")
@@ -105,6 +110,8 @@ def dispatch(args: argparse.Namespace) -> int:
         return uvloop.run(up(options))
     if args.command == "down":
         return commands.down()
+    if args.command == "migrate":
+        return uvloop.run(commands.migrate(args.wait))
     if args.command == "status":
         return uvloop.run(commands.status(args.once or not sys.stdout.isatty()))
     if args.command in ("goal", "strategy", "cancel"):

@@ -195,3 +195,22 @@ def down(wait_s: float = 20.0) -> int:
         time.sleep(0.1)
     print(f"stack {info.pid} did not stop within {wait_s:.0f} s", file=sys.stderr)
     return 1
+
+
+async def migrate(wait_s: float) -> int:
+    """Apply the contract's migrations to PNAV_DATABASE_URL (the compose one-shot job)."""
+    from common.contract.migrate import apply_migrations, current_version
+    from common.db import create_pool
+
+    url = os.environ.get("PNAV_DATABASE_URL", "").strip()
+    if not url:
+        raise UsageError("PNAV_DATABASE_URL is not set: which database should be migrated?")
+    pool = await create_pool(url, max_size=1, wait_s=wait_s)
+    try:
+        async with pool.acquire() as conn:
+            applied = await apply_migrations(conn)
+            version = await current_version(conn)
+    finally:
+        await pool.close()
+    print(f"contract at version {version}; applied now: {applied or 'nothing'}")
+    return 0

@@ -97,3 +97,28 @@ def test_schema_sql_splits_into_numbered_migrations() -> None:
     migrations = contract_migrations()
     assert [m.version for m in migrations] == list(range(1, len(migrations) + 1))
     assert all(m.sql.strip() for m in migrations)
+
+
+async def test_pnav_migrate_applies_the_contract_once(empty_db_url: str) -> None:
+    import asyncio
+    import os
+    import sys
+
+    async def migrate() -> tuple[int, str]:
+        process = await asyncio.create_subprocess_exec(
+            sys.executable,
+            "-m",
+            "pnav",
+            "migrate",
+            env={**os.environ, "PNAV_DATABASE_URL": empty_db_url},
+            stdout=asyncio.subprocess.PIPE,
+        )
+        out, _ = await asyncio.wait_for(process.communicate(), 60)
+        return process.returncode or 0, out.decode()
+
+    newest = len(contract_migrations())
+    assert await migrate() == (
+        0,
+        f"contract at version {newest}; applied now: {list(range(1, newest + 1))}\n",
+    )
+    assert await migrate() == (0, f"contract at version {newest}; applied now: nothing\n")
