@@ -48,6 +48,7 @@ class MetaPlanner(Rule):
     meta = True
     watches = (
         keys.ACTIVE_STRATEGY,
+        keys.STRATEGY,
         keys.GOAL,
         keys.ODOMETRY,
         keys.BATTERY,

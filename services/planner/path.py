@@ -46,6 +46,8 @@ SNAP_RADIUS_M = 0.6
 # (1 in the open; 1 + COST_WEIGHT at the edge of the blocked zone).
 COST_RADIUS_M = 0.6
 COST_WEIGHT = 3.0
+# A shortcut keeps, at each point, the path's clearance within this distance along the path.
+SHORTCUT_WINDOW_M = 0.3
 _SQRT2 = math.sqrt(2.0)
 
 
@@ -155,6 +157,25 @@ class PlanGrid:
             dx, dy = c * dx - s * dy, s * dx + c * dy
         return self.origin_x + dx, self.origin_y + dy
 
+    def cells_of(
+        self, points: np.ndarray[Any, np.dtype[np.float64]]
+    ) -> tuple[
+        np.ndarray[Any, np.dtype[np.int64]],
+        np.ndarray[Any, np.dtype[np.int64]],
+        np.ndarray[Any, np.dtype[np.bool_]],
+    ]:
+        """The (cols, rows) of the cells under world ``points`` (an (n, 2) array), and which
+        of them are inside the grid."""
+        dx, dy = points[:, 0] - self.origin_x, points[:, 1] - self.origin_y
+        if self.origin_yaw:
+            c, s = math.cos(self.origin_yaw), math.sin(self.origin_yaw)
+            dx, dy = c * dx + s * dy, -s * dx + c * dy
+        cols = np.floor(dx / self.resolution).astype(np.int64)
+        rows = np.floor(dy / self.resolution).astype(np.int64)
+        h, w = self.shape
+        inside = (cols >= 0) & (rows >= 0) & (cols < w) & (rows < h)
+        return cols, rows, np.asarray(inside, dtype=np.bool_)
+
     def inside(self, cell: Cell) -> bool:
         h, w = self.shape
         return 0 <= cell[0] < w and 0 <= cell[1] < h
@@ -225,17 +246,11 @@ def with_obstacles(grid: PlanGrid, points: np.ndarray[Any, np.dtype[np.float64]]
     like the map's own obstacles. ``grid`` itself is left alone (it is cached per map)."""
     if len(points) == 0:
         return grid
-    dx, dy = points[:, 0] - grid.origin_x, points[:, 1] - grid.origin_y
-    if grid.origin_yaw:
-        c, s = math.cos(grid.origin_yaw), math.sin(grid.origin_yaw)
-        dx, dy = c * dx + s * dy, -s * dx + c * dy
-    cols = np.floor(dx / grid.resolution).astype(np.int64)
-    rows = np.floor(dy / grid.resolution).astype(np.int64)
-    h, w = grid.shape
-    inside = (cols >= 0) & (rows >= 0) & (cols < w) & (rows < h)
+    cols, rows, inside = grid.cells_of(points)
     cols, rows = cols[inside], rows[inside]
     if cols.size == 0:
         return grid
+    h, w = grid.shape
     reach = math.ceil(max(grid.inflation_m, grid.cost_radius_m) / grid.resolution) + 1
     c0, c1 = max(0, int(cols.min()) - reach), min(w, int(cols.max()) + reach + 1)
     r0, r1 = max(0, int(rows.min()) - reach), min(h, int(rows.max()) + reach + 1)
@@ -358,18 +373,27 @@ def _samples(
 
 
 def visible(
-    grid: PlanGrid, a: tuple[float, float], b: tuple[float, float], clearance_m: float = 0.0
+    grid: PlanGrid,
+    a: tuple[float, float],
+    b: tuple[float, float],
+    clearance_m: float | np.ndarray[Any, np.dtype[np.float64]] = 0.0,
 ) -> bool:
     """True if the straight line between fractional cell positions ``a`` and ``b`` crosses no
-    blocked cell, nor (with ``clearance_m`` > 0 and a clearance map) a cell whose clearance is
-    below ``clearance_m``."""
+    blocked cell, nor (with a clearance map) a cell whose clearance is below ``clearance_m``:
+    one value for the whole line, or a profile of values evenly spaced from ``a`` to ``b``."""
     cells = _samples(grid, a, b)
     if cells is None:
         return False
     cols, rows = cells
     if grid.blocked[rows, cols].any():
         return False
-    if clearance_m > 0.0 and grid.clearance is not None:
+    if grid.clearance is None:
+        return True
+    if isinstance(clearance_m, np.ndarray):
+        at = np.linspace(0.0, 1.0, len(cols))
+        need = np.interp(at, np.linspace(0.0, 1.0, len(clearance_m)), clearance_m)
+        return bool(np.all(grid.clearance[rows, cols] >= need - 1e-9))
+    if clearance_m > 0.0:
         return bool(grid.clearance[rows, cols].min() >= clearance_m - 1e-9)
     return True
 
@@ -380,20 +404,26 @@ def shortcut(grid: PlanGrid, cells: list[Cell]) -> list[Cell]:
     drops a kept cell whenever its two neighbours see each other.
 
     With a clearance map, a straight segment may replace a stretch of the path only if it keeps
-    that stretch's clearance: it comes no closer to an obstacle than the stretch's closest
-    cell, or than ``cost_radius_m`` (beyond which nothing costs). So the A* path's distance
-    from the walls, bought with the clearance costs, survives the straightening.
+    that stretch's clearance *where it replaces it*: at each point along the segment, no closer
+    to an obstacle than the path was around the corresponding place (its smallest clearance
+    within SHORTCUT_WINDOW_M along the path, less half a cell) or than ``cost_radius_m``
+    (beyond which nothing costs). So a segment leaving a robot that stands near a wall may
+    start near it, but cannot run along it; and round a corner the path stays as wide as A*
+    made it, in a few shorter segments.
     """
     n = len(cells)
     if n <= 2:
         return list(cells)
     centre = [(c + 0.5, r + 0.5) for c, r in cells]
-    clear: list[float] | None = None
+    local: np.ndarray[Any, np.dtype[np.float64]] | None = None
     if grid.costed:
-        clear = [min(grid.clearance_at(c), grid.cost_radius_m) for c in cells]
+        clear = np.array([min(grid.clearance_at(c), grid.cost_radius_m) for c in cells])
+        w = max(1, round(SHORTCUT_WINDOW_M / grid.resolution))
+        windows = np.lib.stride_tricks.sliding_window_view(np.pad(clear, w, mode="edge"), 2 * w + 1)
+        local = windows.min(axis=1) - 0.5 * grid.resolution
 
     def sees(i: int, j: int) -> bool:
-        need = min(clear[i : j + 1]) if clear is not None else 0.0
+        need = local[i : j + 1] if local is not None else 0.0
         return visible(grid, centre[i], centre[j], need)
 
     kept = [0]

@@ -4,8 +4,10 @@ velocity (``select``).
 One rule per robot, created by the meta-planner and cloning itself while it is still the
 robot's planner scenario (its slot token matches). Per activation:
 
-1. acquisition: the newest odometry, and the target (the active goal, or the chosen
-   charging station, per the strategy's ``target`` param);
+1. acquisition: the newest odometry (at most every EVAL_PERIOD_S of sim time, unless a
+   goal notification came or a recommendation is due by the cadence), the target (the active
+   goal, or the chosen charging station, per the strategy's ``target`` param), and every
+   SCAN_PERIOD_S the newest laser scan, for the unmapped obstacles to plan around;
 2. guards: still the robot's scenario, fresh odometry (within ODOM_MAX_AGE_S of sim time),
    a target;
 3. conditions: something new to say: a new odometry row or a new target, and then either
@@ -46,6 +48,10 @@ CHANGE_LINEAR_MPS = 0.02
 CHANGE_ANGULAR_RPS = 0.1
 # How often (sim s) the newest laser scan is read, for unmapped obstacles (2 of its 5 Hz).
 SCAN_PERIOD_S = 0.4
+# The odometry wakes the planner 30 times a sim second; it is read (and the velocity worked
+# out) at most this often, i.e. on every other row, unless a goal notification came or the
+# cadence calls for a recommendation.
+EVAL_PERIOD_S = 0.06
 
 
 @dataclass(frozen=True)
@@ -94,7 +100,7 @@ async def target_of(state: PlannerState, robot: RobotState, x: float, y: float) 
     strategy = robot.strategy
     kind = strategy.params.get("target") if strategy else None
     if kind == "goal":
-        goal = await records.active_goal(state.db.pool, robot.info.robot_id)
+        goal = await state.active_goal(robot)
         return Target.of_goal(goal) if goal else None
     if kind == "nearest_charger":
         station = state.choose_station(robot, x, y)
@@ -112,6 +118,7 @@ class MoveScenario(Rule):
         self.turning = False  # turn_then_move's hysteresis: turning in place last time
         self.last_said: tuple[Any, ...] | None = None  # (odometry id, target key) handled
         self.said: Said | None = None  # the last velocity recommended
+        self.evaluated_at = -math.inf  # sim time the odometry was last read
         self.held: set[tuple[Any, ...]] = set()  # targets reached and stopped at
         self.robot: RobotState | None = None
         self.odom: records.Odometry | None = None
@@ -135,11 +142,20 @@ class MoveScenario(Rule):
         if self.robot is None:
             return
         self.sim_now = self.state.now()
+        robot = self.robot
+        said = self.said
+        cadence_due = said is None or self.sim_now >= said.stamp + RECOMMEND_PERIOD_S - 0.005
+        if (
+            0.0 <= self.sim_now - self.evaluated_at < EVAL_PERIOD_S
+            and not cadence_due
+            and not self.state.goal_news(robot)
+        ):
+            return  # looked a moment ago, nothing is due, no new goal: skip this row
+        self.evaluated_at = self.sim_now
         pool = self.state.db.pool
         self.odom = await records.newest_odometry(pool, self.robot_id)
         if self.odom is None:
             return
-        robot = self.robot
         robot.note_pose(self.odom)
         self.target = await target_of(self.state, robot, self.odom.x, self.odom.y)
         if self.target is not None and abs(self.sim_now - robot.scan_read_at) >= SCAN_PERIOD_S:

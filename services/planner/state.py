@@ -29,6 +29,9 @@ from services.planner.tracking import Progress, Route, follow
 logger = logging.getLogger("pnav.planner")
 
 REFRESH_S = 2.0  # re-read robots, maps and stations at least this often (wall s)
+# Re-read the active strategies, and each robot's active goal, when a notification says they
+# changed, and at least this often (wall s) in case one was lost.
+FAST_REFRESH_S = 0.5
 INFLATION_MARGIN_M = 0.05  # clearance kept beyond the footprint radius when planning
 STRAY_M = 0.4  # farther than this from the route: plan again from where the robot is
 REPLAN_MIN_S = 0.5  # ...but not more often than this (wall s), so avoidance cannot thrash it
@@ -164,6 +167,13 @@ class Seen:
 Pose = tuple[float, float, float, float]  # (stamp, x, y, yaw)
 
 
+@dataclass(frozen=True)
+class GoalRead:
+    at: float  # wall time of the read
+    mark: tuple[int, int]  # the goal notifications counted for the robot (and "*") by then
+    goal: records.Goal | None
+
+
 @dataclass
 class RobotState:
     info: RobotInfo
@@ -174,6 +184,7 @@ class RobotState:
     poses: deque[Pose] = field(default_factory=lambda: deque(maxlen=POSES_KEPT))
     seen: Seen | None = None
     scan_read_at: float = -math.inf  # sim time the newest scan was last read
+    goal_read: GoalRead | None = None  # the active goal, as last read
 
     def note_pose(self, odom: records.Odometry) -> None:
         if not self.poses or odom.stamp > self.poses[-1][0]:
@@ -234,28 +245,67 @@ class PlannerState:
         self.meta_round = 0
         self.dirty = True  # robots, maps or stations changed (set from Zenoh's thread)
         self._refreshed = 0.0
+        self.strategies_dirty = True  # active_strategy or strategy changed (Zenoh's thread)
+        self._strategies_read = 0.0
+        # Goal notifications per robot ("*": naming no robot), counted on Zenoh's thread.
+        self.goal_notes: dict[str, int] = {}
         self._warned: set[str] = set()
 
     # -- reading the world -------------------------------------------------------------------
     def note(self, key: str, payload: bytes) -> None:
-        """Notification observer (Zenoh's thread): flag the slow-changing tables as dirty."""
+        """Notification observer (Zenoh's thread): flag what changed, so the rules re-read
+        robots, maps, stations, strategies and goals only then (or after a fallback time)."""
         try:
-            table, _ = keys.parse_notify_key(key)
+            table, robot = keys.parse_notify_key(key)
         except ValueError:
             return
         if table in (keys.ROBOT, keys.MAP, keys.CHARGING_STATION):
             self.dirty = True
+        elif table in (keys.ACTIVE_STRATEGY, keys.STRATEGY):
+            self.strategies_dirty = True
+        elif table == keys.GOAL:
+            who = robot or "*"
+            self.goal_notes[who] = self.goal_notes.get(who, 0) + 1
 
     async def refresh(self) -> None:
         pool = self.db.pool
-        if self.dirty or time.monotonic() - self._refreshed > REFRESH_S:
+        now = time.monotonic()
+        world = self.dirty or now - self._refreshed > REFRESH_S
+        if world:
             self.dirty = False
-            self._refreshed = time.monotonic()
+            self._refreshed = now
             await self._refresh_world(pool)
-        active = await records.active_strategies(pool)
-        for robot_id, state in self.robots.items():
-            entry = active.get(robot_id)
-            state.strategy = entry.strategy if entry else None
+        # The active strategies on every notification (a strategy switch acts at once), not on
+        # every odometry row: those wake the planner 30 times a sim second.
+        if world or self.strategies_dirty or now - self._strategies_read > FAST_REFRESH_S:
+            self.strategies_dirty = False  # before the read: a later change flags it again
+            self._strategies_read = now
+            active = await records.active_strategies(pool)
+            for robot_id, state in self.robots.items():
+                entry = active.get(robot_id)
+                state.strategy = entry.strategy if entry else None
+
+    def _goal_mark(self, robot_id: str) -> tuple[int, int]:
+        return self.goal_notes.get(robot_id, 0), self.goal_notes.get("*", 0)
+
+    def goal_news(self, state: RobotState) -> bool:
+        """Whether a goal notification for the robot came since its goal was last read."""
+        cached = state.goal_read
+        return cached is not None and cached.mark != self._goal_mark(state.info.robot_id)
+
+    async def active_goal(self, state: RobotState) -> records.Goal | None:
+        """The robot's active goal: read again after a goal notification for it, or
+        FAST_REFRESH_S after the last read; otherwise the one read last (the planner is woken
+        by every odometry row, and the goal hardly ever changes in between)."""
+        robot_id = state.info.robot_id
+        mark = self._goal_mark(robot_id)
+        now = time.monotonic()
+        cached = state.goal_read
+        if cached is not None and cached.mark == mark and now - cached.at <= FAST_REFRESH_S:
+            return cached.goal
+        goal = await records.active_goal(self.db.pool, robot_id)
+        state.goal_read = GoalRead(now, mark, goal)
+        return goal
 
     async def _refresh_world(self, pool: Any) -> None:
         rows = await pool.fetch(_ROBOTS)
@@ -321,12 +371,9 @@ class PlannerState:
         )
         grid = data.grid(state.info.footprint_radius_m)
         if grid.clearance is not None and len(hits):
-            cells = np.array([grid.cell_of(px, py) for px, py in hits], dtype=np.int64)
-            h, w = grid.shape
-            inside = (cells[:, 0] >= 0) & (cells[:, 1] >= 0) & (cells[:, 0] < w)
-            inside &= cells[:, 1] < h
-            hits, cells = hits[inside], cells[inside]
-            hits = hits[grid.clearance[cells[:, 1], cells[:, 0]] > UNMAPPED_M]
+            cols, rows, inside = grid.cells_of(hits)  # hits off the map are dropped
+            mapped = grid.clearance[rows[inside], cols[inside]] <= UNMAPPED_M
+            hits = hits[inside][~mapped]
         state.seen = Seen(scan.id, scan.stamp, hits)
 
     def route_for(
@@ -344,13 +391,18 @@ class PlannerState:
             age = wall - route.made_at
             retry = data is not None and not route.planned and age > RETRY_PLAN_S
             blocked = data is not None and self._blocked(state, route, x, y, now)
-            if not retry and not blocked and (progress.deviation_m <= STRAY_M or age < REPLAN_MIN_S):
+            if (
+                not retry
+                and not blocked
+                and (progress.deviation_m <= STRAY_M or age < REPLAN_MIN_S)
+            ):
                 return progress
         obstacles = self._obstacles(state, now)
         points = self.plan(state, (x, y), (target.x, target.y), target.label, obstacles)
         if points is None and len(obstacles):
+            # They close every way (or cover the goal): the map alone, and these obstacles
+            # count as considered, so the next scans do not call for the same failed plan.
             points = self.plan(state, (x, y), (target.x, target.y), target.label)
-            obstacles = _NO_POINTS  # nothing was avoided after all
         planned = points is not None
         if not planned and data is not None:
             self.warn_once(

@@ -27,9 +27,9 @@ from services.planner.scenario import Movement, MoveScenario, clamp, cruise_spee
 from services.planner.state import RobotInfo
 
 THRESHOLD_RAD = 0.3  # turn in place above this heading error
-ALIGNED_RAD = 0.12  # ...until the anticipated error is below this
+ALIGNED_RAD = 0.15  # ...until the error is below this
 TURN_GAIN = 1.5  # rad/s per rad of anticipated heading error, turning in place
-MIN_TURN_RPS = 0.25
+MIN_TURN_RPS = 0.3
 MAX_TURN_RPS = 2.0
 FINE_RAD = 0.5  # closer than this to the target heading, turn at most...
 FINE_TURN_RPS = 0.6  # ...this fast
@@ -65,15 +65,22 @@ def select_movement(
 
     ``turning``: the robot was turning in place (hysteresis). ``turn_rate``: its measured
     angular velocity (odometry), to anticipate where the turn will have got to."""
+    ahead = anticipated(error, turn_rate)
     if turning:
-        ahead = anticipated(error, turn_rate)
-        keep_turning = abs(error) > ALIGNED_RAD and ahead * error > 0 and abs(ahead) > ALIGNED_RAD
+        # Until aligned, unless the turn still under way will sweep well past the target
+        # heading anyway (a long loop delay): then the heading correction brakes it.
+        overshooting = ahead * error < 0 and abs(ahead) > ALIGNED_RAD
+        keep_turning = abs(error) > ALIGNED_RAD and not overshooting
     else:
-        keep_turning = abs(error) > threshold
+        # Both the error and the anticipated one: a robot still turning toward the target
+        # heading (the loop's delay) does not start turning in place again.
+        keep_turning = abs(error) > threshold and ahead * error > 0 and abs(ahead) > threshold
     if keep_turning:
         return Movement(0.0, turn_speed(error, turn_rate, max_angular), True)
     linear = cruise_speed(max_linear, remaining_m)
-    correction = clamp(HEADING_GAIN * anticipated(error, turn_rate), min(max_angular, MAX_HEADING_RPS))
+    correction = clamp(
+        HEADING_GAIN * anticipated(error, turn_rate), min(max_angular, MAX_HEADING_RPS)
+    )
     return Movement(linear, correction, False)
 
 

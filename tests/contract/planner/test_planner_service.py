@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import itertools
 import math
 
 import numpy as np
@@ -192,3 +193,76 @@ async def test_idle_and_unknown_scenarios_recommend_nothing(
     assert await world.recommendations(kind="system") == []
     await world.strategy("GOTO_DIRECT")  # still alive: a known scenario starts at once
     await world.next_recommendation(lambda r: r["source"] == "turn_then_move")
+
+
+async def test_steady_driving_is_recommended_at_a_cadence_not_on_every_odometry_row(
+    world: World, planner: PlannerService
+) -> None:
+    world.pose = (0.0, 0.0, 0.0)
+    await world.strategy("GOTO_AVOID")
+    goal_id = await world.goal(20.0, 0.0)
+    first = await world.next_recommendation(lambda r: r["inputs"].get("goal") == goal_id)
+    assert first["linear_mps"] > 0.1
+    world.streaming = False
+    rows = []
+    for _ in range(50):  # odometry at 50 Hz for a second: driving straight, nothing changes
+        rows.append(await world.odometry(0.0, 0.0, 0.0))
+        await asyncio.sleep(0.02)
+    await asyncio.sleep(0.2)
+    said = [r for r in await world.recommendations() if r["inputs"]["odometry"] in rows]
+    # one every 0.1 s of sim time (here 1 sim s per wall s), not one per row
+    assert 5 <= len(said) <= 15, len(said)
+    stamps = sorted(float(r["stamp"]) for r in said)
+    assert max(b - a for a, b in itertools.pairwise(stamps)) < 0.3
+    # A new goal is answered at once, whatever the cadence.
+    world.streaming = True
+    behind = await world.goal(-2.0, 0.0)
+    rec = await world.next_recommendation(lambda r: r["inputs"].get("goal") == behind)
+    assert rec["linear_mps"] == 0.0 and rec["angular_rps"] != 0.0
+
+
+async def test_an_obstacle_the_lidar_sees_but_the_map_does_not_bends_the_route(
+    world: World, planner: PlannerService
+) -> None:
+    # 4 x 2 m at 5 cm, walls all round, nothing inside
+    grid = np.zeros((40, 80), dtype=np.uint8)
+    grid[0, :] = grid[-1, :] = grid[:, 0] = grid[:, -1] = 100
+    async with world.db.transaction() as tx:
+        await tx.conn.execute(
+            "INSERT INTO map (map_id, resolution_m, origin_x, origin_y, width, height, grid) "
+            "VALUES ('room', 0.05, 0, 0, 80, 40, $1)",
+            grid.tobytes(),
+        )
+        await tx.conn.execute("UPDATE robot SET world = 'room' WHERE robot_id = $1", ROBOT)
+        tx.changed(keys.MAP, None)
+        tx.changed(keys.ROBOT, ROBOT)
+    world.pose = (0.5, 1.0, 0.0)
+    await world.strategy("GOTO_AVOID")
+    goal_id = await world.goal(3.5, 1.0)
+    rec = await world.next_recommendation(
+        lambda r: r["inputs"].get("goal") == goal_id and r["linear_mps"] > 0
+    )
+    assert "waypoint 1/1," in rec["reason"]  # straight across the empty room
+    # A crate 1 m ahead, 0.3 m wide, in a sweep taken where the robot stands.
+    stamp = await world.db.pool.fetchval("SELECT max(stamp) FROM odometry")
+    angles = np.degrees(np.arange(360) * (2 * np.pi / 360))
+    angles = np.where(angles > 180, angles - 360, angles)
+    ranges = np.where(np.abs(angles) <= 8, 1.0, np.inf).astype(np.float32)
+    await world.execute(
+        keys.LASER_SCAN,
+        ROBOT,
+        "INSERT INTO laser_scan (robot_id, stamp, angle_min, angle_increment, range_min, "
+        "range_max, ranges) VALUES ($1, $2, 0, $3, 0.12, 3.5, $4) RETURNING id",
+        ROBOT,
+        stamp,
+        2 * np.pi / 360,
+        ranges.tolist(),
+    )
+    bent = await world.next_recommendation(
+        lambda r: r["inputs"].get("goal") == goal_id and "waypoint 1/1," not in r["reason"],
+        after=rec["id"],
+        what="a route round the crate",
+    )
+    assert bent["inputs"]["goal"] == goal_id
+    remaining = float(bent["reason"].split(" m to goal")[0].rsplit(" ", 1)[1])
+    assert remaining > 3.05  # longer than the 3 m straight line

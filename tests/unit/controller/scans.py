@@ -48,6 +48,31 @@ def scan(
     )
 
 
+def aisle(
+    left_m: float, right_m: float, heading_deg: float = 0.0, *extra: Obstacle, noise: float = 0.0
+) -> LaserScan:
+    """A sweep between two long parallel walls, ``left_m`` to the left of the robot's centre
+    and ``right_m`` to its right, the robot heading ``heading_deg`` (CCW) off the aisle's
+    direction; plus any ``extra`` obstacles, as for :func:`scan`."""
+    base = scan(*extra, noise=noise)
+    ranges = np.asarray(base.ranges, dtype=np.float64)
+    angles = np.radians(np.arange(BEAMS, dtype=np.float64)) + math.radians(heading_deg)
+    with np.errstate(divide="ignore"):
+        sin = np.sin(angles)
+        walls = np.where(sin > 1e-9, left_m / sin, np.where(sin < -1e-9, -right_m / sin, np.inf))
+    walls = np.where(walls <= 3.5, walls, np.inf)
+    return LaserScan(
+        id=base.id,
+        robot_id=base.robot_id,
+        stamp=base.stamp,
+        angle_min=base.angle_min,
+        angle_increment=base.angle_increment,
+        range_min=base.range_min,
+        range_max=base.range_max,
+        ranges=np.minimum(ranges, walls).astype(np.float32),
+    )
+
+
 def odom(
     linear: float = 0.0, angular: float = 0.0, odom_id: int = 1, stamp: float = 10.0
 ) -> Odometry:

@@ -10,7 +10,7 @@ from common.contract.records import LaserScan
 from services.controller.avoid_left import AvoidLeft
 from services.controller.avoid_right import AvoidRight
 from services.controller.scenario import Command
-from tests.unit.controller.scans import BURGER, Obstacle, scan
+from tests.unit.controller.scans import BURGER, Obstacle, aisle, scan
 
 
 def both(sweep: LaserScan, params: dict[str, object] | None = None) -> tuple[Command | None, ...]:
@@ -100,3 +100,36 @@ def test_invalid_beams_are_ignored_but_range_min_is_an_obstacle() -> None:
     assert both(sweep) == (None, None)
     left, _ = both(scan((-40, -20, 0.12)))  # at range_min (stored as float32): an obstacle
     assert left is not None
+
+
+@pytest.mark.parametrize("width", [0.9, 1.0, 1.2])
+@pytest.mark.parametrize("offset", [0.0, 0.1])
+@pytest.mark.parametrize("heading", [-15.0, 0.0, 15.0])
+def test_walls_of_an_aisle_the_robot_drives_along_are_not_obstacles(
+    width: float, offset: float, heading: float
+) -> None:
+    # In the middle of an aisle (or 10 cm off it), heading along it (or 15 deg off): the walls
+    # are passed, not in the way. The racks of a warehouse must not push the robot about.
+    sweep = aisle(width / 2 - offset, width / 2 + offset, heading, noise=0.01)
+    assert both(sweep) == (None, None)
+
+
+def test_in_an_aisle_an_obstacle_in_the_way_still_makes_the_robot_turn_away() -> None:
+    # a pallet ahead and a little to the right, between the racks: turn left, away from it
+    left, right = both(aisle(0.45, 0.45, 0.0, (-25, -5, 0.35)))
+    assert right is None and left is not None and left.angular > 0
+    assert "within 0.25 m of the way ahead" in left.reason
+    # a wall the robot is heading into (30 deg off an aisle only 0.3 m to its side) counts
+    left, right = both(aisle(0.3, 0.6, 40.0))
+    assert left is None and right is not None and right.angular < 0
+
+
+def test_the_lateral_band_is_a_strategy_param() -> None:
+    sweep = scan((30, 40, 0.38))  # 0.19 to 0.24 m to the side
+    assert both(sweep, {"avoid_lateral_m": 0.15}) == (None, None)
+    _, right = both(sweep)
+    assert right is not None
+    # a band as wide as the aisle, and a longer reach: the walls count again (exactly one of
+    # the pair turns, as for any obstacle on both sides)
+    wide = {"avoid_lateral_m": 0.5, "avoid_distance_m": 0.6}
+    assert sum(d is not None for d in both(aisle(0.45, 0.45), wide)) == 1

@@ -9,7 +9,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from services.planner import move_while_turning, turn_then_move
-from services.planner.scenario import Movement
+from services.planner.scenario import RECOMMEND_PERIOD_S, Movement, Said, due
 from services.planner.tracking import Route, follow, heading_error, wrap_angle
 
 MAX_V, MAX_W = 0.22, 2.84
@@ -17,6 +17,10 @@ MAX_V, MAX_W = 0.22, 2.84
 
 def select(error: float, turning: bool = False) -> Movement:
     return turn_then_move.select_movement(error, 3.0, MAX_V, MAX_W, turning)
+
+
+def select_turning(error: float, turn_rate: float = 0.0) -> Movement:
+    return turn_then_move.select_movement(error, 3.0, MAX_V, MAX_W, True, turn_rate=turn_rate)
 
 
 def test_goal_ahead_drives_forward() -> None:
@@ -58,6 +62,70 @@ def test_hysteresis_keeps_turning_until_well_aligned() -> None:
     assert not select(0.25).turning  # under the threshold, was driving: drive
     assert select(0.25, turning=True).turning  # was turning: finish the turn
     assert not select(0.1, turning=True).turning
+
+
+def test_a_turn_still_under_way_is_anticipated() -> None:
+    # Turning fast toward the target heading: the turn ends before the error is small, since
+    # the robot keeps turning until the loop catches up...
+    assert not select_turning(0.4, turn_rate=2.0).turning
+    # ...and slows down first: the rate follows the anticipated error.
+    assert 0 < select_turning(0.8, turn_rate=1.5).angular < select_turning(0.8).angular
+    # Still turning toward it after the turn ended: no new turn in place.
+    assert not turn_then_move.select_movement(0.35, 3.0, MAX_V, MAX_W, turn_rate=0.5).turning
+    assert turn_then_move.select_movement(0.35, 3.0, MAX_V, MAX_W).turning
+    # Sweeping past the target heading: stop turning in place, the correction brakes.
+    move = select_turning(-0.1, turn_rate=1.0)
+    assert not move.turning and move.angular < 0
+
+
+@pytest.mark.parametrize("delay_s", [0.0, 0.1, 0.3, 0.5])
+@pytest.mark.parametrize("target", [0.6, math.pi / 2, 3.0])
+def test_turning_in_place_with_a_delayed_loop_does_not_oscillate(
+    delay_s: float, target: float
+) -> None:
+    """Odometry at 30 Hz, commands reaching the wheels ``delay_s`` later (an accelerated sim
+    on a busy machine), recommendations at the planner's cadence: the turn never reverses,
+    overshoots little, and hands over to driving once, within a few seconds."""
+    yaw, rate, turning, said = 0.0, 0.0, False, None
+    pending: list[tuple[float, Movement]] = []
+    reversals, switches, overshoot, drove_at = 0, 0, 0.0, None
+    for step in range(30 * 6):
+        t = step / 30
+        move = turn_then_move.select_movement(
+            wrap_angle(target - yaw), 3.0, MAX_V, MAX_W, turning, turn_rate=rate
+        )
+        if due(said, t, ("goal",), move):
+            switches += move.turning != turning
+            said, turning = Said(t, ("goal",), move), move.turning
+            pending.append((t + delay_s, move))
+        for _ in range(4):  # the wheels, at 120 Hz
+            while pending and pending[0][0] <= t + 1e-9:
+                applied = pending.pop(0)[1]
+                reversals += applied.linear == 0.0 and applied.angular * rate < 0
+                rate = applied.angular
+                if applied.linear > 0 and drove_at is None:
+                    drove_at = t
+            yaw += rate / 120
+            overshoot = max(overshoot, yaw - target)
+    assert reversals == 0
+    assert switches == 2  # into the turn, and out of it, once
+    assert overshoot < 0.1
+    assert drove_at is not None and drove_at < target / 1.2 + 1.5 + delay_s
+    assert abs(wrap_angle(target - yaw)) < 0.05
+
+
+def test_recommendations_go_out_on_change_or_at_the_cadence() -> None:
+    drive = Movement(0.22, 0.05, False)
+    said = Said(10.0, ("goal", "1"), drive)
+    assert due(None, 10.0, ("goal", "1"), drive)  # the first
+    assert not due(said, 10.03, ("goal", "1"), drive)  # nothing new
+    assert not due(said, 10.06, ("goal", "1"), Movement(0.22, 0.09, False))  # a small change
+    assert due(said, 10.0 + RECOMMEND_PERIOD_S, ("goal", "1"), drive)  # the cadence
+    assert due(said, 10.03, ("goal", "2"), drive)  # a new target
+    assert due(said, 10.03, ("goal", "1"), Movement(0.22, 0.3, False))  # steering harder
+    assert due(said, 10.03, ("goal", "1"), Movement(0.15, 0.05, False))  # slowing down
+    assert due(said, 10.03, ("goal", "1"), Movement(0.0, 0.5, True))  # turning in place
+    assert due(said, 5.0, ("goal", "1"), drive)  # sim time went back
 
 
 def test_driving_slows_near_the_target() -> None:

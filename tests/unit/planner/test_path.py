@@ -1,14 +1,19 @@
-"""The grid path planner on hand-made grids: walls, inflation, no way through."""
+"""The grid path planner on hand-made grids: walls, inflation, clearance costs, no way through."""
 
 from __future__ import annotations
 
 import itertools
+import math
+import time
+from pathlib import Path
 
 import numpy as np
 
 from services.planner.path import (
+    OCCUPIED_AT,
     PlanGrid,
     astar,
+    clearance_cells,
     coarsen,
     inflate,
     path_length,
@@ -16,6 +21,7 @@ from services.planner.path import (
     plan_path,
     shortcut,
     visible,
+    with_obstacles,
 )
 
 RES = 0.1
@@ -130,3 +136,131 @@ def test_coarsen_keeps_every_obstacle() -> None:
     assert pooled[:2, :3].sum() == 0 and pooled[2, :].all() and pooled[:, 3].all()
     grid = plan_grid(np.zeros((400, 400), dtype=bool), 0.05, (0.0, 0.0, 0.0), 0.1, max_cells=40_000)
     assert grid.shape == (200, 200) and grid.resolution == 0.1
+
+
+# -- clearance: the distance transform, costs, and paths that keep away from walls -----------
+
+
+def test_clearance_cells_is_the_euclidean_distance_up_to_the_cap() -> None:
+    rng = np.random.default_rng(3)
+    occupied = rng.random((30, 40)) < 0.03
+    occupied[0, 0] = True
+    got = clearance_cells(occupied, 6)
+    rows, cols = np.nonzero(occupied)
+    rr, cc = np.indices(occupied.shape)
+    exact = np.min(np.hypot(rr[..., None] - rows, cc[..., None] - cols), axis=-1)
+    assert np.allclose(got, np.minimum(exact, 6.0))
+
+
+def aisle_map() -> np.ndarray:
+    """6 x 4 m at 5 cm: walls all round and a block (a rack) in the middle, leaving 1.0 m
+    aisles above and below it, and 1.0 m at either end."""
+    occupied = np.zeros((80, 120), dtype=bool)
+    occupied[0, :] = occupied[-1, :] = occupied[:, 0] = occupied[:, -1] = True
+    occupied[20:60, 20:100] = True  # the rack: x 1.0-5.0, y 1.0-3.0
+    return occupied
+
+
+def clearance_along(points: list[tuple[float, float]], occupied: np.ndarray) -> float:
+    """The smallest distance from the path (sampled every cm) to an occupied cell's centre."""
+    rows, cols = np.nonzero(occupied)
+    xy = np.column_stack(((cols + 0.5) * 0.05, (rows + 0.5) * 0.05))
+    worst = np.inf
+    for a, b in itertools.pairwise(points):
+        n = max(2, int(math.hypot(b[0] - a[0], b[1] - a[1]) / 0.01))
+        for t in np.linspace(0, 1, n):
+            p = np.array(a) + t * (np.array(b) - np.array(a))
+            worst = min(worst, float(np.min(np.hypot(*(xy - p).T))))
+    return worst
+
+
+def test_the_path_runs_along_the_middle_of_an_aisle_and_wide_round_corners() -> None:
+    occupied = aisle_map()
+    grid = plan_grid(occupied, 0.05, (0.0, 0.0, 0.0), 0.155)
+    # From near the wall at the lower aisle's west end, round the rack's corner, to the
+    # upper aisle's east end.
+    points = plan_path(grid, (0.5, 0.25), (5.5, 3.5))
+    assert points is not None
+    # The aisles are 0.95 m wide (0.475 m from the middle to the walls' cell centres): once
+    # off the wall, the path keeps near the middle all along, corners included...
+    assert math.hypot(points[1][0] - 0.5, points[1][1] - 0.25) < 1.0
+    assert clearance_along(points[1:], occupied) > 0.38
+    # ...where the bare shortest path (no clearance costs) grazes the inflation.
+    bare = plan_grid(occupied, 0.05, (0.0, 0.0, 0.0), 0.155, cost_weight=0.0)
+    bare_points = plan_path(bare, (0.5, 0.25), (5.5, 3.5))
+    assert bare_points is not None and clearance_along(bare_points, occupied) < 0.2
+    # Along the lower aisle (y 0.05-1.0) it keeps to the middle line.
+    assert all(abs(p[1] - 0.525) < 0.06 for p in points[1:-1] if p[0] < 5.0)
+    assert path_length(points) < 1.15 * path_length(bare_points)
+
+
+def test_the_shortcut_does_not_cut_back_to_the_walls() -> None:
+    occupied = aisle_map()
+    grid = plan_grid(occupied, 0.05, (0.0, 0.0, 0.0), 0.155)
+    cells = astar(grid, grid.cell_of(0.5, 0.5), grid.cell_of(5.5, 3.5))
+    assert cells is not None
+    kept = shortcut(grid, cells)
+    assert len(kept) < len(cells) // 5  # still a few straight segments
+    worst = min(grid.clearance_at(c) for c in cells)
+    centres = [(c + 0.5, r + 0.5) for c, r in kept]
+    for a, b in itertools.pairwise(centres):
+        assert visible(grid, a, b, clearance_m=worst)
+
+
+def test_visible_checks_the_clearance_when_asked() -> None:
+    grid = plan_grid(aisle_map(), 0.05, (0.0, 0.0, 0.0), 0.155)
+    # along the lower aisle, 0.25 m from the rack: in sight, but not with 0.4 m of clearance
+    a, b = grid.to_cell(1.5, 0.75), grid.to_cell(4.5, 0.75)
+    assert visible(grid, a, b)
+    assert not visible(grid, a, b, clearance_m=0.4)
+    assert visible(grid, grid.to_cell(1.5, 0.5), grid.to_cell(4.5, 0.5), clearance_m=0.4)
+
+
+def test_extra_obstacles_are_blocked_and_costed_like_the_map() -> None:
+    occupied = room(60, 40)
+    grid = plan_grid(occupied, 0.05, (0.0, 0.0, 0.0), 0.155)
+    straight = plan_path(grid, (0.5, 1.0), (2.5, 1.0))
+    assert straight == [(0.5, 1.0), (2.5, 1.0)]
+    # a crate on the straight line, seen by the lidar: the path goes round it, with room
+    crate = np.array(
+        [(x, y) for x in np.arange(1.4, 1.65, 0.05) for y in np.arange(0.8, 1.25, 0.05)]
+    )
+    around = plan_path(with_obstacles(grid, crate), (0.5, 1.0), (2.5, 1.0))
+    assert around is not None and len(around) > 2
+    gaps = [
+        min(float(np.min(np.hypot(*(crate - p).T))) for p in sampled)
+        for sampled in [
+            [np.array(a) + t * (np.array(b) - np.array(a)) for t in np.linspace(0, 1, 40)]
+            for a, b in itertools.pairwise(around)
+        ]
+    ]
+    assert min(gaps) > 0.3
+    assert grid.blocked.sum() < with_obstacles(grid, crate).blocked.sum()
+    assert plan_path(grid, (0.5, 1.0), (2.5, 1.0)) == straight  # the map's grid is unchanged
+    # a wall of them across the room: no way through
+    wall = np.array([(1.5, y) for y in np.arange(0.0, 2.0, 0.05)])
+    assert plan_path(with_obstacles(grid, wall), (0.5, 1.0), (2.5, 1.0)) is None
+
+
+def test_planning_on_the_shipped_warehouse_map_is_quick_and_keeps_clear() -> None:
+    from services.sim.mapserver import load_map  # the map files the sim serves
+
+    shipped = load_map(Path(__file__).resolve().parents[3] / "worlds/maps/warehouse.yaml")
+    occupied = shipped.cells >= OCCUPIED_AT
+    grid = plan_grid(occupied, shipped.resolution, shipped.origin, 0.155)
+    plan_path(grid, (1.0, 2.5), (3.7, 2.5))  # warm the cached lists
+    started = time.perf_counter()
+    points = plan_path(grid, (1.0, 2.5), (8.8, 6.6))
+    elapsed = time.perf_counter() - started
+    assert points is not None and elapsed < 0.25  # ~15 ms on an idle core
+    rows, cols = np.nonzero(occupied)
+    ox, oy, _ = shipped.origin
+    walls = np.column_stack((ox + (cols + 0.5) * 0.05, oy + (rows + 0.5) * 0.05))
+    for a, b in itertools.pairwise(points):
+        for t in np.linspace(0, 1, 30):
+            p = np.array(a) + t * (np.array(b) - np.array(a))
+            assert np.min(np.hypot(*(walls - p).T)) > 0.4  # the aisles are 1.0 and 1.2 m
+    # into an aisle between two racks (x 3.0-4.2): down its middle
+    points = plan_path(grid, (1.0, 2.5), (3.7, 2.5))
+    assert points is not None
+    assert all(abs(p[0] - 3.6) < 0.1 for p in points[1:-1] if p[1] < 3.6)
