@@ -20,6 +20,12 @@ PNAV_ENGINE_MAX_RULES      N: most rules run per activation      1000
 PNAV_ENGINE_PAUSE_MS       P: least pause between activations    0
 PNAV_STATS_PERIOD_S        how often engine_stats is written     2.0
 PNAV_INSTANCE              this process's instance id            <hostname>-<pid>
+PNAV_LEASES                replicas split the robots through     on
+                           Postgres advisory locks (on/off)
+PNAV_LEASE_PERIOD_MS       how often a replica revises its       500
+                           robots (wall time)
+PNAV_LEASE_TIMEOUT_S       Postgres ends a lock connection       5
+                           silent this long, freeing its robots
 PNAV_LOG_LEVEL             DEBUG, INFO, WARNING, ERROR           INFO
 =========================  ====================================  ===============================
 """
@@ -141,6 +147,33 @@ class EngineSettings:
         )
 
 
+@dataclass(frozen=True)
+class LeaseSettings:
+    """How replicas of a scenario service split the robots (common.lease, docs/REPLICAS.md)."""
+
+    enabled: bool = True
+    period_s: float = 0.5
+    timeout_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        if self.period_s <= 0:
+            raise ConfigError(f"the lease period must be positive, got {self.period_s}")
+        if self.timeout_s < 4 * self.period_s:
+            raise ConfigError(
+                f"PNAV_LEASE_TIMEOUT_S={self.timeout_s} must be at least 4 lease periods "
+                f"({4 * self.period_s} s): a replica renews its session every period"
+            )
+
+    @classmethod
+    def from_env(cls, env: Env | None = None) -> LeaseSettings:
+        env = os.environ if env is None else env
+        return cls(
+            enabled=_bool(env, "PNAV_LEASES", cls.enabled),
+            period_s=_float(env, "PNAV_LEASE_PERIOD_MS", cls.period_s * 1000, minimum=10) / 1000,
+            timeout_s=_float(env, "PNAV_LEASE_TIMEOUT_S", cls.timeout_s, minimum=1.0),
+        )
+
+
 def default_instance() -> str:
     return f"{socket.gethostname()}-{os.getpid()}".replace(".", "-")
 
@@ -153,6 +186,7 @@ class ServiceConfig:
     database_url: str
     zenoh: ZenohSettings = field(default_factory=ZenohSettings)
     engine: EngineSettings = field(default_factory=EngineSettings)
+    leases: LeaseSettings = field(default_factory=LeaseSettings)
     pool_max: int = 4
     db_wait_s: float = 10.0
     stats_period_s: float = 2.0
@@ -173,6 +207,7 @@ class ServiceConfig:
             database_url=url,
             zenoh=ZenohSettings.from_env(env),
             engine=EngineSettings.from_env(env),
+            leases=LeaseSettings.from_env(env),
             pool_max=_int(env, "PNAV_DB_POOL_MAX", cls.pool_max, minimum=1),
             db_wait_s=_float(env, "PNAV_DB_WAIT_S", cls.db_wait_s),
             stats_period_s=_float(env, "PNAV_STATS_PERIOD_S", cls.stats_period_s, minimum=0.1),

@@ -7,9 +7,15 @@ Lifecycle of a :class:`ScenarioService`:
 3. The service subscribes to the change notifications of every table the meta rules watch;
    each one wakes the engine at once (the callback runs on Zenoh's thread and only
    schedules ``engine.wake`` on the loop).
-4. The engine runs; every ``stats_period_s`` its statistics are upserted into engine_stats.
-5. On SIGINT/SIGTERM: the engine finishes the activation under way (it is never cut in the
-   middle of a rule), the statistics are written one last time, the connections close.
+4. Robot leases (common.lease, PNAV_LEASES=on by default): the service opens its lock
+   connection and takes its share of the robots *before* the first activation (a lone
+   replica owns every robot from the start). Rules act only for robots the replica owns:
+   ``self.service.owns(robot_id)``. Every change of ownership wakes the engine
+   (:meth:`ScenarioService.on_ownership_change`).
+5. The engine runs; every ``stats_period_s`` its statistics are upserted into engine_stats.
+6. On SIGINT/SIGTERM: the engine finishes the activation under way (it is never cut in the
+   middle of a rule), the robots are given back, the statistics are written one last time,
+   the connections close.
 
 A service module ends with ``if __name__ == "__main__": sys.exit(MyService.main())``.
 """
@@ -28,6 +34,7 @@ from common import bus, log
 from common.config import ServiceConfig
 from common.contract import keys
 from common.engine import Engine
+from common.lease import LeaseManager
 from common.runtime import Runtime, run_service
 
 logger = logging.getLogger("pnav.service")
@@ -82,10 +89,96 @@ class ScenarioService(ABC):
         self.runtime = runtime
         self.config: ServiceConfig = runtime.config
         self.engine = Engine(self.config.engine, name=self.config.service)
+        self.leases: LeaseManager | None = None
 
     @abstractmethod
     def seed(self) -> None:
         """Add this service's meta rules to ``self.engine`` with ``engine.add_meta``."""
+
+    # -- robot ownership (replicas) ---------------------------------------------------------
+    def owns(self, robot_id: str) -> bool:
+        """Whether this replica handles ``robot_id`` now: act (recommend, decide, plan) for a
+        robot only while this is true.
+
+        Replicas of one service split the robots through Postgres advisory locks
+        (common.lease); each robot is owned by exactly one live replica. A lone replica owns
+        every robot. Always true when leases are off (PNAV_LEASES=off) or before
+        :meth:`run` has started them (a service object used directly in a test).
+        """
+        leases = self.leases
+        return True if leases is None else leases.owns(robot_id)
+
+    def owned_robots(self) -> frozenset[str] | None:
+        """The robots this replica owns now, or None when it handles every robot (leases
+        off or not started)."""
+        leases = self.leases
+        return None if leases is None else leases.owned
+
+    def on_ownership_change(self, gained: frozenset[str], lost: frozenset[str]) -> None:
+        """Called on the loop when this replica takes robots (``gained``, after their locks
+        are held) or gives them up (``lost``, before their locks are released, or at once
+        when the lock connection is lost). Wakes the engine, so a taken-over robot is served
+        in the next activation.
+
+        A service that keeps per-robot state in memory overrides this to drop the ``lost``
+        robots' state and to rebuild the ``gained`` ones' from the contract tables (another
+        replica served them until now); it must call ``super().on_ownership_change``.
+        """
+        self.engine.wake()
+
+    async def start_leases(self) -> None:
+        """Open the lease manager and take this replica's share before the engine runs;
+        wake it early when a replica of this service comes or goes (Zenoh liveliness) or
+        a robot is registered (robot notifications)."""
+        settings = self.config.leases
+        if not settings.enabled:
+            log.event(logger, logging.INFO, "leases off: this replica handles every robot")
+            return
+        leases = LeaseManager(
+            self.config.database_url,
+            self.config.service,
+            self.config.instance,
+            settings,
+            on_change=self.on_ownership_change,
+            notify=self.runtime.database.notifier.notify,
+            connect_wait_s=self.config.db_wait_s,
+        )
+        await leases.start()
+        self.leases = leases
+        poke = leases.poke_threadsafe
+
+        def on_liveliness(sample: zenoh.Sample) -> None:
+            poke()
+
+        try:
+            session = self.runtime.zenoh
+            alive = session.liveliness().declare_subscriber(
+                keys.alive_watch(self.config.service), on_liveliness
+            )
+            self.runtime.on_close(alive.undeclare)
+            robots = bus.subscribe_threaded(
+                session, keys.notify_watch(keys.ROBOT), lambda _key, _payload: poke()
+            )
+            self.runtime.on_close(robots.undeclare)
+        except BaseException:
+            await self.stop_leases()
+            raise
+        log.event(
+            logger,
+            logging.INFO,
+            "leases on",
+            owned=len(leases.owned),
+            replicas=leases.replicas,
+            backend_pid=leases.backend_pid,
+        )
+
+    async def stop_leases(self) -> None:
+        """Give every robot back (the engine has drained: nothing acts for them any more)."""
+        if self.leases is not None:
+            try:
+                await self.leases.stop()
+            except Exception:
+                logger.warning("could not release the robot leases", exc_info=True)
 
     def watch(self) -> None:
         """Wake the engine on every notification of a table the meta rules watch."""
@@ -127,9 +220,10 @@ class ScenarioService(ABC):
                 logger.warning("could not write engine_stats", exc_info=True)
 
     async def run(self, stop: asyncio.Event) -> None:
-        """Seed, watch, and run the engine until ``stop`` is set; then drain."""
+        """Seed, watch, lease, and run the engine until ``stop`` is set; then drain."""
         self.seed()
         self.watch()
+        await self.start_leases()
         log.event(
             logger,
             logging.INFO,
@@ -160,6 +254,7 @@ class ScenarioService(ABC):
                     await asyncio.wait_for(engine_task, self.config.engine.period_s * 4 + 5.0)
                 except TimeoutError:
                     logger.error("engine did not drain in time; cancelled")
+            await self.stop_leases()
             try:
                 await self.publish_stats()
             except Exception:

@@ -33,6 +33,13 @@ def build_parser() -> argparse.ArgumentParser:
     up.add_argument("--zenoh-port", type=int, default=7447, help="router port (7447)")
     up.add_argument("--log-dir", type=Path, help="service logs (default: a temp dir)")
     up.add_argument("--quiet", action="store_true", help="do not echo the services' logs")
+    up.add_argument(
+        "--replicas",
+        action="append",
+        metavar="SERVICE=N",
+        help="run N processes of a scenario service that split the robots, e.g. "
+        "controller=3 (repeatable, or comma-separated)",
+    )
 
     goal = commands.add_parser("goal", help="send a robot to X Y (replaces its goal)")
     goal.add_argument("x", type=float)
@@ -93,7 +100,7 @@ def dispatch(args: argparse.Namespace) -> int:
     from pnav import commands
 
     if args.command == "up":
-        from pnav.launcher import StackOptions
+        from pnav.launcher import StackOptions, parse_replicas
         from pnav.up import up
 
         options = StackOptions(
@@ -106,6 +113,7 @@ def dispatch(args: argparse.Namespace) -> int:
             zenoh_port=args.zenoh_port,
             log_dir=args.log_dir,
             echo=not args.quiet,
+            replicas=parse_replicas(args.replicas),
         )
         return uvloop.run(up(options))
     if args.command == "down":

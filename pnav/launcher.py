@@ -6,6 +6,7 @@ benchmark. Services are separate processes under a :class:`~pnav.supervisor.Supe
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import os
 import sys
@@ -48,6 +49,8 @@ class StackOptions:
     echo: bool = False
     services: tuple[str, ...] = ("sim", "bridge", *SCENARIO_SERVICES)
     extra_env: dict[str, str] = field(default_factory=dict)
+    # processes per scenario service (default 1): replicas split the robots (common.lease)
+    replicas: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass
@@ -59,7 +62,44 @@ class RunningStack:
     log_dir: Path
 
 
+MAX_REPLICAS = 32
+
+
+def parse_replicas(values: list[str] | tuple[str, ...] | None) -> dict[str, int]:
+    """``["controller=3", "planner=2,decision=2"]`` -> ``{"controller": 3, ...}``.
+
+    Only scenario services scale: two sims would be two worlds with the same robot ids, two
+    bridges would store every sensor message twice. A later value for a service wins.
+    """
+    out: dict[str, int] = {}
+    for value in values or ():
+        for item in value.split(","):
+            item = item.strip()
+            if not item:
+                continue
+            name, sep, count = item.partition("=")
+            name = name.strip()
+            if not sep:
+                raise UsageError(f"--replicas {item!r}: write SERVICE=N, e.g. controller=3")
+            if name not in SCENARIO_SERVICES:
+                raise UsageError(
+                    f"--replicas {item!r}: only the scenario services scale "
+                    f"({', '.join(SCENARIO_SERVICES)})"
+                )
+            try:
+                n = int(count)
+            except ValueError:
+                raise UsageError(f"--replicas {item!r}: {count!r} is not a whole number") from None
+            if not 1 <= n <= MAX_REPLICAS:
+                raise UsageError(f"--replicas {item!r}: between 1 and {MAX_REPLICAS} replicas")
+            out[name] = n
+    return out
+
+
 def service_specs(local: LocalStack, options: StackOptions, world: Path) -> list[ProcessSpec]:
+    """One process per service; ``options.replicas[name]`` processes for a replicated one,
+    named ``name-1``, ``name-2``... with ``PNAV_INSTANCE`` set to that name (a lone process
+    keeps the plain name, and the supervisor gives it instance ``name-1``)."""
     env = {**local.env(), **options.extra_env}
     specs = []
     for name in options.services:
@@ -72,7 +112,15 @@ def service_specs(local: LocalStack, options: StackOptions, world: Path) -> list
                 argv += ["--robots", str(options.robots)]
             if options.battery is not None:
                 argv += ["--battery", str(options.battery)]
-        specs.append(ProcessSpec(name, argv, env))
+        replicas = options.replicas.get(name, 1)
+        if replicas > 1 and name not in SCENARIO_SERVICES:
+            raise UsageError(f"{name} cannot be replicated: only {', '.join(SCENARIO_SERVICES)}")
+        if replicas <= 1:
+            specs.append(ProcessSpec(name, argv, env))
+            continue
+        for i in range(1, replicas + 1):
+            instance = f"{name}-{i}"
+            specs.append(ProcessSpec(instance, argv, {**env, "PNAV_INSTANCE": instance}))
     return specs
 
 
@@ -93,9 +141,20 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
                 log_dir=str(log_dir),
             )
         )
+        # Supervision runs for as long as the stack does: a crashed service is restarted
+        # whether the stack serves `pnav up`, the demo or a test.
+        stop_watching = asyncio.Event()
+        watcher: asyncio.Task[None] | None = None
         try:
             await supervisor.start()
+            watcher = asyncio.create_task(supervisor.watch(stop_watching), name="supervise")
             yield running
         finally:
+            stop_watching.set()
+            if watcher is not None:
+                try:
+                    await asyncio.wait_for(watcher, 10)  # a restart under way finishes first
+                except TimeoutError:
+                    pass
             await supervisor.stop()
             stackfile.remove(os.getpid())

@@ -37,13 +37,14 @@ async def up(options: StackOptions) -> int:
             zenoh=stack.local.zenoh.connect[0],
             logs=str(stack.log_dir),
             services=",".join(stack.supervisor.children),
+            replicas=",".join(f"{k}={v}" for k, v in sorted(options.replicas.items())) or "-",
         )
         print(
             "stack up: `pnav status` to watch, `pnav goal X Y` to send the robot, "
             "Ctrl-C or `pnav down` to stop",
             flush=True,
         )
-        await stack.supervisor.watch(stop)
+        await stop.wait()
         logger.info("stopping")
     logger.info("stack down")
     return 0

@@ -42,6 +42,7 @@ COMMAND2ROBOT: Final = "command2robot"
 SYSTEM_COMMAND: Final = "system_command"
 ENGINE_STATS: Final = "engine_stats"
 RETENTION_POLICY: Final = "retention_policy"
+ROBOT_LEASE: Final = "robot_lease"
 
 TABLES: Final = (
     SCHEMA_VERSION,
@@ -61,6 +62,7 @@ TABLES: Final = (
     SYSTEM_COMMAND,
     ENGINE_STATS,
     RETENTION_POLICY,
+    ROBOT_LEASE,
 )
 
 # Tables written at sensor rate; the retention policy keeps them bounded.
@@ -135,3 +137,12 @@ def alive_key(service: str, instance: str) -> str:
 
 def alive_watch(service: str | None = None) -> str:
     return f"{PREFIX}/alive/{service or '*'}/*"
+
+
+# -- robot leases (migration 2) ------------------------------------------------------------
+# SQL functions of the contract a replica calls on its one lock connection.
+LEASE_KEY_FN: Final = "lease_key"
+LEASE_ACQUIRE_FN: Final = "robot_lease_acquire"
+LEASE_RELEASE_FN: Final = "robot_lease_release"
+# The second key of the shared advisory lock every live replica of a service holds.
+LEASE_MEMBER_KEY: Final = 0

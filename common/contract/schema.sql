@@ -263,3 +263,79 @@ BEGIN
     RETURN total;
 END;
 $$;
+
+-- migration 2: robot leases of replicated scenario services
+--
+-- Replicas of one scenario service split the robots between them. Who handles a robot is
+-- decided by a Postgres session-level advisory lock, never by this table: a replica owns
+-- robot R of service S while its one dedicated lock connection holds the exclusive advisory
+-- lock (lease_key(S), lease_key(R)), and counts as a live replica of S while that connection
+-- holds the shared lock (lease_key(S), 0). Postgres drops both the moment the connection
+-- ends (a crash, a kill, a network loss noticed by idle_session_timeout), so a dead
+-- replica's robots are free for the others at once. robot_lease is the history of who held
+-- what, for people and tests, written by the holders through the two functions below.
+
+-- A lock key: the first 31 bits of sha256(name), never 0 (0 is the membership key).
+CREATE FUNCTION lease_key(name text) RETURNS integer
+LANGUAGE sql IMMUTABLE STRICT PARALLEL SAFE AS $$
+    SELECT greatest(1, ('x' || substr(encode(sha256(convert_to(name, 'UTF8')), 'hex'), 1, 8))
+                       ::bit(32)::integer & 2147483647)
+$$;
+
+CREATE TABLE robot_lease (
+    id          bigserial PRIMARY KEY,
+    service     text NOT NULL,
+    robot_id    text NOT NULL REFERENCES robot ON DELETE CASCADE,
+    instance    text NOT NULL,
+    backend_pid integer NOT NULL,
+    acquired_at timestamptz NOT NULL DEFAULT clock_timestamp(),
+    released_at timestamptz,
+    reason      text,
+    CHECK (released_at IS NULL OR released_at >= acquired_at)
+);
+-- at most one holder at a time per (service, robot): the lock guarantees it, the index
+-- keeps the history honest
+CREATE UNIQUE INDEX robot_lease_one_holder ON robot_lease (service, robot_id)
+    WHERE released_at IS NULL;
+CREATE INDEX robot_lease_service_robot ON robot_lease (service, robot_id, id DESC);
+
+-- Try to take robot p_robot for service p_service on this session: returns the new
+-- robot_lease id, or NULL if another session holds it. Closes a row left open by a holder
+-- that died (reason 'holder gone': its lock went with its connection).
+CREATE FUNCTION robot_lease_acquire(p_service text, p_robot text, p_instance text)
+RETURNS bigint LANGUAGE plpgsql AS $$
+DECLARE
+    k1 integer := lease_key(p_service);
+    k2 integer := lease_key(p_robot);
+    lease bigint;
+BEGIN
+    IF NOT pg_try_advisory_lock(k1, k2) THEN
+        RETURN NULL;
+    END IF;
+    BEGIN
+        UPDATE robot_lease SET released_at = clock_timestamp(), reason = 'holder gone'
+         WHERE service = p_service AND robot_id = p_robot AND released_at IS NULL;
+        INSERT INTO robot_lease (service, robot_id, instance, backend_pid)
+        VALUES (p_service, p_robot, p_instance, pg_backend_pid())
+        RETURNING id INTO lease;
+    EXCEPTION WHEN OTHERS THEN
+        -- a session lock outlives the transaction: give it back before failing
+        PERFORM pg_advisory_unlock(k1, k2);
+        RAISE;
+    END;
+    RETURN lease;
+END;
+$$;
+
+-- Give robot p_robot of service p_service back: the history row is closed first, then the
+-- lock is released, so the next holder's acquired_at is never before this released_at.
+-- Returns whether this session held the lock.
+CREATE FUNCTION robot_lease_release(p_service text, p_robot text, p_reason text)
+RETURNS boolean LANGUAGE plpgsql AS $$
+BEGIN
+    UPDATE robot_lease SET released_at = clock_timestamp(), reason = p_reason
+     WHERE service = p_service AND robot_id = p_robot AND released_at IS NULL
+       AND backend_pid = pg_backend_pid();
+    RETURN pg_advisory_unlock(lease_key(p_service), lease_key(p_robot));
+END;
+$$;

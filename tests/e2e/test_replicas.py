@@ -1,0 +1,237 @@
+"""The fleet with three controller replicas, as `docker compose up --scale controller=3` runs
+it, without Docker: every container's command and environment, read from
+deploy/docker-compose.yml, run as a local process against one Postgres and one Zenoh router.
+
+- `migrate` runs first (its compose command) on an empty database, then sim (warehouse,
+  PNAV_SIM_ROBOTS=6 from "the shell"), bridge, strategy, planner, three controllers and
+  decision, with the hosts pointed at this test's Postgres and router and, as in compose,
+  no PNAV_INSTANCE: each replica is <hostname>-<pid>.
+- Every robot is owned by exactly one controller replica, two each; one replica is killed
+  with SIGKILL; the two others own all six robots within the takeover bound; a new replica
+  (the restarted container) gets its share back; the history in robot_lease never shows two
+  owners of a robot at once.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import re
+import signal
+import socket
+import sys
+import time
+from collections.abc import AsyncIterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import asyncpg
+import pytest
+import yaml
+
+from common.config import ZenohSettings
+from common.lease import history_overlaps, live_replicas, ownership
+from common.testing import eventually
+
+pytestmark = pytest.mark.timeout(240)
+
+ROOT = Path(__file__).resolve().parents[2]
+COMPOSE_FILE = ROOT / "deploy" / "docker-compose.yml"
+ROBOTS = 6
+REPLICAS = 3
+TAKEOVER_BOUND_S = 5.0
+# What the shell gives compose (docker compose up --scale controller=3 with these set).
+SHELL = {"PNAV_SIM_ROBOTS": str(ROBOTS)}
+ORDER = ("sim", "bridge", "strategy", "planner", "controller", "decision")
+_VARIABLE = re.compile(r"\$\$|\$\{([A-Za-z_][A-Za-z0-9_]*)(?:(:?-)([^}]*))?\}")
+
+
+def interpolate(value: str, shell: Mapping[str, str]) -> str:
+    """Compose's interpolation for the forms the file uses: $$, ${VAR}, ${VAR:-d}, ${VAR-d}."""
+
+    def one(match: re.Match[str]) -> str:
+        if match.group(0) == "$$":
+            return "$"
+        name, operator, default = match.groups()
+        value = shell.get(name)
+        if operator == ":-" and not value:
+            return str(default)
+        if operator == "-" and value is None:
+            return str(default)
+        return value or ""
+
+    return _VARIABLE.sub(one, value)
+
+
+def container(name: str, db_url: str, zenoh: ZenohSettings) -> tuple[list[str], dict[str, str]]:
+    """The command and environment compose gives service ``name``, hosts made local."""
+    service = yaml.safe_load(COMPOSE_FILE.read_text())["services"][name]
+    env = {
+        key: interpolate("" if value is None else str(value), SHELL)
+        for key, value in service.get("environment", {}).items()
+    }
+    assert "PNAV_INSTANCE" not in env  # replicas name themselves <hostname>-<pid>
+    assert "@postgres:5432/" in env["PNAV_DATABASE_URL"]
+    env["PNAV_DATABASE_URL"] = db_url
+    if "PNAV_ZENOH_CONNECT" in env:  # every service but the migrate job
+        assert env["PNAV_ZENOH_CONNECT"] == "tcp/zenoh:7447"
+        env["PNAV_ZENOH_CONNECT"] = zenoh.connect[0]
+    # a container starts with no PNAV_* variable but the ones compose sets
+    base = {k: v for k, v in os.environ.items() if not k.startswith("PNAV_")}
+    # the one addition, for the test's hygiene: the processes die with this test process
+    base["PNAV_PARENT_PID"] = str(os.getpid())
+    words = [str(w) for w in service["command"]]
+    if words[0] == "python":
+        command = [sys.executable, *words[1:]]
+    elif words[0] == "pnav":
+        command = [sys.executable, "-m", "pnav", *words[1:]]
+    else:
+        raise AssertionError(f"unexpected command {words}")
+    return command, {**base, **env}
+
+
+class Fleet:
+    def __init__(self, db_url: str, zenoh: ZenohSettings, log_dir: Path) -> None:
+        self.db_url = db_url
+        self.zenoh = zenoh
+        self.log_dir = log_dir
+        self.processes: dict[str, asyncio.subprocess.Process] = {}
+
+    async def spawn(self, name: str, label: str) -> asyncio.subprocess.Process:
+        command, env = container(name, self.db_url, self.zenoh)
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        with (self.log_dir / f"{label}.log").open("wb") as out:
+            # cwd: the image's working directory /app holds worlds/, as the repository does
+            process = await asyncio.create_subprocess_exec(
+                *command, cwd=ROOT, env=env, stdout=out, stderr=asyncio.subprocess.STDOUT
+            )
+        self.processes[label] = process
+        return process
+
+    async def stop(self) -> None:
+        for process in reversed(self.processes.values()):
+            if process.returncode is None:
+                with contextlib.suppress(ProcessLookupError):
+                    process.send_signal(signal.SIGTERM)
+        for process in self.processes.values():
+            try:
+                await asyncio.wait_for(process.wait(), 15)
+            except TimeoutError:
+                process.kill()
+                await process.wait()
+
+    def tails(self) -> str:
+        out = []
+        for path in sorted(self.log_dir.glob("*.log")):
+            lines = path.read_text(errors="replace").splitlines()[-6:]
+            out.append(f"--- {path.stem}\n" + "\n".join(lines))
+        return "\n".join(out)
+
+
+@contextlib.asynccontextmanager
+async def fleet(empty_db_url: str, zenoh: ZenohSettings, log_dir: Path) -> AsyncIterator[Fleet]:
+    running = Fleet(empty_db_url, zenoh, log_dir)
+    try:
+        migrate = await running.spawn("migrate", "migrate")
+        assert await asyncio.wait_for(migrate.wait(), 90) == 0, running.tails()
+        for name in ORDER:
+            for i in range(1, (REPLICAS if name == "controller" else 1) + 1):
+                await running.spawn(name, f"{name}-{i}")
+        yield running
+    finally:
+        await running.stop()
+
+
+def instance_of(process: asyncio.subprocess.Process) -> str:
+    """The instance id a process announces with PNAV_INSTANCE unset (default_instance)."""
+    return f"{socket.gethostname()}-{process.pid}".replace(".", "-")
+
+
+async def test_three_controller_replicas_split_six_robots_and_survive_a_kill(
+    empty_db_url: str, zenoh_settings: ZenohSettings, tmp_path: Path
+) -> None:
+    async with fleet(empty_db_url, zenoh_settings, tmp_path / "logs") as running:
+        conn = await asyncpg.connect(empty_db_url)
+        try:
+            controllers = {
+                instance_of(p): label
+                for label, p in running.processes.items()
+                if label.startswith("controller-")
+            }
+
+            async def owners() -> dict[str, Any]:
+                return await ownership(conn, "controller")
+
+            async def split_evenly() -> bool:
+                owned = await owners()
+                if len(owned) != ROBOTS or None in owned.values():
+                    return False
+                per = [list(owned.values()).count(i) for i in controllers]
+                return set(owned.values()) <= set(controllers) and per == [2, 2, 2]
+
+            async def fleet_running() -> bool:
+                # the sim publishes and the bridge stores every robot's odometry
+                n = await conn.fetchval("SELECT count(DISTINCT robot_id) FROM odometry")
+                return bool(n == ROBOTS) and await split_evenly()
+
+            try:
+                await eventually(fleet_running, within=120, interval=0.2, what="a 2/2/2 split")
+            except AssertionError:
+                raise AssertionError(f"{await owners()}\n{running.tails()}") from None
+            assert await live_replicas(conn, "controller") == REPLICAS
+            # the single replicas of the other scenario services own every robot
+            for name in ("strategy", "planner", "decision"):
+                instance = instance_of(running.processes[f"{name}-1"])
+                assert set((await ownership(conn, name)).values()) == {instance}, name
+
+            # kill -9 one controller replica: its lock connection goes with the process
+            owned = await owners()
+            victim = next(iter(controllers))
+            victim_robots = sorted(r for r, i in owned.items() if i == victim)
+            survivors = set(controllers) - {victim}
+            killed = time.monotonic()
+            running.processes[controllers[victim]].send_signal(signal.SIGKILL)
+
+            async def taken_over() -> bool:
+                now = await owners()
+                return len(now) == ROBOTS and set(now.values()) <= survivors
+
+            await eventually(
+                taken_over, within=TAKEOVER_BOUND_S + 10, interval=0.05, what="the takeover"
+            )
+            takeover_s = time.monotonic() - killed
+            print(f"robots {victim_robots} taken over in {takeover_s:.2f} s")
+            assert takeover_s < TAKEOVER_BOUND_S, running.tails()
+            final = list((await owners()).values())
+            per = sorted(final.count(i) for i in survivors)
+            assert per == [3, 3]
+            assert await live_replicas(conn, "controller") == REPLICAS - 1
+
+            # a new replica (compose restarts the container: a new process, a new instance
+            # id) gets its share back from the two survivors
+            newcomer = await running.spawn("controller", "controller-4")
+            controllers = {i: controllers[i] for i in survivors}
+            controllers[instance_of(newcomer)] = "controller-4"
+            await eventually(split_evenly, within=60, interval=0.2, what="the newcomer's share")
+            assert await live_replicas(conn, "controller") == REPLICAS
+
+            # TODO(once services filter by ownership, i.e. their meta rules call
+            # self.service.owns(robot_id)): give every robot a goal, then assert that each
+            # controller replica writes command_recommendation rows only for the robots it
+            # owns, and that every robot keeps getting command2robot rows, without a gap
+            # longer than the bridge's 0.5 s watchdog plus the takeover bound, across the
+            # kill. Today every replica still acts for every robot, so only the lease layer
+            # is checked here.
+
+            assert await history_overlaps(conn, "controller") == []
+            # the dead replica's open rows were closed by the replicas that took over
+            rows = await conn.fetch(
+                "SELECT robot_id, released_at, reason FROM robot_lease WHERE instance = $1",
+                victim,
+            )
+            assert all(r["released_at"] is not None for r in rows)
+            gone = sorted(r["robot_id"] for r in rows if r["reason"] == "holder gone")
+            assert gone == victim_robots
+        finally:
+            await conn.close()

@@ -1,0 +1,71 @@
+"""`pnav up --replicas controller=3`: parsing, and the processes the launcher starts."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from common.config import ZenohSettings
+from common.errors import UsageError
+from common.stack import LocalStack
+from pnav.cli import build_parser
+from pnav.launcher import StackOptions, parse_replicas, service_specs
+
+
+def test_replicas_are_repeatable_and_comma_separated() -> None:
+    args = build_parser().parse_args(
+        ["up", "--robots", "6", "--replicas", "controller=3", "--replicas", "planner=2, decision=2"]
+    )
+    assert parse_replicas(args.replicas) == {"controller": 3, "planner": 2, "decision": 2}
+    assert parse_replicas(build_parser().parse_args(["up"]).replicas) == {}
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ("controller", "SERVICE=N"),
+        ("sim=2", "only the scenario services"),
+        ("bridge=2", "only the scenario services"),
+        ("controller=three", "not a whole number"),
+        ("controller=0", "between 1 and"),
+    ],
+)
+def test_a_bad_replicas_value_says_why(value: str, message: str) -> None:
+    with pytest.raises(UsageError, match=message):
+        parse_replicas([value])
+
+
+def local() -> LocalStack:
+    router: Any = None  # not used to build the specs
+    zenoh = ZenohSettings(connect=("tcp/127.0.0.1:7447",))
+    return LocalStack("postgresql://x/y", zenoh, router, None)
+
+
+def test_each_replica_is_its_own_supervised_process_with_its_own_instance() -> None:
+    options = StackOptions(robots=6, replicas={"controller": 3})
+    specs = service_specs(local(), options, Path("worlds/warehouse.yaml"))
+    names = [s.name for s in specs]
+    assert names == [
+        "sim",
+        "bridge",
+        "strategy",
+        "planner",
+        "controller-1",
+        "controller-2",
+        "controller-3",
+        "decision",
+    ]
+    replicas = [s for s in specs if s.name.startswith("controller-")]
+    assert [s.env["PNAV_INSTANCE"] for s in replicas] == [
+        "controller-1",
+        "controller-2",
+        "controller-3",
+    ]
+    assert all(s.argv[1:] == ["-m", "services.controller"] for s in replicas)
+    assert all(s.env["PNAV_DATABASE_URL"] == "postgresql://x/y" for s in replicas)
+    sim = specs[0]
+    assert sim.argv[sim.argv.index("--robots") + 1] == "6"
+    # a service with one process keeps its plain name (and the supervisor's instance name-1)
+    assert "PNAV_INSTANCE" not in specs[3].env
