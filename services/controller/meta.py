@@ -6,7 +6,8 @@ laser_scan or robot wakes the engine, and the period F is the fallback) it reads
 and their active strategies and compares the scenarios they name with those running:
 
 - a newly named scenario starts: a fresh target rule with its own :class:`Handle`;
-- a scenario no longer named (or whose robot left) ends: its handle goes inactive, so its
+- a scenario no longer named (or whose robot left, or is now owned by another replica of
+  the controller, docs/REPLICAS.md) ends: its handle goes inactive, so its
   target rule recommends nothing more and stops cloning itself;
 - a scenario still named follows the strategy's new params and the robot's new limits;
 - an unknown name is logged once and ignored;
@@ -21,7 +22,7 @@ re-seeds after an error carries on with the scenarios already running.
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 from common import log
@@ -67,10 +68,12 @@ class MetaController(Rule):
         host: Host,
         state: ControllerState,
         scenarios: Mapping[str, type[ControllerScenario]] = SCENARIOS,
+        owns: Callable[[str], bool] = lambda _robot_id: True,
     ) -> None:
         self.host = host
         self.state = state
         self.scenarios = scenarios
+        self.owns = owns  # replicas: run scenarios only for the robots this one owns
         self.wanted: dict[Key, Wanted] = {}
         self.starts: list[Key] = []
         self.ends: list[Key] = []
@@ -123,8 +126,8 @@ class MetaController(Rule):
         wanted: dict[Key, Wanted] = {}
         for robot_id, current in sorted(active.items()):
             robot = robots.get(robot_id)
-            if robot is None:
-                continue
+            if robot is None or not self.owns(robot_id):
+                continue  # gone, or served by another replica: its scenarios end
             strategy = current.strategy
             for name in strategy.controller_scenarios:
                 if name not in self.scenarios:

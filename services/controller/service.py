@@ -33,7 +33,17 @@ class ControllerService(ScenarioService):
         self._reads: dict[tuple[str, str], tuple[int, Any]] = {}
 
     def seed(self) -> None:
-        self.engine.add_meta(lambda: MetaController(self, self.state))
+        self.engine.add_meta(lambda: MetaController(self, self.state, owns=self.owns))
+
+    def on_ownership_change(self, gained: frozenset[str], lost: frozenset[str]) -> None:
+        # The meta-controller ends a lost robot's scenarios in its next run (it only wants
+        # owned robots); forget what was read for it, and the scans an earlier tenure
+        # recommended on (another replica served the robot since).
+        for key in [k for k in self._reads if k[1] in lost]:
+            del self._reads[key]
+        for key in [k for k in self.state.last_scan if k[0] in gained]:
+            del self.state.last_scan[key]
+        super().on_ownership_change(gained, lost)
 
     # -- Host ------------------------------------------------------------------------------
     def sim_now(self) -> float | None:

@@ -61,7 +61,20 @@ class MetaDecision(Rule):
             # a stop nor forgets that a robot is moving.
             self.service.issued = await store.last_issued(pool)
             self.service.bootstrapped = True
-        self.live = await store.live_recommendations(pool, self.now)
+            self.service.regained.clear()
+        elif self.service.regained:
+            # Robots taken over from another replica: carry on from what it issued last.
+            regained, self.service.regained = self.service.regained, set()
+            last = await store.last_issued(pool)
+            for robot_id in regained:
+                if robot_id in last:
+                    self.service.issued[robot_id] = last[robot_id]
+                else:
+                    self.service.issued.pop(robot_id, None)
+        live = await store.live_recommendations(pool, self.now)
+        # Replicas: decide only for the robots this one owns (docs/REPLICAS.md).
+        owns = self.service.owns
+        self.live = {robot_id: recs for robot_id, recs in live.items() if owns(robot_id)}
 
     def activation_guards(self) -> bool:
         if not self.clock_started and not self.service.waiting_logged:
@@ -81,7 +94,8 @@ class MetaDecision(Rule):
             system = decide_system(robot_id, system_recs, self.now)
             if system is not None:
                 self.targets.append(IssueSystemCommand(self.service, system))
-        # A robot removed from the robot table has nothing left to stop.
+        # A robot removed from the robot table (or now another replica's) has nothing left
+        # to stop here.
         for robot_id in [r for r in issued if r not in self.live]:
             del issued[robot_id]
         if self.targets:

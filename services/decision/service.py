@@ -24,9 +24,18 @@ class DecisionService(ScenarioService):
         self.issued: dict[str, Issued] = {}
         self.bootstrapped = False
         self.waiting_logged = False
+        # Robots taken over from another replica: their issued entry is read again.
+        self.regained: set[str] = set()
 
     def seed(self) -> None:
         self.engine.add_meta(lambda: MetaDecision(self))
+
+    def on_ownership_change(self, gained: frozenset[str], lost: frozenset[str]) -> None:
+        for robot_id in lost:
+            self.issued.pop(robot_id, None)
+        self.regained -= lost
+        self.regained |= gained
+        super().on_ownership_change(gained, lost)
 
 
 def main() -> int:

@@ -2,7 +2,7 @@
 
 A continuous rule (it clones itself). Each activation it refreshes the shared state (the
 active strategies; robots, maps and chargers when they changed) and, per robot, makes sure
-the right target rules are alive:
+the right target rules are alive (for the robots this replica owns, docs/REPLICAS.md):
 
 - "move": the strategy's ``planner_scenario`` (``turn_then_move`` or ``move_while_turning``),
   none for a strategy without one (IDLE). An unknown name is logged once and ignored.
@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import itertools
 import logging
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 from common import log
 from common.contract import keys
@@ -59,8 +59,11 @@ class MetaPlanner(Rule):
 
     _tokens = itertools.count(1)
 
-    def __init__(self, state: PlannerState) -> None:
+    def __init__(
+        self, state: PlannerState, owns: Callable[[str], bool] = lambda _robot_id: True
+    ) -> None:
         self.state = state
+        self.owns = owns  # replicas: plan only for the robots this one owns
         self.spawned: list[Rule] = []
 
     async def data_acquisition(self) -> None:
@@ -70,6 +73,11 @@ class MetaPlanner(Rule):
         self.state.meta_round += 1
         self.spawned = []
         for robot in self.state.robots.values():
+            if not self.owns(robot.info.robot_id):
+                # Another replica's robot: end its rules here (docs/REPLICAS.md).
+                self.keep(robot, "move", None)
+                self.keep(robot, "battery", None)
+                continue
             move, battery = self.wanted(robot)
             self.keep(robot, "move", move)
             self.keep(robot, "battery", battery)

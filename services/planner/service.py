@@ -23,7 +23,14 @@ class PlannerService(ScenarioService):
         self.state = PlannerState(runtime.database, clock.now, lambda: clock.started)
 
     def seed(self) -> None:
-        self.engine.add_meta(lambda: MetaPlanner(self.state))
+        self.engine.add_meta(lambda: MetaPlanner(self.state, owns=self.owns))
+
+    def on_ownership_change(self, gained: frozenset[str], lost: frozenset[str]) -> None:
+        # A robot given up or taken over starts from a blank state (route, charger, poses,
+        # obstacles seen, goal read): the rules rebuild it from the tables. No slots either,
+        # so a lost robot's target rules end themselves at their next run.
+        self.state.forget(gained | lost)
+        super().on_ownership_change(gained, lost)
 
     def watch(self) -> None:
         # As the base class does, plus an observer that flags robot, map and charger changes,

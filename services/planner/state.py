@@ -14,7 +14,7 @@ import logging
 import math
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -521,6 +521,13 @@ class PlannerState:
         """Expiry of this robot's newest unexpired ``command`` recommendation, if any."""
         value = await self.db.pool.fetchval(_LIVE_SYSTEM, robot_id, command, self.now())
         return float(value) if value is not None else None
+
+    def forget(self, robot_ids: Iterable[str]) -> None:
+        """Drop what is kept in memory about these robots (replicas: ownership changed)."""
+        for robot_id in robot_ids:
+            state = self.robots.get(robot_id)
+            if state is not None:
+                self.robots[robot_id] = RobotState(state.info, strategy=state.strategy)
 
     # -- rule slots --------------------------------------------------------------------------
     def claim(self, robot_id: str, kind: str, token: int) -> RobotState | None:

@@ -2,7 +2,8 @@
 
 A continuous rule (it clones itself). Each activation it reads, in one query, the pending
 user_command and system_command rows and the robots that have no active_strategy row, and
-creates the target rules of :mod:`services.strategy.apply`:
+creates the target rules of :mod:`services.strategy.apply` for the robots this replica owns
+(docs/REPLICAS.md):
 
 - one :class:`ApplyDefaultStrategy` per robot with no active_strategy row;
 - one :class:`ApplyCommand` per pending command, per robot in the order the commands were
@@ -52,6 +53,11 @@ def plan(service: StrategyService, pending: list[store.Pending]) -> list[Rule]:
     rules: list[Rule] = []
     commands: dict[str, list[store.Pending]] = defaultdict(list)
     for item in pending:
+        if item.known_robot and not service.owns(item.robot_id):
+            # Replicas: another one owns this robot (docs/REPLICAS.md). A command naming an
+            # unknown robot has no owner: every replica may reject it, the first one wins
+            # (the status update is conditional on 'pending').
+            continue
         if item.table == keys.ROBOT:
             rules.append(ApplyDefaultStrategy(service, item.robot_id))
         elif item.has_active or not item.known_robot:

@@ -6,13 +6,14 @@ and publishes the change notifications a writer must publish, and it plays the s
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Iterable, Sequence
 
 import pytest
 
 from common.config import ServiceConfig, ZenohSettings
 from common.runtime import Runtime
-from common.testing import ClockPlayer
+from common.service import ScenarioService
+from common.testing import ClockPlayer, eventually
 
 CLOCK_START = 10.0
 
@@ -39,3 +40,25 @@ async def clock(client: Runtime) -> AsyncIterator[ClockPlayer]:
         yield player
     finally:
         await player.stop()
+
+
+async def split_between(
+    replicas: Sequence[ScenarioService], robots: Iterable[str], within: float = 20.0
+) -> list[frozenset[str]]:
+    """Wait until ``replicas`` own disjoint shares, every one non-empty, that cover
+    ``robots``; return the shares (docs/REPLICAS.md)."""
+    wanted = set(robots)
+
+    def split() -> list[frozenset[str]] | None:
+        shares = [replica.owned_robots() for replica in replicas]
+        if any(not share for share in shares):
+            return None
+        owned = [share for share in shares if share is not None]
+        if sum(len(share) for share in owned) != len(wanted) or set().union(*owned) != wanted:
+            return None
+        return owned
+
+    shares: list[frozenset[str]] = await eventually(
+        split, within=within, what="the replicas to split the robots"
+    )
+    return shares

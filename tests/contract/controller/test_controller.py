@@ -8,13 +8,19 @@ says it was derived from (``inputs.laser_scan``).
 from __future__ import annotations
 
 import asyncio
+import math
 import time
+from collections.abc import Awaitable, Callable
 from functools import partial
 
 import asyncpg
 import pytest
 
-from tests.contract.controller.conftest import Feeder, Obstacle, eventually
+from common.config import EngineSettings, LeaseSettings, ServiceConfig, ZenohSettings
+from common.contract import keys
+from common.testing import running_service
+from tests.contract.conftest import split_between
+from tests.contract.controller.conftest import BEAMS, ROBOT, Feeder, Obstacle, eventually
 
 AVOID_SOURCES = ("avoid_left", "avoid_right")
 RIGHT = (-40.0, -20.0, 0.30)  # front-right, closer than the avoid distance
@@ -154,3 +160,91 @@ async def test_a_stale_scan_gets_no_recommendation(feeder: Feeder, controller: N
     rows = await scans_until(feeder, (AHEAD, RIGHT), "safety_stop")
     assert rows[0]["inputs"]["laser_scan"] not in stale
     assert not {r["inputs"]["laser_scan"] for r in await feeder.recommendations()} & set(stale)
+
+
+async def test_two_replicas_split_the_robots_and_each_scan_is_recommended_on_once(
+    feeder: Feeder, db_url: str, zenoh_settings: ZenohSettings
+) -> None:
+    from services.controller.service import ControllerService
+
+    robots = [ROBOT, "r2", "r3", "r4"]
+    for robot in robots[1:]:
+        await feeder.conn.execute("INSERT INTO robot (robot_id, world) VALUES ($1, 'test')", robot)
+        feeder.notifier.notify(keys.ROBOT, robot, None)
+    await feeder.conn.executemany(
+        "INSERT INTO active_strategy (robot_id, strategy_code, source) "
+        "VALUES ($1, 'GOTO_DIRECT', 'user')",
+        [(robot,) for robot in robots],
+    )
+    feeder.notifier.notify(keys.ACTIVE_STRATEGY, None, None)
+
+    for robot in robots:  # driving forward
+        await feeder.conn.execute(
+            "INSERT INTO odometry (robot_id, stamp, x, y, yaw, linear_mps, angular_rps) "
+            "VALUES ($1, $2, 0, 0, 0, 0.15, 0)",
+            robot,
+            feeder.now(),
+        )
+    ahead = [0.14 if beam <= 8 or beam >= BEAMS - 8 else math.inf for beam in range(BEAMS)]
+
+    async def scans() -> list[int]:  # an obstacle dead ahead of every robot: safety_stop
+        ids = []
+        for robot in robots:
+            row_id = await feeder.conn.fetchval(
+                "INSERT INTO laser_scan (robot_id, stamp, angle_min, angle_increment, "
+                "range_min, range_max, ranges) VALUES ($1, $2, 0, $3, 0.12, 3.5, $4) "
+                "RETURNING id",
+                robot,
+                feeder.now(),
+                2 * math.pi / BEAMS,
+                ahead,
+            )
+            feeder.notifier.notify(keys.LASER_SCAN, robot, row_id)
+            ids.append(row_id)
+        return ids
+
+    def config(instance: str) -> ServiceConfig:
+        return ServiceConfig(
+            service="controller",
+            database_url=db_url,
+            zenoh=zenoh_settings,
+            engine=EngineSettings(period_s=0.05),
+            leases=LeaseSettings(period_s=0.2, timeout_s=2.0),
+            stats_period_s=30.0,
+            instance=instance,
+        )
+
+    async with (
+        running_service(ControllerService, config("controller-a")) as a,
+        running_service(ControllerService, config("controller-b")) as b,
+    ):
+        await split_between([a, b], robots)
+        await scans_for_all(scans, 1.0)  # past any hand-over
+        ids = await scans_for_all(scans, 1.5)
+        await asyncio.sleep(0.5)  # the last scans' turn
+        shares = await split_between([a, b], robots)
+    rows = await feeder.conn.fetch(
+        "SELECT (inputs->>'laser_scan')::bigint AS scan, count(*) AS n FROM command_recommendation"
+        " WHERE source = 'safety_stop' AND (inputs->>'laser_scan')::bigint = ANY($1::bigint[])"
+        " GROUP BY 1",
+        ids,
+    )
+    counts = {r["scan"]: r["n"] for r in rows}
+    # Every robot is recommended on (most scans), and no scan twice: one replica per robot.
+    assert max(counts.values()) == 1, counts
+    assert len(counts) >= len(ids) // 2, (len(counts), len(ids))
+    served = await feeder.conn.fetch(
+        "SELECT DISTINCT robot_id FROM laser_scan WHERE id = ANY($1::bigint[])",
+        list(counts),
+    )
+    assert {r["robot_id"] for r in served} == set(robots)
+    assert all(len(share) == 2 for share in shares), shares
+
+
+async def scans_for_all(write: Callable[[], Awaitable[list[int]]], seconds: float) -> list[int]:
+    ids: list[int] = []
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        ids += await write()
+        await asyncio.sleep(PERIOD_S)
+    return ids

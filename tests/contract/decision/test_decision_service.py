@@ -4,16 +4,18 @@ client would: plain SQL inserts and the notification every writer publishes."""
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import asyncpg
 import pytest
 
-from common.config import ServiceConfig
+from common.config import LeaseSettings, ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime
 from common.testing import ClockPlayer, eventually, running_service
 from services.decision.service import DecisionService
+from tests.contract.conftest import split_between
 
 RECOMMEND_SQL = """
 INSERT INTO command_recommendation (robot_id, kind, source, priority, linear_mps, angular_rps,
@@ -302,3 +304,44 @@ async def test_the_period_picks_up_a_row_written_without_notification(
         row = await newest_from(client, rec)
         assert row["source"] == "avoid_right"
         assert service.engine.counters.woken_by_period > 0
+
+
+async def test_two_replicas_split_the_robots_and_decide_each_once(
+    client: Runtime, clock: ClockPlayer, service_config: ServiceConfig
+) -> None:
+    robots = ["r1", "r2", "r3", "r4"]
+    for robot in robots:
+        await add_robot(client, robot)
+    await recommend(client, *(velocity("goto", 10, 0.1, 0.0, robot_id=r) for r in robots))
+    leases = LeaseSettings(period_s=0.2, timeout_s=2.0)
+    a_config = replace(service_config, leases=leases, instance="decision-a")
+    b_config = replace(service_config, leases=leases, instance="decision-b")
+    async with running_service(DecisionService, a_config) as a:
+        await clock_at(a, 10.0)
+        async with running_service(DecisionService, b_config) as b:
+            await split_between([a, b], robots)
+            # Sim time holds still: a robot served by both replicas would get two rows.
+            ids = await recommend(
+                client, *(velocity("avoid_left", 50, 0.0, 0.5, robot_id=r) for r in robots)
+            )
+
+            async def every_robot_decided() -> bool:
+                rows = await client.database.pool.fetch(
+                    "SELECT DISTINCT robot_id FROM command2robot "
+                    "WHERE recommendation_id = ANY($1::bigint[])",
+                    ids,
+                )
+                return len(rows) == len(robots)
+
+            await eventually(every_robot_decided, what="a command for every robot")
+            await more_activations(a, 5)
+            await more_activations(b, 5)
+            shares = await split_between([a, b], robots)
+    for robot, rec in zip(robots, ids, strict=True):
+        rows = await commands(client, robot)
+        # The first goto, issued once by whoever owned the robot then (a newcomer carries
+        # on from the table), and the avoid_left, issued once by its owner.
+        assert [r["recommendation_id"] for r in rows][-1:] == [rec], (robot, rows)
+        assert [r["recommendation_id"] for r in rows].count(rec) == 1, (robot, rows)
+        assert len(rows) == 2, (robot, rows)
+    assert sorted(len(share) for share in shares) == [2, 2]

@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import itertools
 import math
 
 import numpy as np
 
+from common.config import EngineSettings, LeaseSettings, ServiceConfig, ZenohSettings
 from common.contract import keys
+from common.testing import running_service
 from services.planner.service import PlannerService
+from tests.contract.conftest import split_between
 from tests.contract.planner.conftest import ROBOT, World, eventually
 
 
@@ -266,3 +270,91 @@ async def test_an_obstacle_the_lidar_sees_but_the_map_does_not_bends_the_route(
     assert bent["inputs"]["goal"] == goal_id
     remaining = float(bent["reason"].split(" m to goal")[0].rsplit(" ", 1)[1])
     assert remaining > 3.05  # longer than the 3 m straight line
+
+
+async def test_two_replicas_split_the_robots_and_plan_for_each_once(
+    world: World, db_url: str, zenoh_settings: ZenohSettings
+) -> None:
+    robots = [ROBOT, "r2", "r3", "r4"]
+    db = world.db
+    for robot in robots[1:]:
+        await db.write(keys.ROBOT, robot, "INSERT INTO robot (robot_id) VALUES ($1)", robot)
+    for robot in robots:
+        await db.write(
+            keys.ACTIVE_STRATEGY,
+            robot,
+            "INSERT INTO active_strategy (robot_id, strategy_code, source) "
+            "VALUES ($1, 'GOTO_AVOID', 'user')",
+            robot,
+        )
+        await db.write(
+            keys.GOAL,
+            robot,
+            "INSERT INTO goal (robot_id, x, y, tolerance_m, stamp) VALUES ($1, 0, 2, 0.15, $2)",
+            robot,
+            world.now(),
+        )
+
+    async def odometry() -> None:  # the world streams r1's; the others' here, as a bridge
+        while True:
+            for robot in robots[1:]:
+                await db.write(
+                    keys.ODOMETRY,
+                    robot,
+                    "INSERT INTO odometry (robot_id, stamp, x, y, yaw, linear_mps, angular_rps)"
+                    " VALUES ($1, $2, 0, 0, 0, 0, 0)",
+                    robot,
+                    world.now(),
+                )
+            await asyncio.sleep(0.1)
+
+    def config(instance: str) -> ServiceConfig:
+        return ServiceConfig(
+            service="planner",
+            database_url=db_url,
+            zenoh=zenoh_settings,
+            engine=EngineSettings(period_s=0.05),
+            leases=LeaseSettings(period_s=0.2, timeout_s=2.0),
+            stats_period_s=5.0,
+            instance=instance,
+        )
+
+    feed = asyncio.create_task(odometry())
+    try:
+        async with (
+            running_service(PlannerService, config("planner-a")) as a,
+            running_service(PlannerService, config("planner-b")) as b,
+        ):
+            assert isinstance(a, PlannerService) and isinstance(b, PlannerService)
+            shares = await split_between([a, b], robots)
+            await asyncio.sleep(1.0)  # past any hand-over
+            after = await world.newest_id()
+
+            async def every_robot_planned() -> bool:
+                rows = await db.pool.fetch(
+                    "SELECT DISTINCT robot_id FROM command_recommendation "
+                    "WHERE id > $1 AND source = 'turn_then_move'",
+                    after,
+                )
+                return len(rows) == len(robots)
+
+            await eventually(every_robot_planned, what="a recommendation for every robot")
+            await asyncio.sleep(1.0)
+            # Each robot's planner rules live in the replica that owns it, and only there.
+            for robot in robots:
+                planned_by = [s for s in (a, b) if s.state.robots[robot].slots]
+                owners = [s for s, share in zip((a, b), shares, strict=True) if robot in share]
+                assert planned_by == owners, robot
+            assert await split_between([a, b], robots) == shares
+    finally:
+        feed.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await feed
+    # One replica never says the same thing twice about one odometry row; two would.
+    twice = await db.pool.fetch(
+        "SELECT robot_id, inputs->>'odometry' AS odometry, count(*) FROM command_recommendation"
+        " WHERE id > $1 AND kind = 'robot' GROUP BY 1, 2 HAVING count(*) > 1",
+        after,
+    )
+    assert twice == []
+    assert sorted(len(share) for share in shares) == [2, 2]

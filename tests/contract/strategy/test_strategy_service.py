@@ -4,18 +4,20 @@ from __future__ import annotations
 
 import asyncio
 import threading
+from dataclasses import replace
 from typing import Any
 
 import asyncpg
 import pytest
 
 from common import bus
-from common.config import ServiceConfig
+from common.config import LeaseSettings, ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime
 from common.testing import ClockPlayer, eventually, running_service
+from services.strategy.apply import ApplyCommand
 from services.strategy.service import StrategyService
-from tests.contract.conftest import CLOCK_START
+from tests.contract.conftest import CLOCK_START, split_between
 
 USER_SQL = "INSERT INTO user_command (robot_id, command, argument) VALUES ($1, $2, $3) RETURNING id"
 SYSTEM_SQL = (
@@ -297,3 +299,30 @@ async def test_a_restarted_service_carries_on_from_the_tables(
             None,
             "system",
         )
+
+
+async def test_two_replicas_split_the_robots_and_apply_each_command_once(
+    client: Runtime, clock: ClockPlayer, service_config: ServiceConfig
+) -> None:
+    robots = ["r1", "r2", "r3", "r4"]
+    leases = LeaseSettings(period_s=0.2, timeout_s=2.0)
+    a_config = replace(service_config, leases=leases, instance="strategy-a")
+    b_config = replace(service_config, leases=leases, instance="strategy-b")
+    async with (
+        running_service(StrategyService, a_config) as a,
+        running_service(StrategyService, b_config) as b,
+    ):
+        for robot in robots:
+            await add_robot(client, robot)
+        for robot in robots:
+            await default_applied(client, robot)
+        shares = await split_between([a, b], robots)
+        before = [s.engine.stats_for(ApplyCommand).executed for s in (a, b)]
+        ids = [await user_command(client, r, "SET_STRATEGY", "GOTO_DIRECT") for r in robots]
+        for command_id in ids:
+            assert (await treated(client, keys.USER_COMMAND, command_id))["status"] == "accepted"
+        after = [s.engine.stats_for(ApplyCommand).executed for s in (a, b)]
+        assert await split_between([a, b], robots) == shares
+    # Each command was taken up by one replica only: the one owning its robot.
+    assert [n - m for n, m in zip(after, before, strict=True)] == [len(s) for s in shares]
+    assert sorted(len(share) for share in shares) == [2, 2]
