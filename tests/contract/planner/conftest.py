@@ -12,7 +12,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import AsyncIterator, Callable
 from typing import Any
 
 import asyncpg
@@ -22,26 +22,10 @@ from common import bus
 from common.config import EngineSettings, ServiceConfig, ZenohSettings
 from common.contract import keys
 from common.db import Database, create_pool
-from common.testing import publish_clock, running_service
+from common.testing import eventually, publish_clock, running_service
 from services.planner.service import PlannerService
 
 ROBOT = "r1"
-
-
-async def eventually(
-    check: Callable[[], Any], within: float = 10.0, interval: float = 0.05, what: str = ""
-) -> Any:
-    """Wait until ``check()`` (sync or async) is truthy; return it, or fail after ``within``."""
-    deadline = time.monotonic() + within
-    while True:
-        value = check()
-        if isinstance(value, Awaitable):
-            value = await value
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {within} s waiting for {what or check}")
-        await asyncio.sleep(interval)
 
 
 class World:
