@@ -20,10 +20,10 @@ import logging
 from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
+import services.decision.store as store
 from common import log
 from common.contract import keys
 from common.engine import Rule
-from services.decision import store
 from services.decision.arbitration import Recommendation, decide_robot, decide_system
 from services.decision.robot_command import IssueRobotCommand
 from services.decision.system_command import IssueSystemCommand

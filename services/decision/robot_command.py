@@ -10,9 +10,9 @@ from __future__ import annotations
 import logging
 from typing import TYPE_CHECKING
 
+import services.decision.store as store
 from common import log
 from common.engine import Rule
-from services.decision import store
 from services.decision.arbitration import Issued, RobotDecision
 
 if TYPE_CHECKING:

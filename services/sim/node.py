@@ -14,10 +14,10 @@ from typing import Any
 
 import zenoh
 
+import services.sim.messages as messages
 from common.bus import pack, subscribe_threaded, unpack
 from common.contract import keys
 from common.log import event
-from services.sim import messages
 from services.sim.clock import Pacer
 from services.sim.sim import SimConfig, Simulation
 from services.sim.world import World

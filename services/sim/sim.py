@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
+import services.sim.messages as messages
 from common.contract import keys
-from services.sim import messages
 from services.sim.battery import Battery, BatteryModel
 from services.sim.clock import Every
 from services.sim.lidar import Lidar, LidarParams

@@ -12,10 +12,10 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import services.strategy.store as store
 from common import log
 from common.contract import keys
 from common.engine import Rule
-from services.strategy import store
 from services.strategy.commands import DEFAULT_STRATEGY, Outcome, RobotState, decide
 
 if TYPE_CHECKING:

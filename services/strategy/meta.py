@@ -22,9 +22,9 @@ from collections.abc import Iterable
 from datetime import datetime
 from typing import TYPE_CHECKING
 
+import services.strategy.store as store
 from common.contract import keys
 from common.engine import Rule
-from services.strategy import store
 from services.strategy.apply import ApplyCommand, ApplyDefaultStrategy, Chain
 
 if TYPE_CHECKING:
