@@ -79,7 +79,37 @@ def build_parser() -> argparse.ArgumentParser:
     startup = benches.add_parser("startup", help="start-up time to first command, and memory")
     startup.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
     startup.add_argument("--runs", type=int, default=3, help="how many start-ups to time")
+    latency = benches.add_parser(
+        "latency", help="sense-to-act latency by stage, CPU and memory per process"
+    )
+    latency.add_argument(
+        "--robots",
+        default="1,10,50",
+        help="robot counts, one run each (comma-separated, default 1,10,50)",
+    )
+    latency.add_argument("--hz", type=float, default=20.0, help="lidar and odometry rate")
+    latency.add_argument(
+        "--seconds", type=float, default=30.0, help="sim seconds measured per run (default 30)"
+    )
+    latency.add_argument(
+        "--replicas",
+        action="append",
+        metavar="N|SERVICE=N",
+        help="replicas: N of every scenario service, or SERVICE=N (repeatable)",
+    )
+    latency.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
     return parser
+
+
+def parse_counts(text: str, option: str) -> list[int]:
+    """``"1,10,50"`` -> ``[1, 10, 50]``; UsageError naming ``option`` otherwise."""
+    try:
+        counts = [int(part) for part in text.split(",") if part.strip()]
+    except ValueError:
+        raise UsageError(f"{option} {text!r}: write whole numbers, e.g. 1,10,50") from None
+    if not counts or min(counts) < 1:
+        raise UsageError(f"{option} {text!r}: at least one count, each 1 or more")
+    return counts
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -136,6 +166,17 @@ def dispatch(args: argparse.Namespace) -> int:
         from pnav.bench import startup
 
         return startup.run(args.json, args.runs)
+    if args.command == "bench" and args.bench == "latency":
+        from pnav.bench import latency_report
+        from pnav.launcher import parse_replicas
+
+        return latency_report.run(
+            parse_counts(args.robots, "--robots"),
+            args.hz,
+            args.seconds,
+            parse_replicas(args.replicas),
+            args.json,
+        )
     raise AssertionError(f"unhandled command {args.command}")  # argparse enforces the choices
 
 

@@ -133,10 +133,31 @@ def _fmt(value: Any, spec: str, missing: str = "-") -> str:
     return missing if value is None else format(value, spec)
 
 
-def status_lines(rows: Sequence[Any], width: int = 160) -> list[str]:
+async def owners(rt: Runtime) -> tuple[dict[str, int], dict[str, list[str]]]:
+    """Live replicas per scenario service, and robot -> the owning instance of each service
+    that runs more than one replica (a lone replica owns every robot: nothing to show)."""
+    from common import lease
+    from pnav.launcher import SCENARIO_SERVICES
+
+    replicas: dict[str, int] = {}
+    owned: dict[str, list[str]] = {}
+    async with rt.database.pool.acquire() as conn:
+        for service in SCENARIO_SERVICES:
+            replicas[service] = await lease.live_replicas(conn, service)
+            if replicas[service] > 1:
+                for robot, instance in (await lease.ownership(conn, service)).items():
+                    owned.setdefault(robot, []).append(instance or f"{service}: nobody")
+    return replicas, owned
+
+
+def status_lines(
+    rows: Sequence[Any], width: int = 160, owned: dict[str, list[str]] | None = None
+) -> list[str]:
     header = (
         f"{'robot':<6} {'sim t':>7} {'x':>6} {'y':>6} {'yaw':>5} {'goal':>13} {'left':>5} "
-        f"{'strategy':<12} {'batt':>6} {'cmd v':>6} {'cmd w':>6} {'coll':>4}  last decision"
+        f"{'strategy':<12} {'batt':>6} {'cmd v':>6} {'cmd w':>6} {'coll':>4}  "
+        + ("owners  " if owned else "")
+        + "last decision"
     )
     lines = [header]
     for r in rows:
@@ -159,7 +180,9 @@ def status_lines(rows: Sequence[Any], width: int = 160) -> list[str]:
             f"{r['robot_id']:<6} {_fmt(r['stamp'], '7.1f')} {_fmt(r['x'], '6.2f')} "
             f"{_fmt(r['y'], '6.2f')} {_fmt(r['yaw'], '5.2f')} {goal:>13} {_fmt(left, '5.2f')} "
             f"{strategy:<12} {batt:>6} {_fmt(r['cmd_v'], '6.2f')} {_fmt(r['cmd_w'], '6.2f')} "
-            f"{r['collisions']:>4}  {decision}"
+            f"{r['collisions']:>4}  "
+            + (f"{','.join(owned.get(r['robot_id'], ['-']))}  " if owned else "")
+            + decision
         )
         lines.append(line[:width])
     return lines
@@ -170,8 +193,14 @@ async def status(once: bool, interval_s: float = 1.0) -> int:
     try:
         while True:
             rows = await rt.database.pool.fetch(STATUS_SQL)
+            replicas, owned = await owners(rt)
             width = os.get_terminal_size().columns if sys.stdout.isatty() else 200
-            text = "\n".join(status_lines(rows, width))
+            lines = status_lines(rows, width, owned)
+            if any(n > 1 for n in replicas.values()):
+                lines.append(
+                    "replicas: " + ", ".join(f"{name} {n}" for name, n in replicas.items())
+                )
+            text = "\n".join(lines)
             if once:
                 print(text)
                 return 0

@@ -66,7 +66,8 @@ MAX_REPLICAS = 32
 
 
 def parse_replicas(values: list[str] | tuple[str, ...] | None) -> dict[str, int]:
-    """``["controller=3", "planner=2,decision=2"]`` -> ``{"controller": 3, ...}``.
+    """``["controller=3", "planner=2,decision=2"]`` -> ``{"controller": 3, ...}``; a bare
+    ``"3"`` asks for 3 of every scenario service.
 
     Only scenario services scale: two sims would be two worlds with the same robot ids, two
     bridges would store every sensor message twice. A later value for a service wins.
@@ -79,6 +80,10 @@ def parse_replicas(values: list[str] | tuple[str, ...] | None) -> dict[str, int]
                 continue
             name, sep, count = item.partition("=")
             name = name.strip()
+            if not sep and name.isdigit():
+                for service in SCENARIO_SERVICES:
+                    out.update(parse_replicas([f"{service}={name}"]))
+                continue
             if not sep:
                 raise UsageError(f"--replicas {item!r}: write SERVICE=N, e.g. controller=3")
             if name not in SCENARIO_SERVICES:

@@ -12,13 +12,10 @@ shared buffers, the Python runtime) are counted once.
 from __future__ import annotations
 
 import asyncio
-import os
 import threading
 import time
-from pathlib import Path
 from typing import Any
 
-import psutil
 import uvloop
 
 from common import bus
@@ -26,34 +23,11 @@ from common.config import ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime
 from pnav import commands
+from pnav.bench.processes import memory_mb, stack_processes
 from pnav.bench.report import emit, machine
-from pnav.launcher import RunningStack, StackOptions, launched
+from pnav.launcher import StackOptions, launched
 
 TARGET_S, TARGET_MB = 3.0, 500.0
-
-
-def stack_processes(stack: RunningStack) -> list[psutil.Process]:
-    procs = [psutil.Process(os.getpid())]
-    procs += [psutil.Process(pid) for pid in stack.supervisor.pids().values()]
-    if stack.local.postgres is not None:
-        pid_file = Path(stack.local.postgres.data_dir) / "postmaster.pid"
-        postmaster = psutil.Process(int(pid_file.read_text().split()[0]))
-        procs += [postmaster, *postmaster.children(recursive=True)]
-    children = {p.pid for parent in procs[1:] for p in parent.children(recursive=True)}
-    procs += [psutil.Process(pid) for pid in children - {p.pid for p in procs}]
-    return procs
-
-
-def memory_mb(procs: list[psutil.Process]) -> dict[str, float]:
-    pss = rss = 0
-    for proc in procs:
-        try:
-            info = proc.memory_full_info()
-        except psutil.NoSuchProcess:
-            continue
-        pss += getattr(info, "pss", info.rss)
-        rss += info.rss
-    return {"pss_mb": round(pss / 2**20, 1), "rss_mb": round(rss / 2**20, 1)}
 
 
 async def one_startup() -> dict[str, Any]:

@@ -4,7 +4,8 @@
     python -m services.sim --bench --robots 10 --seconds 60 [--world worlds/warehouse.yaml]
 
 Options fall back to environment variables (for containers): PNAV_SIM_WORLD, PNAV_SIM_RATE,
-PNAV_SIM_ROBOTS, PNAV_SIM_BATTERY, PNAV_SIM_SEED, PNAV_SIM_SCAN_HZ; Zenoh comes from the
+PNAV_SIM_ROBOTS, PNAV_SIM_BATTERY, PNAV_SIM_SEED, PNAV_SIM_SCAN_HZ, PNAV_SIM_ODOM_HZ,
+PNAV_SIM_TRACE; Zenoh comes from the
 PNAV_ZENOH_* variables (common.config.ZenohSettings). SIGINT and SIGTERM stop it cleanly.
 """
 
@@ -84,6 +85,18 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         help="lidar rate in sim time [PNAV_SIM_SCAN_HZ, default 5]",
     )
     ap.add_argument(
+        "--odom-hz",
+        type=float,
+        default=_float_env("PNAV_SIM_ODOM_HZ") or 30.0,
+        help="odometry rate in sim time [PNAV_SIM_ODOM_HZ, default 30]",
+    )
+    ap.add_argument(
+        "--trace",
+        default=_env("PNAV_SIM_TRACE"),
+        help="write when each sensor message left and each command arrived, for "
+        "`pnav bench latency` (services/sim/trace.py) [PNAV_SIM_TRACE]",
+    )
+    ap.add_argument(
         "--physics-hz", type=float, default=240.0, help="physics steps per sim second (default 240)"
     )
     ap.add_argument(
@@ -134,11 +147,12 @@ def build(args: argparse.Namespace) -> tuple[World, SimConfig, float]:
     ):
         # pybullet's GUI would call exit(1) from C with no display; say why instead
         raise ConfigError("--gui needs a display (DISPLAY is not set); run headless without it")
-    if not args.physics_hz > 0 or not args.scan_hz > 0:
-        raise ConfigError("--physics-hz and --scan-hz must be positive")
+    if not args.physics_hz > 0 or not args.scan_hz > 0 or not args.odom_hz > 0:
+        raise ConfigError("--physics-hz, --scan-hz and --odom-hz must be positive")
     config = SimConfig(
         physics_hz=args.physics_hz,
         scan_hz=args.scan_hz,
+        odom_hz=args.odom_hz,
         battery_percent=args.battery,
         seed=args.seed,
         gui=args.gui,
@@ -147,8 +161,9 @@ def build(args: argparse.Namespace) -> tuple[World, SimConfig, float]:
     return world, config, parse_rate(args.rate)
 
 
-def serve(world: World, config: SimConfig, rate: float) -> int:
+def serve(world: World, config: SimConfig, rate: float, trace: str | None = None) -> int:
     from services.sim.node import SimNode
+    from services.sim.trace import Tracer
 
     stop = threading.Event()
 
@@ -162,7 +177,8 @@ def serve(world: World, config: SimConfig, rate: float) -> int:
     session = open_session(settings)
     try:
         instance = _env("PNAV_INSTANCE") or default_instance()
-        node = SimNode(world, config, session, rate=rate, instance=instance)
+        tracer = Tracer(Path(trace)) if trace else None
+        node = SimNode(world, config, session, rate=rate, instance=instance, tracer=tracer)
         try:
             node.run(stop)
         finally:
@@ -181,7 +197,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.bench:
             print(report(run_bench(world, replace(config, gui=False), args.seconds)), flush=True)
             return 0
-        return serve(world, config, rate)
+        return serve(world, config, rate, args.trace)
     except UsageError as exc:
         event(log, logging.ERROR, "cannot start the sim", problem=str(exc))
         print(f"error: {exc}", file=sys.stderr)

@@ -20,6 +20,7 @@ from common.contract import keys
 from common.log import event
 from services.sim.clock import Pacer
 from services.sim.sim import SimConfig, Simulation
+from services.sim.trace import CMD_VEL, Tracer
 from services.sim.world import World
 
 log = logging.getLogger(__name__)
@@ -42,9 +43,11 @@ class SimNode:
         *,
         rate: float = 1.0,
         instance: str = "sim",
+        tracer: Tracer | None = None,
     ) -> None:
         self.session = session
         self.rate = rate
+        self.tracer = tracer
         self._publishers: dict[tuple[str, str], zenoh.Publisher] = {}
         for spec in world.robots:
             for topic in keys.SENSOR_TOPICS:
@@ -55,8 +58,12 @@ class SimNode:
                     if topic == keys.COLLISION
                     else zenoh.CongestionControl.DROP
                 )
+                # express: sent at once, not held for Zenoh's batching (up to a millisecond
+                # per link, twice through the router, measured in sense-to-act latency)
                 self._publishers[(spec.robot_id, topic)] = session.declare_publisher(
-                    keys.robot_key(spec.robot_id, topic), congestion_control=congestion
+                    keys.robot_key(spec.robot_id, topic),
+                    congestion_control=congestion,
+                    express=True,
                 )
         self._clock_pub = session.declare_publisher(keys.SIM_CLOCK, express=True)
         self._world_pub = session.declare_publisher(
@@ -86,6 +93,8 @@ class SimNode:
         if not self.sim.set_command(robot, cmd.linear, cmd.angular):
             self._complain(robot, "cmd_vel for an unknown robot ignored", robot)
             return
+        if self.tracer is not None and cmd.command_id is not None:
+            self.tracer.record(CMD_VEL, robot, cmd.command_id)
         self.commands_received += 1
 
     def _complain(self, robot: str, msg: str, problem: str) -> None:
@@ -99,7 +108,10 @@ class SimNode:
 
     # -- publishing --------------------------------------------------------------------------
     def _publish(self, robot: str, topic: str, message: dict[str, Any]) -> None:
-        self._publishers[(robot, topic)].put(pack(message))
+        payload = pack(message)
+        if self.tracer is not None:
+            self.tracer.record(topic, robot, message["seq"])
+        self._publishers[(robot, topic)].put(payload)
 
     def publish_clock(self) -> None:
         self._clock_pub.put(pack(messages.clock(self.sim.time, self.rate)))
@@ -136,6 +148,8 @@ class SimNode:
             if now >= next_world:
                 self.publish_world()
                 next_world = now + WORLD_PERIOD_S
+            if self.tracer is not None:
+                self.tracer.maybe_flush()
             owed = pacer.steps_due(sim.steps)
             if owed == 0:
                 stop.wait(min(pacer.wall_until_next(sim.steps), max(0.0, next_clock - now)))
@@ -181,3 +195,5 @@ class SimNode:
                 log.debug("undeclare failed", exc_info=True)
         self._publishers.clear()
         self.sim.close()
+        if self.tracer is not None:
+            self.tracer.close()

@@ -154,6 +154,24 @@ def instance_of(process: asyncio.subprocess.Process) -> str:
     return f"{socket.gethostname()}-{process.pid}".replace(".", "-")
 
 
+async def status_shows_owners(
+    db_url: str, zenoh: ZenohSettings, owned: dict[str, str | None]
+) -> None:
+    """`pnav status` names each robot's controller replica and counts the replicas."""
+    env = {**os.environ, "PNAV_DATABASE_URL": db_url, **zenoh.to_env()}
+    process = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "pnav", "status", "--once",
+        cwd=ROOT, env=env, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
+    )  # fmt: skip
+    out, _ = await asyncio.wait_for(process.communicate(), 60)
+    text = out.decode()
+    assert process.returncode == 0, text
+    assert f"controller {REPLICAS}" in text and "planner 1" in text, text
+    lines = {line.split()[0]: line for line in text.splitlines()[1:] if line.strip()}
+    for robot, instance in owned.items():
+        assert instance is not None and instance in lines[robot], (robot, instance, text)
+
+
 async def test_three_controller_replicas_split_six_robots_and_survive_a_kill(
     empty_db_url: str, zenoh_settings: ZenohSettings, tmp_path: Path
 ) -> None:
@@ -186,6 +204,7 @@ async def test_three_controller_replicas_split_six_robots_and_survive_a_kill(
             except AssertionError:
                 raise AssertionError(f"{await owners()}\n{running.tails()}") from None
             assert await live_replicas(conn, "controller") == REPLICAS
+            await status_shows_owners(empty_db_url, zenoh_settings, await owners())
             # the single replicas of the other scenario services own every robot
             for name in ("strategy", "planner", "decision"):
                 instance = instance_of(running.processes[f"{name}-1"])

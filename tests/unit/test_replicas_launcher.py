@@ -69,3 +69,23 @@ def test_each_replica_is_its_own_supervised_process_with_its_own_instance() -> N
     assert sim.argv[sim.argv.index("--robots") + 1] == "6"
     # a service with one process keeps its plain name (and the supervisor's instance name-1)
     assert "PNAV_INSTANCE" not in specs[3].env
+
+
+def test_a_bare_count_replicates_every_scenario_service() -> None:
+    assert parse_replicas(["3"]) == {
+        s: 3 for s in ("strategy", "planner", "controller", "decision")
+    }
+    assert parse_replicas(["2", "controller=4"])["controller"] == 4
+    with pytest.raises(UsageError, match="between 1 and"):
+        parse_replicas(["0"])
+
+
+def test_bench_latency_robot_counts() -> None:
+    from pnav.cli import parse_counts
+
+    assert parse_counts("1,10,50", "--robots") == [1, 10, 50]
+    args = build_parser().parse_args(["bench", "latency"])
+    assert (args.robots, args.hz, args.seconds) == ("1,10,50", 20.0, 30.0)
+    for bad in ("", "0", "a,2"):
+        with pytest.raises(UsageError, match="--robots"):
+            parse_counts(bad, "--robots")

@@ -1,0 +1,118 @@
+"""Figures and the printed table of ``pnav bench latency`` (the runs are in latency.py)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import uvloop
+
+from pnav.bench import provenance as prov
+from pnav.bench.latency import measure
+from pnav.bench.report import emit, machine, percentiles
+
+# the issue's targets: robots -> p99 ms, on a 2-core machine
+TARGETS_MS = {1: 5.0, 10: 10.0, 50: 50.0}
+LIMITS_MS = (5.0, 50.0)
+
+
+def target_for(robots: int) -> float | None:
+    """The p99 target of the nearest listed fleet size at or above ``robots``."""
+    for n in sorted(TARGETS_MS):
+        if robots <= n:
+            return TARGETS_MS[n]
+    return None
+
+
+def latency_figures(samples: Sequence[prov.Sample]) -> dict[str, Any]:
+    totals = [s.total_ms for s in samples]
+    out: dict[str, Any] = {k: round(v, 3) for k, v in percentiles(totals).items()}
+    for limit in LIMITS_MS:
+        out[f"share_over_{limit:g}ms"] = round(prov.share_over(totals, limit), 4)
+    return out
+
+
+def summarise(run: dict[str, Any]) -> dict[str, Any]:
+    """A run from latency.measure with its samples turned into figures (JSON-ready)."""
+    samples: list[prov.Sample] = run.pop("samples_raw")
+    stages = {
+        name: {
+            k: round(v, 3) for k, v in percentiles([s.stages_ms()[name] for s in samples]).items()
+        }
+        for name in prov.STAGES
+    }
+    by_source = {
+        source: {"samples": len(group), **latency_figures(group)}
+        for source in sorted({s.source for s in samples})
+        for group in [[s for s in samples if s.source == source]]
+    }
+    target = target_for(run["robots"])
+    figures = latency_figures(samples)
+    met = None if target is None or not samples else figures["p99"] < target
+    return {
+        **run,
+        "latency_ms": figures,
+        "stages_ms": stages,
+        "by_source": by_source,
+        "target_p99_ms": target,
+        "target_met": met,
+    }
+
+
+def table(results: Sequence[dict[str, Any]]) -> list[str]:
+    head = (
+        f"{'robots':>6} {'repl':>4} {'samples':>7} {'p50':>7} {'p95':>7} {'p99':>7} {'max':>7}"
+        f" {'>5ms':>6} {'>50ms':>6} {'target':>7} {'rows/s':>7} {'sim x':>6} {'CPU %':>6}"
+    )
+    lines = ["sense-to-act latency, ms (sensor published by the sim -> command at the sim)", head]
+    for r in results:
+        lat = r["latency_ms"]
+        rows = sum(r["rows_per_s"].values())
+        cpu = sum(p["cpu_percent"] for p in r["processes"].values())
+        repl = max(r["replicas"].values(), default=1)
+        target = "-" if r["target_p99_ms"] is None else f"<{r['target_p99_ms']:g}"
+        mark = {True: " ok", False: " MISS", None: ""}[r["target_met"]]
+        if not lat:
+            lines.append(f"{r['robots']:>6} {repl:>4} {0:>7}   no samples (see unmatched)")
+            continue
+        lines.append(
+            f"{r['robots']:>6} {repl:>4} {r['samples']:>7} {lat['p50']:>7.2f} {lat['p95']:>7.2f}"
+            f" {lat['p99']:>7.2f} {lat['max']:>7.1f} {lat['share_over_5ms']:>6.1%}"
+            f" {lat['share_over_50ms']:>6.1%} {target:>7} {rows:>7.0f} {r['sim_rate']:>6.2f}"
+            f" {cpu:>6.0f}{mark}"
+        )
+    lines.append("")
+    lines.append("per stage, p50 / p99 ms")
+    for r in results:
+        parts = [
+            f"{name.replace('_to_', '->')} {st['p50']:.2f}/{st['p99']:.2f}"
+            for name, st in r["stages_ms"].items()
+            if st
+        ]
+        lines.append(f"  {r['robots']:>3} robots: " + ", ".join(parts))
+    lines.append("")
+    lines.append("per process: CPU % of one core, peak PSS MB")
+    for r in results:
+        procs = r["processes"]
+        parts = [
+            f"{name} {p['cpu_percent']:.0f}%/{p['peak_pss_mb']:.0f}" for name, p in procs.items()
+        ]
+        lines.append(f"  {r['robots']:>3} robots: " + ", ".join(parts))
+    return lines
+
+
+def run(
+    robots: Sequence[int],
+    hz: float = 20.0,
+    seconds: float = 30.0,
+    replicas: dict[str, int] | None = None,
+    json_path: str | None = None,
+) -> int:
+    results = []
+    for n in robots:
+        print(f"running {n} robot(s) at {hz:g} Hz for {seconds:g} sim s ...", flush=True)
+        results.append(summarise(uvloop.run(measure(n, hz, seconds, replicas or {}))))
+    for line in table(results):
+        print(line)
+    emit({"benchmark": "latency", "machine": machine(), "runs": results}, json_path)
+    return 0

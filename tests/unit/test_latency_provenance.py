@@ -1,0 +1,136 @@
+"""Sense-to-act samples joined from provenance: what counts, from where, and the stages."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from pnav.bench import provenance as prov
+from pnav.bench.hall import write_hall
+from pnav.bench.latency_report import latency_figures, target_for
+from services.sim.trace import Tracer, read_trace
+from services.sim.world import load_world
+
+T0 = 1_800_000_000.0  # wall seconds, as Postgres' clock_timestamp() gives them
+US = 1e-3  # ms: float seconds near T0 resolve about 0.24 us, Postgres stamps 1 us
+
+
+def command(
+    cid: int, rec: int, inputs: dict[str, object], decided: float = T0 + 0.004
+) -> prov.Command:
+    return prov.Command(cid, "r1", rec, decided, "planner", T0 + 0.003, inputs)
+
+
+ROWS = {
+    ("odometry", 7): prov.SensorRow("odometry", 7, "r1", 70, T0 + 0.001),
+    ("laser_scan", 9): prov.SensorRow("laser_scan", 9, "r1", 90, T0 + 0.0015),
+}
+PUBLISHED = {("odom", "r1", 70): T0, ("scan", "r1", 90): T0 + 0.0005}
+
+
+def test_a_sample_runs_from_the_sensor_message_to_the_command_at_the_sim() -> None:
+    arrivals = {100: T0 + 0.005}
+    (sample,), missing = prov.samples(arrivals, [command(100, 1, {"odometry": 7})], ROWS, PUBLISHED)
+    assert sample.total_ms == pytest.approx(5.0, abs=US)
+    assert sample.stages_ms() == pytest.approx(
+        {
+            "sensor_to_row": 1.0,
+            "row_to_recommendation": 2.0,
+            "recommendation_to_decision": 1.0,
+            "decision_to_robot": 1.0,
+        },
+        abs=US,
+    )
+    assert sum(sample.stages_ms().values()) == pytest.approx(sample.total_ms, abs=US)
+    assert vars(missing) == {
+        "no_sensor_origin": 0,
+        "sensor_row_missing": 0,
+        "publish_not_traced": 0,
+    }
+
+
+def test_a_controller_recommendation_starts_at_its_scan_not_its_newer_odometry() -> None:
+    inputs = {"laser_scan": 9, "odometry": 7}
+    (sample,), _ = prov.samples({100: T0 + 0.005}, [command(100, 1, inputs)], ROWS, PUBLISHED)
+    assert sample.origin == "laser_scan"
+    assert sample.published == T0 + 0.0005
+
+
+def test_repeats_of_a_recommendation_count_once_at_its_first_arrival() -> None:
+    # the decision re-issues its winner every 0.1 s sim: the repeats are not reactions
+    cmds = [command(100, 1, {"odometry": 7}), command(101, 1, {"odometry": 7}, T0 + 0.104)]
+    arrivals = {100: T0 + 0.006, 101: T0 + 0.105}
+    samples, _ = prov.samples(arrivals, cmds, ROWS, PUBLISHED)
+    assert [round(s.total_ms, 3) for s in samples] == [6.0]
+
+
+def test_a_superseded_command_leaves_its_recommendation_to_the_first_that_arrived() -> None:
+    cmds = [command(100, 1, {"odometry": 7}), command(101, 1, {"odometry": 7})]
+    samples, _ = prov.samples({101: T0 + 0.008}, cmds, ROWS, PUBLISHED)
+    assert [round(s.total_ms, 3) for s in samples] == [8.0]
+
+
+def test_commands_without_a_traceable_origin_are_counted_not_sampled() -> None:
+    cmds = [
+        command(1, 1, {}),  # nothing sensed behind it
+        command(2, 2, {"odometry": 8}),  # row pruned before it was read
+        command(3, 3, {"laser_scan": True}),  # not an id
+    ]
+    rows = {**ROWS, ("odometry", 8): prov.SensorRow("odometry", 8, "r1", 71, T0)}
+    samples, missing = prov.samples({1: T0, 2: T0, 3: T0}, cmds, rows, PUBLISHED)
+    assert samples == []
+    assert vars(missing) == {
+        "no_sensor_origin": 2,
+        "sensor_row_missing": 0,
+        "publish_not_traced": 1,
+    }
+    samples, missing = prov.samples({2: T0}, [cmds[1]], ROWS, PUBLISHED)
+    assert missing.sensor_row_missing == 1
+
+
+def test_share_over_counts_strictly_later_values() -> None:
+    assert prov.share_over([1.0, 5.0, 5.1, 60.0], 5.0) == 0.5
+    assert prov.share_over([], 5.0) == 0.0
+
+
+def test_figures_and_targets() -> None:
+    samples, _ = prov.samples(
+        {100: T0 + 0.0045}, [command(100, 1, {"odometry": 7})], ROWS, PUBLISHED
+    )
+    figures = latency_figures(samples)
+    assert figures["p50"] == figures["p99"] == pytest.approx(4.5, abs=US)
+    assert figures["share_over_5ms"] == 0.0 and figures["share_over_50ms"] == 0.0
+    assert (target_for(1), target_for(10), target_for(50), target_for(51)) == (
+        5.0,
+        10.0,
+        50.0,
+        None,
+    )
+    assert target_for(5) == 10.0
+
+
+def test_the_sim_trace_reads_back_what_was_recorded(tmp_path: Path) -> None:
+    tracer = Tracer(tmp_path / "trace.csv")
+    tracer.record("odom", "r1", 70)
+    tracer.record("cmd_vel", "r1", 100)
+    tracer.flush()
+    tracer.record("scan", "r2", 5)  # not flushed yet: not in the file
+    events = read_trace(tmp_path / "trace.csv")
+    assert [(e.kind, e.robot, e.ref) for e in events] == [
+        ("odom", "r1", 70),
+        ("cmd_vel", "r1", 100),
+    ]
+    assert events[0].wall_ns <= events[1].wall_ns
+    tracer.close()
+    assert len(read_trace(tmp_path / "trace.csv")) == 3
+
+
+@pytest.mark.parametrize("robots", [1, 10, 50])
+def test_the_hall_holds_every_robot_in_its_own_lane(tmp_path: Path, robots: int) -> None:
+    hall = write_hall(tmp_path, robots)
+    world = load_world(hall.world)
+    assert [r.robot_id for r in world.robots] == [lane.robot_id for lane in hall.lanes]
+    for lane in hall.lanes:
+        for x, y in (lane.a, lane.b):
+            assert world.blocked(x, y, world.params.footprint_radius_m + 0.1) is None
