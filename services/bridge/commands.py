@@ -202,7 +202,7 @@ class CommandRelay:
         linear = clamp(cmd.linear, cmd.max_linear)
         angular = clamp(cmd.angular, cmd.max_angular)
         try:
-            self._send(robot, linear, angular, cmd.id)
+            self._send(robot, linear, angular, cmd.id, decided_stamp=cmd.stamp)
         except Exception as exc:  # Zenoh closing
             self._alerts.warning("send", "cmd_vel publish failed", error=repr(exc))
             return
@@ -239,6 +239,7 @@ class CommandRelay:
         angular: float,
         command_id: int | None,
         *,
+        decided_stamp: float | None = None,
         reliable: bool = False,
     ) -> None:
         payload = bus.pack(
@@ -247,6 +248,7 @@ class CommandRelay:
                 "linear": linear,
                 "angular": angular,
                 "command_id": command_id,
+                "decided_stamp": decided_stamp,
             }
         )
         if reliable:

@@ -5,7 +5,7 @@
 
 Options fall back to environment variables (for containers): PNAV_SIM_WORLD, PNAV_SIM_RATE,
 PNAV_SIM_ROBOTS, PNAV_SIM_BATTERY, PNAV_SIM_SEED, PNAV_SIM_SCAN_HZ, PNAV_SIM_ODOM_HZ,
-PNAV_SIM_TRACE; Zenoh comes from the
+PNAV_SIM_TRACE, PNAV_SIM_MAX_LAG; Zenoh comes from the
 PNAV_ZENOH_* variables (common.config.ZenohSettings). SIGINT and SIGTERM stop it cleanly.
 """
 
@@ -91,6 +91,13 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         help="odometry rate in sim time [PNAV_SIM_ODOM_HZ, default 30]",
     )
     ap.add_argument(
+        "--max-lag",
+        type=float,
+        default=_float_env("PNAV_SIM_MAX_LAG"),
+        help="pace by the stack: never run more than S sim seconds past a robot's newest "
+        "decision (services/sim/gate.py; for --rate max) [PNAV_SIM_MAX_LAG]",
+    )
+    ap.add_argument(
         "--trace",
         default=_env("PNAV_SIM_TRACE"),
         help="write when each sensor message left and each command arrived, for "
@@ -147,6 +154,8 @@ def build(args: argparse.Namespace) -> tuple[World, SimConfig, float]:
     ):
         # pybullet's GUI would call exit(1) from C with no display; say why instead
         raise ConfigError("--gui needs a display (DISPLAY is not set); run headless without it")
+    if args.max_lag is not None and not args.max_lag > 0:
+        raise ConfigError(f"--max-lag {args.max_lag} must be a positive number of sim seconds")
     if not args.physics_hz > 0 or not args.scan_hz > 0 or not args.odom_hz > 0:
         raise ConfigError("--physics-hz, --scan-hz and --odom-hz must be positive")
     config = SimConfig(
@@ -161,7 +170,14 @@ def build(args: argparse.Namespace) -> tuple[World, SimConfig, float]:
     return world, config, parse_rate(args.rate)
 
 
-def serve(world: World, config: SimConfig, rate: float, trace: str | None = None) -> int:
+def serve(
+    world: World,
+    config: SimConfig,
+    rate: float,
+    trace: str | None = None,
+    max_lag: float | None = None,
+) -> int:
+    from services.sim.gate import Gate
     from services.sim.node import SimNode
     from services.sim.trace import Tracer
 
@@ -178,7 +194,10 @@ def serve(world: World, config: SimConfig, rate: float, trace: str | None = None
     try:
         instance = _env("PNAV_INSTANCE") or default_instance()
         tracer = Tracer(Path(trace)) if trace else None
-        node = SimNode(world, config, session, rate=rate, instance=instance, tracer=tracer)
+        gate = Gate(max_lag) if max_lag is not None else None
+        node = SimNode(
+            world, config, session, rate=rate, instance=instance, tracer=tracer, gate=gate
+        )
         try:
             node.run(stop)
         finally:
@@ -197,7 +216,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.bench:
             print(report(run_bench(world, replace(config, gui=False), args.seconds)), flush=True)
             return 0
-        return serve(world, config, rate, args.trace)
+        return serve(world, config, rate, args.trace, args.max_lag)
     except UsageError as exc:
         event(log, logging.ERROR, "cannot start the sim", problem=str(exc))
         print(f"error: {exc}", file=sys.stderr)

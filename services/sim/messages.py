@@ -70,6 +70,7 @@ class CmdVel:
     linear: float
     angular: float
     command_id: int | None
+    decided_stamp: float | None = None
 
 
 def _finite(body: dict[str, Any], key: str) -> float:
@@ -86,9 +87,11 @@ def parse_cmd_vel(body: Any) -> CmdVel:
     command_id = body.get("command_id")
     if command_id is not None and (isinstance(command_id, bool) or not isinstance(command_id, int)):
         raise ValueError(f"'command_id' must be an int or nil, got {command_id!r}")
+    decided = body.get("decided_stamp")
     return CmdVel(
         stamp=_finite(body, "stamp"),
         linear=_finite(body, "linear"),
         angular=_finite(body, "angular"),
         command_id=command_id,
+        decided_stamp=None if decided is None else _finite(body, "decided_stamp"),
     )

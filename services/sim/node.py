@@ -19,6 +19,7 @@ from common.bus import pack, subscribe_threaded, unpack
 from common.contract import keys
 from common.log import event
 from services.sim.clock import Pacer
+from services.sim.gate import Gate
 from services.sim.sim import SimConfig, Simulation
 from services.sim.trace import CMD_VEL, Tracer
 from services.sim.world import World
@@ -28,6 +29,9 @@ log = logging.getLogger(__name__)
 SERVICE = "sim"
 # the clock goes out at this wall rate, above the contract's 20 Hz floor
 CLOCK_HZ = 30.0
+# paced by the stack (--max-lag), the clock also goes out every this many sim seconds: the
+# services then stamp their decisions with a time at most this far behind the sim's
+GATE_CLOCK_SIM_S = 0.02
 # and the world every this many wall seconds, besides the queryable
 WORLD_PERIOD_S = 1.0
 # at most one log line per robot per this many seconds about bad cmd_vel
@@ -44,10 +48,12 @@ class SimNode:
         rate: float = 1.0,
         instance: str = "sim",
         tracer: Tracer | None = None,
+        gate: Gate | None = None,
     ) -> None:
         self.session = session
         self.rate = rate
         self.tracer = tracer
+        self.gate = gate
         self._publishers: dict[tuple[str, str], zenoh.Publisher] = {}
         for spec in world.robots:
             for topic in keys.SENSOR_TOPICS:
@@ -95,6 +101,8 @@ class SimNode:
             return
         if self.tracer is not None and cmd.command_id is not None:
             self.tracer.record(CMD_VEL, robot, cmd.command_id)
+        if self.gate is not None and cmd.decided_stamp is not None:
+            self.gate.on_decision(robot, cmd.decided_stamp)
         self.commands_received += 1
 
     def _complain(self, robot: str, msg: str, problem: str) -> None:
@@ -129,12 +137,14 @@ class SimNode:
         self.publish_world()
         next_world = time.monotonic() + WORLD_PERIOD_S
         next_clock = 0.0
+        gate, next_gate_clock = self.gate, 0.0
         event(
             log,
             logging.INFO,
             "sim running",
             world=sim.world.name,
             rate=self.rate or "max",
+            max_lag=None if self.gate is None else self.gate.max_lag_s,
             robots=[r.robot_id for r in sim.robots],
             physics_hz=sim.config.physics_hz,
         )
@@ -155,6 +165,11 @@ class SimNode:
                 stop.wait(min(pacer.wall_until_next(sim.steps), max(0.0, next_clock - now)))
                 continue
             for k in range(owed):
+                if gate is not None:
+                    gate.wait(sim.time, stop, self.publish_clock)
+                    if sim.time >= next_gate_clock:
+                        self.publish_clock()
+                        next_gate_clock = sim.time + GATE_CLOCK_SIM_S
                 sim.step()
                 # come back in time for the clock however many steps are owed
                 if k & 15 == 15 and time.monotonic() >= next_clock:
@@ -176,7 +191,18 @@ class SimNode:
             "sim stopped",
             sim_time=round(sim.time, 3),
             commands=self.commands_received,
+            **self.gate_figures(),
         )
+
+    def gate_figures(self) -> dict[str, Any]:
+        """How often and how long the sim waited for the stack (empty without a gate)."""
+        if self.gate is None:
+            return {}
+        return {
+            "gate_waits": self.gate.waits,
+            "gate_timeouts": self.gate.timeouts,
+            "gate_waited_wall_s": round(self.gate.waited_wall_s, 3),
+        }
 
     def close(self) -> None:
         """Undeclare everything this node declared and free pybullet (not the session)."""

@@ -72,10 +72,12 @@ async def test_a_notified_command_reaches_cmd_vel_clamped_to_the_robot_limits(
     assert key == keys.robot_key("r1", keys.CMD_VEL)
     assert vel(body) == (0.22, -2.84, first)
     assert body["stamp"] == 10.0  # sim time of sending
-    assert set(body) == {"stamp", "linear", "angular", "command_id"}
+    assert body["decided_stamp"] == 10.0  # the row's stamp: when the decision was made
+    assert set(body) == {"stamp", "linear", "angular", "command_id", "decided_stamp"}
 
-    within = await command(conn, sim, 0.1, 0.5)
-    assert vel((await cmd_vel.next())[1]) == (0.1, 0.5, within)
+    within = await command(conn, sim, 0.1, 0.5, stamp=9.96)
+    _, body = await cmd_vel.next()
+    assert vel(body) == (0.1, 0.5, within) and body["decided_stamp"] == 9.96
     other = await command(conn, sim, 0.4, 0.0, robot="r2")  # r2's own limits
     key, body = await cmd_vel.next()
     assert (key, vel(body)) == (keys.robot_key("r2", keys.CMD_VEL), (0.4, 0.0, other))

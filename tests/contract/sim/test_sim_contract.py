@@ -23,6 +23,7 @@ import zenoh
 from common.bus import open_session, pack, unpack
 from common.config import ZenohSettings
 from common.contract import keys
+from services.sim.gate import Gate
 from services.sim.node import SimNode
 from services.sim.sim import SimConfig
 from services.sim.world import load_world
@@ -149,9 +150,11 @@ def listener(zenoh_settings: ZenohSettings) -> Iterator[Listener]:
 
 
 @contextmanager
-def running_sim(settings: ZenohSettings, rate: float, **config: Any) -> Iterator[SimNode]:
+def running_sim(
+    settings: ZenohSettings, rate: float, gate: Gate | None = None, **config: Any
+) -> Iterator[SimNode]:
     session = open_session(settings)
-    node = SimNode(load_world(OPEN_ROOM), SimConfig(**config), session, rate=rate)
+    node = SimNode(load_world(OPEN_ROOM), SimConfig(**config), session, rate=rate, gate=gate)
     stop = threading.Event()
     thread = threading.Thread(target=node.run, args=(stop,), daemon=True)
     thread.start()
@@ -284,6 +287,39 @@ def test_rate_max_is_faster_with_the_same_scans_per_sim_second(
     assert max_speed > 5.0  # well above real time (about 100x when alone on the machine)
     assert real_time == pytest.approx(5.0, rel=0.01)
     assert flat_out == pytest.approx(5.0, rel=0.01)
+
+
+def test_paced_by_the_stack_the_sim_waits_for_fresh_decisions(
+    zenoh_settings: ZenohSettings, listener: Listener
+) -> None:
+    clock = lambda: max((m["stamp"] for m in listener.of(keys.SIM_CLOCK)), default=0.0)  # noqa: E731
+
+    def decide(stamp: float) -> None:
+        body = {"stamp": stamp, "linear": 0.1, "angular": 0.0, "command_id": 1}
+        listener.send("r1", pack({**body, "decided_stamp": stamp}))
+
+    gate = Gate(0.1, timeout_s=1.5)
+    with running_sim(zenoh_settings, rate=0.0, gate=gate) as node:  # rate 0: max
+        listener.wait(lambda: clock() > 1.0)  # nobody under command: flat out
+        t = clock()
+        decide(t + 0.05)  # a decision a little ahead of the clock seen: r1 is under command
+        listener.wait(lambda: gate.waits >= 1)
+        # the sim stops 0.1 s past the decision and says where it stopped
+        time.sleep(0.3)
+        held = node.sim.time
+        assert t + 0.05 + 0.1 - 0.01 <= held <= t + 0.05 + 0.1 + 0.01
+        assert clock() == pytest.approx(held, abs=1e-6)
+        # each fresh decision lets it run on, 0.1 s past the decision
+        for _ in range(3):
+            decide(held)
+            listener.wait(lambda h=held: node.sim.time >= h + 0.09)
+            time.sleep(0.2)
+            assert node.sim.time <= held + 0.1 + 0.01
+            held = node.sim.time
+        # without decisions the wait ends after timeout_s of wall time and r1 is let go
+        listener.wait(lambda: gate.timeouts == 1, timeout=5)
+        listener.wait(lambda h=held: clock() > h + 2.0)
+    assert gate.waited_wall_s >= 1.5
 
 
 def test_cli_reads_the_environment_and_stops_on_sigterm(
