@@ -194,8 +194,7 @@ def serve(
     try:
         instance = _env("PNAV_INSTANCE") or default_instance()
         tracer = Tracer(Path(trace)) if trace else None
-        robots = [r.robot_id for r in world.robots]
-        gate = Gate(max_lag, robots) if max_lag is not None else None
+        gate = Gate(max_lag) if max_lag is not None else None
         node = SimNode(
             world, config, session, rate=rate, instance=instance, tracer=tracer, gate=gate
         )

@@ -165,6 +165,9 @@ class SimNode:
                 stop.wait(min(pacer.wall_until_next(sim.steps), max(0.0, next_clock - now)))
                 continue
             for k in range(owed):
+                if gate is not None and not gate.heard:
+                    # services still starting: real time, not max (services/sim/gate.py)
+                    stop.wait(sim.dt)
                 if gate is not None:
                     gate.wait(sim.time, stop, self.publish_clock)
                     if sim.time >= next_gate_clock:

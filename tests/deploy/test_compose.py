@@ -678,7 +678,8 @@ def test_every_copy_source_exists_and_the_package_is_complete() -> None:
         pattern.rstrip("*")
         for pattern in project["tool"]["setuptools"]["packages"]["find"]["include"]
     }
-    needed = {"pyproject.toml", project["project"]["readme"], "worlds", *packages}
+    # examples/ is not installed: it sits in the working directory (tests/deploy/test_swap.py)
+    needed = {"pyproject.toml", project["project"]["readme"], "worlds", "examples", *packages}
     assert copied == needed
 
 

@@ -2,6 +2,13 @@
 service and the sim would: plain SQL, a change notification after each write, sim time on
 ``pnav/sim/clock``. Tests assert on table contents only, so another implementation of the
 controller that speaks the contract passes them by swapping the ``controller`` fixture.
+
+The ``controller`` fixture runs every test that asks for it twice: against the shipped
+controller (in-process), and against ``examples/sql_controller`` (docs/SWAP.md), started as
+a real process the way a compose container starts it: ``python -m examples.sql_controller``
+with only PNAV_* variables for this test's Postgres and loopback router, ready once its
+liveliness token is up and it holds every robot's lease, stopped with SIGTERM and expected
+to exit 0.
 """
 
 from __future__ import annotations
@@ -9,8 +16,13 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
+import os
+import signal
+import socket
+import sys
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
+from pathlib import Path
 from typing import Any, TypeVar
 
 import asyncpg
@@ -30,9 +42,19 @@ BEAMS = 360
 Obstacle = tuple[float, float, float]  # (from deg, to deg, range m), in (-180, 180], CCW
 
 
-@pytest.fixture
-async def controller(db_url: str, zenoh_settings: ZenohSettings) -> AsyncIterator[None]:
-    """The controller service, running until the test ends (in-process for this one)."""
+ROOT = Path(__file__).resolve().parents[3]
+IMPLEMENTATIONS = ("shipped", "sql_controller")
+
+
+@pytest.fixture(params=IMPLEMENTATIONS)
+async def controller(
+    request: pytest.FixtureRequest, db_url: str, zenoh_settings: ZenohSettings, tmp_path: Path
+) -> AsyncIterator[None]:
+    """A controller, running until the test ends: the shipped one, then the example."""
+    if request.param == "sql_controller":
+        async with example_controller(db_url, zenoh_settings, tmp_path / "sql_controller.log"):
+            yield
+        return
     from services.controller.service import ControllerService
 
     config = ServiceConfig(
@@ -45,6 +67,89 @@ async def controller(db_url: str, zenoh_settings: ZenohSettings) -> AsyncIterato
     )
     async with running_service(ControllerService, config, settle_s=0.5):
         yield
+
+
+def compose_like_env(db_url: str, zenoh_settings: ZenohSettings) -> dict[str, str]:
+    """What deploy/docker-compose.yml gives a controller container, pointed at this test's
+    Postgres and router; no other PNAV_* variable (PNAV_INSTANCE unset, as there)."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PNAV_")}
+    env.update(
+        PNAV_DATABASE_URL=db_url,
+        PNAV_ZENOH_MODE="client",
+        PNAV_ZENOH_CONNECT=",".join(zenoh_settings.connect),
+        PNAV_ZENOH_MULTICAST="false",
+        PNAV_LOG_LEVEL="INFO",
+        # not from compose: if this test process dies, the example dies with it
+        PNAV_PARENT_PID=str(os.getpid()),
+    )
+    return env
+
+
+@contextlib.asynccontextmanager
+async def example_controller(
+    db_url: str, zenoh_settings: ZenohSettings, log: Path
+) -> AsyncIterator[None]:
+    """``python -m examples.sql_controller`` from the repository root, until SIGTERM."""
+    with log.open("wb") as sink:
+        process = await asyncio.create_subprocess_exec(
+            sys.executable,
+            "-m",
+            "examples.sql_controller",
+            cwd=ROOT,
+            env=compose_like_env(db_url, zenoh_settings),
+            stdin=asyncio.subprocess.DEVNULL,
+            stdout=sink,
+            stderr=sink,
+        )
+    try:
+        await example_ready(process, db_url, zenoh_settings, log)
+        yield
+    finally:
+        if process.returncode is None:
+            process.send_signal(signal.SIGTERM)
+            try:
+                await asyncio.wait_for(process.wait(), 20)
+            except TimeoutError:
+                process.kill()
+                await process.wait()
+    assert process.returncode == 0, f"exit {process.returncode}:\n{tail(log)}"
+
+
+def tail(log: Path) -> str:
+    """The end of the example's log, for a failure message."""
+    return log.read_text(errors="replace")[-3000:]
+
+
+async def example_ready(
+    process: asyncio.subprocess.Process, db_url: str, zenoh_settings: ZenohSettings, log: Path
+) -> None:
+    """Its liveliness token is up (it declares it last) and it holds every robot's lease."""
+    conn = await connect(db_url)
+    session = await asyncio.to_thread(bus.open_session, zenoh_settings)
+    # PNAV_INSTANCE is unset, so it must announce itself as <hostname>-<pid>
+    instance = f"{socket.gethostname()}-{process.pid}".replace(".", "-")
+    token = keys.alive_key("controller", instance)
+
+    def token_up() -> bool:
+        replies = session.liveliness().get(token, timeout=1)
+        return any(reply.ok is not None for reply in replies)
+
+    async def ready() -> bool:
+        if process.returncode is not None:
+            raise AssertionError(f"it exited {process.returncode}:\n{tail(log)}")
+        if not await asyncio.to_thread(token_up):
+            return False
+        unleased = await conn.fetchval(
+            "SELECT count(*) FROM robot r WHERE NOT EXISTS (SELECT 1 FROM robot_lease l "
+            "WHERE l.service = 'controller' AND l.robot_id = r.robot_id AND l.released_at IS NULL)"
+        )
+        return unleased == 0
+
+    try:
+        await eventually(ready, "examples.sql_controller to be ready", 30.0)
+    finally:
+        await conn.close()
+        await asyncio.to_thread(session.close)
 
 
 class Feeder:

@@ -1,0 +1,274 @@
+"""Robot leases (CONTRACT.md, *Robot leases*): which robots this controller may act for.
+
+Replicas of the ``controller`` family split the robots, whatever code each replica runs:
+this example, the shipped controller, or one in another language. Postgres decides, and
+nothing else:
+
+- one dedicated connection (never a pooled one: a session lock must die with its owner),
+  with ``idle_session_timeout`` so that Postgres frees our robots if we stop talking;
+- on it, the membership lock ``(lease_key('controller'), 0)`` taken shared while we run;
+- robot R is ours exactly while that connection holds ``(lease_key('controller'),
+  lease_key(R))``, taken with ``robot_lease_acquire`` and given back with
+  ``robot_lease_release`` (each followed by a ``pnav/db/robot_lease/{R}`` notification);
+- every period, one read of ``robot`` and ``pg_locks`` gives the live replicas and the holder
+  of every robot; we take free robots up to our fair share and give back what is above it
+  once the excess has lasted two cycles (so ownership does not flap).
+
+We stop acting for a robot *before* releasing it: :attr:`Leases.acting` is held by the
+controller while it decides and writes, and a release first waits for it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import hashlib
+import logging
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+import asyncpg
+
+from examples.sql_controller.config import SERVICE, Settings
+
+logger = logging.getLogger("sql_controller.leases")
+
+# The lock classid is lease_key(service); objsubid = 2 marks two-key advisory locks.
+_SNAPSHOT = """
+WITH locks AS (
+    SELECT objid::bigint AS key, pid, mode FROM pg_locks
+     WHERE locktype = 'advisory' AND granted AND objsubid = 2
+       AND database = (SELECT oid FROM pg_database WHERE datname = current_database())
+       AND classid = lease_key($1)::oid)
+SELECT r.robot_id, l.pid FROM robot r
+  LEFT JOIN locks l ON l.key = lease_key(r.robot_id) AND l.mode = 'ExclusiveLock'
+UNION ALL
+SELECT NULL, pid FROM locks WHERE key = 0 AND mode = 'ShareLock'
+"""
+_CONNECTION_ERRORS = (
+    asyncpg.PostgresConnectionError,
+    asyncpg.InterfaceError,
+    asyncpg.AdminShutdownError,
+    asyncpg.CannotConnectNowError,
+    OSError,
+    TimeoutError,
+)
+Notify = Callable[[str, int | None], None]  # (robot, robot_lease id or None)
+
+
+@dataclass(frozen=True)
+class Plan:
+    take: tuple[str, ...]  # free robots, best first
+    want: int  # how many of them to take
+    excess: int  # how many of ours are above the fair share
+
+
+def affinity(instance: str, robot: str) -> int:
+    """Replicas try free robots in different orders, so they rarely race for the same one."""
+    return int.from_bytes(hashlib.sha256(f"{instance}/{robot}".encode()).digest()[:8], "big")
+
+
+def plan(holders: Mapping[str, int | None], members: set[int], me: int, instance: str) -> Plan:
+    """The contract's fair share: with R robots and N live replicas, hold floor(R/N) to
+    ceil(R/N); take up to floor, up to ceil only when no replica is below floor; more than
+    ceil is excess, and so is more than floor when another replica is below floor, nothing
+    is free, and we are the richest (ties: the lowest backend pid gives)."""
+    counts = dict.fromkeys(members | {me}, 0)
+    for pid in holders.values():
+        if pid in counts:
+            counts[pid] += 1
+    n = len(counts)
+    low, high = len(holders) // n, -(-len(holders) // n)
+    mine = counts[me]
+    others_short = any(c < low for pid, c in counts.items() if pid != me)
+    free = sorted(
+        (r for r, pid in holders.items() if pid is None), key=lambda r: -affinity(instance, r)
+    )
+    want = max(0, min(len(free), (low if others_short else high) - mine))
+    excess = mine - high if mine > high else 0
+    if not excess and mine > low and others_short and not free:
+        richest = max(counts.values())
+        excess = int(mine == richest and me == min(p for p, c in counts.items() if c == richest))
+    return Plan(tuple(free), want, excess)
+
+
+class Leases:
+    def __init__(self, settings: Settings, notify: Notify) -> None:
+        self.settings = settings
+        self.notify = notify
+        self.acting = asyncio.Lock()  # held by the controller while it acts for our robots
+        self._owned: set[str] = set()
+        self._conn: asyncpg.Connection | None = None
+        self._me = 0
+        self._confirmed = 0.0  # monotonic start of the last cycle that read our locks
+        self._excess_cycles = 0
+        self._poke = asyncio.Event()
+        self._timeout = max(1.0, settings.lease_timeout_s / 2)
+
+    def owned(self) -> frozenset[str]:
+        """Our robots; none once our view is older than 80 % of the idle timeout, since by
+        then Postgres may have ended our session and handed them to someone else."""
+        if time.monotonic() - self._confirmed > 0.8 * self.settings.lease_timeout_s:
+            return frozenset()
+        return frozenset(self._owned)
+
+    def poke(self) -> None:
+        """Revise now (a replica came or went, a robot was registered)."""
+        self._poke.set()
+
+    async def start(self) -> None:
+        """Connect and take our share before the controller's first tick."""
+        deadline = time.monotonic() + self.settings.db_wait_s
+        while True:
+            try:
+                await self._connect()
+                await self._cycle()
+                return
+            except _CONNECTION_ERRORS:
+                self._drop_all("could not start")
+                if time.monotonic() >= deadline:
+                    raise
+                await asyncio.sleep(0.2)
+
+    async def run(self, stop: asyncio.Event) -> None:
+        """Revise every period until ``stop``; survive a lost connection by reconnecting."""
+        while not stop.is_set():
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(self.settings.lease_period_s):
+                    await self._poke.wait()
+            self._poke.clear()
+            if stop.is_set():
+                return
+            try:
+                if self._conn is None:
+                    await self._connect()
+                await self._cycle()
+            except _CONNECTION_ERRORS as exc:
+                self._drop_all(f"lease connection failed: {exc!r}")
+            except asyncpg.PostgresError:
+                logger.warning("lease cycle failed", exc_info=True)
+            await asyncio.sleep(0.05)  # at most 20 cycles a second, however often poked
+
+    async def stop(self) -> None:
+        """Give every robot back (reason ``shutdown``), leave, close the lock connection."""
+        conn = self._conn
+        if conn is None or conn.is_closed():
+            self._owned.clear()
+            return
+        try:
+            await self._give_back(conn, set(self._owned), "shutdown")
+            await conn.fetchval(
+                "SELECT pg_advisory_unlock_shared(lease_key($1), 0)", SERVICE, timeout=self._timeout
+            )
+            await conn.close(timeout=self._timeout)
+        except Exception:
+            logger.warning("lease connection did not close cleanly", exc_info=True)
+            conn.terminate()  # closing the session frees its locks anyway
+        self._conn = None
+
+    # -- internals ---------------------------------------------------------------------------
+    async def _connect(self) -> None:
+        conn = await asyncpg.connect(
+            self.settings.database_url,
+            timeout=self._timeout,
+            server_settings={
+                "application_name": f"pnav-lease {SERVICE}/{self.settings.instance}"[:63]
+            },
+        )
+        try:
+            ms = int(self.settings.lease_timeout_s * 1000)
+            await conn.execute(f"SET idle_session_timeout = {ms}", timeout=self._timeout)
+            self._me = int(await conn.fetchval("SELECT pg_backend_pid()", timeout=self._timeout))
+            joined = await conn.fetchval(
+                "SELECT pg_try_advisory_lock_shared(lease_key($1), 0)",
+                SERVICE,
+                timeout=self._timeout,
+            )
+            if not joined:
+                raise ConnectionError("the controller membership lock is held exclusively")
+        except BaseException:
+            conn.terminate()
+            raise
+        conn.add_termination_listener(self._on_closed)
+        self._conn = conn
+        logger.info("lease connection open, backend pid %d", self._me)
+
+    def _on_closed(self, conn: asyncpg.Connection) -> None:
+        if conn is self._conn:
+            self._drop_all("the lock connection closed")
+
+    def _drop_all(self, why: str) -> None:
+        """The connection is gone, and our locks with it: stop acting for every robot now."""
+        if self._owned:
+            logger.warning("%s: no longer acting for %s", why, ",".join(sorted(self._owned)))
+        self._owned.clear()
+        self._confirmed = 0.0
+        conn, self._conn = self._conn, None
+        if conn is not None and not conn.is_closed():
+            conn.terminate()
+
+    async def _cycle(self) -> None:
+        conn = self._conn
+        if conn is None:
+            return
+        started = time.monotonic()
+        holders: dict[str, int | None] = {}
+        members: set[int] = set()
+        for robot, pid in await conn.fetch(_SNAPSHOT, SERVICE, timeout=self._timeout):
+            if robot is None:
+                members.add(pid)
+            else:
+                holders[robot] = pid
+        self._confirmed = started
+        # pg_locks is the truth; a robot whose row was deleted still has our lock: free it.
+        gone = {r for r in self._owned if r not in holders}
+        self._owned = {r for r, pid in holders.items() if pid == self._me}
+        await self._give_back(conn, gone, "robot gone")
+
+        decision = plan(holders, members, self._me, self.settings.instance)
+        self._excess_cycles = self._excess_cycles + 1 if decision.excess else 0
+        if self._excess_cycles >= 2:  # hysteresis: an excess must last two cycles
+            self._excess_cycles = 0
+            ours = sorted(self._owned, key=lambda r: affinity(self.settings.instance, r))
+            await self._give_back(conn, set(ours[: decision.excess]), "rebalance")
+        taken: list[str] = []
+        for robot in decision.take:
+            if len(taken) >= decision.want:
+                break
+            try:
+                lease_id = await conn.fetchval(
+                    "SELECT robot_lease_acquire($1, $2, $3)",
+                    SERVICE,
+                    robot,
+                    self.settings.instance,
+                    timeout=self._timeout,
+                )
+            except asyncpg.PostgresError as exc:
+                if isinstance(exc, _CONNECTION_ERRORS):
+                    raise
+                logger.warning("could not lease %s: %s", robot, exc)  # e.g. just deleted
+                continue
+            if lease_id is not None:  # None: another replica was quicker
+                self._owned.add(robot)
+                taken.append(robot)
+                self.notify(robot, int(lease_id))
+        if taken:
+            logger.info("leased %s (replicas %d)", ",".join(taken), len(members | {self._me}))
+
+    async def _give_back(self, conn: asyncpg.Connection, robots: set[str], reason: str) -> None:
+        if not robots:
+            return
+        self._owned -= robots
+        async with self.acting:  # a tick under way for them finishes first; none starts
+            pass
+        for robot in sorted(robots):
+            await conn.fetchval(
+                "SELECT robot_lease_release($1, $2, $3)",
+                SERVICE,
+                robot,
+                reason,
+                timeout=self._timeout,
+            )
+            self.notify(robot, None)
+        logger.info("gave back %s (%s)", ",".join(sorted(robots)), reason)
