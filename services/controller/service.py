@@ -8,20 +8,26 @@ controller scenarios (registry.py) each robot's strategy names. The service is t
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Awaitable, Callable
 from typing import Any, TypeVar
 
 from common import log
-from common.contract import records
+from common.bus import Notification
+from common.contract import keys, records
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
 from common.runtime import Runtime
-from common.service import ScenarioService
+from common.service import ScenarioService, wake_on_notifications
 from services.controller.meta import ControllerState, MetaController
 from services.controller.scenario import Recommendation
 
 logger = logging.getLogger("pnav.controller")
 
 T = TypeVar("T")
+
+# Notifications are hints: a row is read again after this long (wall) even if none came.
+RECHECK_S = 0.25
+_META_TABLES = frozenset((keys.ACTIVE_STRATEGY, keys.STRATEGY, keys.ROBOT))
 
 
 class ControllerService(ScenarioService):
@@ -31,6 +37,14 @@ class ControllerService(ScenarioService):
         super().__init__(runtime)
         self.state = ControllerState()
         self._reads: dict[tuple[str, str], tuple[int, Any]] = {}
+        # What the notifications announced, written on Zenoh's thread (single stores): the
+        # newest laser_scan id per robot, and whether robots or strategies changed. Reads
+        # are skipped while nothing newer was announced, so an activation woken by one
+        # robot's scan reads that robot's scan only, not every robot's.
+        self._announced_scan: dict[str, int | None] = {}
+        self._scans: dict[str, tuple[LaserScan | None, float]] = {}
+        self._meta_dirty = True
+        self._meta: tuple[list[Robot], dict[str, ActiveStrategy], float] | None = None
 
     def seed(self) -> None:
         self.engine.add_meta(lambda: MetaController(self, self.state, owns=self.owns))
@@ -41,9 +55,44 @@ class ControllerService(ScenarioService):
         # recommended on (another replica served the robot since).
         for key in [k for k in self._reads if k[1] in lost]:
             del self._reads[key]
+        for robot_id in lost:
+            self._scans.pop(robot_id, None)
         for key in [k for k in self.state.last_scan if k[0] in gained]:
             del self.state.last_scan[key]
         super().on_ownership_change(gained, lost)
+
+    def watch(self) -> None:
+        """As the base class does, noting what each notification announces."""
+        for subscriber in wake_on_notifications(
+            self.runtime.zenoh, self.engine, self.engine.watched_tables, observer=self._note
+        ):
+            self.runtime.on_close(subscriber.undeclare)
+
+    def _note(self, key: str, payload: bytes) -> None:
+        try:
+            note = Notification.decode(key, payload)
+        except ValueError:
+            self._meta_dirty = True  # unreadable: assume anything changed
+            return
+        if note.table == keys.LASER_SCAN and note.robot is not None:
+            known = self._announced_scan.get(note.robot)
+            if note.id is None or known is None or note.id > known:
+                # an id-less hint leaves None: "something new", read at the next chance
+                self._announced_scan[note.robot] = note.id
+            if note.id is None:
+                self._scans.pop(note.robot, None)
+        elif note.table in _META_TABLES:
+            self._meta_dirty = True
+
+    async def _meta_reads(self) -> tuple[list[Robot], dict[str, ActiveStrategy]]:
+        meta = self._meta
+        if meta is None or self._meta_dirty or time.monotonic() - meta[2] >= RECHECK_S:
+            self._meta_dirty = False  # before the reads: a change meanwhile flags it again
+            pool = self.runtime.database.pool
+            read_at = time.monotonic()
+            meta = (await records.robots(pool), await records.active_strategies(pool), read_at)
+            self._meta = meta
+        return meta[0], meta[1]
 
     # -- Host ------------------------------------------------------------------------------
     def sim_now(self) -> float | None:
@@ -51,13 +100,26 @@ class ControllerService(ScenarioService):
         return clock.now() if clock.started else None
 
     async def robots(self) -> list[Robot]:
-        return await records.robots(self.runtime.database.pool)
+        return (await self._meta_reads())[0]
 
     async def active_strategies(self) -> dict[str, ActiveStrategy]:
-        return await records.active_strategies(self.runtime.database.pool)
+        return (await self._meta_reads())[1]
 
     async def newest_scan(self, robot_id: str) -> LaserScan | None:
-        return await self._once_per_activation("scan", robot_id, records.newest_scan)
+        cached = self._scans.get(robot_id)
+        if cached is not None and time.monotonic() - cached[1] < RECHECK_S:
+            scan = cached[0]
+            announced = self._announced_scan.get(robot_id, -1)
+            if announced is not None and scan is not None and announced <= scan.id:
+                return scan  # nothing newer announced since it was read
+            if announced == -1 and scan is None:
+                return None  # no scan yet, and none announced
+        read_at = time.monotonic()
+        scan = await records.newest_scan(self.runtime.database.pool, robot_id)
+        self._scans[robot_id] = (scan, read_at)
+        if scan is not None and self._announced_scan.get(robot_id, -1) is None:
+            self._announced_scan[robot_id] = scan.id  # the id-less hint is answered
+        return scan
 
     async def newest_odometry(self, robot_id: str) -> Odometry | None:
         return await self._once_per_activation("odometry", robot_id, records.newest_odometry)
