@@ -35,8 +35,9 @@ async def _keep_session(conn: asyncpg.Connection) -> None:
     asyncpg's default also sends ``SELECT pg_advisory_unlock_all(); CLOSE ALL; UNLISTEN *;
     RESET ALL`` on every release, before ``pool.fetch*`` returns: one more round trip per
     pooled query (a pooled ``SELECT`` took 0.12 ms p50 with it, 0.06 ms without, on the
-    embedded Postgres; a scenario rule makes two to four of them per wake). Services keep no session state on pooled connections (leases use a
-    dedicated connection, settings are fixed at connect), so there is nothing to reset.
+    embedded Postgres; a scenario rule makes two to four of them per wake). Services keep
+    no session state on pooled connections (leases use a dedicated connection, settings
+    are fixed at connect), so there is nothing to reset.
     """
 
 
