@@ -141,6 +141,49 @@ async def newest_scan(db: Executor, robot_id: str) -> LaserScan | None:
     return LaserScan(**fields)
 
 
+_SCAN_AND_ODOMETRY = (
+    "SELECT s.id, s.robot_id, s.stamp, s.angle_min, s.angle_increment, s.range_min, "
+    "s.range_max, s.ranges, o.id AS o_id, o.stamp AS o_stamp, o.x AS o_x, o.y AS o_y, "
+    "o.yaw AS o_yaw, o.linear_mps AS o_linear_mps, o.angular_rps AS o_angular_rps "
+    "FROM (SELECT * FROM laser_scan WHERE robot_id = $1 ORDER BY id DESC LIMIT 1) s "
+    "LEFT JOIN LATERAL (SELECT * FROM odometry WHERE robot_id = $1 ORDER BY id DESC LIMIT 1) o "
+    "ON true"
+)
+
+
+async def newest_scan_and_odometry(
+    db: Executor, robot_id: str
+) -> tuple[LaserScan | None, Odometry | None]:
+    """The robot's newest scan and newest odometry in one round trip (odometry is None
+    when there is no scan yet, or no odometry)."""
+    row = await db.fetchrow(_SCAN_AND_ODOMETRY, robot_id)
+    if row is None:
+        return None, None
+    scan = LaserScan(
+        id=row["id"],
+        robot_id=row["robot_id"],
+        stamp=row["stamp"],
+        angle_min=row["angle_min"],
+        angle_increment=row["angle_increment"],
+        range_min=row["range_min"],
+        range_max=row["range_max"],
+        ranges=np.asarray(row["ranges"], dtype=np.float32),
+    )
+    if row["o_id"] is None:
+        return scan, None
+    odom = Odometry(
+        id=row["o_id"],
+        robot_id=robot_id,
+        stamp=row["o_stamp"],
+        x=row["o_x"],
+        y=row["o_y"],
+        yaw=row["o_yaw"],
+        linear_mps=row["o_linear_mps"],
+        angular_rps=row["o_angular_rps"],
+    )
+    return scan, odom
+
+
 async def newest_battery(db: Executor, robot_id: str) -> Battery | None:
     row = await db.fetchrow(
         "SELECT id, robot_id, stamp, energy_wh, capacity_wh, percentage, charging FROM battery "

@@ -39,6 +39,24 @@ async def test_newest_rows_per_robot(seeded: asyncpg.Connection) -> None:
     assert [r.robot_id for r in await records.robots(seeded)] == ["r1", "r2"]
 
 
+async def test_newest_scan_and_odometry_in_one_read(seeded: asyncpg.Connection) -> None:
+    scan, odom = await records.newest_scan_and_odometry(seeded, "r1")
+    alone = await records.newest_scan(seeded, "r1")
+    assert scan is not None and alone is not None
+    assert (scan.id, scan.stamp, scan.angle_increment) == (
+        alone.id,
+        alone.stamp,
+        alone.angle_increment,
+    )
+    assert np.array_equal(scan.ranges, alone.ranges)
+    assert odom == await records.newest_odometry(seeded, "r1")
+    assert scan is not None and scan.ranges.dtype == np.float32 and len(scan.ranges) == 360
+    assert await records.newest_scan_and_odometry(seeded, "r2") == (None, None)
+    await seeded.execute("DELETE FROM odometry")
+    scan, odom = await records.newest_scan_and_odometry(seeded, "r1")
+    assert scan is not None and odom is None
+
+
 async def test_scan_sectors_use_angles_relative_to_the_heading(seeded: asyncpg.Connection) -> None:
     scan = await records.newest_scan(seeded, "r1")
     assert scan is not None and scan.ranges.dtype == np.float32
