@@ -7,6 +7,7 @@ asyncpg connection (or pool) and return plain frozen dataclasses.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any, TypeAlias
@@ -42,6 +43,17 @@ class Odometry:
     angular_rps: float
 
 
+@functools.lru_cache(maxsize=16)
+def _beam_angles(
+    angle_min: float, increment: float, n: int
+) -> np.ndarray[Any, np.dtype[np.float64]]:
+    # every scan of a lidar has the same geometry: work the angles out once, not per scan
+    raw = angle_min + increment * np.arange(n)
+    out = np.asarray(np.arctan2(np.sin(raw), np.cos(raw)), dtype=np.float64)
+    out.flags.writeable = False
+    return out
+
+
 @dataclass(frozen=True)
 class LaserScan:
     id: int
@@ -54,9 +66,9 @@ class LaserScan:
     ranges: np.ndarray[Any, np.dtype[np.float32]]
 
     def angles(self) -> np.ndarray[Any, np.dtype[np.float64]]:
-        """Beam angles relative to the heading, wrapped to (-pi, pi]."""
-        raw = self.angle_min + self.angle_increment * np.arange(len(self.ranges))
-        return np.asarray(np.arctan2(np.sin(raw), np.cos(raw)), dtype=np.float64)
+        """Beam angles relative to the heading, wrapped to (-pi, pi] (read-only: shared by
+        every scan with the same geometry)."""
+        return _beam_angles(self.angle_min, self.angle_increment, len(self.ranges))
 
     def sector_min(self, low: float, high: float) -> float:
         """Closest valid range among beams with angle in [low, high] (rad); inf if none."""

@@ -44,7 +44,6 @@ class ControllerService(ScenarioService):
         self._announced_scan: dict[str, int | None] = {}
         self._scans: dict[str, tuple[LaserScan | None, float]] = {}
         self._odometry_with_scan: dict[str, tuple[int | None, Odometry | None]] = {}
-        self._scan_tick: dict[str, int] = {}  # the activation that read the robot's scan
         self._meta_dirty = True
         self._meta: tuple[list[Robot], dict[str, ActiveStrategy], float] | None = None
 
@@ -121,24 +120,23 @@ class ControllerService(ScenarioService):
         # the avoid scenarios want the odometry too, for the same scan: one round trip
         scan, odom = await records.newest_scan_and_odometry(self.runtime.database.pool, robot_id)
         self._scans[robot_id] = (scan, read_at)
-        self._scan_tick[robot_id] = self.engine.counters.activations
         self._odometry_with_scan[robot_id] = (scan.id if scan else None, odom)
         if scan is not None and self._announced_scan.get(robot_id, -1) is None:
             self._announced_scan[robot_id] = scan.id  # the id-less hint is answered
         return scan
 
     async def newest_odometry(self, robot_id: str) -> Odometry | None:
-        """The odometry read with the robot's current scan, if that scan was read in this
-        activation; otherwise the newest, once per activation."""
+        """The odometry read together with the robot's current scan: the robot's motion at
+        the moment that scan was read, which is what a decision about the scan needs (a
+        scenario may come to the scan an activation later); otherwise the newest, read once
+        per activation."""
         scan = self._scans.get(robot_id)
         with_scan = self._odometry_with_scan.get(robot_id)
-        tick = self.engine.counters.activations
         if (
             scan is not None
             and scan[0] is not None
             and with_scan is not None
             and with_scan[0] == scan[0].id
-            and self._scan_tick.get(robot_id) == tick
         ):
             return with_scan[1]
         return await self._once_per_activation("odometry", robot_id, records.newest_odometry)
