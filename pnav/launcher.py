@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
+import shlex
 import sys
 import tempfile
 from collections.abc import AsyncIterator
@@ -51,6 +52,8 @@ class StackOptions:
     extra_env: dict[str, str] = field(default_factory=dict)
     # processes per scenario service (default 1): replicas split the robots (common.lease)
     replicas: dict[str, int] = field(default_factory=dict)
+    # service -> the command run in its place (another implementation, docs/SWAP.md)
+    replace: dict[str, list[str]] = field(default_factory=dict)
 
 
 @dataclass
@@ -101,6 +104,34 @@ def parse_replicas(values: list[str] | tuple[str, ...] | None) -> dict[str, int]
     return out
 
 
+def parse_replace(values: list[str] | tuple[str, ...] | None) -> dict[str, list[str]]:
+    """``["controller=python -m examples.sql_controller"]`` -> ``{"controller": [...]}``.
+
+    Only a scenario service can be swapped: the sim and the bridge are the robot's side, not
+    a part of the navigation design one would compare. ``python`` is this interpreter, so a
+    module of this checkout runs with the same packages.
+    """
+    out: dict[str, list[str]] = {}
+    for value in values or ():
+        name, sep, command = value.partition("=")
+        name = name.strip()
+        if not sep or not command.strip():
+            raise UsageError(f"--replace {value!r}: write SERVICE=COMMAND")
+        if name not in SCENARIO_SERVICES:
+            raise UsageError(
+                f"--replace {value!r}: only a scenario service can be replaced "
+                f"({', '.join(SCENARIO_SERVICES)})"
+            )
+        try:
+            argv = shlex.split(command)
+        except ValueError as exc:
+            raise UsageError(f"--replace {value!r}: {exc}") from None
+        if argv[0] in ("python", "python3"):
+            argv[0] = sys.executable
+        out[name] = argv
+    return out
+
+
 def service_specs(local: LocalStack, options: StackOptions, world: Path) -> list[ProcessSpec]:
     """One process per service; ``options.replicas[name]`` processes for a replicated one,
     named ``name-1``, ``name-2``... with ``PNAV_INSTANCE`` set to that name (a lone process
@@ -108,7 +139,7 @@ def service_specs(local: LocalStack, options: StackOptions, world: Path) -> list
     env = {**local.env(), **options.extra_env}
     specs = []
     for name in options.services:
-        argv = [sys.executable, "-m", f"services.{name}"]
+        argv = options.replace.get(name) or [sys.executable, "-m", f"services.{name}"]
         if name == "sim":
             argv += ["--world", str(world), "--rate", options.rate]
             if options.gui:

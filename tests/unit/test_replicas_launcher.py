@@ -89,3 +89,39 @@ def test_bench_latency_robot_counts() -> None:
     for bad in ("", "0", "a,2"):
         with pytest.raises(UsageError, match="--robots"):
             parse_counts(bad, "--robots")
+
+
+def test_a_replaced_service_runs_the_given_command_with_the_same_environment() -> None:
+    import sys
+
+    from pnav.launcher import parse_replace
+
+    replace = parse_replace(["controller=python -m examples.sql_controller --flag 'a b'"])
+    assert replace == {
+        "controller": [sys.executable, "-m", "examples.sql_controller", "--flag", "a b"]
+    }
+    options = StackOptions(replace=replace, replicas={"controller": 2})
+    specs = {s.name: s for s in service_specs(local(), options, Path("worlds/open_room.yaml"))}
+    for name in ("controller-1", "controller-2"):
+        assert specs[name].argv == replace["controller"]
+        assert specs[name].env["PNAV_INSTANCE"] == name
+    assert specs["planner"].argv[1:] == ["-m", "services.planner"]
+    assert specs["planner"].env == {
+        k: v for k, v in specs["controller-1"].env.items() if k != "PNAV_INSTANCE"
+    }
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ("controller", "SERVICE=COMMAND"),
+        ("controller=", "SERVICE=COMMAND"),
+        ("sim=python -m other", "only a scenario service"),
+        ("planner=python 'unclosed", "closing quotation"),
+    ],
+)
+def test_a_bad_replace_value_says_why(value: str, message: str) -> None:
+    from pnav.launcher import parse_replace
+
+    with pytest.raises(UsageError, match=message):
+        parse_replace([value])
