@@ -17,21 +17,12 @@ import numpy.typing as npt
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from services.sim.mapserver import write_pgm
+from services.sim.mapserver import map_yaml, write_pgm
 
 RES = 0.05
 WALL = 0.10  # wall thickness, m
 MARGIN = 0.10  # unknown band outside the walls, m
 FREE, OCCUPIED, UNKNOWN = 254, 0, 205
-
-MAP_YAML = """image: {image}
-resolution: {res}
-origin: [{ox}, {oy}, 0.0]
-negate: 0
-occupied_thresh: 0.65
-free_thresh: 0.196
-mode: trinary
-"""
 
 
 class Canvas:
@@ -63,9 +54,7 @@ class Canvas:
         # PGM row 0 is the top of the image: flip the bottom-up canvas
         write_pgm(out / f"{name}.pgm", np.flipud(self.pixels))
         origin = -self.offset
-        (out / f"{name}.yaml").write_text(
-            MAP_YAML.format(image=f"{name}.pgm", res=RES, ox=origin, oy=origin)
-        )
+        (out / f"{name}.yaml").write_text(map_yaml(f"{name}.pgm", RES, origin, origin))
 
 
 def open_room() -> Canvas:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from services.sim.mapserver import write_pgm
+from services.sim.mapserver import map_yaml, write_pgm
 
 RES = 0.05
 LANE_M = 4.0  # distance between a lane's two goals
@@ -66,10 +66,7 @@ def write_hall(directory: Path, robots: int) -> Hall:
     pixels[wall : h - wall, wall : w - wall] = FREE
     # map_server images are stored top row first
     write_pgm(directory / "hall.pgm", pixels[::-1].copy())
-    (directory / "hall_map.yaml").write_text(
-        f"image: hall.pgm\nresolution: {RES}\norigin: [{-WALL_M}, {-WALL_M}, 0.0]\n"
-        "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\nmode: trinary\n"
-    )
+    (directory / "hall_map.yaml").write_text(map_yaml("hall.pgm", RES, -WALL_M, -WALL_M))
     robot_lines = [
         f"  - {{id: {ln.robot_id}, x: {ln.a[0]}, y: {ln.a[1]}, yaw: 0.0}}" for ln in all_lanes
     ]

@@ -26,19 +26,10 @@ from pnav.navbench.difficulty import Difficulty
 from pnav.navbench.generator import LEVELS, ORIGIN, GeneratedWorld
 from pnav.navbench.metrics import GOAL_TOLERANCE_M, TOP_SPEED_MPS, default_time_limit, optimal_time
 from pnav.navbench.search import BoolGrid, Point
-from services.sim.mapserver import OCCUPIED, OccupancyGrid, encode_pgm, load_map
+from services.sim.mapserver import OCCUPIED, OccupancyGrid, encode_pgm, load_map, map_yaml
 
 FORMAT = 1
 FREE_PX, OCCUPIED_PX = 254, 0  # as map_saver writes them
-
-MAP_YAML = """image: {image}
-resolution: {res}
-origin: [{ox}, {oy}, 0.0]
-negate: 0
-occupied_thresh: 0.65
-free_thresh: 0.196
-mode: trinary
-"""
 
 
 def _r(value: float, digits: int = 4) -> float:
@@ -93,9 +84,7 @@ def write_world(world: GeneratedWorld, folder: Path, *, header: str = "") -> Pat
     pixels = np.where(world.occupied, OCCUPIED_PX, FREE_PX).astype(np.uint8)
     (maps / f"{world.name}.pgm").write_bytes(encode_pgm(np.flipud(pixels)))
     (maps / f"{world.name}.yaml").write_text(
-        MAP_YAML.format(
-            image=f"{world.name}.pgm", res=world.layout.resolution_m, ox=ORIGIN[0], oy=ORIGIN[1]
-        )
+        map_yaml(f"{world.name}.pgm", world.layout.resolution_m, ORIGIN[0], ORIGIN[1])
     )
     comment = "".join(f"# {line}\n".replace("# \n", "#\n") for line in header.splitlines())
     body = yaml.safe_dump(world_document(world), sort_keys=False, default_flow_style=None)

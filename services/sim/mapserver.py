@@ -123,6 +123,14 @@ def write_pgm(path: Path, pixels: npt.NDArray[np.uint8], *, binary: bool = True)
     path.write_bytes(encode_pgm(pixels, binary=binary))
 
 
+def map_yaml(image: str, resolution: float, origin_x: float, origin_y: float) -> str:
+    """The map_server YAML of a trinary map whose pixels are map_saver's 0 / 205 / 254."""
+    return (
+        f"image: {image}\nresolution: {resolution}\norigin: [{origin_x}, {origin_y}, 0.0]\n"
+        "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\nmode: trinary\n"
+    )
+
+
 # -- the grid ----------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class OccupancyGrid:
