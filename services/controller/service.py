@@ -16,6 +16,7 @@ from common import log
 from common.bus import Notification
 from common.contract import keys, records
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
+from common.db import Database
 from common.runtime import Runtime
 from common.service import ScenarioService, wake_on_notifications
 from services.controller.meta import ControllerState, MetaController
@@ -28,6 +29,22 @@ T = TypeVar("T")
 # Notifications are hints: a row is read again after this long (wall) even if none came.
 RECHECK_S = 0.25
 _META_TABLES = frozenset((keys.ACTIVE_STRATEGY, keys.STRATEGY, keys.ROBOT))
+
+
+async def store_recommendation(db: Database, r: Recommendation) -> int:
+    """A scenario's recommendation as a command_recommendation row (notified after commit)."""
+    return await records.recommend_velocity(
+        db,
+        r.robot_id,
+        source=r.source,
+        priority=r.priority,
+        linear=r.linear,
+        angular=r.angular,
+        stamp=r.stamp,
+        ttl_s=r.ttl_s,
+        reason=r.reason,
+        inputs=r.inputs,
+    )
 
 
 class ControllerService(ScenarioService):
@@ -143,18 +160,7 @@ class ControllerService(ScenarioService):
 
     async def recommend(self, recommendation: Recommendation) -> int:
         r = recommendation
-        row_id = await records.recommend_velocity(
-            self.runtime.database,
-            r.robot_id,
-            source=r.source,
-            priority=r.priority,
-            linear=r.linear,
-            angular=r.angular,
-            stamp=r.stamp,
-            ttl_s=r.ttl_s,
-            reason=r.reason,
-            inputs=r.inputs,
-        )
+        row_id = await store_recommendation(self.runtime.database, r)
         log.event(
             logger,
             logging.DEBUG,
