@@ -9,6 +9,7 @@ from pathlib import Path
 import uvloop
 
 from common.errors import PnavError, UsageError
+from pnav.navbench.worlds_cli import add_worlds_parser
 
 
 def _stack_options(parser: argparse.ArgumentParser) -> None:
@@ -39,6 +40,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="SERVICE=N",
         help="run N processes of a scenario service that split the robots, e.g. "
         "controller=3 (repeatable, or comma-separated)",
+    )
+    up.add_argument(
+        "--replace",
+        action="append",
+        metavar="SERVICE=COMMAND",
+        help="run COMMAND instead of a scenario service, with the same environment, e.g. "
+        "controller='python -m examples.sql_controller' (docs/SWAP.md; repeatable)",
     )
 
     goal = commands.add_parser("goal", help="send a robot to X Y (replaces its goal)")
@@ -98,6 +106,39 @@ def build_parser() -> argparse.ArgumentParser:
         help="replicas: N of every scenario service, or SERVICE=N (repeatable)",
     )
     latency.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
+    nav = benches.add_parser(
+        "nav",
+        help="navigation: success, SPL and BARN score of every strategy/planner combo per world",
+        description="Runs the whole stack (sim at --rate max, paced by the stack) in every "
+        "world of a suite with every shipped strategy/planner combination, one episode per "
+        "world, combo and run. The whole shipped suite is 60 worlds x 4 combos = 240 "
+        "episodes, about 25 min on 2 cores (times --runs, twice with --monolith): --levels "
+        "and --worlds run a subset.",
+    )
+    nav.add_argument(
+        "--suite", type=Path, default=Path("worlds/barn"), help="suite folder (worlds/barn)"
+    )
+    nav.add_argument("--runs", type=int, default=1, help="runs per world and combo, seed = run")
+    nav.add_argument("--levels", help="only these levels, comma-separated (e.g. easy,medium)")
+    nav.add_argument(
+        "--worlds", metavar="N|NAMES", help="the first N worlds of each level, or these names"
+    )
+    nav.add_argument(
+        "--combos", help="e.g. GOTO_AVOID/turn_then_move,GOTO_DIRECT (default: all shipped)"
+    )
+    nav.add_argument(
+        "--monolith",
+        action="store_true",
+        help="also run each episode in the monolith (pnav.monolith) and compare the cost",
+    )
+    nav.add_argument("--json", metavar="FILE", help="every run and the summaries ('-': stdout)")
+    nav.add_argument(
+        "--report", type=Path, metavar="DIR", help="write DIR/README.md, a PNG per run, DIR/logs"
+    )
+    nav.add_argument(
+        "--compare", type=Path, metavar="FILE", help="compare each run with an earlier --json"
+    )
+    add_worlds_parser(commands)
     return parser
 
 
@@ -130,7 +171,7 @@ def dispatch(args: argparse.Namespace) -> int:
     from pnav import commands
 
     if args.command == "up":
-        from pnav.launcher import StackOptions, parse_replicas
+        from pnav.launcher import StackOptions, parse_replace, parse_replicas
         from pnav.up import up
 
         options = StackOptions(
@@ -144,6 +185,7 @@ def dispatch(args: argparse.Namespace) -> int:
             log_dir=args.log_dir,
             echo=not args.quiet,
             replicas=parse_replicas(args.replicas),
+            replace=parse_replace(args.replace),
         )
         return uvloop.run(up(options))
     if args.command == "down":
@@ -177,6 +219,14 @@ def dispatch(args: argparse.Namespace) -> int:
             parse_replicas(args.replicas),
             args.json,
         )
+    if args.command == "bench" and args.bench == "nav":
+        from pnav.navbench import runner
+
+        return runner.run(args)
+    if args.command == "worlds":
+        from pnav.navbench.worlds_cli import run_worlds
+
+        return run_worlds(args)
     raise AssertionError(f"unhandled command {args.command}")  # argparse enforces the choices
 
 

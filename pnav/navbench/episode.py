@@ -8,8 +8,18 @@ makes a run slower in wall time, not different in sim time.
 The episode watches what a user would: odometry (the driven trajectory), collision events
 and the commands reaching the sim. Sim time counts from the first decided command that
 moves the robot, because before it the robot stands still while the services start; the
-episode ends at the first of reaching the goal (within ``SUCCESS_RADIUS_M``), a collision,
-or the time limit.
+episode ends at the first of reaching the goal (within the episode's goal tolerance, BARN's
+0.3 m by default), a collision, or the time limit.
+
+What the run cost is measured over the same span (first decision to the end): the CPU
+seconds of every process of the stack (``pnav.bench.processes.Usage``: the services,
+Postgres, and this process with its Zenoh router) and the wall time, so that a benchmark can
+put them per sim second next to another way of running the same logic; and the
+sense-to-act latency of every decision of the run (wall ms from the sim publishing the
+reading a recommendation was made from to the command reaching the sim), joined through
+the sim's trace and the commands' provenance exactly as ``pnav bench latency`` does. The
+sim's pacing figures (``gate_timeouts``: waits that gave up after 2 s wall, i.e. the pacing
+failed) are read from its log once it stopped.
 """
 
 from __future__ import annotations
@@ -17,6 +27,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
+import re
 import tempfile
 import threading
 import time
@@ -29,11 +40,19 @@ from common.config import ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime
 from pnav import commands
+from pnav.bench import provenance as prov
+from pnav.bench.latency import Collected, collect
+from pnav.bench.processes import Usage
 from pnav.launcher import StackOptions, launched
+from pnav.navbench.metrics import GOAL_TOLERANCE_M
+from services.sim.trace import CMD_VEL, read_trace
 
-SUCCESS_RADIUS_M = 0.3  # BARN: the goal counts as reached within this distance
+SUCCESS_RADIUS_M = GOAL_TOLERANCE_M  # BARN: the goal counts as reached within 0.3 m
 MAX_LAG_S = 0.1  # the decision service re-issues every 0.1 s sim: never staler than that
 WALL_FACTOR = 4.0  # a run may take this many times its time limit in wall time, plus START
+# read new commands (and the sensor rows they name) this often, wall: Postgres keeps 900
+# odometry rows a robot, 30 s of sim time, which a paced run crosses in 3 s or more
+COLLECT_PERIOD_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -61,6 +80,7 @@ class Episode:
     time_limit_s: float
     seed: int = 0
     robot: str = "r1"
+    goal_tolerance_m: float = SUCCESS_RADIUS_M
 
 
 @dataclass
@@ -72,18 +92,27 @@ class Outcome:
     trajectory: list[tuple[float, float, float]] = field(default_factory=list)  # (t, x, y)
     collisions: list[tuple[float, float, float, str]] = field(default_factory=list)
     final_distance_m: float = math.inf
-    wall_s: float = 0.0
+    wall_s: float = 0.0  # the whole episode, the stack's start-up and shut-down included
+    run_wall_s: float = 0.0  # wall time from the first decision to the end
+    cpu_s: float = 0.0  # CPU seconds of the whole stack over the same span
+    cpu_by_role: dict[str, float] = field(default_factory=dict)  # sim, postgres, launcher...
+    gate_timeouts: int | None = None  # from the sim's log; None when it could not be read
+    log_dir: str = ""
+    latency_ms: list[float] = field(default_factory=list)  # sense-to-act, one per decision
 
 
 class Watcher:
     """Odometry, collisions and commands of one robot, from Zenoh's threads."""
 
-    def __init__(self, robot: str, goal: tuple[float, float]) -> None:
-        self.robot, self.goal = robot, goal
+    def __init__(
+        self, robot: str, goal: tuple[float, float], tolerance_m: float = SUCCESS_RADIUS_M
+    ) -> None:
+        self.robot, self.goal, self.tolerance_m = robot, goal, tolerance_m
         self.lock = threading.Lock()
         self.odom: list[tuple[float, float, float]] = []
         self.collisions: list[tuple[float, float, float, str]] = []
         self.first_decision: float | None = None
+        self.checked = 0  # odometry points already looked at for arrival
 
     def on_odom(self, _key: str, payload: bytes) -> None:
         m = bus.unpack(payload)
@@ -112,9 +141,12 @@ class Watcher:
             hits = [c for c in self.collisions if c[0] >= t0]
             if hits:
                 return "collision", hits[0][0] - t0
-            for t, x, y in reversed(self.odom[-10:]):
-                if t >= t0 and math.dist((x, y), self.goal) <= SUCCESS_RADIUS_M:
+            # every point since the last look, oldest first: the arrival is the first point
+            # inside the tolerance, however many came in between two looks
+            for t, x, y in self.odom[self.checked :]:
+                if t >= t0 and math.dist((x, y), self.goal) <= self.tolerance_m:
                     return "goal", t - t0
+            self.checked = len(self.odom)
             if self.odom[-1][0] - t0 > limit_s:
                 return "timeout", limit_s
         return None
@@ -134,16 +166,55 @@ async def ensure_combo(rt: Runtime, combo: Combo) -> None:
     )
 
 
+def gate_figures(sim_log: Path) -> dict[str, int]:
+    """``gate_waits`` and ``gate_timeouts`` from the sim's last "sim stopped" line ({} if
+    there is none: the sim did not stop cleanly, or the log is elsewhere)."""
+    try:
+        text = sim_log.read_text(errors="replace")
+    except OSError:
+        return {}
+    stops = [line for line in text.splitlines() if "sim stopped" in line]
+    if not stops:
+        return {}
+    found = re.findall(r"(gate_waits|gate_timeouts)=(\d+)", stops[-1])
+    return {name: int(value) for name, value in found}
+
+
+def sense_to_act_ms(trace: Path, collected: Collected, since: float, until: float) -> list[float]:
+    """The latency of each decision whose reading the sim published between ``since`` and
+    ``until`` (wall, time.time()), in ms; [] without a trace."""
+    try:
+        events = read_trace(trace)
+    except OSError:
+        return []
+    published: dict[tuple[str, str, int], float] = {}
+    arrivals: dict[int, float] = {}
+    for e in events:
+        if e.kind == CMD_VEL:
+            arrivals.setdefault(e.ref, e.wall_ns / 1e9)
+        else:
+            published[(e.kind, e.robot, e.ref)] = e.wall_ns / 1e9
+    found, _ = prov.samples(arrivals, collected.commands, collected.rows, published)
+    return [s.total_ms for s in found if since <= s.published <= until]
+
+
 async def run_episode(episode: Episode, log_dir: Path | None = None) -> Outcome:
+    log_dir = log_dir or Path(tempfile.mkdtemp(prefix="pnav-nav-"))
     options = StackOptions(
         world=str(episode.world),
         rate="max",
         zenoh_port=None,
-        log_dir=log_dir or Path(tempfile.mkdtemp(prefix="pnav-nav-")),
-        extra_env={"PNAV_SIM_MAX_LAG": str(MAX_LAG_S), "PNAV_SIM_SEED": str(episode.seed)},
+        log_dir=log_dir,
+        extra_env={
+            "PNAV_SIM_MAX_LAG": str(MAX_LAG_S),
+            "PNAV_SIM_SEED": str(episode.seed),
+            "PNAV_SIM_TRACE": str(log_dir / "trace.csv"),
+        },
     )
     started = time.monotonic()
-    watcher = Watcher(episode.robot, episode.goal)
+    watcher = Watcher(episode.robot, episode.goal, episode.goal_tolerance_m)
+    usage: Usage | None = None
+    collected, window, next_collect = Collected(), [0.0, 0.0], 0.0
     async with launched(options) as stack:
         config = ServiceConfig(
             service="navbench", database_url=stack.local.database_url, zenoh=stack.local.zenoh
@@ -168,13 +239,24 @@ async def run_episode(episode: Episode, log_dir: Path | None = None) -> Outcome:
                 raise RuntimeError(f"strategy {episode.combo.code} {verdict}: {reason}")
             await commands.set_goal(rt, episode.robot, *episode.goal)
             wall_cap = started + 30.0 + WALL_FACTOR * episode.time_limit_s
-            while (result := watcher.verdict(episode.time_limit_s)) is None:
-                if time.monotonic() > wall_cap:
-                    t0 = watcher.first_decision
-                    last = watcher.odom[-1][0] if watcher.odom else 0.0
-                    result = ("stalled", last - t0 if t0 is not None else 0.0)
-                    break
-                await asyncio.sleep(0.02)
+            async with contextlib.AsyncExitStack() as measuring:
+                while (result := watcher.verdict(episode.time_limit_s)) is None:
+                    if usage is None and watcher.first_decision is not None:
+                        # the run starts: measure its cost from here to its end
+                        usage = Usage(stack, period_s=5.0)  # few samples: little of our own CPU
+                        await measuring.enter_async_context(usage.measuring())
+                        window[0] = time.time()
+                    if time.monotonic() >= next_collect:
+                        next_collect = time.monotonic() + COLLECT_PERIOD_S
+                        await collect(rt, collected)
+                    if time.monotonic() > wall_cap:
+                        t0 = watcher.first_decision
+                        last = watcher.odom[-1][0] if watcher.odom else 0.0
+                        result = ("stalled", last - t0 if t0 is not None else 0.0)
+                        break
+                    await asyncio.sleep(0.02)
+            window[1] = time.time()
+            await collect(rt, collected)  # the last decisions, before the rows go
         finally:
             for sub in subs:
                 with contextlib.suppress(Exception):
@@ -184,6 +266,23 @@ async def run_episode(episode: Episode, log_dir: Path | None = None) -> Outcome:
     t0 = watcher.first_decision or 0.0
     with watcher.lock:
         trajectory = [(t - t0, x, y) for t, x, y in watcher.odom if t0 <= t <= t0 + time_s]
-        collisions = [(t - t0, x, y, o) for t, x, y, o in watcher.collisions if t >= t0]
+        # a contact reported after the run ended (the goal reached first) is not the run's
+        collisions = [
+            (t - t0, x, y, o) for t, x, y, o in watcher.collisions if t0 <= t <= t0 + time_s
+        ]
     final = math.dist(trajectory[-1][1:], episode.goal) if trajectory else math.inf
-    return Outcome(end, time_s, trajectory, collisions, final, time.monotonic() - started)
+    cpu = {role: float(r["cpu_s"]) for role, r in usage.report().items()} if usage else {}
+    return Outcome(
+        end,
+        time_s,
+        trajectory,
+        collisions,
+        final,
+        wall_s=time.monotonic() - started,
+        run_wall_s=usage.wall_s if usage else 0.0,
+        cpu_s=sum(cpu.values()),
+        cpu_by_role=cpu,
+        gate_timeouts=gate_figures(log_dir / "sim.log").get("gate_timeouts"),
+        log_dir=str(log_dir),
+        latency_ms=sense_to_act_ms(log_dir / "trace.csv", collected, *window) if usage else [],
+    )

@@ -1,0 +1,155 @@
+"""The contract tables in memory: what Postgres is to the stack, for one process.
+
+The scenario services read and write the contract through asyncpg (``pool.fetch*``) and
+``common.db.Database.write``. Their rules are written against those calls, so the monolith
+hands them a :class:`MemoryPool` that answers the same statements from Python lists, and a
+real :class:`~common.db.Database` built on it: the rows come back through the very functions
+the services call (``common.contract.records``, ``services.decision.store``...), so every
+rule gets the same record types, built by the same code, as in the stack.
+
+Only the statements the monolith's services issue are understood (sql.py): a plain
+single-table ``SELECT`` is evaluated generically (columns, ``col = $n`` / ``col = 'text'``
+filters, ``ORDER BY``, ``LIMIT``); the joins and the writes are matched by their text, taken
+from the modules that issue them. Anything else raises :class:`UnsupportedStatement`: a
+service that starts issuing a new statement makes the monolith fail loudly, not drift.
+
+Sensor tables keep as many rows per robot as the contract's retention policy (schema.sql),
+so memory stays flat however long a run is.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable, Iterator
+from typing import Any
+
+from common.bus import Notifier
+from common.contract import keys
+
+Row = dict[str, Any]
+# (table, robot, row id): what a write announces; the monolith's stand-in for Zenoh
+Listener = Callable[[str, str | None, int | None], None]
+
+# schema.sql's retention_policy: rows kept per robot in the sensor tables
+RETENTION = {
+    keys.ODOMETRY: 900,
+    keys.LASER_SCAN: 150,
+    keys.BATTERY: 300,
+    keys.COLLISION_EVENT: 1000,
+}
+
+
+class AdapterError(RuntimeError):
+    """The monolith's own plumbing failed (not a scenario's logic): always fatal."""
+
+
+class UnsupportedStatement(AdapterError):
+    def __init__(self, sql: str) -> None:
+        super().__init__(f"the in-memory contract does not know this statement: {sql!r}")
+
+
+class Table:
+    """Rows of one contract table, in id order, indexed by robot (``None``: no robot_id)."""
+
+    def __init__(self, name: str, keep: int | None = None) -> None:
+        self.name = name
+        self.keep = keep
+        self._next_id = 1
+        self._by_robot: dict[str | None, deque[Row]] = {}
+        self.by_id: dict[int, Row] = {}  # only for tables that are not pruned
+
+    def insert(self, row: Row) -> int:
+        """Add ``row``, giving it the next id (bigserial) unless it has one; its id."""
+        if "id" not in row:
+            row["id"] = self._next_id
+            self._next_id += 1
+        rows = self._by_robot.get(row.get("robot_id"))
+        if rows is None:
+            rows = self._by_robot[row.get("robot_id")] = deque(maxlen=self.keep)
+        rows.append(row)
+        if self.keep is None:
+            self.by_id[row["id"]] = row
+        return int(row["id"])
+
+    def rows(self, robot: str | None, *, newest_first: bool = False) -> Iterator[Row]:
+        """The rows of ``robot`` (None: the rows without one), oldest first."""
+        group = self._by_robot.get(robot, ())
+        return reversed(group) if newest_first else iter(group)
+
+    def all_rows(self) -> Iterator[Row]:
+        """Every row, robot by robot (in name order), oldest first within each."""
+        for robot in sorted(self._by_robot, key=lambda k: k or ""):
+            yield from self._by_robot[robot]
+
+    def newest(self, robot: str | None) -> Row | None:
+        rows = self._by_robot.get(robot)
+        return rows[-1] if rows else None
+
+
+class MemoryContract:
+    """Every contract table the navigation services use, plus the change listeners."""
+
+    def __init__(self) -> None:
+        self.tables = {
+            name: Table(name, RETENTION.get(name))
+            for name in (
+                keys.ROBOT,
+                keys.MAP,
+                keys.CHARGING_STATION,
+                keys.STRATEGY,
+                keys.ACTIVE_STRATEGY,
+                keys.GOAL,
+                keys.ODOMETRY,
+                keys.LASER_SCAN,
+                keys.BATTERY,
+                keys.COLLISION_EVENT,
+                keys.COMMAND_RECOMMENDATION,
+                keys.COMMAND2ROBOT,
+                keys.SYSTEM_COMMAND,
+            )
+        }
+        self.listeners: list[Listener] = []
+        # command_recommendation rows not yet expired, per robot: the decision asks for the
+        # live ones 30+ times a sim second; sim time only goes forward within a run, so a row
+        # found expired once is dropped from here for good (the table keeps it).
+        self._live: dict[str, list[Row]] = {}
+        self._live_now = float("-inf")
+
+    def __getitem__(self, table: str) -> Table:
+        return self.tables[table]
+
+    def insert(self, table: str, row: Row, *, notify: bool = True) -> int:
+        row_id = self.tables[table].insert(row)
+        if table == keys.COMMAND_RECOMMENDATION:
+            self._live.setdefault(row["robot_id"], []).append(row)
+        if notify:
+            self.changed(table, row.get("robot_id"), row_id)
+        return row_id
+
+    def changed(self, table: str, robot: str | None, row_id: int | None) -> None:
+        """What a Zenoh notification does in the stack: tell whoever watches ``table``."""
+        for listener in self.listeners:
+            listener(table, robot, row_id)
+
+    def live_recommendations(self, robot: str, now: float) -> list[Row]:
+        """The robot's command_recommendation rows with ``expires_stamp > now``, id order."""
+        if now < self._live_now:  # time went back (never within one run): start over
+            for robot_id in list(self._live):
+                self._live[robot_id] = list(self[keys.COMMAND_RECOMMENDATION].rows(robot_id))
+        self._live_now = now
+        live = [r for r in self._live.get(robot, ()) if r["expires_stamp"] > now]
+        self._live[robot] = live
+        return live
+
+
+class MemoryNotifier(Notifier):
+    """``Database.write`` notifies through this: straight to the contract's listeners."""
+
+    def __init__(self, contract: MemoryContract) -> None:  # no Zenoh session: no super()
+        self.contract = contract
+
+    def notify(self, table: str, robot: str | None, row_id: int | None) -> None:
+        self.contract.changed(table, robot, row_id)
+
+    def close(self) -> None:
+        return None

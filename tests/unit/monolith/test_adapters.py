@@ -1,0 +1,164 @@
+"""The monolith's adapters on their own: the in-memory contract, the strategy rows read
+from schema.sql, the planner's clock, the engine's failure handling, the bridge's watchdog."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from common.bus import Notifier
+from common.contract import keys, records
+from common.db import Database
+from common.engine import Rule
+from pnav.monolith.bridge import Applied, Bridge
+from pnav.monolith.contract import MemoryContract, MemoryNotifier, UnsupportedStatement
+from pnav.monolith.engines import LockstepEngine, planner_clock, run_sync
+from pnav.monolith.sql import MemoryPool
+from pnav.monolith.strategies import combo_strategy, shipped_strategies
+from pnav.navbench.episode import Combo
+from services.decision import store
+from services.decision.arbitration import RobotDecision
+from services.planner import state as planner_state
+from services.planner.tracking import Route
+
+
+def contract_with_rows() -> tuple[MemoryContract, Database, list[tuple[str, Any, Any]]]:
+    contract = MemoryContract()
+    notes: list[tuple[str, Any, Any]] = []
+    contract.listeners.append(lambda table, robot, row_id: notes.append((table, robot, row_id)))
+    db = Database(MemoryPool(contract), MemoryNotifier(contract))
+    for robot in ("r2", "r1"):
+        contract.insert(
+            keys.ROBOT,
+            {
+                "robot_id": robot,
+                "max_linear_mps": 0.22,
+                "max_angular_rps": 2.84,
+                "footprint_radius_m": 0.105,
+                "battery_capacity_wh": 19.98,
+            },
+        )
+    for i in range(3):
+        row = {"robot_id": "r1", "stamp": i / 30, "seq": i, "x": float(i), "y": 0.0, "yaw": 0.0}
+        contract.insert(keys.ODOMETRY, row | {"linear_mps": 0.1, "angular_rps": 0.0})
+    return contract, db, notes
+
+
+def test_the_records_functions_read_the_in_memory_rows() -> None:
+    _contract, db, _notes = contract_with_rows()
+    odom = run_sync(records.newest_odometry(db.pool, "r1"))
+    assert odom == records.Odometry(3, "r1", 2 / 30, 2.0, 0.0, 0.0, 0.1, 0.0)
+    assert run_sync(records.newest_odometry(db.pool, "r3")) is None
+    assert [r.robot_id for r in run_sync(records.robots(db.pool))] == ["r1", "r2"]  # ORDER BY
+
+
+def test_a_write_notifies_after_it_and_the_decision_marks_what_it_considered() -> None:
+    contract, db, notes = contract_with_rows()
+    rec = run_sync(
+        records.recommend_velocity(
+            db, "r1", source="x", priority=5, linear=0.1, angular=0.0, stamp=1.0, ttl_s=0.5,
+            reason="",
+        )
+    )  # fmt: skip
+    assert notes[-1] == (keys.COMMAND_RECOMMENDATION, "r1", rec)
+    live = run_sync(store.live_recommendations(db.pool, 1.2))
+    assert [r.id for r in live["r1"]] == [rec] and live["r2"] == []
+    assert run_sync(store.live_recommendations(db.pool, 1.5))["r1"] == []  # expired
+    decision = RobotDecision("r1", 1.2, 0.1, 0.0, rec, "x", (rec,), "why")
+    issued = run_sync(store.write_robot_command(db, decision))
+    assert contract[keys.COMMAND_RECOMMENDATION].by_id[rec]["treated_by"] == issued
+    assert run_sync(store.last_issued(db.pool))["r1"].recommendation_id == rec
+
+
+def test_a_statement_the_contract_does_not_know_is_refused() -> None:
+    _contract, db, _notes = contract_with_rows()
+    with pytest.raises(UnsupportedStatement):
+        run_sync(db.pool.fetch("SELECT count(*) FROM odometry"))
+    with pytest.raises(UnsupportedStatement):
+        run_sync(db.pool.fetch("SELECT id FROM no_such_table"))
+
+
+class Broken(Rule):
+    scenario = "broken"
+    meta = True
+
+    def __init__(self, error: Exception) -> None:
+        self.error = error
+
+    def data_acquisition(self) -> None:
+        raise self.error
+
+
+def test_a_plumbing_failure_stops_the_run_and_a_rule_error_does_not() -> None:
+    engine = LockstepEngine("test", lambda: 0.0)
+    engine.add_meta(lambda: Broken(UnsupportedStatement("SELECT 1")))
+    with pytest.raises(UnsupportedStatement):
+        engine.activate(0.0)
+    engine = LockstepEngine("test", lambda: 0.0)
+    engine.add_meta(lambda: Broken(ValueError("the rule's own bug")))
+    engine.activate(0.0)  # logged and discarded, the meta rule re-seeded: as in the stack
+    assert engine.errors == 1 and len(engine.current) == 1
+
+
+def test_the_engine_is_due_on_a_notification_a_hurry_or_f_of_sim_time() -> None:
+    engine = LockstepEngine("test", lambda: 0.0)
+    assert engine.due(0.0)  # a service starts with an activation
+    engine.activate(0.0)
+    assert not engine.due(0.01)
+    assert engine.due(engine.settings.period_s)
+    engine.wake()
+    assert engine.due(0.01)
+
+
+def test_the_strategy_rows_come_from_schema_sql() -> None:
+    shipped = shipped_strategies()
+    assert shipped["GOTO_AVOID"].controller_scenarios == (
+        "avoid_left",
+        "avoid_right",
+        "safety_stop",
+    )
+    assert shipped["GOTO_DIRECT"].controller_scenarios == ("safety_stop",)
+    assert shipped["GOTO_AVOID"].params["target"] == "goal"
+    assert shipped["IDLE"].planner_scenario is None
+    combo = combo_strategy(Combo("GOTO_DIRECT", "move_while_turning"), shipped)
+    assert (combo.code, combo.planner_scenario) == (
+        "NAV_GOTO_DIRECT_MOVE_WHILE_TURNING",
+        "move_while_turning",
+    )
+    assert combo.params == shipped["GOTO_DIRECT"].params
+
+
+def test_the_planner_counts_its_wall_clock_gates_in_sim_time_while_a_run_lasts() -> None:
+    saved_time, saved_route = planner_state.time, planner_state.Route
+    with planner_clock(lambda: 42.0):
+        assert planner_state.time.monotonic() == 42.0
+        route = planner_state.Route.of(("goal",), None, [(0.0, 0.0), (1.0, 0.0)], True)
+        assert isinstance(route, Route) and route.made_at == 42.0
+    assert (planner_state.time, planner_state.Route) == (saved_time, saved_route)
+
+
+def test_the_bridge_clamps_sends_once_and_stops_a_robot_left_without_commands() -> None:
+    contract, db, _notes = contract_with_rows()
+    sent: list[tuple[str, float, float]] = []
+    applied: list[Applied] = []
+    bridge = Bridge(contract, lambda r, v, w: sent.append((r, v, w)) is None, applied.append)
+    decision = RobotDecision("r1", 1.0, 5.0, float("nan"), None, None, (), "too fast")
+    run_sync(store.write_robot_command(db, decision))
+    assert bridge.relay(1.0) == 1 and bridge.relay(1.01) == 0  # each row once
+    assert sent == [("r1", 0.22, 0.0)]  # clamped; NaN is 0
+    bridge.tick(1.49)
+    assert len(sent) == 1
+    bridge.tick(1.5)  # 0.5 s of sim time without a fresh command
+    assert sent[-1] == ("r1", 0.0, 0.0) and applied[-1].decided_stamp is None
+    bridge.tick(2.5)
+    assert len(sent) == 2  # the watchdog stops once
+
+
+def test_the_notifier_is_the_contracts_listener() -> None:
+    contract = MemoryContract()
+    notes: list[Any] = []
+    contract.listeners.append(lambda *note: notes.append(note))
+    notifier: Notifier = MemoryNotifier(contract)
+    notifier.notify(keys.GOAL, "r1", 7)
+    assert notes == [(keys.GOAL, "r1", 7)]
