@@ -131,6 +131,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="also run each episode in the monolith (pnav.monolith) and compare the cost",
     )
+    nav.add_argument(
+        "--in-process",
+        action="store_true",
+        help="run the stack episodes in this process instead of a worker replaced every 20 "
+        "(saves ~1 s per 20 episodes; this process then grows ~20 MB per episode)",
+    )
     nav.add_argument("--json", metavar="FILE", help="every run and the summaries ('-': stdout)")
     nav.add_argument(
         "--report", type=Path, metavar="DIR", help="write DIR/README.md, a PNG per run, DIR/logs"

@@ -36,6 +36,7 @@ if TYPE_CHECKING:
     # parser: pnav imports this module lazily, and the tests import it without a stack
     from pnav.navbench.episode import Combo, Episode, Outcome
     from pnav.navbench.report import RunRecord
+    from pnav.navbench.workers import EpisodeWorkers
     from pnav.navbench.worldfile import BenchmarkWorld
 
 STACK, MONOLITH = "stack", "monolith"  # the records' modes (pnav.navbench.report)
@@ -199,6 +200,7 @@ class Plan:
     logs: Path
     report: Path | None = None
     monolith: Callable[[Episode], Any] | None = None
+    workers: EpisodeWorkers | None = None  # None: stack episodes in this process
 
 
 async def attempt(plan: Plan, mode: str, episode: Episode, log_dir: Path) -> Outcome | str:
@@ -208,6 +210,8 @@ async def attempt(plan: Plan, mode: str, episode: Episode, log_dir: Path) -> Out
 
     try:
         if plan.monolith is None or mode == STACK:
+            if plan.workers is not None:
+                return await plan.workers.run(episode, log_dir)
             return await run_episode(episode, log_dir)
         # the monolith's outcome has the Outcome's fields (and more); sync or async, it
         # must not block the event loop that draws the progress bar
@@ -316,6 +320,9 @@ def run(args: argparse.Namespace) -> int:
     date = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
     records: list[RunRecord] = []
     interrupted = False
+    from pnav.navbench.workers import EpisodeWorkers
+
+    plan.workers = None if args.in_process else EpisodeWorkers()
     try:
         uvloop.run(execute(plan, progress, records))
     except KeyboardInterrupt:
@@ -323,6 +330,8 @@ def run(args: argparse.Namespace) -> int:
             raise
         interrupted = True  # Ctrl-C: report the runs done so far, and say so
     finally:
+        if plan.workers is not None:
+            plan.workers.close()
         progress.close()
     meta = {
         "benchmark": "nav",

@@ -241,6 +241,7 @@ def bench(tmp_path: Path, *extra: str) -> tuple[int, dict[str, Any], str]:
             *("bench", "nav", "--suite", str(SUITE), "--worlds", "1", "--levels", "easy,hard"),
             *("--combos", "GOTO_AVOID/turn_then_move,GOTO_DIRECT/move_while_turning"),
             *("--json", str(tmp_path / "nav.json"), "--report", str(tmp_path / "report")),
+            "--in-process",  # the fake episodes are patched into this process
             *extra,
         ]
     )
