@@ -12,9 +12,6 @@ from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-import numpy as np
-import numpy.typing as npt
-
 from pnav.bench.report import percentiles
 from pnav.navbench.metrics import RunResult, Summary, summarize, summarize_by
 
@@ -308,59 +305,7 @@ def readme(records: Sequence[RunRecord], meta: dict[str, Any]) -> str:
     return "\n".join([*parts, "", "## Runs", "", markdown(run_table(records, links=True)), ""])
 
 
-def _to_polyline(p: npt.NDArray[np.float64], q: npt.NDArray[np.float64]) -> float:
-    """The largest distance from a point of ``p`` to the polyline through ``q`` (n, 2)."""
-    if len(q) == 1:
-        return float(np.sqrt(((p - q[0]) ** 2).sum(-1)).max())
-    a, ab = q[:-1], np.diff(q, axis=0)
-    rel = p[:, None, :] - a[None, :, :]
-    t = np.clip((rel * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
-    gap = rel - t[..., None] * ab
-    return float(np.sqrt((gap * gap).sum(-1)).min(axis=1).max())
-
-
-def parted_m(a: Sequence[Sequence[float]], b: Sequence[Sequence[float]]) -> float:
-    """How far two drives ([t, x, y] points) parted: the largest distance from a point of
-    either to the other's polyline, so that the JSON's sparser points compare fairly with
-    full odometry (NaN if one is empty)."""
-    if not a or not b:
-        return math.nan
-    pa, pb = np.asarray(a, dtype=float)[:, -2:], np.asarray(b, dtype=float)[:, -2:]
-    return max(_to_polyline(pa, pb), _to_polyline(pb, pa))
-
-
-def compare(records: Sequence[RunRecord], before: Sequence[dict[str, Any]]) -> list[str]:
-    """This run's records against an earlier JSON's runs, matched by world, combo, run and
-    mode: outcome, time, and how far the paths parted; one line each, then a count."""
-    earlier = {(b["world"], b["combo"], b["run"], b["mode"]): b for b in before}
-    lines, same, matched, worst = [], 0, 0, 0.0
-    for r in records:
-        if (b := earlier.get((r.world, r.combo, r.run, r.mode))) is None:
-            continue
-        dt = r.result.time_s - float(b["time_s"])
-        equal = r.result.outcome == b["outcome"]
-        matched, same, worst = matched + 1, same + equal, max(worst, abs(dt))
-        lines.append(
-            f"{r.world} {r.combo} run {r.run} ({r.mode}): {b['outcome']} -> {r.result.outcome}"
-            f"{'' if equal else ' DIFFERENT'}; time {float(b['time_s']):.3f} -> "
-            f"{r.result.time_s:.3f} s ({dt:+.3f}); paths at most "
-            f"{parted_m(r.trajectory, b.get('trajectory', [])):.3f} m apart"
-        )
-    lines.append(
-        f"{same} of {matched} runs with the same outcome; largest time change {worst:.3f} s"
-    )
-    return lines
-
-
 def document(records: Sequence[RunRecord], meta: dict[str, Any]) -> dict[str, Any]:
     """The JSON: how the runs were made, the summaries and costs, then every run."""
     runs = [r.to_json() for r in records]
     return {**meta, "summary": summaries(records), "cost": costs(records), "runs": runs}
-
-
-def summary_lines(records: Sequence[RunRecord], before: Sequence[dict[str, Any]] = ()) -> list[str]:
-    """What the terminal shows at the end: the tables, the runs needing a look, and the
-    comparison with an earlier JSON if one was given."""
-    lines = [line for t in tables(records) for line in (text(t), "")]
-    lines += attention(records)
-    return lines + (["", "against the earlier runs:", *compare(records, before)] if before else [])

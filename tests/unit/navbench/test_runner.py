@@ -20,8 +20,8 @@ from common import bus
 from common.contract.migrate import schema_text
 from common.errors import UsageError
 from pnav import cli
+from pnav.navbench import compare, progress, report, runner
 from pnav.navbench import episode as episode_module
-from pnav.navbench import report, runner
 from pnav.navbench.episode import Combo, Episode, Outcome
 from pnav.navbench.worldfile import BenchmarkWorld, load_suite
 from services.planner.meta import SCENARIOS
@@ -192,7 +192,7 @@ class Terminal(io.StringIO):
 
 def test_progress_redraws_in_place_on_a_terminal_and_writes_lines_elsewhere() -> None:
     term, out = Terminal(), io.StringIO()
-    bar = runner.Progress(4, term, out)
+    bar = progress.Progress(4, term, out)
     bar.begin("barn_easy_000 GOTO_AVOID/turn_then_move run 0 stack")
     assert "\r[....................] 0/4 barn_easy_000" in term.getvalue()
     assert "ETA --" in term.getvalue() and "\n" not in term.getvalue()
@@ -200,7 +200,7 @@ def test_progress_redraws_in_place_on_a_terminal_and_writes_lines_elsewhere() ->
     assert out.getvalue() == "barn_easy_000: success\n"
     assert "1/4" in bar.line() and "#####" in bar.line() and "ETA 0m0" in bar.line()
     log = io.StringIO()
-    plain = runner.Progress(2, log, io.StringIO())
+    plain = progress.Progress(2, log, io.StringIO())
     plain.begin("a")
     plain.finish("done a")
     plain.begin("b")
@@ -211,7 +211,7 @@ def test_progress_redraws_in_place_on_a_terminal_and_writes_lines_elsewhere() ->
     bar.close()
     last = term.getvalue().split("\r")[-1]  # the bar's final state, then a new line
     assert last.startswith("[#####...............] 1/4 done") and last.endswith(" \n")
-    assert runner.clock(3725) == "1h02m" and runner.clock(65) == "1m05s"
+    assert progress.clock(3725) == "1h02m" and progress.clock(65) == "1m05s"
 
 
 # --- the whole bench, with made-up episodes ---------------------------------------------------
@@ -332,7 +332,7 @@ def test_compare_finds_the_runs_that_changed(suite: list[BenchmarkWorld]) -> Non
     before[0]["time_s"] = arrival - 0.5
     before[0]["trajectory"] = [[t, x + 0.1, y] for t, x, y in before[0]["trajectory"]]
     before[1]["outcome"] = "success"
-    lines = report.compare(now, before)
+    lines = compare.compare(now, before)
     assert f"time {arrival - 0.5:.3f} -> {arrival:.3f} s (+0.500)" in lines[0]
     assert "DIFFERENT" not in lines[0]
 
@@ -342,7 +342,7 @@ def test_compare_finds_the_runs_that_changed(suite: list[BenchmarkWorld]) -> Non
     assert 0.099 <= apart(lines[0]) < 0.11  # moved 0.1 m sideways (a bit more at an end)
     assert "DIFFERENT" in lines[1] and apart(lines[1]) <= 0.001  # the JSON's rounding
     assert lines[-1] == "1 of 2 runs with the same outcome; largest time change 0.500 s"
-    assert report.parted_m([], [[0.0, 1.0, 1.0]]) != report.parted_m([], [])  # both NaN
+    assert compare.parted_m([], [[0.0, 1.0, 1.0]]) != compare.parted_m([], [])  # both NaN
 
 
 # --- the episode's own pure parts -----------------------------------------------------------
