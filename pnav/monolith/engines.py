@@ -15,22 +15,15 @@ The rules' async steps await only the in-memory contract, whose coroutines never
 
 from __future__ import annotations
 
-import contextlib
-import dataclasses
 import math
 import sys
-import time
-import types
-from collections.abc import Callable, Coroutine, Iterator
+from collections.abc import Callable, Coroutine
 from typing import Any, TypeVar
 
 from common.config import EngineSettings
 from common.engine import Engine, Rule
 from common.engine.stats import RuleStats
 from pnav.monolith.contract import AdapterError
-from services.planner import battery as planner_battery
-from services.planner import state as planner_state
-from services.planner.tracking import Route
 
 T = TypeVar("T")
 
@@ -89,40 +82,3 @@ class LockstepEngine(Engine):
         if isinstance(failure, AdapterError):
             raise failure
         super()._discard_on_error(rule, stats, step)
-
-
-@contextlib.contextmanager
-def planner_clock(now: Callable[[], float]) -> Iterator[None]:
-    """The planner's wall-clock gates on sim time, for as long as the run lasts.
-
-    The planner times a few things in wall seconds (``time.monotonic``): how long a route
-    stands before a stray robot may replan (REPLAN_MIN_S) or a straight-line fallback is
-    retried (RETRY_PLAN_S), how often robots, maps and strategies are re-read (REFRESH_S,
-    FAST_REFRESH_S) and the battery evaluated (battery.EVAL_PERIOD_S). Those gates were tuned
-    for a sim at rate 1; counting them in wall time in a loop that runs many times faster
-    than real time would change what the planner does, and make it depend on the machine's
-    load (not deterministic). So while the monolith runs, the two planner modules see a
-    ``time`` whose ``monotonic()`` is sim time, and the planner's state makes its routes
-    with a ``Route`` whose birth time (``made_at``) is sim time too (the class's default is
-    the real ``time.monotonic``, bound when the class was made). One run at a time: these
-    are module globals.
-    """
-
-    @dataclasses.dataclass
-    class SimRoute(Route):
-        made_at: float = dataclasses.field(default_factory=now)
-
-    shim = types.SimpleNamespace(monotonic=now, perf_counter=time.perf_counter)
-    patches: list[tuple[types.ModuleType, str, object]] = [
-        (planner_state, "time", shim),
-        (planner_state, "Route", SimRoute),
-        (planner_battery, "time", shim),
-    ]
-    saved = [(module, name, vars(module)[name]) for module, name, _ in patches]
-    for module, name, value in patches:
-        vars(module)[name] = value
-    try:
-        yield
-    finally:
-        for module, name, original in saved:
-            vars(module)[name] = original

@@ -23,7 +23,6 @@ from typing import Any
 
 from common.contract import keys
 from pnav.monolith.bridge import Applied
-from pnav.monolith.engines import planner_clock
 from pnav.monolith.stack import MonolithStack
 from pnav.monolith.strategies import combo_strategy, shipped_strategies
 from pnav.navbench.episode import Episode, Outcome, Watcher
@@ -86,14 +85,13 @@ def run_monolith_episode(episode: Episode) -> MonolithOutcome:
         on_message=on_message,
     )
     try:
-        with planner_clock(lambda: stack.now):
-            stack.set_strategy(episode.robot, strategy.code)
-            stack.set_goal(episode.robot, *episode.goal)
-            while (result := watcher.verdict(episode.time_limit_s)) is None:
-                stack.step()
-                if watcher.first_decision is None and stack.now > episode.time_limit_s:
-                    result = ("timeout", episode.time_limit_s)  # never set off at all
-                    break
+        stack.set_strategy(episode.robot, strategy.code)
+        stack.set_goal(episode.robot, *episode.goal)
+        while (result := watcher.verdict(episode.time_limit_s)) is None:
+            stack.step()
+            if watcher.first_decision is None and stack.now > episode.time_limit_s:
+                result = ("timeout", episode.time_limit_s)  # never set off at all
+                break
         cpu_s = time.process_time() - marks["cpu"] if marks else 0.0
         run_wall_s = time.perf_counter() - marks["wall"] if marks else 0.0
     finally:

@@ -101,7 +101,9 @@ class MonolithStack:
         host = ControllerHost(self.db, sim_now)
         self.controller = LockstepEngine("controller", sim_now)
         self.controller.add_meta(lambda: MetaController(host, self.controller_state))
-        self.planner_state = PlannerState(self.db, sim_now, lambda: True)
+        # the planner's own gates (re-reads, replanning, battery checks) count sim time
+        # here, as they count wall time in the service at rate 1: deterministic runs
+        self.planner_state = PlannerState(self.db, sim_now, lambda: True, wall=sim_now)
         self.planner = LockstepEngine("planner", sim_now)
         self.planner.add_meta(lambda: MetaPlanner(self.planner_state))
         runtime = Runtime(ServiceConfig(service="decision", database_url="memory://monolith"))

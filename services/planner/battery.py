@@ -18,7 +18,6 @@ The arithmetic is in plain functions, unit-tested on their own.
 from __future__ import annotations
 
 import logging
-import time
 from collections.abc import Iterable, Iterator
 from typing import Any, ClassVar
 
@@ -99,9 +98,9 @@ class _BatteryRule(Rule):
         self.robot = self.state.claim(self.robot_id, self.kind, self.token)
         if self.robot is None or self.robot.strategy is None:
             return False
-        if time.monotonic() < self._next_eval:
+        if self.state.wall() < self._next_eval:
             return False
-        self._next_eval = time.monotonic() + EVAL_PERIOD_S
+        self._next_eval = self.state.wall() + EVAL_PERIOD_S
         self.ready = True
         self.params = self.robot.strategy.params
         self.sim_now = self.state.now()

@@ -235,10 +235,19 @@ def _known(avoided: set[tuple[int, int]], x: float, y: float) -> bool:
 
 
 class PlannerState:
-    def __init__(self, db: Database, now: Callable[[], float], started: Callable[[], bool]):
+    def __init__(
+        self,
+        db: Database,
+        now: Callable[[], float],
+        started: Callable[[], bool],
+        wall: Callable[[], float] = time.monotonic,
+    ):
         self.db = db
         self.now = now  # sim time
         self.clock_started = started
+        # The clock of the planner's own gates (re-reads, replanning, retries), in seconds:
+        # wall time in the service; an in-process run may count them in sim time instead.
+        self.wall = wall
         self.robots: dict[str, RobotState] = {}
         self.maps: dict[str, MapData] = {}
         self.stations: list[Station] = []
@@ -269,7 +278,7 @@ class PlannerState:
 
     async def refresh(self) -> None:
         pool = self.db.pool
-        now = time.monotonic()
+        now = self.wall()
         world = self.dirty or now - self._refreshed > REFRESH_S
         if world:
             self.dirty = False
@@ -299,7 +308,7 @@ class PlannerState:
         by every odometry row, and the goal hardly ever changes in between)."""
         robot_id = state.info.robot_id
         mark = self._goal_mark(robot_id)
-        now = time.monotonic()
+        now = self.wall()
         cached = state.goal_read
         if cached is not None and cached.mark == mark and now - cached.at <= FAST_REFRESH_S:
             return cached.goal
@@ -385,7 +394,7 @@ class PlannerState:
         data = self.map_for(state.info)
         version = data.version if data else None
         route = state.route
-        wall = time.monotonic()
+        wall = self.wall()
         if route is not None and route.target_key == target.key and route.map_version == version:
             progress = follow(route, x, y)
             age = wall - route.made_at
@@ -414,6 +423,7 @@ class PlannerState:
         state.route = Route.of(
             target.key, version, points or [(x, y), (target.x, target.y)], planned
         )
+        state.route.made_at = self.wall()
         state.route.made_stamp = now if now is not None else 0.0
         state.route.avoided = _buckets(obstacles)
         state.route.checked_scan = state.seen.scan_id if state.seen is not None else None

@@ -13,14 +13,13 @@ from common.db import Database
 from common.engine import Rule
 from pnav.monolith.bridge import Applied, Bridge
 from pnav.monolith.contract import MemoryContract, MemoryNotifier, UnsupportedStatement
-from pnav.monolith.engines import LockstepEngine, planner_clock, run_sync
+from pnav.monolith.engines import LockstepEngine, run_sync
 from pnav.monolith.sql import MemoryPool
 from pnav.monolith.strategies import combo_strategy, shipped_strategies
 from pnav.navbench.episode import Combo
 from services.decision import store
 from services.decision.arbitration import RobotDecision
-from services.planner import state as planner_state
-from services.planner.tracking import Route
+from services.planner.state import PlannerState, RobotInfo, RobotState, Target
 
 
 def contract_with_rows() -> tuple[MemoryContract, Database, list[tuple[str, Any, Any]]]:
@@ -129,13 +128,14 @@ def test_the_strategy_rows_come_from_schema_sql() -> None:
     assert combo.params == shipped["GOTO_DIRECT"].params
 
 
-def test_the_planner_counts_its_wall_clock_gates_in_sim_time_while_a_run_lasts() -> None:
-    saved_time, saved_route = planner_state.time, planner_state.Route
-    with planner_clock(lambda: 42.0):
-        assert planner_state.time.monotonic() == 42.0
-        route = planner_state.Route.of(("goal",), None, [(0.0, 0.0), (1.0, 0.0)], True)
-        assert isinstance(route, Route) and route.made_at == 42.0
-    assert (planner_state.time, planner_state.Route) == (saved_time, saved_route)
+def test_the_planner_counts_its_own_gates_on_the_clock_it_is_given() -> None:
+    # the monolith hands the planner sim time for its gates (re-reads, replanning): a route
+    # is born at that clock's time, not at the wall clock's
+    t = [42.0]
+    state = PlannerState(None, lambda: 0.0, lambda: True, wall=lambda: t[0])  # type: ignore[arg-type]
+    robot = RobotState(RobotInfo("r1", None, 0.22, 2.84, 0.105))
+    state.route_for(robot, 0.0, 0.0, Target("goal", "1", 1.0, 0.0, 0.15, 0.3), 0.0)
+    assert robot.route is not None and robot.route.made_at == 42.0
 
 
 def test_the_bridge_clamps_sends_once_and_stops_a_robot_left_without_commands() -> None:
