@@ -27,6 +27,7 @@ from pnav.navbench.generator import LEVELS, ORIGIN, GeneratedWorld
 from pnav.navbench.metrics import GOAL_TOLERANCE_M, TOP_SPEED_MPS, default_time_limit, optimal_time
 from pnav.navbench.search import BoolGrid, Point
 from services.sim.mapserver import OCCUPIED, OccupancyGrid, encode_pgm, load_map, map_yaml
+from services.sim.world import read_world_yaml
 
 FORMAT = 1
 FREE_PX, OCCUPIED_PX = 254, 0  # as map_saver writes them
@@ -151,12 +152,7 @@ def read_benchmark(path: str | Path) -> BenchmarkWorld:
     """The benchmark fields of a world file; WorldError (naming the file) when it has no
     ``benchmark`` section or a field is missing or malformed."""
     path = Path(path)
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise WorldError(f"{path}: world file not found") from None
-    except (OSError, yaml.YAMLError) as exc:
-        raise WorldError(f"{path}: cannot read world YAML: {exc}") from None
+    doc = read_world_yaml(path)
     if not isinstance(doc, dict) or not isinstance(doc.get("benchmark"), dict):
         raise WorldError(f"{path}: not a benchmark world (no 'benchmark' mapping)")
     if not isinstance(doc.get("map"), str):

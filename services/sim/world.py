@@ -272,15 +272,20 @@ def _check_start(world: World, path: Path, spec: RobotSpec, placed: list[RobotSp
             )
 
 
-def load_world(path: str | Path) -> World:
-    """Load and check a world file (or a bare map_server YAML)."""
-    path = Path(path)
+def read_world_yaml(path: Path) -> Any:
+    """A world file's YAML document; WorldError naming the file if it cannot be read."""
     try:
-        doc = yaml.safe_load(path.read_text())
+        return yaml.safe_load(path.read_text())
     except FileNotFoundError:
         raise WorldError(f"{path}: world file not found") from None
     except (OSError, yaml.YAMLError) as exc:
         raise WorldError(f"{path}: cannot read world YAML: {exc}") from None
+
+
+def load_world(path: str | Path) -> World:
+    """Load and check a world file (or a bare map_server YAML)."""
+    path = Path(path)
+    doc = read_world_yaml(path)
     if not isinstance(doc, dict):
         raise WorldError(f"{path}: a world file must be a YAML mapping")
 
