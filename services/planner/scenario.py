@@ -52,6 +52,9 @@ SCAN_PERIOD_S = 0.4
 # out) at most this often, i.e. on every other row, unless a goal notification came or the
 # cadence calls for a recommendation.
 EVAL_PERIOD_S = 0.06
+# A robot's odometry is looked at on its own notifications, or this long (the planner's
+# clock: wall time in the service) after the last read in case one was lost.
+ODOM_RECHECK_S = 0.25
 
 
 @dataclass(frozen=True)
@@ -119,6 +122,8 @@ class MoveScenario(Rule):
         self.last_said: tuple[Any, ...] | None = None  # (odometry id, target key) handled
         self.said: Said | None = None  # the last velocity recommended
         self.evaluated_at = -math.inf  # sim time the odometry was last read
+        self.odometry_mark = -1  # the robot's odometry notifications already looked at
+        self.odometry_read_at = -math.inf  # the planner's clock at the last read
         self.held: set[tuple[Any, ...]] = set()  # targets reached and stopped at
         self.robot: RobotState | None = None
         self.odom: records.Odometry | None = None
@@ -145,12 +150,23 @@ class MoveScenario(Rule):
         robot = self.robot
         said = self.said
         cadence_due = said is None or self.sim_now >= said.stamp + RECOMMEND_PERIOD_S - 0.005
+        goal_news = self.state.goal_news(robot)
+        # Every robot's odometry wakes the planner. This robot's rule looks only when a row
+        # of its own was announced (or ODOM_RECHECK_S passed: notifications are hints), and
+        # a row it skips is consumed: looking later, at another robot's wake-up, would act
+        # on a row already tens of milliseconds old.
+        notes, wall = self.state.odometry_notes.get(self.robot_id, 0), self.state.wall()
+        recheck = wall - self.odometry_read_at >= ODOM_RECHECK_S
+        if notes == self.odometry_mark and not recheck and not goal_news:
+            return
+        self.odometry_mark = notes
         if (
             0.0 <= self.sim_now - self.evaluated_at < EVAL_PERIOD_S
             and not cadence_due
-            and not self.state.goal_news(robot)
+            and not goal_news
         ):
             return  # looked a moment ago, nothing is due, no new goal: skip this row
+        self.odometry_read_at = wall
         self.evaluated_at = self.sim_now
         pool = self.state.db.pool
         self.odom = await records.newest_odometry(pool, self.robot_id)

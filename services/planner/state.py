@@ -258,6 +258,8 @@ class PlannerState:
         self._strategies_read = 0.0
         # Goal notifications per robot ("*": naming no robot), counted on Zenoh's thread.
         self.goal_notes: dict[str, int] = {}
+        # odometry notifications per robot: a robot's rule evaluates on its own rows
+        self.odometry_notes: dict[str, int] = {}
         self._warned: set[str] = set()
 
     # -- reading the world -------------------------------------------------------------------
@@ -275,6 +277,8 @@ class PlannerState:
         elif table == keys.GOAL:
             who = robot or "*"
             self.goal_notes[who] = self.goal_notes.get(who, 0) + 1
+        elif table == keys.ODOMETRY and robot is not None:
+            self.odometry_notes[robot] = self.odometry_notes.get(robot, 0) + 1
 
     async def refresh(self) -> None:
         pool = self.db.pool

@@ -38,11 +38,12 @@ class Every:
     starting with step 0; the long-run rate is exact even if the period is not a whole number
     of steps."""
 
-    def __init__(self, period_s: float, dt: float) -> None:
+    def __init__(self, period_s: float, dt: float, phase: float = 0.0) -> None:
         if period_s <= 0:
             raise ConfigError(f"a sensor period must be positive, got {period_s}")
         self.period_steps = period_s / dt
-        self._next = 0.0
+        # phase in [0, 1): the first firing is that fraction of a period after step 0
+        self._next = float(round(phase * self.period_steps))
 
     def due(self, step: int) -> bool:
         # the tolerance absorbs float error in period/dt (0.2 / (1/240) = 48.000000001)

@@ -70,11 +70,18 @@ class Simulation:
         self.scene = Scene(world, gui=config.gui)
         self._touching: list[frozenset[str]] = [frozenset() for _ in self.robots]
         self._seq: dict[tuple[int, str], int] = {}
-        self._schedule = {
-            SCAN: Every(1.0 / config.scan_hz, self.dt),
-            ODOM: Every(1.0 / config.odom_hz, self.dt),
-            BATTERY: Every(1.0 / config.battery_hz, self.dt),
-        }
+        # Each robot's sensors run on its own phase, i/N of a period after robot 0's, as the
+        # clocks of independent robots would: in phase, a fleet's readings would all land in
+        # the same instant and every service would see them as one burst.
+        n = len(self.robots)
+        self._schedule = [
+            {
+                SCAN: Every(1.0 / config.scan_hz, self.dt, i / n),
+                ODOM: Every(1.0 / config.odom_hz, self.dt, i / n),
+                BATTERY: Every(1.0 / config.battery_hz, self.dt, i / n),
+            }
+            for i in range(n)
+        ]
         # commands arrive on Zenoh's threads; the loop takes them under this lock
         self._lock = threading.Lock()
         self._pending: dict[int, tuple[float, float]] = {}
@@ -164,23 +171,22 @@ class Simulation:
 
     def _sense(self) -> None:
         now, step = self.time, self.steps
-        if self._schedule[ODOM].due(step):
-            for i, robot in enumerate(self.robots):
+        for i, robot in enumerate(self.robots):
+            due = self._schedule[i]
+            if due[ODOM].due(step):
                 self._emit(i, ODOM, messages.odom(now, self._next_seq(i, ODOM), robot))
-        if self._schedule[SCAN].due(step):
-            self._scan(now)
-        if self._schedule[BATTERY].due(step):
-            for i, bat in enumerate(self.batteries):
+            if due[SCAN].due(step):
+                self._scan(i, now)
+            if due[BATTERY].due(step):
+                bat = self.batteries[i]
                 self._emit(i, BATTERY, messages.battery(now, self._next_seq(i, BATTERY), bat))
 
-    def _scan(self, now: float) -> None:
-        lidar = self.lidar
-        for i, r in enumerate(self.robots):
-            pose = (r.x, r.y, r.yaw)
-            hit, fraction = self.scene.cast_from(i, pose, *lidar.rays(*pose))
-            ranges = lidar.ranges(hit, fraction, self.rng)
-            msg = messages.scan(now, self._next_seq(i, SCAN), lidar.params, ranges)
-            self._emit(i, SCAN, msg)
+    def _scan(self, i: int, now: float) -> None:
+        lidar, r = self.lidar, self.robots[i]
+        pose = (r.x, r.y, r.yaw)
+        hit, fraction = self.scene.cast_from(i, pose, *lidar.rays(*pose))
+        ranges = lidar.ranges(hit, fraction, self.rng)
+        self._emit(i, SCAN, messages.scan(now, self._next_seq(i, SCAN), lidar.params, ranges))
 
     def _next_seq(self, i: int, topic: str) -> int:
         seq = self._seq.get((i, topic), 0)

@@ -34,7 +34,8 @@ def scans_of(
     world = load_world(make_world(10.0, 10.0, WALLS, robots=robots))
     sim = Simulation(world, SimConfig(**config), sink)
     try:
-        while len(got.get(robots[0]["id"], [])) < count:
+        # each robot scans on its own phase: wait for every robot's scans
+        while min(len(got.get(r["id"], [])) for r in robots) < count:
             sim.step()
     finally:
         sim.close()
