@@ -20,6 +20,7 @@ from typing import Any
 
 import psutil
 
+from common.tasks import cancel_and_wait
 from pnav.launcher import RunningStack
 
 
@@ -109,9 +110,7 @@ class Usage:
         try:
             yield self
         finally:
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+            await cancel_and_wait([task])
             self._sample()
             self.wall_s = time.monotonic() - t0
 

@@ -28,6 +28,7 @@ from common import bus, log
 from common.config import ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime, run_service
+from common.tasks import cancel_and_wait
 from services.bridge.commands import CommandRelay
 from services.bridge.counters import Counters, RateLimitedLog
 from services.bridge.messages import UNKNOWN_ROBOT, MalformedMessage, parse_sensor
@@ -108,12 +109,7 @@ class Bridge:
             with contextlib.suppress(Exception):
                 subscriber.undeclare()
         self._subscribers.clear()
-        tasks = [*self._tasks, *([self._reload] if self._reload else [])]
-        for task in tasks:
-            task.cancel()
-        for task in tasks:
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+        await cancel_and_wait([*self._tasks, *([self._reload] if self._reload else [])])
         self._tasks.clear()
         await self.world.close()
         # the robots' stop first: it must not wait behind a slow Postgres draining sensor rows

@@ -29,6 +29,7 @@ import zenoh
 from common import bus, log
 from common.clock import SimClock
 from common.contract import keys
+from common.tasks import cancel_and_wait
 from services.bridge.counters import Counters, RateLimitedLog
 from services.bridge.settings import BridgeSettings
 from services.bridge.watchdog import Watchdog
@@ -117,11 +118,7 @@ class CommandRelay:
         if self._subscriber is not None:
             self._subscriber.undeclare()
             self._subscriber = None
-        for task in self._tasks:
-            task.cancel()
-        for task in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+        await cancel_and_wait(self._tasks)
         self._tasks = []
         targets = sorted(set(robots) | set(self.last_sent))
         for robot in targets:

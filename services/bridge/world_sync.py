@@ -20,6 +20,7 @@ import zenoh
 from common import bus, log
 from common.contract import keys
 from common.db import Database
+from common.tasks import cancel_and_wait
 from services.bridge.counters import Counters, RateLimitedLog
 from services.bridge.messages import MalformedMessage
 from services.bridge.world import World, parse_world, upsert_world
@@ -64,11 +65,7 @@ class WorldSync:
         if self._subscriber is not None:
             self._subscriber.undeclare()
             self._subscriber = None
-        for task in self._tasks:
-            task.cancel()
-        for task in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+        await cancel_and_wait(self._tasks)
         self._tasks = []
 
     def offer(self, key: str, payload: bytes) -> None:

@@ -24,7 +24,6 @@ is stale a moment later anyway. Commands and the world use the service's normal 
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -36,6 +35,7 @@ from common.bus import Notifier
 from common.contract import keys
 from common.db import create_pool
 from common.errors import ConnectionFailure
+from common.tasks import cancel_and_wait
 from services.bridge.counters import Counters, RateLimitedLog
 from services.bridge.messages import BatteryState, Collision, LaserScan, Odometry, SensorRecord
 
@@ -245,11 +245,7 @@ class SensorWriter:
             table.wake.set()
         if tasks:
             _, late = await asyncio.wait(tasks, timeout=timeout_s)
-            for task in late:
-                task.cancel()
-            for task in late:
-                with contextlib.suppress(asyncio.CancelledError):
-                    await task
+            await cancel_and_wait(late)
         if self.pool is not None:
             pool, self.pool = self.pool, None
             try:
