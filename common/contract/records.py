@@ -146,11 +146,20 @@ async def newest_scan(db: Executor, robot_id: str) -> LaserScan | None:
         "FROM laser_scan WHERE robot_id = $1 ORDER BY id DESC LIMIT 1",
         robot_id,
     )
-    if row is None:
-        return None
-    fields = dict(row)
-    fields["ranges"] = np.asarray(fields["ranges"], dtype=np.float32)
-    return LaserScan(**fields)
+    return None if row is None else _laser_scan(row)
+
+
+def _laser_scan(row: asyncpg.Record) -> LaserScan:
+    return LaserScan(
+        id=row["id"],
+        robot_id=row["robot_id"],
+        stamp=row["stamp"],
+        angle_min=row["angle_min"],
+        angle_increment=row["angle_increment"],
+        range_min=row["range_min"],
+        range_max=row["range_max"],
+        ranges=np.asarray(row["ranges"], dtype=np.float32),
+    )
 
 
 _SCAN_AND_ODOMETRY = (
@@ -171,16 +180,7 @@ async def newest_scan_and_odometry(
     row = await db.fetchrow(_SCAN_AND_ODOMETRY, robot_id)
     if row is None:
         return None, None
-    scan = LaserScan(
-        id=row["id"],
-        robot_id=row["robot_id"],
-        stamp=row["stamp"],
-        angle_min=row["angle_min"],
-        angle_increment=row["angle_increment"],
-        range_min=row["range_min"],
-        range_max=row["range_max"],
-        ranges=np.asarray(row["ranges"], dtype=np.float32),
-    )
+    scan = _laser_scan(row)
     if row["o_id"] is None:
         return scan, None
     odom = Odometry(

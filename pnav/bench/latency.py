@@ -46,6 +46,9 @@ SELECT c.id, c.robot_id, c.recommendation_id,
   FROM command2robot c JOIN command_recommendation r ON r.id = c.recommendation_id
  WHERE c.id > $1 ORDER BY c.id
 """
+COMMANDED_SQL = (
+    "SELECT count(DISTINCT robot_id) FROM command2robot WHERE recommendation_id IS NOT NULL"
+)
 SENSOR_SQL = """
 SELECT id, robot_id, seq, extract(epoch FROM received_at)::float8 AS received
   FROM {table} WHERE id = ANY($1::bigint[])
@@ -124,27 +127,14 @@ class Shuttle:
                 await self.send(r["robot_id"])
 
 
-async def wait_for_robots(rt: Runtime, count: int, limit_s: float = 60.0) -> None:
+async def wait_for_count(
+    rt: Runtime, sql: str, count: int, what: str, limit_s: float = 60.0
+) -> None:
+    """Poll ``sql`` (a count) until it reaches ``count``; RuntimeError naming ``what``."""
     deadline = time.monotonic() + limit_s
-    while True:
-        n = await rt.database.pool.fetchval("SELECT count(*) FROM robot")
-        if n >= count:
-            return
+    while (n := await rt.database.pool.fetchval(sql)) < count:
         if time.monotonic() > deadline:
-            raise RuntimeError(f"only {n} of {count} robots registered within {limit_s:.0f} s")
-        await asyncio.sleep(0.2)
-
-
-async def wait_for_commands(rt: Runtime, count: int, limit_s: float = 60.0) -> None:
-    deadline = time.monotonic() + limit_s
-    while True:
-        n = await rt.database.pool.fetchval(
-            "SELECT count(DISTINCT robot_id) FROM command2robot WHERE recommendation_id IS NOT NULL"
-        )
-        if n >= count:
-            return
-        if time.monotonic() > deadline:
-            raise RuntimeError(f"only {n} of {count} robots got a command within {limit_s:.0f} s")
+            raise RuntimeError(f"only {n} of {count} robots {what} within {limit_s:.0f} s")
         await asyncio.sleep(0.2)
 
 
@@ -172,10 +162,10 @@ async def measure(
         )
         rt = await Runtime.open(config)
         try:
-            await wait_for_robots(rt, robots)
+            await wait_for_count(rt, "SELECT count(*) FROM robot", robots, "registered")
             shuttle = Shuttle(rt, hall)
             await shuttle.start()
-            await wait_for_commands(rt, robots)
+            await wait_for_count(rt, COMMANDED_SQL, robots, "got a command")
             await asyncio.sleep(WARMUP_S)
             collected = Collected()
             await collect(rt, collected)  # the warm-up's commands are read, not counted
