@@ -263,13 +263,18 @@ def test_collision_event_on_the_wire(zenoh_settings: ZenohSettings, listener: Li
 
 
 def scans_per_sim_second(listener: Listener) -> tuple[float, float]:
-    """(scans received per sim second, sim seconds per wall second) of one run."""
+    """(scans taken per sim second, sim seconds per wall second) of one run.
+
+    Counted by ``seq``, not by arrivals: sensor streams use Zenoh's DROP congestion mode
+    (docs/SIM.md), so flat out a listener may miss a few; most must still arrive."""
     scans = listener.of(keys.robot_key("r1", keys.SCAN))
     clock = [(b["stamp"], t) for k, b, t in listener.samples if k == keys.SIM_CLOCK]
     assert len(scans) >= 4 and len(clock) >= 2
     span = scans[-1]["stamp"] - scans[0]["stamp"]
+    taken = scans[-1]["seq"] - scans[0]["seq"]
+    assert len(scans) - 1 >= 0.9 * taken, f"{len(scans) - 1} of {taken} scans arrived"
     speed = (clock[-1][0] - clock[0][0]) / (clock[-1][1] - clock[0][1])
-    return (len(scans) - 1) / span, speed
+    return taken / span, speed
 
 
 def test_rate_max_is_faster_with_the_same_scans_per_sim_second(
