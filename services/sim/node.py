@@ -32,6 +32,8 @@ CLOCK_HZ = 30.0
 # paced by the stack (--max-lag), the clock also goes out every this many sim seconds: the
 # services then stamp their decisions with a time at most this far behind the sim's
 GATE_CLOCK_SIM_S = 0.02
+# at start, the longest wait for a sensor subscriber before the first reading (wall s)
+LISTENERS_WAIT_S = 1.0
 # and the world every this many wall seconds, besides the queryable
 WORLD_PERIOD_S = 1.0
 # at most one log line per robot per this many seconds about bad cmd_vel
@@ -138,6 +140,7 @@ class SimNode:
         next_world = time.monotonic() + WORLD_PERIOD_S
         next_clock = 0.0
         gate, next_gate_clock = self.gate, 0.0
+        self._await_listeners(stop)
         event(
             log,
             logging.INFO,
@@ -196,6 +199,19 @@ class SimNode:
             commands=self.commands_received,
             **self.gate_figures(),
         )
+
+    def _await_listeners(self, stop: threading.Event) -> None:
+        """Before the first reading, wait (at most LISTENERS_WAIT_S) until the sensor
+        publishers know of a subscriber: a Zenoh client drops a publication sent before the
+        router's interest reaches it, and the readings of sim time 0 would be lost to
+        listeners that were there all along. Nobody listening: start anyway."""
+        deadline = time.monotonic() + LISTENERS_WAIT_S
+        while not stop.is_set() and time.monotonic() < deadline:
+            # the stubs say bool; zenoh 1.x returns a MatchingStatus with .matching
+            statuses: list[Any] = [pub.matching_status for pub in self._publishers.values()]
+            if any(status.matching for status in statuses):
+                return
+            stop.wait(0.01)
 
     def gate_figures(self) -> dict[str, Any]:
         """How often and how long the sim waited for the stack (empty without a gate)."""

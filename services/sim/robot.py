@@ -73,15 +73,14 @@ def integrate(
 ) -> tuple[float, float, float]:
     """Exact unicycle motion over ``dt`` at constant (linear, angular): an arc, or a line.
 
-    Positive angular is counter-clockwise, so yaw increases.
+    Positive angular is counter-clockwise, so yaw increases. The arc's chord, of length
+    ``linear * dt * sin(h) / h`` at heading ``yaw + h`` (h = half the turn), is exact and, unlike
+    the radius form ``linear / angular``, loses no precision as the turn rate goes to 0.
     """
-    if abs(angular) < 1e-9:
-        return x + linear * dt * math.cos(yaw), y + linear * dt * math.sin(yaw), yaw
-    new_yaw = yaw + angular * dt
-    r = linear / angular
-    nx = x + r * (math.sin(new_yaw) - math.sin(yaw))
-    ny = y - r * (math.cos(new_yaw) - math.cos(yaw))
-    return nx, ny, normalize_angle(new_yaw)
+    h = angular * dt / 2.0
+    chord = linear * dt * (math.sin(h) / h if h != 0.0 else 1.0)
+    mid = yaw + h
+    return x + chord * math.cos(mid), y + chord * math.sin(mid), normalize_angle(yaw + 2.0 * h)
 
 
 @dataclass

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from services.sim.robot import BURGER, clamp_command, integrate, normalize_angle, wheel_speeds
@@ -45,6 +45,7 @@ def test_a_full_circle_comes_back() -> None:
 
 
 @settings(max_examples=100, deadline=None)
+@example(v=0.125, w=1e-9, yaw=0.5, t=1.0)  # a turn rate near 0: the radius form lost precision
 @given(
     v=st.floats(-0.22, 0.22),
     w=st.floats(-2.84, 2.84),
