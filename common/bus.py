@@ -17,6 +17,7 @@ from typing import Any
 import msgpack
 import zenoh
 
+from common import lockstep
 from common.config import ZenohSettings
 from common.contract import keys
 from common.errors import ConfigError, ConnectionFailure
@@ -70,9 +71,11 @@ def subscribe(
 ) -> zenoh.Subscriber[None]:
     """Call ``handler(key, payload)`` on ``loop`` for every sample on ``key_expr``.
 
-    Keep the returned subscriber referenced; call ``undeclare()`` on it to stop.
+    Keep the returned subscriber referenced; call ``undeclare()`` on it to stop. In a
+    lockstep run a message counts as received once ``handler`` returned.
     """
     loop = loop or asyncio.get_running_loop()
+    handler = _counted(key_expr, handler)
 
     def on_sample(sample: zenoh.Sample) -> None:
         # Runs on a Zenoh thread: copy out of the sample, then cross over to the loop.
@@ -89,12 +92,32 @@ def subscribe(
 def subscribe_threaded(
     session: zenoh.Session, key_expr: str, handler: Handler
 ) -> zenoh.Subscriber[None]:
-    """Call ``handler(key, payload)`` directly on Zenoh's thread (must be thread-safe, quick)."""
+    """Call ``handler(key, payload)`` directly on Zenoh's thread (must be thread-safe, quick).
+    In a lockstep run a message counts as received once ``handler`` returned."""
+    handler = _counted(key_expr, handler)
 
     def on_sample(sample: zenoh.Sample) -> None:
         handler(str(sample.key_expr), sample.payload.to_bytes())
 
     return session.declare_subscriber(key_expr, on_sample)
+
+
+def _counted(key_expr: str, handler: Handler) -> Handler:
+    """``handler``, counting each message after it (common.lockstep) if this process takes
+    part in a lockstep run."""
+    ledger = lockstep.active()
+    tally = ledger.tally(key_expr) if ledger is not None else None
+    if ledger is None or tally is None:
+        return handler
+    received = ledger.received
+
+    def counted(key: str, payload: bytes) -> None:
+        try:
+            handler(key, payload)
+        finally:
+            received(tally, key)
+
+    return counted
 
 
 def pack(message: dict[str, Any]) -> bytes:
@@ -147,6 +170,9 @@ class Notifier:
                 if publisher is None:
                     publisher = self._session.declare_publisher(key, express=True)
                     self._publishers[key] = publisher
+        ledger = lockstep.active()
+        if ledger is not None:
+            ledger.sent_on(key)
         publisher.put(Notification(table, robot, row_id).encode())
 
     def close(self) -> None:

@@ -37,6 +37,7 @@ import socket
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from common.contract import keys
 from common.errors import ConfigError
 
 Env = Mapping[str, str]
@@ -174,6 +175,17 @@ class LeaseSettings:
         )
 
 
+def lockstep_from_env(env: Env | None = None) -> tuple[str, ...]:
+    """PNAV_LOCKSTEP: a comma list of the services a lockstep sim waits for (docs/SIM.md,
+    "Lockstep"); empty or unset: no lockstep."""
+    env = os.environ if env is None else env
+    names = tuple(n.strip() for n in env.get("PNAV_LOCKSTEP", "").split(",") if n.strip())
+    for name in names:
+        if not keys.valid_id(name):
+            raise ConfigError(f"PNAV_LOCKSTEP: {name!r} is not a service name")
+    return names
+
+
 def default_instance() -> str:
     return f"{socket.gethostname()}-{os.getpid()}".replace(".", "-")
 
@@ -192,6 +204,8 @@ class ServiceConfig:
     stats_period_s: float = 2.0
     instance: str = field(default_factory=default_instance)
     log_level: str = "INFO"
+    # PNAV_LOCKSTEP: the services a lockstep sim waits for; non-empty: this one takes part
+    lockstep: tuple[str, ...] = ()
 
     @classmethod
     def from_env(cls, service: str, env: Env | None = None) -> ServiceConfig:
@@ -213,4 +227,5 @@ class ServiceConfig:
             stats_period_s=_float(env, "PNAV_STATS_PERIOD_S", cls.stats_period_s, minimum=0.1),
             instance=_get(env, "PNAV_INSTANCE", default_instance()),
             log_level=_get(env, "PNAV_LOG_LEVEL", cls.log_level).upper(),
+            lockstep=lockstep_from_env(env),
         )

@@ -18,7 +18,7 @@ from typing import Any
 import uvloop
 import zenoh
 
-from common import bus, log
+from common import bus, lockstep, log
 from common.clock import SimClock
 from common.config import ServiceConfig
 from common.contract import keys
@@ -38,6 +38,7 @@ class Runtime:
         self.db: Database | None = None
         self.clock = SimClock()
         self._token: Any = None
+        self.ledger: lockstep.Ledger | None = None  # taking part in a lockstep run
         self._closers: list[Callable[[], Any]] = []
 
     @classmethod
@@ -46,6 +47,9 @@ class Runtime:
         try:
             # Zenoh's open blocks while it connects: keep the loop free meanwhile.
             runtime.session = await asyncio.to_thread(bus.open_session, config.zenoh)
+            if config.lockstep:
+                # before any subscription: each one is counted from its start
+                runtime.ledger = lockstep.start(runtime.session, config.service, config.instance)
             runtime.clock.attach(runtime.session)
             if with_db:
                 pool = await create_pool(
@@ -95,6 +99,9 @@ class Runtime:
                 logger.warning("closing %r failed", closer, exc_info=True)
         self._closers.clear()
         self.clock.close()
+        if self.ledger is not None:
+            self.ledger = None
+            lockstep.stop()
         if self._token is not None:
             try:
                 self._token.undeclare()

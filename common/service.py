@@ -7,6 +7,8 @@ Lifecycle of a :class:`ScenarioService`:
 3. The service subscribes to the change notifications of every table the meta rules watch;
    each one wakes the engine at once (the callback runs on Zenoh's thread and only
    schedules ``engine.wake`` on the loop).
+   In a lockstep run (PNAV_LOCKSTEP, common.lockstep) the engine counts F in sim time and
+   reports the service quiet whenever an activation left nothing pending.
 4. Robot leases (common.lease, PNAV_LEASES=on by default): the service opens its lock
    connection and takes its share of the robots *before* the first activation (a lone
    replica owns every robot from the start). Rules act only for robots the replica owns:
@@ -74,6 +76,14 @@ def wake_on_notifications(
         except RuntimeError:
             pass  # loop closed: shutting down
 
+    def on_notification_lockstep(key: str, payload: bytes) -> None:
+        if observer is not None:
+            observer(key, payload)
+        engine.note_threadsafe()  # the flag is set before bus counts the message
+
+    if engine.ledger is not None:
+        on_notification = on_notification_lockstep
+
     return [
         bus.subscribe_threaded(session, keys.notify_watch(table), on_notification)
         for table in tables
@@ -90,6 +100,13 @@ class ScenarioService(ABC):
         self.config: ServiceConfig = runtime.config
         self.engine = Engine(self.config.engine, name=self.config.service)
         self.leases: LeaseManager | None = None
+        ledger = runtime.ledger
+        if ledger is not None:
+            # lockstep (common.lockstep): F on sim time, and every counted receipt makes the
+            # engine look again (a clock message may make F due; a quiet engine reports)
+            self.engine.ledger = ledger
+            self.engine.clock = runtime.clock.now
+            ledger.listener = self.engine.poke_threadsafe
 
     @abstractmethod
     def seed(self) -> None:

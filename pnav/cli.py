@@ -132,6 +132,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="also run each episode in the monolith (pnav.monolith) and compare the cost",
     )
     nav.add_argument(
+        "--pacing",
+        choices=("lockstep", "lag"),
+        default="lockstep",
+        help="lockstep (default): the sim steps only when the stack is quiet, so the same "
+        "world and seed give the same run, loaded or not; lag: decisions at most 0.1 s of "
+        "sim time stale (faster, not repeatable)",
+    )
+    nav.add_argument(
         "--in-process",
         action="store_true",
         help="run the stack episodes in this process instead of a worker replaced every 20 "

@@ -15,6 +15,7 @@ Key expressions (``{robot}`` is a robot id; ids are ``[A-Za-z0-9_-]+``):
 - ``pnav/sim/clock``              sim time
 - ``pnav/sim/world``              the loaded world (map, chargers, robots); also a queryable
 - ``pnav/alive/{service}/{instance}`` liveliness token of a running service
+- ``pnav/lockstep/{service}/{instance}`` a participant's quiet report (lockstep runs only)
 """
 
 from __future__ import annotations
@@ -137,6 +138,22 @@ def alive_key(service: str, instance: str) -> str:
 
 def alive_watch(service: str | None = None) -> str:
     return f"{PREFIX}/alive/{service or '*'}/*"
+
+
+# -- lockstep with the sim (common/lockstep.py, services/sim/lockstep.py) ------------------
+def lockstep_key(service: str, instance: str) -> str:
+    return f"{PREFIX}/lockstep/{service}/{instance}"
+
+
+LOCKSTEP_WATCH: Final = f"{PREFIX}/lockstep/*/*"
+
+
+def parse_lockstep_key(key: str) -> tuple[str, str]:
+    """``pnav/lockstep/planner/host-12`` -> ``("planner", "host-12")``."""
+    parts = key.split("/")
+    if len(parts) != 4 or parts[0] != PREFIX or parts[1] != "lockstep":
+        raise ValueError(f"not a lockstep key: {key!r}")
+    return parts[2], parts[3]
 
 
 # -- robot leases (migration 2) ------------------------------------------------------------

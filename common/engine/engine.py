@@ -13,6 +13,10 @@ Semantics (DESIGN.md section 3, thesis section 3.2):
 - Every rule is run once and discarded. Rules enter the system through :meth:`add` (end of
   ``current``) or a rule's generation step (end of ``next``).
 
+In a lockstep run (common.lockstep) F is counted in sim time and checked when a sim clock
+message comes, and after every activation that left nothing pending the engine reports its
+service quiet: :meth:`Engine.run` then follows ``_run_lockstep``.
+
 Our one addition to the thesis: a meta rule (``Rule.meta``) that is discarded because of an
 error would silently end its meta scenario. The engine re-seeds it from the factory given to
 :meth:`add_meta`, logs that it did, and counts it.
@@ -25,11 +29,14 @@ import logging
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from common.config import EngineSettings
 from common.engine.rule import Rule
 from common.engine.stats import EngineCounters, RuleStats
+
+if TYPE_CHECKING:
+    from common.lockstep import Ledger
 
 log = logging.getLogger("pnav.engine")
 
@@ -52,6 +59,8 @@ class Engine:
         self._hurried = False
         self._running = False
         self.clock: Callable[[], float] = time.monotonic
+        # set (with ``clock`` on sim time) when the service takes part in a lockstep run
+        self.ledger: Ledger | None = None
 
     # -- putting rules in ------------------------------------------------------------------
     def add(self, rule: Rule) -> None:
@@ -233,6 +242,22 @@ class Engine:
         if self._wake is not None:
             self._wake.set()
 
+    def note_threadsafe(self) -> None:
+        """A notification came (any thread): the flag is set before this returns, so a
+        lockstep report taken after it sees the activation owed (see ``_run_lockstep``)."""
+        self._woken = True
+        self.poke_threadsafe()
+
+    def poke_threadsafe(self) -> None:
+        """Make the loop look again (any thread): in lockstep, after every counted receipt
+        (a clock message may make F due; a quiet engine reports)."""
+        loop, event = self._loop, self._wake
+        if loop is not None and event is not None:
+            try:
+                loop.call_soon_threadsafe(event.set)
+            except RuntimeError:
+                pass  # loop closed while shutting down
+
     def wake_threadsafe(self) -> None:
         """:meth:`wake` from any thread, e.g. a Zenoh callback."""
         loop = self._loop
@@ -251,6 +276,9 @@ class Engine:
         self._wake = asyncio.Event()
         period, pause = self.settings.period_s, self.settings.pause_s
         try:
+            if self.ledger is not None:
+                await self._run_lockstep(self.ledger)
+                return
             while not self._stopping:
                 self._wake.clear()
                 self._woken = self._hurried = False
@@ -276,6 +304,34 @@ class Engine:
         finally:
             self._running = False
             self._stopping = False
+
+    async def _run_lockstep(self, ledger: Ledger) -> None:
+        """Activations on notifications, hurry, and F in sim time; a report when quiet.
+
+        The mark is taken before the flags are read: a notification counted in it set
+        ``_woken`` before it was counted, so it is either consumed by the activation that
+        follows (which reads the database after the row was committed) or still owed. A
+        report therefore never covers a notification no activation has seen.
+        """
+        assert self._wake is not None
+        started = -float("inf")
+        while not self._stopping:
+            self._wake.clear()
+            mark = ledger.mark()
+            woken, hurried = self._woken, self._hurried
+            if woken or hurried or self.clock() >= started + self.settings.period_s:
+                self._woken = self._hurried = False
+                started = self.clock()
+                await self.activation()
+                if woken:
+                    self.counters.woken_by_notification += 1
+                elif hurried:
+                    self.counters.woken_by_rule += 1
+                else:
+                    self.counters.woken_by_period += 1
+                continue  # look again: what came meanwhile, a hurry, a report
+            if ledger.report_if_settled(mark):
+                await self._wake.wait()
 
     def stop(self) -> None:
         """Ask :meth:`run` to return after the activation under way (drain, don't cut)."""

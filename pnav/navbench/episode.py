@@ -1,9 +1,13 @@
 """One navigation run of the whole stack: a world, a strategy, a goal; what the robot did.
 
 The stack runs as ``pnav up`` runs it (embedded Postgres, router, sim, bridge, the four
-scenario services), with the sim at ``--rate max`` paced by the stack (``--max-lag``,
-docs/SIM.md): the services always decide within ``max_lag`` sim seconds, so a loaded machine
-makes a run slower in wall time, not different in sim time.
+scenario services), with the sim at ``--rate max`` in lockstep with the stack (by default;
+``PNAV_LOCKSTEP``, docs/SIM.md): the sim holds at sim time 0 until the services and this
+runner (a participant that sends the mission, then only watches) report quiet, and then
+steps only when everything its readings caused has been handled, so the same world and seed
+give the same run on a quiet or a loaded machine. ``pacing="lag"`` runs the older pacing
+instead (``--max-lag``: decisions never staler than 0.1 s of sim time; faster, not
+repeatable).
 
 The episode watches what a user would: odometry (the driven trajectory), collision events
 and the commands reaching the sim. Sim time counts from the first decided command that
@@ -35,7 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from common import bus
+from common import bus, lockstep
 from common.config import ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime
@@ -49,7 +53,12 @@ from services.sim.trace import CMD_VEL, read_trace
 
 SUCCESS_RADIUS_M = GOAL_TOLERANCE_M  # BARN: the goal counts as reached within 0.3 m
 MAX_LAG_S = 0.1  # the decision service re-issues every 0.1 s sim: never staler than that
-WALL_FACTOR = 4.0  # a run may take this many times its time limit in wall time, plus START
+LOCKSTEP = "lockstep"
+LAG = "lag"
+PACINGS = (LOCKSTEP, LAG)
+# who the lockstep sim waits for: the stack's services and this runner
+PARTICIPANTS = ("bridge", "strategy", "planner", "controller", "decision", "navbench")
+WALL_FACTOR = 8.0  # a run may take this many times its time limit in wall time, plus START
 # read new commands (and the sensor rows they name) this often, wall: Postgres keeps 900
 # odometry rows a robot, 30 s of sim time, which a paced run crosses in 3 s or more
 COLLECT_PERIOD_S = 1.0
@@ -81,6 +90,7 @@ class Episode:
     seed: int = 0
     robot: str = "r1"
     goal_tolerance_m: float = SUCCESS_RADIUS_M
+    pacing: str = LOCKSTEP
 
 
 @dataclass
@@ -96,7 +106,8 @@ class Outcome:
     run_wall_s: float = 0.0  # wall time from the first decision to the end
     cpu_s: float = 0.0  # CPU seconds of the whole stack over the same span
     cpu_by_role: dict[str, float] = field(default_factory=dict)  # sim, postgres, launcher...
-    gate_timeouts: int | None = None  # from the sim's log; None when it could not be read
+    # the sim's pacing gave up waiting for the stack this often (its log; None: unread)
+    gate_timeouts: int | None = None
     log_dir: str = ""
     latency_ms: list[float] = field(default_factory=list)  # sense-to-act, one per decision
 
@@ -168,7 +179,9 @@ async def ensure_combo(rt: Runtime, combo: Combo) -> None:
 
 def gate_figures(sim_log: Path) -> dict[str, int]:
     """``gate_waits`` and ``gate_timeouts`` from the sim's last "sim stopped" line ({} if
-    there is none: the sim did not stop cleanly, or the log is elsewhere)."""
+    there is none: the sim did not stop cleanly, or the log is elsewhere); a lockstep sim's
+    ``lockstep_waits`` under the same name, its ``lockstep_timeouts`` plus
+    ``lockstep_lost`` as ``gate_timeouts``."""
     try:
         text = sim_log.read_text(errors="replace")
     except OSError:
@@ -176,8 +189,13 @@ def gate_figures(sim_log: Path) -> dict[str, int]:
     stops = [line for line in text.splitlines() if "sim stopped" in line]
     if not stops:
         return {}
-    found = re.findall(r"(gate_waits|gate_timeouts)=(\d+)", stops[-1])
-    return {name: int(value) for name, value in found}
+    found = dict(re.findall(r"(?:gate|lockstep)_(waits|timeouts|lost)=(\d+)", stops[-1]))
+    figures = {f"gate_{name}": int(found[name]) for name in ("waits", "timeouts") if name in found}
+    if "lost" in found and "gate_timeouts" in figures:
+        # a message that never reached a participant mid-run spoils the repeat as a wait
+        # given up does
+        figures["gate_timeouts"] += int(found["lost"])
+    return figures
 
 
 def sense_to_act_ms(trace: Path, collected: Collected, since: float, until: float) -> list[float]:
@@ -200,13 +218,20 @@ def sense_to_act_ms(trace: Path, collected: Collected, since: float, until: floa
 
 async def run_episode(episode: Episode, log_dir: Path | None = None) -> Outcome:
     log_dir = log_dir or Path(tempfile.mkdtemp(prefix="pnav-nav-"))
+    if episode.pacing not in PACINGS:
+        raise ValueError(f"pacing {episode.pacing!r}: one of {', '.join(PACINGS)}")
+    pacing = (
+        {"PNAV_LOCKSTEP": ",".join(PARTICIPANTS)}
+        if episode.pacing == LOCKSTEP
+        else {"PNAV_SIM_MAX_LAG": str(MAX_LAG_S)}
+    )
     options = StackOptions(
         world=str(episode.world),
         rate="max",
         zenoh_port=None,
         log_dir=log_dir,
         extra_env={
-            "PNAV_SIM_MAX_LAG": str(MAX_LAG_S),
+            **pacing,
             "PNAV_SIM_SEED": str(episode.seed),
             "PNAV_SIM_TRACE": str(log_dir / "trace.csv"),
         },
@@ -221,6 +246,11 @@ async def run_episode(episode: Episode, log_dir: Path | None = None) -> Outcome:
         )
         rt = await Runtime.open(config)
         subs: list[Any] = []
+        ledger = (
+            lockstep.start(rt.zenoh, "navbench", config.instance, receipts=False)
+            if episode.pacing == LOCKSTEP
+            else None
+        )
         try:
             for topic, handler in (
                 (keys.ODOM, watcher.on_odom),
@@ -238,6 +268,8 @@ async def run_episode(episode: Episode, log_dir: Path | None = None) -> Outcome:
             if verdict != "accepted":
                 raise RuntimeError(f"strategy {episode.combo.code} {verdict}: {reason}")
             await commands.set_goal(rt, episode.robot, *episode.goal)
+            if ledger is not None:
+                ledger.report_if_settled(ledger.mark())  # the mission is sent: the sim may go
             wall_cap = started + 30.0 + WALL_FACTOR * episode.time_limit_s
             async with contextlib.AsyncExitStack() as measuring:
                 while (result := watcher.verdict(episode.time_limit_s)) is None:
@@ -261,6 +293,8 @@ async def run_episode(episode: Episode, log_dir: Path | None = None) -> Outcome:
             for sub in subs:
                 with contextlib.suppress(Exception):
                     sub.undeclare()
+            if ledger is not None:
+                lockstep.stop()
             await rt.close()
     end, time_s = result
     t0 = watcher.first_decision or 0.0

@@ -146,6 +146,7 @@ class Plan:
     report: Path | None = None
     monolith: Callable[[Episode], Any] | None = None
     workers: EpisodeWorkers | None = None  # None: stack episodes in this process
+    pacing: str = "lockstep"  # or "lag" (pnav.navbench.episode)
 
 
 async def attempt(plan: Plan, mode: str, episode: Episode, log_dir: Path) -> Outcome | str:
@@ -177,7 +178,9 @@ async def run_one(plan: Plan, world: BenchmarkWorld, combo: Combo, k: int, mode:
     from pnav.navbench.render import render_run
 
     tolerance = world.goal_tolerance_m
-    episode = Episode(world.world_file, world.goal, combo, world.time_limit_s, k, "r1", tolerance)
+    episode = Episode(
+        world.world_file, world.goal, combo, world.time_limit_s, k, "r1", tolerance, plan.pacing
+    )
     name = f"{world.name}__{combo.strategy}-{combo.planner}"
     got = await attempt(plan, mode, episode, plan.logs / f"{name}__{k}")
     rec = to_record(world, combo, k, mode, Outcome("error", 0.0) if isinstance(got, str) else got)
@@ -257,7 +260,7 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(f"--compare {args.compare}: not a bench nav JSON ({exc})") from None
     monolith = load_monolith() if args.monolith else None
     logs = args.report / "logs" if args.report else Path(tempfile.mkdtemp(prefix="pnav-nav-"))
-    plan = Plan(worlds, combos, args.runs, logs, args.report, monolith)
+    plan = Plan(worlds, combos, args.runs, logs, args.report, monolith, pacing=args.pacing)
     total = len(worlds) * len(combos) * args.runs * (2 if monolith else 1)
     print(f"{total} episodes; logs in {logs}", file=sys.stderr)
     out = sys.stderr if args.json == "-" else sys.stdout  # keep stdout JSON-only then

@@ -24,7 +24,7 @@ import time
 
 import zenoh
 
-from common import bus, log
+from common import bus, lockstep, log
 from common.config import ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime, run_service
@@ -92,6 +92,10 @@ class Bridge:
             asyncio.create_task(self._prune_loop(), name="prune"),
             asyncio.create_task(self._stats_loop(), name="bridge-stats"),
         ]
+        if self.runtime.ledger is not None:
+            self._tasks.append(
+                asyncio.create_task(self._report_quiet(self.runtime.ledger), name="lockstep")
+            )
         log.event(
             logger,
             logging.INFO,
@@ -175,6 +179,37 @@ class Bridge:
             await self._load_robots()
         except Exception as exc:
             self._malformed_log.warning("robots", "robot table read failed", error=repr(exc))
+
+    # -- lockstep --------------------------------------------------------------------------
+    def quiet(self) -> bool:
+        """Every sensor message handed over is written and notified, every command
+        notification read and relayed, no robot reload under way."""
+        reload = self._reload
+        return self.writer.idle() and self.commands.idle() and (reload is None or reload.done())
+
+    async def _report_quiet(self, ledger: lockstep.Ledger) -> None:
+        """Report the bridge quiet (common.lockstep) whenever it is, after every counted
+        message; the watchdog runs here first, on the sim time a clock message moved."""
+        poke = asyncio.Event()
+        loop = asyncio.get_running_loop()
+
+        def wake() -> None:
+            try:
+                loop.call_soon_threadsafe(poke.set)
+            except RuntimeError:
+                pass  # loop closed: shutting down
+
+        ledger.listener = wake
+        self.writer.on_idle = self.commands.on_idle = poke.set
+        while True:
+            poke.clear()
+            mark = ledger.mark()
+            self.commands.check_watchdog()
+            if self.quiet():
+                ledger.report_if_settled(mark)
+            elif self._reload is not None and not self._reload.done():
+                self._reload.add_done_callback(lambda _task: poke.set())
+            await poke.wait()
 
     # -- housekeeping --------------------------------------------------------------------
     async def prune(self) -> int:

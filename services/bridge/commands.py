@@ -20,13 +20,13 @@ import contextlib
 import logging
 import math
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import asyncpg
 import zenoh
 
-from common import bus, log
+from common import bus, lockstep, log
 from common.clock import SimClock
 from common.contract import keys
 from common.tasks import cancel_and_wait
@@ -93,6 +93,11 @@ class CommandRelay:
         self._stopped: set[str] = set()  # robots the watchdog stopped
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._wake = asyncio.Event()
+        self._polling = False
+        # called on the loop when a read of command2robot ended (lockstep's reporter)
+        self.on_idle: Callable[[], None] | None = None
+        # in lockstep the watchdog runs when the reporter says, on sim-clock messages
+        self.lockstep = lockstep.active() is not None
         self._want_all = False
         self._wanted: set[str] = set()
         self._alerts = RateLimitedLog(logger)
@@ -152,6 +157,7 @@ class CommandRelay:
             wanted = None if self._want_all else list(self._wanted)
             self._want_all = False
             self._wanted.clear()
+            self._polling = True
             try:
                 async with self.pool.acquire() as conn:
                     if wanted is None:
@@ -163,6 +169,20 @@ class CommandRelay:
             except Exception as exc:  # Postgres away: the watchdog still stops the robots
                 self._alerts.warning("read", "command2robot read failed", error=repr(exc))
                 await asyncio.sleep(0.1)
+            finally:
+                self._polling = False
+            if self.on_idle is not None:
+                self.on_idle()
+
+    def idle(self) -> bool:
+        """No read of command2robot under way or asked for."""
+        return not (self._polling or self._wake.is_set())
+
+    def check_watchdog(self) -> None:
+        """Stop every robot whose command stream went quiet (sim time)."""
+        if self.clock.started:
+            for robot, age in self.watchdog.expired(self.clock.now()):
+                self._watchdog_stop(robot, age)
 
     async def _ticker(self) -> None:
         """Runs the watchdog every tick and asks for a full re-read every period."""
@@ -170,9 +190,8 @@ class CommandRelay:
         next_read = time.monotonic() + self.settings.command_period_s
         while True:
             await asyncio.sleep(tick)
-            if self.clock.started:
-                for robot, age in self.watchdog.expired(self.clock.now()):
-                    self._watchdog_stop(robot, age)
+            if not self.lockstep:
+                self.check_watchdog()
             now = time.monotonic()
             if now >= next_read:
                 next_read = now + self.settings.command_period_s
@@ -239,6 +258,9 @@ class CommandRelay:
         decided_stamp: float | None = None,
         reliable: bool = False,
     ) -> None:
+        ledger = lockstep.active()
+        if ledger is not None:
+            ledger.sent_on(keys.robot_key(robot, keys.CMD_VEL))
         payload = bus.pack(
             {
                 "stamp": self.clock.now(),

@@ -139,6 +139,7 @@ class _Table:
     pending: list[SensorRecord] = field(default_factory=list)
     wake: asyncio.Event = field(default_factory=asyncio.Event)
     task: asyncio.Task[None] | None = None
+    writing: bool = False  # a batch is being written (its rows not all notified yet)
 
 
 TABLE_OF_RECORD: dict[type, str] = {
@@ -181,6 +182,8 @@ class SensorWriter:
         self.max_pending = max_pending
         self._alerts = RateLimitedLog(logger)
         self._closing = False
+        # called on the loop whenever a table's writing goes idle (lockstep's reporter)
+        self.on_idle: Callable[[], None] | None = None
         self._tables = {
             t.name: t
             for t in (
@@ -237,6 +240,10 @@ class SensorWriter:
     def pending(self) -> int:
         return sum(len(t.pending) for t in self._tables.values())
 
+    def idle(self) -> bool:
+        """Every record added so far is written and notified (or dropped)."""
+        return not any(t.pending or t.writing for t in self._tables.values())
+
     async def close(self, timeout_s: float = 5.0) -> None:
         """Write what is queued (within ``timeout_s``), then stop the tasks."""
         self._closing = True
@@ -257,12 +264,18 @@ class SensorWriter:
         while True:
             await table.wake.wait()
             table.wake.clear()
-            while table.pending:
-                batch, table.pending = table.pending, []
-                try:
-                    await self._write(table, batch)
-                except Exception:  # a bug must not end this table's writing for good
-                    logger.exception("sensor batch failed", extra={"table": table.name})
+            table.writing = True
+            try:
+                while table.pending:
+                    batch, table.pending = table.pending, []
+                    try:
+                        await self._write(table, batch)
+                    except Exception:  # a bug must not end this table's writing for good
+                        logger.exception("sensor batch failed", extra={"table": table.name})
+            finally:
+                table.writing = False
+            if self.on_idle is not None:
+                self.on_idle()
             if self._closing:
                 return
 

@@ -8,6 +8,8 @@ recommendations (battery_check, charge_complete) and goal status. See docs/PLANN
 
 from __future__ import annotations
 
+import time
+
 from common.runtime import Runtime
 from common.service import ScenarioService, wake_on_notifications
 from services.planner.meta import MetaPlanner
@@ -20,7 +22,10 @@ class PlannerService(ScenarioService):
     def __init__(self, runtime: Runtime) -> None:
         super().__init__(runtime)
         clock = runtime.clock
-        self.state = PlannerState(runtime.database, clock.now, lambda: clock.started)
+        # in lockstep the planner's own gates (replan, retry, refresh) count sim time too,
+        # as the engine's F does: what it does then depends on the sim alone
+        wall = clock.now if runtime.ledger is not None else time.monotonic
+        self.state = PlannerState(runtime.database, clock.now, lambda: clock.started, wall=wall)
 
     def seed(self) -> None:
         self.engine.add_meta(lambda: MetaPlanner(self.state, owns=self.owns))

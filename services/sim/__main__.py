@@ -5,7 +5,7 @@
 
 Options fall back to environment variables (for containers): PNAV_SIM_WORLD, PNAV_SIM_RATE,
 PNAV_SIM_ROBOTS, PNAV_SIM_BATTERY, PNAV_SIM_SEED, PNAV_SIM_SCAN_HZ, PNAV_SIM_ODOM_HZ,
-PNAV_SIM_TRACE, PNAV_SIM_MAX_LAG; Zenoh comes from the
+PNAV_SIM_TRACE, PNAV_SIM_MAX_LAG, PNAV_LOCKSTEP; Zenoh comes from the
 PNAV_ZENOH_* variables (common.config.ZenohSettings). SIGINT and SIGTERM stop it cleanly.
 """
 
@@ -23,7 +23,7 @@ from pathlib import Path
 from types import FrameType
 
 from common.bus import open_session
-from common.config import ZenohSettings, default_instance
+from common.config import ZenohSettings, default_instance, lockstep_from_env
 from common.errors import ConfigError, ConnectionFailure, UsageError
 from common.lifeline import die_with_parent
 from common.log import event, setup
@@ -98,6 +98,15 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         "decision (services/sim/gate.py; for --rate max) [PNAV_SIM_MAX_LAG]",
     )
     ap.add_argument(
+        "--lockstep",
+        default=_env("PNAV_LOCKSTEP"),
+        metavar="SERVICES",
+        help="step only when the stack is quiet: hold at 0 until these services (a comma "
+        "list, e.g. bridge,strategy,planner,controller,decision) report, then wait after "
+        "every message (services/sim/lockstep.py; same world and seed, same run) "
+        "[PNAV_LOCKSTEP]",
+    )
+    ap.add_argument(
         "--trace",
         default=_env("PNAV_SIM_TRACE"),
         help="write when each sensor message left and each command arrived, for "
@@ -156,6 +165,9 @@ def build(args: argparse.Namespace) -> tuple[World, SimConfig, float]:
         raise ConfigError("--gui needs a display (DISPLAY is not set); run headless without it")
     if args.max_lag is not None and not args.max_lag > 0:
         raise ConfigError(f"--max-lag {args.max_lag} must be a positive number of sim seconds")
+    args.lockstep = lockstep_from_env({"PNAV_LOCKSTEP": args.lockstep or ""})
+    if args.lockstep and args.max_lag is not None:
+        raise ConfigError("--lockstep and --max-lag exclude each other (lockstep always waits)")
     if not args.physics_hz > 0 or not args.scan_hz > 0 or not args.odom_hz > 0:
         raise ConfigError("--physics-hz, --scan-hz and --odom-hz must be positive")
     config = SimConfig(
@@ -176,6 +188,7 @@ def serve(
     rate: float,
     trace: str | None = None,
     max_lag: float | None = None,
+    lockstep: tuple[str, ...] = (),
 ) -> int:
     from services.sim.gate import Gate
     from services.sim.node import SimNode
@@ -196,7 +209,14 @@ def serve(
         tracer = Tracer(Path(trace)) if trace else None
         gate = Gate(max_lag) if max_lag is not None else None
         node = SimNode(
-            world, config, session, rate=rate, instance=instance, tracer=tracer, gate=gate
+            world,
+            config,
+            session,
+            rate=rate,
+            instance=instance,
+            tracer=tracer,
+            gate=gate,
+            lockstep=lockstep,
         )
         try:
             node.run(stop)
@@ -216,7 +236,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.bench:
             print(report(run_bench(world, replace(config, gui=False), args.seconds)), flush=True)
             return 0
-        return serve(world, config, rate, args.trace, args.max_lag)
+        return serve(world, config, rate, args.trace, args.max_lag, args.lockstep)
     except UsageError as exc:
         event(log, logging.ERROR, "cannot start the sim", problem=str(exc))
         print(f"error: {exc}", file=sys.stderr)

@@ -20,6 +20,7 @@ from common.contract import keys
 from common.log import event
 from services.sim.clock import Pacer
 from services.sim.gate import Gate
+from services.sim.lockstep import Barrier
 from services.sim.sim import SimConfig, Simulation
 from services.sim.trace import CMD_VEL, Tracer
 from services.sim.world import World
@@ -32,6 +33,10 @@ CLOCK_HZ = 30.0
 # paced by the stack (--max-lag), the clock also goes out every this many sim seconds: the
 # services then stamp their decisions with a time at most this far behind the sim's
 GATE_CLOCK_SIM_S = 0.02
+# in lockstep, the clock goes out before every step's readings and at least every this many
+# sim seconds: the engines' F (0.05 s) and the bridge's watchdog run on it. Odometry at
+# 30 Hz already brings one every 0.033 s; each clock costs a wait for the whole stack.
+LOCKSTEP_CLOCK_S = 0.05
 # at start, the longest wait for a sensor subscriber before the first reading (wall s)
 LISTENERS_WAIT_S = 1.0
 # and the world every this many wall seconds, besides the queryable
@@ -51,11 +56,17 @@ class SimNode:
         instance: str = "sim",
         tracer: Tracer | None = None,
         gate: Gate | None = None,
+        lockstep: tuple[str, ...] = (),
     ) -> None:
+        if gate is not None and lockstep:
+            raise ValueError("--max-lag and --lockstep exclude each other: lockstep waits always")
         self.session = session
         self.rate = rate
         self.tracer = tracer
         self.gate = gate
+        self.barrier = Barrier(session, lockstep) if lockstep else None
+        # in lockstep a step's readings wait here, to go out one at a time
+        self._held: list[tuple[str, str, dict[str, Any]]] = []
         self._publishers: dict[tuple[str, str], zenoh.Publisher] = {}
         for spec in world.robots:
             for topic in keys.SENSOR_TOPICS:
@@ -106,6 +117,8 @@ class SimNode:
         if self.gate is not None and cmd.decided_stamp is not None:
             self.gate.on_decision(robot, cmd.decided_stamp)
         self.commands_received += 1
+        if self.barrier is not None:
+            self.barrier.on_cmd_vel(key)
 
     def _complain(self, robot: str, msg: str, problem: str) -> None:
         now = time.monotonic()
@@ -118,13 +131,21 @@ class SimNode:
 
     # -- publishing --------------------------------------------------------------------------
     def _publish(self, robot: str, topic: str, message: dict[str, Any]) -> None:
+        if self.barrier is not None:
+            self._held.append((robot, topic, message))
+            return
+        self._send(robot, topic, message)
+
+    def _send(self, robot: str, topic: str, message: dict[str, Any]) -> None:
         payload = pack(message)
         if self.tracer is not None:
             self.tracer.record(topic, robot, message["seq"])
         self._publishers[(robot, topic)].put(payload)
 
     def publish_clock(self) -> None:
-        self._clock_pub.put(pack(messages.clock(self.sim.time, self.rate)))
+        # in lockstep the clock stands still between messages: rate 0, no extrapolation
+        rate = 0.0 if self.barrier is not None else self.rate
+        self._clock_pub.put(pack(messages.clock(self.sim.time, rate)))
 
     def publish_world(self) -> None:
         self._world_pub.put(self._world_payload)
@@ -133,6 +154,9 @@ class SimNode:
     def run(self, stop: threading.Event, *, until_sim_s: float | None = None) -> None:
         """Step the sim at ``rate`` until ``stop`` is set (or sim time reaches ``until_sim_s``),
         publishing the clock at CLOCK_HZ and the world every WORLD_PERIOD_S of wall time."""
+        if self.barrier is not None:
+            self._run_lockstep(self.barrier, stop, until_sim_s)
+            return
         sim = self.sim
         pacer = Pacer(self.rate, sim.dt)
         clock_period = 1.0 / CLOCK_HZ
@@ -200,6 +224,71 @@ class SimNode:
             **self.gate_figures(),
         )
 
+    def _run_lockstep(
+        self, barrier: Barrier, stop: threading.Event, until_sim_s: float | None
+    ) -> None:
+        """Step only when the stack is quiet (lockstep.py): the clock, then each reading of
+        a step on its own, each followed by a wait; the clock at least every LOCKSTEP_CLOCK_S."""
+        sim = self.sim
+        pacer = Pacer(self.rate, sim.dt)
+        self.publish_world()
+        event(
+            log,
+            logging.INFO,
+            "sim holding at 0 for the stack (lockstep)",
+            world=sim.world.name,
+            expected=",".join(sorted(barrier.expected)),
+        )
+        # at 0 until everyone is there and quiet, then once more with the clock of sim time 0:
+        # whoever joined late has it too before the first step
+        barrier.hold(stop, lambda: self._count_clock(barrier))
+        self._clock_barrier(barrier, stop)
+        event(
+            log,
+            logging.INFO,
+            "sim running",
+            world=sim.world.name,
+            rate=self.rate or "max",
+            lockstep=",".join(sorted(barrier.expected)),
+            robots=[r.robot_id for r in sim.robots],
+            physics_hz=sim.config.physics_hz,
+        )
+        next_clock = sim.time + LOCKSTEP_CLOCK_S
+        while not stop.is_set():
+            if until_sim_s is not None and sim.time >= until_sim_s:
+                break
+            if self.rate and pacer.steps_due(sim.steps) == 0:
+                stop.wait(pacer.wall_until_next(sim.steps))
+                continue
+            sim.step()
+            if self._held or sim.time >= next_clock - 1e-9:
+                self._clock_barrier(barrier, stop)
+                next_clock = sim.time + LOCKSTEP_CLOCK_S
+            held, self._held = self._held, []
+            for robot, topic, message in held:
+                barrier.published(keys.robot_key(robot, topic))
+                self._send(robot, topic, message)
+                barrier.wait(stop)
+            if self.tracer is not None:
+                self.tracer.maybe_flush()
+        self.publish_clock()
+        event(
+            log,
+            logging.INFO,
+            "sim stopped",
+            sim_time=round(sim.time, 3),
+            commands=self.commands_received,
+            **barrier.figures(),
+        )
+
+    def _clock_barrier(self, barrier: Barrier, stop: threading.Event) -> None:
+        self._count_clock(barrier)
+        barrier.wait(stop)
+
+    def _count_clock(self, barrier: Barrier) -> None:
+        barrier.published(keys.SIM_CLOCK)
+        self.publish_clock()
+
     def _await_listeners(self, stop: threading.Event) -> None:
         """Before the first reading, wait (at most LISTENERS_WAIT_S) until the sensor
         publishers know of a subscriber: a Zenoh client drops a publication sent before the
@@ -215,6 +304,8 @@ class SimNode:
 
     def gate_figures(self) -> dict[str, Any]:
         """How often and how long the sim waited for the stack (empty without a gate)."""
+        if self.barrier is not None:
+            return self.barrier.figures()
         if self.gate is None:
             return {}
         return {
@@ -225,6 +316,8 @@ class SimNode:
 
     def close(self) -> None:
         """Undeclare everything this node declared and free pybullet (not the session)."""
+        if self.barrier is not None:
+            self.barrier.close()
         entities: list[Any] = [
             self._subscriber,
             self._queryable,

@@ -376,3 +376,16 @@ def test_gate_figures_come_from_the_sims_last_stop_line(tmp_path: Path) -> None:
         "gate_waited_wall_s=2.27\n"
     )
     assert episode_module.gate_figures(log) == {"gate_waits": 362, "gate_timeouts": 0}
+
+
+def test_a_lockstep_sims_timeouts_and_lost_messages_both_count_as_gate_timeouts(
+    tmp_path: Path,
+) -> None:
+    log = tmp_path / "sim.log"
+    log.write_text(
+        "x INFO sim sim stopped sim_time=12.7 commands=132 lockstep_waits=847 "
+        "lockstep_timeouts=1 lockstep_lost=2 lockstep_missed_at_start=7 "
+        "lockstep_waited_wall_s=3.418\n"
+    )
+    # messages missed while the stack started (before the run) do not count
+    assert episode_module.gate_figures(log) == {"gate_waits": 847, "gate_timeouts": 3}
