@@ -109,7 +109,7 @@ def build_parser() -> argparse.ArgumentParser:
     nav = benches.add_parser(
         "nav",
         help="navigation: success, SPL and BARN score of every strategy/planner combo per world",
-        description="Runs the whole stack (sim at --rate max, paced by the stack) in every "
+        description="Runs the whole stack (sim at --rate max, in lockstep with it) in every "
         "world of a suite with every shipped strategy/planner combination, one episode per "
         "world, combo and run. The whole shipped suite is 60 worlds x 4 combos = 240 "
         "episodes, about 25 min on 2 cores (times --runs, twice with --monolith): --levels "

@@ -289,8 +289,13 @@ def readme(records: Sequence[RunRecord], meta: dict[str, Any]) -> str:
         f"- suite `{meta['suite']}`, {len(meta['worlds'])} worlds; combos "
         + ", ".join(f"`{c}`" for c in meta["combos"])
         + f"; {meta['runs_per_world']} run(s) each, seed = run",
-        f"- the sim at `--rate max`, paced by the stack (`--max-lag {meta['max_lag_s']}`);"
-        " success: within the goal tolerance (0.3 m), no collision, within the time limit",
+        "- the sim at `--rate max`, "
+        + (
+            f"paced by the stack (`--max-lag {meta['max_lag_s']}`)"
+            if meta.get("pacing") == "lag"
+            else "in lockstep with the stack (the same world and seed give the same run)"
+        )
+        + "; success: within the goal tolerance (0.3 m), no collision, within the time limit",
         "",
         *(["- **interrupted** (Ctrl-C): only the runs done so far"] if meta["interrupted"] else []),
         "## Summary",

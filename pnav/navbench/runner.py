@@ -291,6 +291,7 @@ def run(args: argparse.Namespace) -> int:
         "worlds": [w.name for w in worlds],
         "combos": [c.label for c in combos],
         "runs_per_world": args.runs,
+        "pacing": args.pacing,
         "max_lag_s": MAX_LAG_S,
         "interrupted": interrupted,
     }
