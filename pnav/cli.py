@@ -42,6 +42,12 @@ def build_parser() -> argparse.ArgumentParser:
         "controller=3 (repeatable, or comma-separated)",
     )
     up.add_argument(
+        "--lockstep",
+        action="store_true",
+        help="the sim steps only when the stack is quiet (PNAV_LOCKSTEP, docs/SIM.md): "
+        "with --rate max, the same world and seed give the same run, loaded or not",
+    )
+    up.add_argument(
         "--replace",
         action="append",
         metavar="SERVICE=COMMAND",
@@ -185,7 +191,7 @@ def dispatch(args: argparse.Namespace) -> int:
     from pnav import commands
 
     if args.command == "up":
-        from pnav.launcher import StackOptions, parse_replace, parse_replicas
+        from pnav.launcher import StackOptions, lockstep_env, parse_replace, parse_replicas
         from pnav.up import up
 
         options = StackOptions(
@@ -201,6 +207,8 @@ def dispatch(args: argparse.Namespace) -> int:
             replicas=parse_replicas(args.replicas),
             replace=parse_replace(args.replace),
         )
+        if args.lockstep:
+            options.extra_env.update(lockstep_env(options))
         return uvloop.run(up(options))
     if args.command == "down":
         return commands.down()

@@ -132,6 +132,14 @@ def parse_replace(values: list[str] | tuple[str, ...] | None) -> dict[str, list[
     return out
 
 
+def lockstep_env(options: StackOptions) -> dict[str, str]:
+    """PNAV_LOCKSTEP for a stack run in lockstep (docs/SIM.md): every service it starts but
+    the sim (which waits for them) and those replaced by another command (which may not
+    take part: the sim would hold for them)."""
+    names = [s for s in options.services if s != "sim" and s not in options.replace]
+    return {"PNAV_LOCKSTEP": ",".join(names)}
+
+
 def service_specs(local: LocalStack, options: StackOptions, world: Path) -> list[ProcessSpec]:
     """One process per service; ``options.replicas[name]`` processes for a replicated one,
     named ``name-1``, ``name-2``... with ``PNAV_INSTANCE`` set to that name (a lone process

@@ -165,16 +165,7 @@ class SimNode:
         next_clock = 0.0
         gate, next_gate_clock = self.gate, 0.0
         self._await_listeners(stop)
-        event(
-            log,
-            logging.INFO,
-            "sim running",
-            world=sim.world.name,
-            rate=self.rate or "max",
-            max_lag=None if self.gate is None else self.gate.max_lag_s,
-            robots=[r.robot_id for r in sim.robots],
-            physics_hz=sim.config.physics_hz,
-        )
+        self._log_running(max_lag=None if self.gate is None else self.gate.max_lag_s)
         while not stop.is_set():
             if until_sim_s is not None and sim.time >= until_sim_s:
                 break
@@ -215,14 +206,7 @@ class SimNode:
                 rate=self.rate,
                 slips=pacer.slips,
             )
-        event(
-            log,
-            logging.INFO,
-            "sim stopped",
-            sim_time=round(sim.time, 3),
-            commands=self.commands_received,
-            **self.gate_figures(),
-        )
+        self._log_stopped()
 
     def _run_lockstep(
         self, barrier: Barrier, stop: threading.Event, until_sim_s: float | None
@@ -243,16 +227,7 @@ class SimNode:
         # whoever joined late has it too before the first step
         barrier.hold(stop, lambda: self._count_clock(barrier))
         self._clock_barrier(barrier, stop)
-        event(
-            log,
-            logging.INFO,
-            "sim running",
-            world=sim.world.name,
-            rate=self.rate or "max",
-            lockstep=",".join(sorted(barrier.expected)),
-            robots=[r.robot_id for r in sim.robots],
-            physics_hz=sim.config.physics_hz,
-        )
+        self._log_running(lockstep=",".join(sorted(barrier.expected)))
         next_clock = sim.time + LOCKSTEP_CLOCK_S
         while not stop.is_set():
             if until_sim_s is not None and sim.time >= until_sim_s:
@@ -272,13 +247,30 @@ class SimNode:
             if self.tracer is not None:
                 self.tracer.maybe_flush()
         self.publish_clock()
+        self._log_stopped()
+
+    def _log_stopped(self) -> None:
+        """The line ``pnav bench nav`` reads the pacing's figures from (``gate_figures``)."""
         event(
             log,
             logging.INFO,
             "sim stopped",
-            sim_time=round(sim.time, 3),
+            sim_time=round(self.sim.time, 3),
             commands=self.commands_received,
-            **barrier.figures(),
+            **self.gate_figures(),
+        )
+
+    def _log_running(self, **pacing: Any) -> None:
+        sim = self.sim
+        event(
+            log,
+            logging.INFO,
+            "sim running",
+            world=sim.world.name,
+            rate=self.rate or "max",
+            **pacing,
+            robots=[r.robot_id for r in sim.robots],
+            physics_hz=sim.config.physics_hz,
         )
 
     def _clock_barrier(self, barrier: Barrier, stop: threading.Event) -> None:

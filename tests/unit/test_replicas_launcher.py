@@ -125,3 +125,20 @@ def test_a_bad_replace_value_says_why(value: str, message: str) -> None:
 
     with pytest.raises(UsageError, match=message):
         parse_replace([value])
+
+
+def test_up_lockstep_waits_for_every_service_started_but_a_replaced_one() -> None:
+    from pnav.launcher import lockstep_env, parse_replace
+
+    args = build_parser().parse_args(["up", "--lockstep"])
+    assert args.lockstep
+    assert lockstep_env(StackOptions()) == {
+        "PNAV_LOCKSTEP": "bridge,strategy,planner,controller,decision"
+    }
+    replaced = StackOptions(replace=parse_replace(["controller=python -m other"]))
+    assert lockstep_env(replaced) == {"PNAV_LOCKSTEP": "bridge,strategy,planner,decision"}
+    options = StackOptions(extra_env=lockstep_env(StackOptions()))
+    specs = service_specs(local(), options, Path("worlds/open_room.yaml"))
+    assert {s.env["PNAV_LOCKSTEP"] for s in specs} == {
+        "bridge,strategy,planner,controller,decision"
+    }
