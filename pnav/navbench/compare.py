@@ -36,23 +36,33 @@ def parted_m(a: Sequence[Sequence[float]], b: Sequence[Sequence[float]]) -> floa
 
 def compare(records: Sequence[RunRecord], before: Sequence[dict[str, Any]]) -> list[str]:
     """This run's records against an earlier JSON's runs, matched by world, combo, run and
-    mode: outcome, time, and how far the paths parted; one line each, then a count."""
+    mode: outcome, time, and how far the paths parted (or that they are the same path, point
+    for point, as a lockstep run repeats); one line each, then a count. Each record is
+    compared in its JSON form, rounded as the earlier one was."""
     earlier = {(b["world"], b["combo"], b["run"], b["mode"]): b for b in before}
-    lines, same, matched, worst = [], 0, 0, 0.0
+    lines, same, identical, matched, worst = [], 0, 0, 0, 0.0
     for r in records:
         if (b := earlier.get((r.world, r.combo, r.run, r.mode))) is None:
             continue
-        dt = r.result.time_s - float(b["time_s"])
-        equal = r.result.outcome == b["outcome"]
+        now = r.to_json()
+        dt = float(now["time_s"]) - float(b["time_s"])
+        equal = now["outcome"] == b["outcome"]
+        same_path = bool(now["trajectory"]) and now["trajectory"] == b.get("trajectory")
         matched, same, worst = matched + 1, same + equal, max(worst, abs(dt))
+        identical += same_path
+        path = (
+            "the same path, point for point"
+            if same_path
+            else f"paths at most {parted_m(now['trajectory'], b.get('trajectory', [])):.3f} m apart"
+        )
         lines.append(
-            f"{r.world} {r.combo} run {r.run} ({r.mode}): {b['outcome']} -> {r.result.outcome}"
+            f"{r.world} {r.combo} run {r.run} ({r.mode}): {b['outcome']} -> {now['outcome']}"
             f"{'' if equal else ' DIFFERENT'}; time {float(b['time_s']):.3f} -> "
-            f"{r.result.time_s:.3f} s ({dt:+.3f}); paths at most "
-            f"{parted_m(r.trajectory, b.get('trajectory', [])):.3f} m apart"
+            f"{float(now['time_s']):.3f} s ({dt:+.3f}); {path}"
         )
     lines.append(
-        f"{same} of {matched} runs with the same outcome; largest time change {worst:.3f} s"
+        f"{same} of {matched} runs with the same outcome, {identical} on the same path; "
+        f"largest time change {worst:.3f} s"
     )
     return lines
 

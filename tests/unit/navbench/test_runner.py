@@ -328,20 +328,26 @@ def test_compare_finds_the_runs_that_changed(suite: list[BenchmarkWorld]) -> Non
         runner.to_record(world, DIRECT, 0, "stack", Outcome("stalled", 9.0, path[:40])),
     ]
     before = [r.to_json() for r in now]
+    assert compare.compare(now, before)[-1] == (
+        "2 of 2 runs with the same outcome, 2 on the same path; largest time change 0.000 s"
+    )
+    assert "the same path, point for point" in compare.compare(now, before)[0]
     arrival = now[0].result.time_s
     before[0]["time_s"] = arrival - 0.5
     before[0]["trajectory"] = [[t, x + 0.1, y] for t, x, y in before[0]["trajectory"]]
     before[1]["outcome"] = "success"
     lines = compare.compare(now, before)
-    assert f"time {arrival - 0.5:.3f} -> {arrival:.3f} s (+0.500)" in lines[0]
+    assert f"time {arrival - 0.5:.3f} -> {round(arrival, 4):.3f} s (+0.500)" in lines[0]
     assert "DIFFERENT" not in lines[0]
 
     def apart(line: str) -> float:
         return float(line.split("paths at most ")[1].split(" m")[0])
 
     assert 0.099 <= apart(lines[0]) < 0.11  # moved 0.1 m sideways (a bit more at an end)
-    assert "DIFFERENT" in lines[1] and apart(lines[1]) <= 0.001  # the JSON's rounding
-    assert lines[-1] == "1 of 2 runs with the same outcome; largest time change 0.500 s"
+    assert "DIFFERENT" in lines[1] and "the same path, point for point" in lines[1]
+    assert lines[-1] == (
+        "1 of 2 runs with the same outcome, 1 on the same path; largest time change 0.500 s"
+    )
     assert compare.parted_m([], [[0.0, 1.0, 1.0]]) != compare.parted_m([], [])  # both NaN
 
 
