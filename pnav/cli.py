@@ -118,7 +118,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Runs the whole stack (sim at --rate max, in lockstep with it) in every "
         "world of a suite with every shipped strategy/planner combination, one episode per "
         "world, combo and run. The whole shipped suite is 60 worlds x 4 combos = 240 "
-        "episodes, about 25 min on 2 cores (times --runs, twice with --monolith): --levels "
+        "episodes, about 42 min on 2 cores (times --runs, twice with --monolith): --levels "
         "and --worlds run a subset.",
     )
     nav.add_argument(
