@@ -213,7 +213,12 @@ def test_payloads_follow_the_contract_and_cmd_vel_moves_the_robot(
         msgs = listener.of(key)
         for msg in msgs:
             check(msg, schema)
-        assert [m["seq"] for m in msgs] == list(range(len(msgs))), key
+        # seq counts the stream's messages from 0; a sensor stream drops rather than stalls
+        # the sim under congestion (CONTRACT.md), so a gap or two on a loaded machine is
+        # the contract working, not breaking
+        seqs = [m["seq"] for m in msgs]
+        assert seqs[0] == 0 and all(b > a for a, b in zip(seqs, seqs[1:])), key
+        assert len(seqs) >= 0.9 * (seqs[-1] + 1), key
     scan = listener.of(scan_key)[0]
     assert len(scan["ranges"]) == 360
     assert all(isinstance(r, float) for r in scan["ranges"])
