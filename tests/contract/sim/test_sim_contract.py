@@ -217,7 +217,7 @@ def test_payloads_follow_the_contract_and_cmd_vel_moves_the_robot(
         # the sim under congestion (CONTRACT.md), so a gap or two on a loaded machine is
         # the contract working, not breaking
         seqs = [m["seq"] for m in msgs]
-        assert seqs[0] == 0 and all(b > a for a, b in zip(seqs, seqs[1:])), key
+        assert seqs[0] == 0 and seqs == sorted(set(seqs)), key  # rising, no repeat
         assert len(seqs) >= 0.9 * (seqs[-1] + 1), key
     scan = listener.of(scan_key)[0]
     assert len(scan["ranges"]) == 360
