@@ -182,10 +182,15 @@ class Bridge:
 
     # -- lockstep --------------------------------------------------------------------------
     def quiet(self) -> bool:
-        """Every sensor message handed over is written and notified, every command
-        notification read and relayed, no robot reload under way."""
+        """The world is applied; every sensor message handed over is written and notified,
+        every command notification read and relayed; no robot reload under way."""
         reload = self._reload
-        return self.writer.idle() and self.commands.idle() and (reload is None or reload.done())
+        return (
+            self.world.idle()
+            and self.writer.idle()
+            and self.commands.idle()
+            and (reload is None or reload.done())
+        )
 
     async def _report_quiet(self, ledger: lockstep.Ledger) -> None:
         """Report the bridge quiet (common.lockstep) whenever it is, after every counted
@@ -200,7 +205,7 @@ class Bridge:
                 pass  # loop closed: shutting down
 
         ledger.listener = wake
-        self.writer.on_idle = self.commands.on_idle = poke.set
+        self.writer.on_idle = self.commands.on_idle = self.world.on_idle = poke.set
         while True:
             poke.clear()
             mark = ledger.mark()

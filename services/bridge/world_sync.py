@@ -50,6 +50,9 @@ class WorldSync:
         self._refused_payload: bytes | None = None
         self._latest: bytes | None = None
         self._wake = asyncio.Event()
+        self._applying = False
+        # called on the loop when an application ended (lockstep's reporter)
+        self.on_idle: Callable[[], None] | None = None
         self._alerts = RateLimitedLog(logger, period_s=30.0)
         self._subscriber: zenoh.Subscriber[None] | None = None
         self._tasks: list[asyncio.Task[None]] = []
@@ -102,41 +105,56 @@ class WorldSync:
                 self._alerts.warning("query", "world query failed", error=repr(exc))
             await asyncio.sleep(self.retry_s)
 
+    def idle(self) -> bool:
+        """A world is applied and no newer one is waiting or being written (lockstep: the
+        bridge is not quiet before it has the world, so the sim holds until the robots,
+        map and chargers are rows)."""
+        return self.world is not None and not self._applying and not self._wake.is_set()
+
     async def _apply_loop(self) -> None:
         while True:
             await self._wake.wait()
             self._wake.clear()
-            payload, self._latest = self._latest, None
-            if payload is None or payload == self._applied_payload:
-                continue
+            self._applying = True
             try:
-                world = parse_world(payload)
-            except MalformedMessage as exc:
-                self._refused_payload = payload
-                self.counters.worlds_malformed += 1
-                self._alerts.warning(exc.reason, "malformed world ignored", reason=exc.reason)
-                continue
-            if world == self.world:
-                self._applied_payload = payload
-                self.counters.worlds_unchanged += 1
-                continue
-            try:
-                await upsert_world(self.db, world)
-            except Exception as exc:
-                # Postgres away or refusing: try again with the next republication
-                self._alerts.warning("upsert", "world not written", error=repr(exc))
-                await asyncio.sleep(1.0)
-                continue
-            self.world = world
+                await self._apply_latest()
+            finally:
+                self._applying = False
+            if self.on_idle is not None:
+                self.on_idle()
+
+    async def _apply_latest(self) -> None:
+        payload, self._latest = self._latest, None
+        if payload is None or payload == self._applied_payload:
+            return
+        try:
+            world = parse_world(payload)
+        except MalformedMessage as exc:
+            self._refused_payload = payload
+            self.counters.worlds_malformed += 1
+            self._alerts.warning(exc.reason, "malformed world ignored", reason=exc.reason)
+            return
+        if world == self.world:
             self._applied_payload = payload
-            self.counters.worlds_applied += 1
-            log.event(
-                logger,
-                logging.INFO,
-                "world applied",
-                world=world.name,
-                robots=",".join(r.robot_id for r in world.robots),
-                stations=len(world.stations),
-                map=f"{world.map.width}x{world.map.height}@{world.map.resolution}",
-            )
-            self.on_applied(world)
+            self.counters.worlds_unchanged += 1
+            return
+        try:
+            await upsert_world(self.db, world)
+        except Exception as exc:
+            # Postgres away or refusing: try again with the next republication
+            self._alerts.warning("upsert", "world not written", error=repr(exc))
+            await asyncio.sleep(1.0)
+            return
+        self.world = world
+        self._applied_payload = payload
+        self.counters.worlds_applied += 1
+        log.event(
+            logger,
+            logging.INFO,
+            "world applied",
+            world=world.name,
+            robots=",".join(r.robot_id for r in world.robots),
+            stations=len(world.stations),
+            map=f"{world.map.width}x{world.map.height}@{world.map.resolution}",
+        )
+        self.on_applied(world)
