@@ -73,6 +73,7 @@ class Bridge:
         self._tasks: list[asyncio.Task[None]] = []
         self._last_reload = 0.0
         self._reload: asyncio.Task[None] | None = None
+        self._reload_again = False
         self._stopped = False
 
     # -- lifecycle -----------------------------------------------------------------------
@@ -157,12 +158,17 @@ class Bridge:
     # -- robots --------------------------------------------------------------------------
     def _on_world(self, world: World) -> None:
         self.robots = self.robots | {r.robot_id for r in world.robots}
+        # a robot-table read under way may have started before the world's rows were in
+        self._reload_again = self._reload is not None and not self._reload.done()
 
     def _on_robot_notification(self, key: str, payload: bytes) -> None:
         self._reload_robots_soon(force=True)
 
     def _reload_robots_soon(self, *, force: bool = False) -> None:
         if self._reload is not None and not self._reload.done():
+            # a read under way may predate the change that asked for this one: read again
+            # when it is done, or its stale set would stand
+            self._reload_again = self._reload_again or force
             return
         if not force and time.monotonic() - self._last_reload < _ROBOT_RELOAD_S:
             return
@@ -175,10 +181,14 @@ class Bridge:
         self.robots = frozenset(r[0] for r in rows)
 
     async def _load_robots_safely(self) -> None:
-        try:
-            await self._load_robots()
-        except Exception as exc:
-            self._malformed_log.warning("robots", "robot table read failed", error=repr(exc))
+        again = True
+        while again:
+            self._reload_again = False
+            try:
+                await self._load_robots()
+            except Exception as exc:
+                self._malformed_log.warning("robots", "robot table read failed", error=repr(exc))
+            again = self._reload_again
 
     # -- lockstep --------------------------------------------------------------------------
     def quiet(self) -> bool:
