@@ -183,16 +183,8 @@ async def newest_scan_and_odometry(
     scan = _laser_scan(row)
     if row["o_id"] is None:
         return scan, None
-    odom = Odometry(
-        id=row["o_id"],
-        robot_id=robot_id,
-        stamp=row["o_stamp"],
-        x=row["o_x"],
-        y=row["o_y"],
-        yaw=row["o_yaw"],
-        linear_mps=row["o_linear_mps"],
-        angular_rps=row["o_angular_rps"],
-    )
+    # the odometry columns come prefixed "o_", as newest_odometry reads them unprefixed
+    odom = Odometry(robot_id=robot_id, **{k[2:]: v for k, v in row.items() if k[:2] == "o_"})
     return scan, odom
 
 
