@@ -33,6 +33,7 @@ from typing import ClassVar
 import zenoh
 
 from common import bus, log
+from common.bus import Notification
 from common.config import ServiceConfig
 from common.contract import keys
 from common.engine import Engine
@@ -197,11 +198,38 @@ class ScenarioService(ABC):
             except Exception:
                 logger.warning("could not release the robot leases", exc_info=True)
 
+    def on_notification(self, note: Notification) -> None:
+        """A change notification of a table the meta rules watch, on the event loop, just
+        before it wakes the engine. A service hands it to its store, which keeps what the
+        notifications told it (common.freshness); the default does nothing.
+
+        ``note.id`` is None when the notification named no row or its payload was
+        unreadable: then anything of ``note.table`` (for ``note.robot``) may have changed.
+        """
+        return None
+
     def watch(self) -> None:
-        """Wake the engine on every notification of a table the meta rules watch."""
-        for subscriber in wake_on_notifications(
-            self.runtime.zenoh, self.engine, self.engine.watched_tables
-        ):
+        """On every notification of a table the meta rules watch: :meth:`on_notification`,
+        then wake the engine. Both run on the event loop (one hop from Zenoh's thread), so a
+        store needs no locks; in a lockstep run the message counts as handled after both."""
+        engine, note = self.engine, self.on_notification
+
+        def on_message(key: str, payload: bytes) -> None:
+            try:
+                decoded = Notification.decode(key, payload)
+            except ValueError:
+                try:
+                    table, robot = keys.parse_notify_key(key)
+                except ValueError:
+                    table, robot = "", None
+                decoded = Notification(table, robot, None)
+            if decoded.table:
+                note(decoded)
+            engine.wake()
+
+        session = self.runtime.zenoh
+        for table in engine.watched_tables:
+            subscriber = bus.subscribe(session, keys.notify_watch(table), on_message)
             self.runtime.on_close(subscriber.undeclare)
 
     async def publish_stats(self) -> None:

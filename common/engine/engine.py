@@ -208,6 +208,13 @@ class Engine:
             step,
             extra={"rule": rule.name, "scenario": rule.scenario, "engine": self.name},
         )
+        try:
+            rule.discarded(step)
+        except Exception:
+            log.exception(
+                "discarded hook raised",
+                extra={"rule": rule.name, "scenario": rule.scenario, "engine": self.name},
+            )
         factory = self._meta_factories.get(type(rule))
         if factory is not None:
             self.next.append(factory())

@@ -12,6 +12,9 @@ The steps, run in this order by :class:`~common.engine.Engine` (thesis, figure 3
    go to the end of the engine's ``next`` queue. A rule that must live on returns a clone of
    itself here (``return [self.clone()]``).
 
+A rule discarded on an error is told so (``discarded(step)``), so a supervisor that keeps
+it alive can start it again (common.engine.supervisor).
+
 Tests (steps 2 and 3) return a bool or an iterable of bools; a generator that ``yield``-s each
 test stops at the first false one, like the thesis' "go to step 6". A result that is not a
 bool, or a test that raises, is logged and counts as false: a broken guard makes the rule
@@ -83,6 +86,13 @@ class Rule:
     def rule_generation(self) -> Iterable[Rule]:
         """Step 5: rules to append to the next queue; runs even when not activated."""
         return ()
+
+    def discarded(self, step: str) -> None:
+        """The engine discarded this rule on an error in ``step`` (no rule generation ran).
+
+        A hook for whoever keeps the rule alive (common.engine.supervisor); it must not
+        raise. The default does nothing.
+        """
 
     def clone(self) -> Rule:
         """A fresh copy of this rule for the next activation (shallow; ``activated`` reset)."""

@@ -18,7 +18,7 @@ from common.contract import keys, records
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
 from common.db import Database
 from common.runtime import Runtime
-from common.service import ScenarioService, wake_on_notifications
+from common.service import ScenarioService
 from services.controller.meta import ControllerState, MetaController
 from services.controller.scenario import Recommendation
 
@@ -80,17 +80,9 @@ class ControllerService(ScenarioService):
             del self.state.last_scan[key]
         super().on_ownership_change(gained, lost)
 
-    def watch(self) -> None:
-        """As the base class does, noting what each notification announces."""
-        for subscriber in wake_on_notifications(
-            self.runtime.zenoh, self.engine, self.engine.watched_tables, observer=self._note
-        ):
-            self.runtime.on_close(subscriber.undeclare)
-
-    def _note(self, key: str, payload: bytes) -> None:
-        try:
-            note = Notification.decode(key, payload)
-        except ValueError:
+    def on_notification(self, note: Notification) -> None:
+        """Note what each notification announces (on the loop, before the engine wakes)."""
+        if not note.table:
             self._meta_dirty = True  # unreadable: assume anything changed
             return
         if note.table == keys.LASER_SCAN and note.robot is not None:

@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import time
 
+from common.bus import Notification
+from common.contract import keys
 from common.runtime import Runtime
-from common.service import ScenarioService, wake_on_notifications
+from common.service import ScenarioService
 from services.planner.meta import MetaPlanner
 from services.planner.state import PlannerState
 
@@ -37,11 +39,7 @@ class PlannerService(ScenarioService):
         self.state.forget(gained | lost)
         super().on_ownership_change(gained, lost)
 
-    def watch(self) -> None:
-        # As the base class does, plus an observer that flags robot, map and charger changes,
-        # so the meta-planner re-reads those tables only when they change.
-        subscribers = wake_on_notifications(
-            self.runtime.zenoh, self.engine, self.engine.watched_tables, observer=self.state.note
-        )
-        for subscriber in subscribers:
-            self.runtime.on_close(subscriber.undeclare)
+    def on_notification(self, note: Notification) -> None:
+        # flags robot, map and charger changes, so the meta-planner re-reads those tables
+        # only when they change
+        self.state.note(keys.notify_key(note.table, note.robot), b"")
