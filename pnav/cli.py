@@ -191,25 +191,7 @@ def dispatch(args: argparse.Namespace) -> int:
     from pnav import commands
 
     if args.command == "up":
-        from pnav.launcher import StackOptions, lockstep_env, parse_replace, parse_replicas
-        from pnav.up import up
-
-        options = StackOptions(
-            world=args.world,
-            rate=args.rate,
-            gui=args.gui,
-            robots=args.robots,
-            battery=args.battery,
-            data_dir=args.data_dir,
-            zenoh_port=args.zenoh_port,
-            log_dir=args.log_dir,
-            echo=not args.quiet,
-            replicas=parse_replicas(args.replicas),
-            replace=parse_replace(args.replace),
-        )
-        if args.lockstep:
-            options.extra_env.update(lockstep_env(options))
-        return uvloop.run(up(options))
+        return _up(args)
     if args.command == "down":
         return commands.down()
     if args.command == "migrate":
@@ -222,15 +204,47 @@ def dispatch(args: argparse.Namespace) -> int:
         from pnav import demo
 
         return demo.run(args.json, args.rate)
-    if args.command == "bench" and args.bench == "engine":
+    if args.command == "bench":
+        return _bench(args)
+    if args.command == "worlds":
+        from pnav.navbench.worlds_cli import run_worlds
+
+        return run_worlds(args)
+    raise AssertionError(f"unhandled command {args.command}")  # argparse enforces the choices
+
+
+def _up(args: argparse.Namespace) -> int:
+    from pnav.launcher import StackOptions, lockstep_env, parse_replace, parse_replicas
+    from pnav.up import up
+
+    options = StackOptions(
+        world=args.world,
+        rate=args.rate,
+        gui=args.gui,
+        robots=args.robots,
+        battery=args.battery,
+        data_dir=args.data_dir,
+        zenoh_port=args.zenoh_port,
+        log_dir=args.log_dir,
+        echo=not args.quiet,
+        replicas=parse_replicas(args.replicas),
+        replace=parse_replace(args.replace),
+    )
+    if args.lockstep:
+        options.extra_env.update(lockstep_env(options))
+    return uvloop.run(up(options))
+
+
+def _bench(args: argparse.Namespace) -> int:
+    if args.bench == "engine":
         from pnav.bench import engine
 
         return engine.run(args.json, args.seconds, args.notifications)
-    if args.command == "bench" and args.bench == "startup":
+    if args.bench == "startup":
         from pnav.bench import startup
 
         return startup.run(args.json, args.runs)
-    if args.command == "bench" and args.bench == "latency":
+    if args.bench == "latency":
         from pnav.bench import latency_report
         from pnav.launcher import parse_replicas
 
@@ -241,15 +255,11 @@ def dispatch(args: argparse.Namespace) -> int:
             parse_replicas(args.replicas),
             args.json,
         )
-    if args.command == "bench" and args.bench == "nav":
+    if args.bench == "nav":
         from pnav.navbench import runner
 
         return runner.run(args)
-    if args.command == "worlds":
-        from pnav.navbench.worlds_cli import run_worlds
-
-        return run_worlds(args)
-    raise AssertionError(f"unhandled command {args.command}")  # argparse enforces the choices
+    raise AssertionError(f"unhandled bench {args.bench}")  # argparse enforces the choices
 
 
 async def _drive(args: argparse.Namespace) -> int:

@@ -84,20 +84,9 @@ def astar(
         if i in done:
             continue
         done.add(i)
-        r, c = divmod(i, cols)
-        for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)):
-            nr, nc = r + dr, c + dc
-            if not (0 <= nr < rows and 0 <= nc < cols):
+        for j, step in _steps(free, rows, cols, i):
+            if j in done:
                 continue
-            j = nr * cols + nc
-            if not free[j] or j in done:
-                continue
-            if dr and dc:
-                if not (free[r * cols + nc] and free[nr * cols + c]):
-                    continue
-                step = SQRT2
-            else:
-                step = 1.0
             new = cost[i] + step
             if new < cost.get(j, math.inf):
                 cost[j] = new
@@ -109,6 +98,26 @@ def astar(
     while cells[-1] != s:
         cells.append(parent[cells[-1]])
     return [divmod(i, cols) for i in reversed(cells)]
+
+
+_NEIGHBOURS = ((1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1))
+
+
+def _steps(free: list[bool], rows: int, cols: int, i: int) -> list[tuple[int, float]]:
+    """The traversable neighbours of cell ``i`` with the cost of the step to each; a
+    diagonal only when both cells beside it are free (no clipped corner)."""
+    r, c = divmod(i, cols)
+    out = []
+    for dr, dc in _NEIGHBOURS:
+        nr, nc = r + dr, c + dc
+        if not (0 <= nr < rows and 0 <= nc < cols) or not free[nr * cols + nc]:
+            continue
+        if dr and dc:
+            if free[r * cols + nc] and free[nr * cols + c]:
+                out.append((nr * cols + nc, SQRT2))
+        else:
+            out.append((nr * cols + nc, 1.0))
+    return out
 
 
 def world_to_cell(origin: Point, resolution: float, x: float, y: float) -> tuple[int, int]:

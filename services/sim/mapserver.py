@@ -242,6 +242,23 @@ def _number(doc: dict[str, Any], key: str, where: Path) -> float:
 def load_map(path: str | Path) -> OccupancyGrid:
     """Load a map_server YAML and its image; WorldError names the file and the problem."""
     path = Path(path)
+    doc = _read_yaml(path)
+    resolution = _number(doc, "resolution", path)
+    if resolution <= 0:
+        raise WorldError(f"{path}: resolution must be positive, got {resolution}")
+    origin = _origin(doc, path)
+    occupied, free, negate = _thresholds(doc, path)
+    pixels = _image(doc, path)
+    cells = classify(pixels, occupied, free, negate)
+    return OccupancyGrid(
+        cells=np.ascontiguousarray(np.flipud(cells)),
+        resolution=resolution,
+        origin=origin,
+        source=str(path),
+    )
+
+
+def _read_yaml(path: Path) -> dict[str, Any]:
     try:
         doc = yaml.safe_load(path.read_text())
     except FileNotFoundError:
@@ -253,10 +270,10 @@ def load_map(path: str | Path) -> OccupancyGrid:
     missing = [k for k in REQUIRED_KEYS if k not in doc]
     if missing:
         raise WorldError(f"{path}: missing required key(s) {', '.join(missing)}")
+    return doc
 
-    resolution = _number(doc, "resolution", path)
-    if resolution <= 0:
-        raise WorldError(f"{path}: resolution must be positive, got {resolution}")
+
+def _origin(doc: dict[str, Any], path: Path) -> tuple[float, float, float]:
     origin = doc["origin"]
     if (
         not isinstance(origin, list | tuple)
@@ -264,6 +281,11 @@ def load_map(path: str | Path) -> OccupancyGrid:
         or not all(isinstance(v, int | float) and math.isfinite(v) for v in origin)
     ):
         raise WorldError(f"{path}: origin must be [x, y, yaw] numbers, got {origin!r}")
+    return float(origin[0]), float(origin[1]), float(origin[2])
+
+
+def _thresholds(doc: dict[str, Any], path: Path) -> tuple[float, float, bool]:
+    """``(occupied_thresh, free_thresh, negate)``, checked; only the trinary mode is read."""
     occupied = _number(doc, "occupied_thresh", path)
     free = _number(doc, "free_thresh", path)
     for key, value in (("occupied_thresh", occupied), ("free_thresh", free)):
@@ -277,7 +299,10 @@ def load_map(path: str | Path) -> OccupancyGrid:
     mode = doc.get("mode", "trinary")
     if mode != "trinary":
         raise WorldError(f"{path}: mode {mode!r} is not supported (only 'trinary')")
+    return occupied, free, bool(negate)
 
+
+def _image(doc: dict[str, Any], path: Path) -> npt.NDArray[np.uint8]:
     image = doc["image"]
     if not isinstance(image, str) or not image:
         raise WorldError(f"{path}: image must be a file name, got {image!r}")
@@ -285,14 +310,6 @@ def load_map(path: str | Path) -> OccupancyGrid:
     if not image_path.is_file():
         raise WorldError(f"{path}: image {image_path} not found")
     try:
-        pixels = read_pgm(image_path)
+        return read_pgm(image_path)
     except (OSError, ValueError) as exc:
         raise WorldError(f"{path}: image {image_path}: {exc} (only PGM P5/P2 is read)") from None
-
-    cells = classify(pixels, occupied, free, bool(negate))
-    return OccupancyGrid(
-        cells=np.ascontiguousarray(np.flipud(cells)),
-        resolution=resolution,
-        origin=(float(origin[0]), float(origin[1]), float(origin[2])),
-        source=str(path),
-    )
