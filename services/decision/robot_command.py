@@ -8,15 +8,11 @@ notifies command2robot so the bridge sends it at once.
 from __future__ import annotations
 
 import logging
-from typing import TYPE_CHECKING
 
-import services.decision.store as store
 from common import log
 from common.engine import Rule
-from services.decision.arbitration import Issued, RobotDecision
-
-if TYPE_CHECKING:
-    from services.decision.service import DecisionService
+from services.decision.arbitration import RobotDecision
+from services.decision.view import DecisionView
 
 logger = logging.getLogger("pnav.decision")
 
@@ -24,17 +20,14 @@ logger = logging.getLogger("pnav.decision")
 class IssueRobotCommand(Rule):
     scenario = "decision"
 
-    def __init__(self, service: DecisionService, decision: RobotDecision) -> None:
-        self.service = service
+    def __init__(self, store: DecisionView, decision: RobotDecision) -> None:
+        self.store = store
         self.decision = decision
 
     async def actions(self) -> None:
         d = self.decision
-        row_id = await store.write_robot_command(self.service.runtime.database, d)
-        previous = self.service.issued.get(d.robot_id)
-        self.service.issued[d.robot_id] = Issued(
-            row_id, d.stamp, d.linear_mps, d.angular_rps, d.recommendation_id, d.source
-        )
+        previous = self.store.issued(d.robot_id)
+        row_id = await self.store.write_robot_command(d)  # the store remembers it as issued
         # A re-issue of the same winner happens 10 times a sim second: only a change of
         # source (or a stop) is worth a line at INFO.
         changed = previous is None or previous.source != d.source

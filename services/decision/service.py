@@ -1,18 +1,26 @@
 """The decision service: live recommendations -> command2robot and system_command.
 
-One Proactive Engine seeded with the meta-decision rule; see docs/DECISION.md. It keeps the
-last command it issued per robot in memory, bootstrapped from command2robot at start, so a
-restarted process carries on.
+Wiring only (docs/DECISION.md): a :class:`~services.decision.store.DecisionStore` on
+Postgres and the sim clock, the meta-decision rule seeded on the engine, and ownership
+changes (replicas) forwarded to the store, which keeps the last command issued per robot
+(read from command2robot at start, so a restarted process carries on).
 """
 
 from __future__ import annotations
 
 import sys
 
+from common.bus import Notification
+from common.clock import SimClock
 from common.runtime import Runtime
 from common.service import ScenarioService
-from services.decision.arbitration import Issued
-from services.decision.meta import MetaDecision
+from services.decision import meta
+from services.decision.store import DecisionStore, PgDecisionSource
+
+
+def sim_reader(clock: SimClock) -> float | None:
+    """Sim time now, or None before the sim's clock was ever heard."""
+    return clock.now() if clock.started else None
 
 
 class DecisionService(ScenarioService):
@@ -20,21 +28,19 @@ class DecisionService(ScenarioService):
 
     def __init__(self, runtime: Runtime) -> None:
         super().__init__(runtime)
-        # Robot id -> newest command2robot row; read from the table on the first look.
-        self.issued: dict[str, Issued] = {}
-        self.bootstrapped = False
-        self.waiting_logged = False
-        # Robots taken over from another replica: their issued entry is read again.
-        self.regained: set[str] = set()
+        clock = runtime.clock
+        self.store = DecisionStore(
+            PgDecisionSource(runtime.database), lambda: sim_reader(clock), self.owns
+        )
 
     def seed(self) -> None:
-        self.engine.add_meta(lambda: MetaDecision(self))
+        meta.seed(self.engine, self.store)
+
+    def on_notification(self, note: Notification) -> None:
+        self.store.note(note)
 
     def on_ownership_change(self, gained: frozenset[str], lost: frozenset[str]) -> None:
-        for robot_id in lost:
-            self.issued.pop(robot_id, None)
-        self.regained -= lost
-        self.regained |= gained
+        self.store.on_ownership_change(gained, lost)
         super().on_ownership_change(gained, lost)
 
 

@@ -1,4 +1,12 @@
-"""The decision service's SQL: one read of every live recommendation, and its two writes.
+"""The decision service's one data path: its SQL, its source Protocol, and its store.
+
+- :class:`DecisionSource`: the raw typed reads and writes (one read of every live
+  recommendation, the newest command per robot, and the two writes);
+  :class:`PgDecisionSource` is its Postgres implementation (pnav.monolith.decision has the
+  in-memory one).
+- :class:`DecisionStore`: the one object the service holds. It keeps the last command issued
+  per robot (read from the table on the first look and for robots regained from another
+  replica) and implements :class:`~services.decision.view.DecisionView`, all the rules see.
 
 Each write is a single statement (a data-modifying CTE): the decision row and the
 ``treated_by`` of the rows it considered commit together, in one round trip, which keeps
@@ -7,12 +15,18 @@ the decision's latency to one query in and one out.
 
 from __future__ import annotations
 
+import logging
 from collections import defaultdict
-from typing import Any, Final
+from collections.abc import Callable
+from typing import Any, Final, Protocol
 
+from common import log
+from common.bus import Notification
 from common.contract import keys
 from common.db import Database
 from services.decision.arbitration import Issued, Recommendation, RobotDecision, SystemDecision
+
+logger = logging.getLogger("pnav.decision")
 
 # Every robot, with each of its live recommendations (none: one row of NULLs). The table is
 # append-only and grows all run long, so each robot must be served by the
@@ -140,3 +154,130 @@ async def write_system_command(db: Database, d: SystemDecision) -> int:
         d.stamp,
     )
     return int(value)
+
+
+class DecisionSource(Protocol):
+    """The decision service's reads and writes of the contract, typed."""
+
+    async def live_recommendations(self, now: float) -> dict[str, list[Recommendation]]:
+        """Robot id -> its live robot and system recommendations (every robot present)."""
+        ...
+
+    async def last_issued(self) -> dict[str, Issued]:
+        """Robot id -> its newest command2robot row (robots never commanded are absent)."""
+        ...
+
+    async def write_robot_command(self, d: RobotDecision) -> int:
+        """Insert the command2robot row and mark ``treated_by``; then notify. Its id."""
+        ...
+
+    async def write_system_command(self, d: SystemDecision) -> int:
+        """Insert the pending system_command row and mark ``treated_by``; then notify."""
+        ...
+
+
+class PgDecisionSource:
+    """:class:`DecisionSource` on Postgres (pool reads, ``Database.write`` for the writes)."""
+
+    def __init__(self, db: Database) -> None:
+        self.db = db
+
+    async def live_recommendations(self, now: float) -> dict[str, list[Recommendation]]:
+        return await live_recommendations(self.db.pool, now)
+
+    async def last_issued(self) -> dict[str, Issued]:
+        return await last_issued(self.db.pool)
+
+    async def write_robot_command(self, d: RobotDecision) -> int:
+        return await write_robot_command(self.db, d)
+
+    async def write_system_command(self, d: SystemDecision) -> int:
+        return await write_system_command(self.db, d)
+
+
+def _everyone(_robot_id: str) -> bool:
+    return True
+
+
+class DecisionStore:
+    """The decision service's store: a :class:`DecisionSource` and what the service keeps.
+
+    ``sim_now`` reads the sim clock (None until it is heard); ``owns`` says which robots this
+    replica decides for (docs/REPLICAS.md; every robot by default). Runs on the event loop.
+    """
+
+    def __init__(
+        self,
+        source: DecisionSource,
+        sim_now: Callable[[], float | None],
+        owns: Callable[[str], bool] = _everyone,
+    ) -> None:
+        self.source = source
+        self._sim_now = sim_now
+        self._owns = owns
+        # Robot id -> newest command2robot row; read from the table on the first look.
+        self._issued: dict[str, Issued] = {}
+        self._bootstrapped = False
+        # Robots taken over from another replica: their issued entry is read again.
+        self._regained: set[str] = set()
+        self._waiting_logged = False
+
+    # -- DecisionView ----------------------------------------------------------------------
+    def sim_now(self) -> float | None:
+        now = self._sim_now()
+        if now is None and not self._waiting_logged:
+            self._waiting_logged = True  # once: the clock is missing at every look until then
+            log.event(logger, logging.INFO, "waiting for the sim clock before deciding")
+        return now
+
+    async def live(self, now: float) -> dict[str, list[Recommendation]]:
+        await self._catch_up()
+        live = await self.source.live_recommendations(now)
+        owned = {robot_id: recs for robot_id, recs in live.items() if self._owns(robot_id)}
+        # A robot removed from the robot table (or now another replica's) has nothing left
+        # to stop here.
+        for robot_id in [r for r in self._issued if r not in owned]:
+            del self._issued[robot_id]
+        return owned
+
+    def issued(self, robot_id: str) -> Issued | None:
+        return self._issued.get(robot_id)
+
+    async def write_robot_command(self, d: RobotDecision) -> int:
+        row_id = await self.source.write_robot_command(d)
+        self._issued[d.robot_id] = Issued(
+            row_id, d.stamp, d.linear_mps, d.angular_rps, d.recommendation_id, d.source
+        )
+        return row_id
+
+    async def write_system_command(self, d: SystemDecision) -> int:
+        return await self.source.write_system_command(d)
+
+    # -- what the service forwards -----------------------------------------------------------
+    def note(self, note: Notification) -> None:
+        """A change notification. Nothing to keep: the live rows are read at every look,
+        since which are live moves with sim time; the notification only wakes the engine."""
+
+    def on_ownership_change(self, gained: frozenset[str], lost: frozenset[str]) -> None:
+        """Drop what is kept for the ``lost`` robots; read the ``gained`` ones' again."""
+        for robot_id in lost:
+            self._issued.pop(robot_id, None)
+        self._regained -= lost
+        self._regained |= gained
+
+    async def _catch_up(self) -> None:
+        if not self._bootstrapped:
+            # First look after start: carry on from the table, so a restart neither repeats
+            # a stop nor forgets that a robot is moving.
+            self._issued = await self.source.last_issued()
+            self._bootstrapped = True
+            self._regained.clear()
+        elif self._regained:
+            # Robots taken over from another replica: carry on from what it issued last.
+            regained, self._regained = self._regained, set()
+            last = await self.source.last_issued()
+            for robot_id in regained:
+                if robot_id in last:
+                    self._issued[robot_id] = last[robot_id]
+                else:
+                    self._issued.pop(robot_id, None)

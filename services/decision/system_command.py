@@ -8,15 +8,11 @@ one statement, then notifies system_command so the strategy service applies it a
 from __future__ import annotations
 
 import logging
-from typing import TYPE_CHECKING
 
-import services.decision.store as store
 from common import log
 from common.engine import Rule
 from services.decision.arbitration import SystemDecision
-
-if TYPE_CHECKING:
-    from services.decision.service import DecisionService
+from services.decision.view import DecisionView
 
 logger = logging.getLogger("pnav.decision")
 
@@ -24,13 +20,13 @@ logger = logging.getLogger("pnav.decision")
 class IssueSystemCommand(Rule):
     scenario = "decision"
 
-    def __init__(self, service: DecisionService, decision: SystemDecision) -> None:
-        self.service = service
+    def __init__(self, store: DecisionView, decision: SystemDecision) -> None:
+        self.store = store
         self.decision = decision
 
     async def actions(self) -> None:
         d = self.decision
-        row_id = await store.write_system_command(self.service.runtime.database, d)
+        row_id = await self.store.write_system_command(d)
         log.event(
             logger,
             logging.INFO,

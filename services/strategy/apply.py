@@ -1,8 +1,9 @@
 """Target rules of the strategy scenario: apply one command, or give a robot its default.
 
 Each rule does one task and ends; the meta rule (:mod:`services.strategy.meta`) creates them.
-A command's status update and the active_strategy change it causes commit in one
-transaction, and the notifications go out only after the commit.
+A command's status update and the active_strategy change it causes commit together
+(:meth:`StrategyView.treat`), and the notifications go out only after the commit. The rules
+see the contract only through :class:`~services.strategy.view.StrategyView`.
 """
 
 from __future__ import annotations
@@ -10,16 +11,11 @@ from __future__ import annotations
 import logging
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
-import services.strategy.store as store
 from common import log
-from common.contract import keys
 from common.engine import Rule
-from services.strategy.commands import DEFAULT_STRATEGY, Outcome, RobotState, decide
-
-if TYPE_CHECKING:
-    from services.strategy.service import StrategyService
+from services.strategy.commands import DEFAULT_STRATEGY, RobotState, decide
+from services.strategy.view import CommandSnapshot, StaleState, StrategyView
 
 logger = logging.getLogger("pnav.strategy")
 
@@ -44,19 +40,19 @@ class ApplyCommand(Rule):
 
     def __init__(
         self,
-        service: StrategyService,
-        table: store.CommandTable,
+        store: StrategyView,
+        table: str,
         command_id: int,
         robot_id: str,
         chain: Chain,
     ) -> None:
-        self.service = service
+        self.store = store
         self.table = table
         self.command_id = command_id
         self.robot_id = robot_id
         self.chain = chain
         self.blocked = False
-        self.snap: store.CommandSnapshot | None = None
+        self.snap: CommandSnapshot | None = None
         self.done = False
 
     async def data_acquisition(self) -> None:
@@ -65,8 +61,7 @@ class ApplyCommand(Rule):
         self.done = False
         self.snap = None
         if not self.blocked:
-            pool = self.service.runtime.database.pool
-            self.snap = await store.snapshot(pool, self.table, self.command_id)
+            self.snap = await self.store.snapshot(self.table, self.command_id)
 
     def activation_guards(self) -> Iterator[bool]:
         # An earlier command of this robot was not applied: keep the id order, wait.
@@ -86,14 +81,14 @@ class ApplyCommand(Rule):
         state = RobotState(snap.known_robot, snap.strategy_code, snap.resume_code)
         outcome = decide(snap.command, snap.argument, state, snap.strategies)
         try:
-            await self._write(snap, outcome)
-        except store.StaleState as exc:
+            await self.store.treat(self.table, snap, outcome)
+        except StaleState as exc:
             log.event(
                 logger,
                 logging.INFO,
                 "command deferred",
                 robot=self.robot_id,
-                table=self.table.table,
+                table=self.table,
                 command_id=self.command_id,
                 command=snap.command,
                 why=str(exc),
@@ -105,39 +100,13 @@ class ApplyCommand(Rule):
             logging.INFO,
             "command accepted" if outcome.accepted else "command rejected",
             robot=self.robot_id,
-            table=self.table.table,
+            table=self.table,
             command_id=self.command_id,
             command=snap.command,
             argument=snap.argument,
             outcome="accepted" if outcome.accepted else "rejected",
             reason=outcome.reason,
         )
-
-    async def _write(self, snap: store.CommandSnapshot, outcome: Outcome) -> None:
-        db = self.service.runtime.database
-        status = "accepted" if outcome.accepted else "rejected"
-        async with db.transaction() as tx:
-            treated = await tx.conn.fetchval(
-                self.table.treat_sql, self.command_id, status, outcome.reason
-            )
-            if treated is None:
-                raise store.StaleState("treated by someone else meanwhile")
-            tx.changed(self.table.table, self.robot_id, self.command_id)
-            if outcome.accepted:
-                written = await tx.conn.fetchval(
-                    store.SET_ACTIVE_SQL,
-                    self.robot_id,
-                    outcome.strategy_code,
-                    outcome.resume_code,
-                    self.table.source,
-                    self.command_id,
-                    self.service.sim_stamp(),
-                    snap.strategy_code,
-                    snap.resume_code,
-                )
-                if written is None:
-                    raise store.StaleState("active_strategy changed since it was read")
-                tx.changed(keys.ACTIVE_STRATEGY, self.robot_id)
 
     def rule_generation(self) -> Iterable[Rule]:
         gone = not self.blocked and (self.snap is None or self.snap.status != "pending")
@@ -150,23 +119,15 @@ class ApplyDefaultStrategy(Rule):
 
     scenario = "strategy"
 
-    def __init__(self, service: StrategyService, robot_id: str) -> None:
-        self.service = service
+    def __init__(self, store: StrategyView, robot_id: str) -> None:
+        self.store = store
         self.robot_id = robot_id
         self.default_exists = False
 
     async def data_acquisition(self) -> None:
-        pool = self.service.runtime.database.pool
-        self.default_exists = bool(
-            await pool.fetchval(
-                "SELECT EXISTS (SELECT 1 FROM strategy WHERE code = $1)", DEFAULT_STRATEGY
-            )
-        )
-
-    def activation_guards(self) -> bool:
-        if not self.default_exists and self.robot_id not in self.service.warned:
-            # Say it once per robot, not every activation.
-            self.service.warned.add(self.robot_id)
+        self.default_exists = await self.store.strategy_exists(DEFAULT_STRATEGY)
+        if not self.default_exists and self.store.should_warn(self.robot_id):
+            # Said here, not in the guard (guards have no side effects); once per robot.
             log.event(
                 logger,
                 logging.ERROR,
@@ -174,17 +135,12 @@ class ApplyDefaultStrategy(Rule):
                 robot=self.robot_id,
                 strategy=DEFAULT_STRATEGY,
             )
+
+    def activation_guards(self) -> bool:
         return self.default_exists
 
     async def actions(self) -> None:
-        db = self.service.runtime.database
-        async with db.transaction() as tx:
-            written = await store.set_default(
-                tx.conn, self.robot_id, DEFAULT_STRATEGY, self.service.sim_stamp()
-            )
-            if written:
-                tx.changed(keys.ACTIVE_STRATEGY, self.robot_id)
-        if written:
+        if await self.store.set_default(self.robot_id, DEFAULT_STRATEGY):
             log.event(
                 logger,
                 logging.INFO,

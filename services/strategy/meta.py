@@ -18,56 +18,51 @@ from __future__ import annotations
 
 import heapq
 from collections import defaultdict
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from datetime import datetime
-from typing import TYPE_CHECKING
 
-import services.strategy.store as store
 from common.contract import keys
-from common.engine import Rule
+from common.engine import Engine, Rule
 from services.strategy.apply import ApplyCommand, ApplyDefaultStrategy, Chain
-
-if TYPE_CHECKING:
-    from services.strategy.service import StrategyService
+from services.strategy.view import Pending, StrategyView
 
 
-def _order(command: store.Pending) -> tuple[datetime, str, int]:
+def _order(command: Pending) -> tuple[datetime, str, int]:
     assert command.created_at is not None and command.id is not None
     return (command.created_at, command.table, command.id)
 
 
-def in_order(commands: Iterable[store.Pending]) -> list[store.Pending]:
+def in_order(commands: Iterable[Pending]) -> list[Pending]:
     """One robot's commands: each table's rows by id, the two tables merged by created_at.
 
     Ids order rows within a table; across the two tables only the creation time can.
     """
-    per_table: dict[str, list[store.Pending]] = defaultdict(list)
+    per_table: dict[str, list[Pending]] = defaultdict(list)
     for command in commands:
         per_table[command.table].append(command)
     runs = [sorted(rows, key=lambda p: p.id or 0) for rows in per_table.values()]
     return list(heapq.merge(*runs, key=_order))
 
 
-def plan(service: StrategyService, pending: list[store.Pending]) -> list[Rule]:
+def plan(store: StrategyView, pending: list[Pending]) -> list[Rule]:
     """The target rules for what the scan found, defaults first."""
     rules: list[Rule] = []
-    commands: dict[str, list[store.Pending]] = defaultdict(list)
+    commands: dict[str, list[Pending]] = defaultdict(list)
     for item in pending:
-        if item.known_robot and not service.owns(item.robot_id):
+        if item.known_robot and not store.owns(item.robot_id):
             # Replicas: another one owns this robot (docs/REPLICAS.md). A command naming an
             # unknown robot has no owner: every replica may reject it, the first one wins
             # (the status update is conditional on 'pending').
             continue
         if item.table == keys.ROBOT:
-            rules.append(ApplyDefaultStrategy(service, item.robot_id))
+            rules.append(ApplyDefaultStrategy(store, item.robot_id))
         elif item.has_active or not item.known_robot:
             commands[item.robot_id].append(item)
     for robot_id in sorted(commands):
         chain = Chain()
         for item in in_order(commands[robot_id]):
             assert item.id is not None
-            table = store.COMMAND_TABLES[item.table]
-            rules.append(ApplyCommand(service, table, item.id, robot_id, chain))
+            rules.append(ApplyCommand(store, item.table, item.id, robot_id, chain))
     return rules
 
 
@@ -78,23 +73,33 @@ class MetaStrategy(Rule):
     meta = True
     watches = (keys.USER_COMMAND, keys.SYSTEM_COMMAND, keys.ROBOT, keys.STRATEGY)
 
-    def __init__(self, service: StrategyService) -> None:
-        self.service = service
-        self.pending: list[store.Pending] = []
+    def __init__(self, store: StrategyView, hurry: Callable[[], None]) -> None:
+        self.store = store
+        self.hurry = hurry
+        self.pending: list[Pending] = []
         self.targets: list[Rule] = []
 
     async def data_acquisition(self) -> None:
         self.targets = []
-        self.pending = await store.scan(self.service.runtime.database.pool)
+        self.pending = await self.store.pending()
 
     def activation_guards(self) -> bool:
         return bool(self.pending)
 
     def actions(self) -> None:
-        self.targets = plan(self.service, self.pending)
+        self.targets = plan(self.store, self.pending)
         if self.targets:
             # Run them in the very next activation instead of waiting for the period F.
-            self.service.engine.hurry()
+            self.hurry()
 
     def rule_generation(self) -> Iterable[Rule]:
         return [*self.targets, self.clone()]
+
+
+def seed(engine: Engine, store: StrategyView) -> None:
+    """Add the strategy's meta rule to ``engine`` (the service and the monolith both).
+
+    ``hurry`` is handed to the rule as a callable, as in the decision service: scheduling
+    is the engine's business, not the store's.
+    """
+    engine.add_meta(lambda: MetaStrategy(store, engine.hurry))

@@ -1,17 +1,26 @@
 """The strategy service: sets each robot's active_strategy from user and system commands.
 
-One Proactive Engine seeded with the meta-strategy rule; see docs/STRATEGY.md. All its state
-is in the contract tables (active_strategy, the command rows' status), so a restarted
-process carries on where the last one stopped.
+Wiring only (docs/STRATEGY.md): a :class:`~services.strategy.store.StrategyStore` on
+Postgres and the sim clock, the meta-strategy rule seeded on the engine. All its state is
+in the contract tables (active_strategy, the command rows' status), so a restarted process
+carries on where the last one stopped.
 """
 
 from __future__ import annotations
 
 import sys
 
+from common.bus import Notification
+from common.clock import SimClock
 from common.runtime import Runtime
 from common.service import ScenarioService
-from services.strategy.meta import MetaStrategy
+from services.strategy import meta
+from services.strategy.store import PgStrategySource, StrategyStore
+
+
+def sim_reader(clock: SimClock) -> float | None:
+    """Sim time now, or None before the sim's clock was ever heard (stamps stay NULL)."""
+    return clock.now() if clock.started else None
 
 
 class StrategyService(ScenarioService):
@@ -19,16 +28,16 @@ class StrategyService(ScenarioService):
 
     def __init__(self, runtime: Runtime) -> None:
         super().__init__(runtime)
-        # Robots already warned about a missing default strategy (log once, not every F).
-        self.warned: set[str] = set()
+        clock = runtime.clock
+        self.store = StrategyStore(
+            PgStrategySource(runtime.database), lambda: sim_reader(clock), self.owns
+        )
 
     def seed(self) -> None:
-        self.engine.add_meta(lambda: MetaStrategy(self))
+        meta.seed(self.engine, self.store)
 
-    def sim_stamp(self) -> float | None:
-        """Sim time now, or None before the sim's clock was ever heard (stamp stays NULL)."""
-        clock = self.runtime.clock
-        return clock.now() if clock.started else None
+    def on_notification(self, note: Notification) -> None:
+        self.store.note(note)
 
 
 def main() -> int:

@@ -1,4 +1,11 @@
-"""The strategy service's SQL: what its meta rule scans for and what its target rules write.
+"""The strategy service's one data path: its SQL, its source Protocol, and its store.
+
+- :class:`StrategySource`: the raw typed reads and writes (the meta rule's scan, a command's
+  snapshot, treating a command, the default strategy); :class:`PgStrategySource` is its
+  Postgres implementation (pnav.monolith.strategy has the in-memory one).
+- :class:`StrategyStore`: the one object the service holds; it stamps writes with sim time,
+  answers ``owns`` and implements :class:`~services.strategy.view.StrategyView`, all the
+  rules see.
 
 These queries are the strategy service's own (records.py holds only reads every service
 shares). Each command table is described once by a :class:`CommandTable` so user and system
@@ -7,13 +14,15 @@ commands go through the same rule with their own columns.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from datetime import datetime
-from typing import Any, Final
+from typing import Final, Protocol
 
-import asyncpg
-
+from common.bus import Notification
 from common.contract import keys
+from common.db import Database
+from services.strategy.commands import Outcome
+from services.strategy.view import CommandSnapshot, Pending, StaleState
 
 
 @dataclass(frozen=True)
@@ -56,18 +65,6 @@ SYSTEM: Final = CommandTable(keys.SYSTEM_COMMAND, "system", "status_reason", has
 COMMAND_TABLES: Final = {t.table: t for t in (USER, SYSTEM)}
 
 
-@dataclass(frozen=True)
-class Pending:
-    """A pending command, or (table = robot) a robot with no active_strategy row."""
-
-    table: str
-    id: int | None
-    robot_id: str
-    created_at: datetime | None
-    has_active: bool
-    known_robot: bool
-
-
 # One round trip per meta activation: pending commands of both tables, and robots that
 # still need their default strategy.
 SCAN_SQL: Final = f"""
@@ -87,41 +84,6 @@ SELECT '{keys.ROBOT}', NULL, r.robot_id, NULL, false, true
 FROM robot r
 WHERE NOT EXISTS (SELECT 1 FROM active_strategy a WHERE a.robot_id = r.robot_id)
 """
-
-
-async def scan(db: Any) -> list[Pending]:
-    rows = await db.fetch(SCAN_SQL)
-    return [
-        Pending(
-            r["tbl"], r["id"], r["robot_id"], r["created_at"], r["has_active"], r["known_robot"]
-        )
-        for r in rows
-    ]
-
-
-@dataclass(frozen=True)
-class CommandSnapshot:
-    """A command row and its robot's strategy state, read in one query."""
-
-    id: int
-    robot_id: str
-    command: str
-    argument: str | None
-    status: str
-    known_robot: bool
-    strategy_code: str | None
-    resume_code: str | None
-    strategies: frozenset[str]
-
-
-async def snapshot(db: Any, table: CommandTable, command_id: int) -> CommandSnapshot | None:
-    row = await db.fetchrow(table.snapshot_sql, command_id)
-    if row is None:
-        return None
-    fields = dict(row)
-    fields["strategies"] = frozenset(fields["strategies"] or ())
-    return CommandSnapshot(**fields)
-
 
 # Upsert guarded by the state the decision was made on: if the row changed since the rule
 # read it (another writer), nothing is updated, the transaction rolls back, and the command
@@ -147,13 +109,148 @@ ON CONFLICT (robot_id) DO NOTHING
 RETURNING robot_id
 """
 
-
-class StaleState(Exception):
-    """Raised inside a transaction to roll it back: the rows changed since they were read."""
+STRATEGY_EXISTS_SQL: Final = "SELECT EXISTS (SELECT 1 FROM strategy WHERE code = $1)"
 
 
-async def set_default(
-    conn: asyncpg.Connection, robot_id: str, code: str, stamp: float | None
-) -> bool:
-    """Give ``robot_id`` strategy ``code`` if it has none; False if nothing was written."""
-    return await conn.fetchval(SET_DEFAULT_SQL, robot_id, code, stamp) is not None
+def command_table(name: str) -> CommandTable:
+    """The :class:`CommandTable` called ``name``; a KeyError names a table never scanned."""
+    return COMMAND_TABLES[name]
+
+
+class StrategySource(Protocol):
+    """The strategy service's reads and writes of the contract, typed."""
+
+    async def scan(self) -> list[Pending]: ...
+
+    async def snapshot(self, table: CommandTable, command_id: int) -> CommandSnapshot | None: ...
+
+    async def treat(
+        self, table: CommandTable, before: CommandSnapshot, outcome: Outcome, stamp: float | None
+    ) -> None:
+        """The command's status and reason and, if accepted, the robot's active_strategy
+        (source ``table.source``), in one transaction guarded by ``before``; notify after
+        commit. Raise :class:`StaleState` (writing nothing) if a row changed meanwhile."""
+        ...
+
+    async def strategy_exists(self, code: str) -> bool: ...
+
+    async def set_default(self, robot_id: str, code: str, stamp: float | None) -> bool:
+        """Give a known robot with no active_strategy row strategy ``code`` (source
+        'default') if it exists; notify; False if nothing was written."""
+        ...
+
+
+class PgStrategySource:
+    """:class:`StrategySource` on Postgres; writes notify after their commit."""
+
+    def __init__(self, db: Database) -> None:
+        self.db = db
+
+    async def scan(self) -> list[Pending]:
+        rows = await self.db.pool.fetch(SCAN_SQL)
+        return [
+            Pending(
+                r["tbl"], r["id"], r["robot_id"], r["created_at"], r["has_active"], r["known_robot"]
+            )
+            for r in rows
+        ]
+
+    async def snapshot(self, table: CommandTable, command_id: int) -> CommandSnapshot | None:
+        row = await self.db.pool.fetchrow(table.snapshot_sql, command_id)
+        if row is None:
+            return None
+        fields = dict(row)
+        fields["strategies"] = frozenset(fields["strategies"] or ())
+        return CommandSnapshot(**fields)
+
+    async def treat(
+        self, table: CommandTable, before: CommandSnapshot, outcome: Outcome, stamp: float | None
+    ) -> None:
+        status = "accepted" if outcome.accepted else "rejected"
+        robot_id = before.robot_id
+        async with self.db.transaction() as tx:
+            treated = await tx.conn.fetchval(table.treat_sql, before.id, status, outcome.reason)
+            if treated is None:
+                raise StaleState("treated by someone else meanwhile")
+            tx.changed(table.table, robot_id, before.id)
+            if not outcome.accepted:
+                return
+            written = await tx.conn.fetchval(
+                SET_ACTIVE_SQL,
+                robot_id,
+                outcome.strategy_code,
+                outcome.resume_code,
+                table.source,
+                before.id,
+                stamp,
+                before.strategy_code,
+                before.resume_code,
+            )
+            if written is None:
+                raise StaleState("active_strategy changed since it was read")
+            tx.changed(keys.ACTIVE_STRATEGY, robot_id)
+
+    async def strategy_exists(self, code: str) -> bool:
+        return bool(await self.db.pool.fetchval(STRATEGY_EXISTS_SQL, code))
+
+    async def set_default(self, robot_id: str, code: str, stamp: float | None) -> bool:
+        async with self.db.transaction() as tx:
+            written = await tx.conn.fetchval(SET_DEFAULT_SQL, robot_id, code, stamp) is not None
+            if written:
+                tx.changed(keys.ACTIVE_STRATEGY, robot_id)
+        return written
+
+
+def _everyone(_robot_id: str) -> bool:
+    return True
+
+
+class StrategyStore:
+    """The strategy service's store: a :class:`StrategySource`, the sim clock, ownership.
+
+    All the service's state is in the contract tables (active_strategy, the commands'
+    status), so a restarted process carries on; the store keeps only which robots were
+    warned about already. ``sim_now`` is None until the sim clock is heard (stamps stay
+    NULL); ``owns`` stands for the replica's leases (every robot by default).
+    """
+
+    def __init__(
+        self,
+        source: StrategySource,
+        sim_now: Callable[[], float | None],
+        owns: Callable[[str], bool] = _everyone,
+    ) -> None:
+        self.source = source
+        self.sim_now = sim_now
+        self._owns = owns
+        self._warned: set[str] = set()
+
+    # -- StrategyView ----------------------------------------------------------------------
+    def owns(self, robot_id: str) -> bool:
+        return self._owns(robot_id)
+
+    async def pending(self) -> list[Pending]:
+        return await self.source.scan()
+
+    async def snapshot(self, table: str, command_id: int) -> CommandSnapshot | None:
+        return await self.source.snapshot(command_table(table), command_id)
+
+    async def treat(self, table: str, before: CommandSnapshot, outcome: Outcome) -> None:
+        await self.source.treat(command_table(table), before, outcome, self.sim_now())
+
+    async def strategy_exists(self, code: str) -> bool:
+        return await self.source.strategy_exists(code)
+
+    async def set_default(self, robot_id: str, code: str) -> bool:
+        return await self.source.set_default(robot_id, code, self.sim_now())
+
+    def should_warn(self, robot_id: str) -> bool:
+        if robot_id in self._warned:
+            return False
+        self._warned.add(robot_id)
+        return True
+
+    # -- what the service forwards -----------------------------------------------------------
+    def note(self, note: Notification) -> None:
+        """A change notification. Nothing to keep: the meta rule's one scan per activation
+        is the read, and rows written without a notification are found by period F."""

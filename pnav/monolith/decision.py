@@ -1,0 +1,134 @@
+"""The decision service's source on the in-memory contract, and its engine for the monolith.
+
+:class:`MemoryDecisionSource` is :class:`~services.decision.store.DecisionSource` over
+:class:`~pnav.monolith.contract.MemoryContract`: the same reads and writes as
+``PgDecisionSource``'s SQL, typed, with no statement to parse. :func:`decision_engine` seeds
+the service's own meta rule on a given engine, behind the service's own
+:class:`~services.decision.store.DecisionStore`, so the monolith runs the decision exactly as
+the service does, bookkeeping included.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from datetime import UTC, datetime
+
+from common.contract import keys
+from common.engine import Engine
+from pnav.monolith.contract import MemoryContract, Row
+from services.decision import meta
+from services.decision.arbitration import Issued, Recommendation, RobotDecision, SystemDecision
+from services.decision.store import DecisionStore
+
+_KINDS = ("robot", "system")
+
+
+def _recommendation(row: Row) -> Recommendation:
+    return Recommendation(
+        id=row["id"],
+        robot_id=row["robot_id"],
+        kind=row["kind"],
+        source=row["source"],
+        priority=row["priority"],
+        linear_mps=row["linear_mps"],
+        angular_rps=row["angular_rps"],
+        system_command=row["system_command"],
+        reason=row["reason"],
+        treated_by=row["treated_by"],
+    )
+
+
+class MemoryDecisionSource:
+    """The decision's reads and writes on a :class:`MemoryContract`."""
+
+    def __init__(self, contract: MemoryContract) -> None:
+        self.contract = contract
+
+    async def live_recommendations(self, now: float) -> dict[str, list[Recommendation]]:
+        """As LIVE_SQL: every robot, with its robot and system rows whose expiry is ahead."""
+        return {
+            robot["robot_id"]: [
+                _recommendation(r)
+                for r in self.contract.live_recommendations(robot["robot_id"], now)
+                if r["kind"] in _KINDS
+            ]
+            for robot in self.contract[keys.ROBOT].all_rows()
+        }
+
+    async def last_issued(self) -> dict[str, Issued]:
+        """As LAST_ISSUED_SQL: each robot's newest command2robot row, if it has one."""
+        out: dict[str, Issued] = {}
+        for robot in self.contract[keys.ROBOT].all_rows():
+            row = self.contract[keys.COMMAND2ROBOT].newest(robot["robot_id"])
+            if row is not None:
+                out[row["robot_id"]] = Issued(
+                    row["id"],
+                    row["stamp"],
+                    row["linear_mps"],
+                    row["angular_rps"],
+                    row["recommendation_id"],
+                    row["source"],
+                )
+        return out
+
+    async def write_robot_command(self, d: RobotDecision) -> int:
+        row = {
+            "robot_id": d.robot_id,
+            "stamp": d.stamp,
+            "linear_mps": d.linear_mps,
+            "angular_rps": d.angular_rps,
+            "recommendation_id": d.recommendation_id,
+            "source": d.source,
+            "considered_ids": list(d.considered_ids),
+            "reason": d.reason,
+            "created_at": datetime.now(UTC),
+        }
+        return self._commit(keys.COMMAND2ROBOT, row, d.considered_ids)
+
+    async def write_system_command(self, d: SystemDecision) -> int:
+        row = {
+            "robot_id": d.robot_id,
+            "command": d.command,
+            "recommendation_id": d.recommendation_id,
+            "considered_ids": list(d.considered_ids),
+            "reason": d.reason,
+            "status": "pending",
+            "status_reason": None,
+            "stamp": d.stamp,
+            "created_at": datetime.now(UTC),
+            "treated_at": None,
+        }
+        return self._commit(keys.SYSTEM_COMMAND, row, d.considered_ids)
+
+    def _commit(self, table: str, row: Row, considered: tuple[int, ...]) -> int:
+        """The decision row and ``treated_by`` of what it considered, then the notification
+        (as the statement's CTE commits both before ``Database.write`` notifies)."""
+        row_id = self.contract.insert(table, row, notify=False)
+        by_id = self.contract[keys.COMMAND_RECOMMENDATION].by_id
+        for rec_id in considered:
+            rec = by_id.get(rec_id)
+            if rec is not None:  # UPDATE ... WHERE id = ANY(...) skips a missing row too
+                rec["treated_by"] = row_id
+        self.contract.changed(table, row["robot_id"], row_id)
+        return row_id
+
+
+def _everyone(_robot_id: str) -> bool:
+    return True
+
+
+def decision_engine(
+    contract: MemoryContract,
+    engine: Engine,
+    now: Callable[[], float | None],
+    owns: Callable[[str], bool] = _everyone,
+) -> DecisionStore:
+    """Seed the decision's meta rule on ``engine`` as the service does; its store.
+
+    ``now`` is sim time (None: the sim clock is not heard yet); ``owns`` stands for the
+    replica's leases (one process owns every robot, unless a test says otherwise). Hand the
+    store every change notification (``store.note``) as the service does.
+    """
+    store = DecisionStore(MemoryDecisionSource(contract), now, owns)
+    meta.seed(engine, store)
+    return store

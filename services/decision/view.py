@@ -1,0 +1,32 @@
+"""What the decision rules see of the contract: a Protocol, no pool, no service.
+
+:class:`~services.decision.store.DecisionStore` implements it on Postgres in the service and
+on the in-memory contract in the monolith (pnav.monolith.decision); a test may implement it
+with anything. The rules import this module and the pure ``arbitration`` only.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from services.decision.arbitration import Issued, Recommendation, RobotDecision, SystemDecision
+
+
+class DecisionView(Protocol):
+    """What the decision rules see of the contract: no pool, no service."""
+
+    def sim_now(self) -> float | None:
+        """Sim time now, or None while the sim clock has not been heard."""
+        ...
+
+    async def live(self, now: float) -> dict[str, list[Recommendation]]:
+        """The live recommendations of every robot this replica owns, by robot id."""
+        ...
+
+    def issued(self, robot_id: str) -> Issued | None:
+        """The newest command2robot row of ``robot_id`` (None: none to carry on from)."""
+        ...
+
+    async def write_robot_command(self, d: RobotDecision) -> int: ...
+
+    async def write_system_command(self, d: SystemDecision) -> int: ...
