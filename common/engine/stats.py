@@ -49,3 +49,13 @@ class EngineCounters:
     capped_by_n: int = 0
     capped_by_f: int = 0
     meta_reseeded: int = 0
+
+    def woken_by(self, reason: str) -> None:
+        """Count an activation started by ``reason`` (common.engine.trigger: NOTIFICATION,
+        RULE or PERIOD)."""
+        if reason == "notification":
+            self.woken_by_notification += 1
+        elif reason == "rule":
+            self.woken_by_rule += 1
+        else:
+            self.woken_by_period += 1
