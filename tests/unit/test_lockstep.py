@@ -10,7 +10,7 @@ from __future__ import annotations
 import asyncio
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import replace
 
 import pytest
@@ -21,6 +21,7 @@ from common.contract import keys
 from common.engine import Engine, Rule
 from common.lockstep import Ledger, LockstepTrigger, Status
 from common.runtime import Runtime
+from common.service import ScenarioService
 from common.testing import eventually
 from services.sim.lockstep import Barrier
 
@@ -383,3 +384,67 @@ async def test_engine_in_lockstep_runs_on_notes_and_on_sim_time_and_reports_when
     finally:
         engine.stop()
         await asyncio.wait_for(task, 5)
+
+
+class CountingService(ScenarioService):
+    service = "planner"
+
+    def __init__(self, runtime: Runtime, runs: list[float]) -> None:
+        super().__init__(runtime)
+        self.runs = runs
+
+    def seed(self) -> None:
+        clock = self.runtime.clock
+        self.engine.add_meta(lambda: SimStamp(self.runs, clock.now))
+
+
+class SimStamp(Rule):
+    """A meta rule that notes the sim time of each of its runs."""
+
+    meta = True
+    scenario = "count"
+
+    def __init__(self, runs: list[float], now: Callable[[], float]) -> None:
+        self.runs = runs
+        self.now = now
+
+    def actions(self) -> None:
+        self.runs.append(self.now())
+
+    def rule_generation(self) -> list[Rule]:
+        return [self.clone()]
+
+
+async def test_a_service_in_lockstep_runs_its_engine_on_sim_clock_messages_and_reports(
+    zenoh_settings: ZenohSettings,
+) -> None:
+    config = ServiceConfig(
+        service="planner",
+        database_url="postgresql://unused",
+        zenoh=zenoh_settings,
+        engine=EngineSettings(period_s=0.05),
+        instance="p-7",
+        lockstep=("planner",),
+    )
+    runtime = await Runtime.open(config, with_db=False)
+    runs: list[float] = []
+    service = CountingService(runtime, runs)
+    service.seed()
+    task = asyncio.create_task(service.engine.run())
+    try:
+        ledger = runtime.ledger
+        assert ledger is not None
+        await eventually(lambda: ledger.reports >= 1)
+        assert runs == [0.0]
+        runtime.zenoh.put(keys.SIM_CLOCK, bus.pack({"stamp": 0.02, "rate": 0.0}))
+        await eventually(lambda: ledger.reports >= 2)  # F not due at 0.02 s: quiet again
+        assert runs == [0.0]
+        runtime.zenoh.put(keys.SIM_CLOCK, bus.pack({"stamp": 0.05, "rate": 0.0}))
+        await eventually(lambda: ledger.reports >= 3)
+        assert runs == [0.0, 0.05]  # F is due on sim time: an activation, then a report
+        await asyncio.sleep(0.2)
+        assert runs == [0.0, 0.05]  # no wall-clock period
+    finally:
+        service.engine.stop()
+        await asyncio.wait_for(task, 5)
+        await runtime.close()
