@@ -2,6 +2,10 @@
 
 Zenoh runs callbacks on its own threads. :func:`subscribe` hands every sample to the event
 loop with ``call_soon_threadsafe`` so handlers run on the loop like any other asyncio code.
+
+In a lockstep run (common.lockstep) the process's ledger is handed to every subscription
+and to the :class:`Notifier` (``ledger=``, ``Runtime.ledger``): they count on it. Without a
+ledger nothing is counted.
 """
 
 from __future__ import annotations
@@ -12,15 +16,17 @@ import logging
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import msgpack
 import zenoh
 
-from common import lockstep
 from common.config import ZenohSettings
 from common.contract import keys
 from common.errors import ConfigError, ConnectionFailure
+
+if TYPE_CHECKING:
+    from common.lockstep import Ledger
 
 log = logging.getLogger(__name__)
 
@@ -68,14 +74,16 @@ def subscribe(
     key_expr: str,
     handler: Handler,
     loop: asyncio.AbstractEventLoop | None = None,
+    *,
+    ledger: Ledger | None = None,
 ) -> zenoh.Subscriber[None]:
     """Call ``handler(key, payload)`` on ``loop`` for every sample on ``key_expr``.
 
-    Keep the returned subscriber referenced; call ``undeclare()`` on it to stop. In a
-    lockstep run a message counts as received once ``handler`` returned.
+    Keep the returned subscriber referenced; call ``undeclare()`` on it to stop. With a
+    ``ledger`` (lockstep) a message counts as received once ``handler`` returned.
     """
     loop = loop or asyncio.get_running_loop()
-    handler = _counted(key_expr, handler)
+    handler = _counted(key_expr, handler, ledger)
 
     def on_sample(sample: zenoh.Sample) -> None:
         # Runs on a Zenoh thread: copy out of the sample, then cross over to the loop.
@@ -90,11 +98,11 @@ def subscribe(
 
 
 def subscribe_threaded(
-    session: zenoh.Session, key_expr: str, handler: Handler
+    session: zenoh.Session, key_expr: str, handler: Handler, *, ledger: Ledger | None = None
 ) -> zenoh.Subscriber[None]:
     """Call ``handler(key, payload)`` directly on Zenoh's thread (must be thread-safe, quick).
-    In a lockstep run a message counts as received once ``handler`` returned."""
-    handler = _counted(key_expr, handler)
+    With a ``ledger`` (lockstep) a message counts as received once ``handler`` returned."""
+    handler = _counted(key_expr, handler, ledger)
 
     def on_sample(sample: zenoh.Sample) -> None:
         handler(str(sample.key_expr), sample.payload.to_bytes())
@@ -102,10 +110,8 @@ def subscribe_threaded(
     return session.declare_subscriber(key_expr, on_sample)
 
 
-def _counted(key_expr: str, handler: Handler) -> Handler:
-    """``handler``, counting each message after it (common.lockstep) if this process takes
-    part in a lockstep run."""
-    ledger = lockstep.active()
+def _counted(key_expr: str, handler: Handler, ledger: Ledger | None) -> Handler:
+    """``handler``, counting each message on ``ledger`` after it (common.lockstep)."""
     tally = ledger.tally(key_expr) if ledger is not None else None
     if ledger is None or tally is None:
         return handler
@@ -154,10 +160,12 @@ class Notification:
 
 
 class Notifier:
-    """Publishes change notifications, one cached express publisher per key."""
+    """Publishes change notifications, one cached express publisher per key; each one counted
+    as sent on ``ledger`` in a lockstep run."""
 
-    def __init__(self, session: zenoh.Session) -> None:
+    def __init__(self, session: zenoh.Session, ledger: Ledger | None = None) -> None:
         self._session = session
+        self._ledger = ledger
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._lock = threading.Lock()
 
@@ -170,9 +178,8 @@ class Notifier:
                 if publisher is None:
                     publisher = self._session.declare_publisher(key, express=True)
                     self._publishers[key] = publisher
-        ledger = lockstep.active()
-        if ledger is not None:
-            ledger.sent_on(key)
+        if self._ledger is not None:
+            self._ledger.sent_on(key)
         publisher.put(Notification(table, robot, row_id).encode())
 
     def close(self) -> None:

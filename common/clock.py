@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import zenoh
 
@@ -20,6 +20,9 @@ from common.contract import keys
 _MAX_EXTRAPOLATION_WALL_S = 0.1
 # A clock this far behind the last one is a restarted sim, not a reordered message.
 _RESTART_JUMP_S = 1.0
+
+if TYPE_CHECKING:
+    from common.lockstep import Ledger
 
 log = logging.getLogger(__name__)
 
@@ -31,9 +34,12 @@ class SimClock:
         self._received = 0.0
         self._subscriber: Any = None
 
-    def attach(self, session: zenoh.Session) -> None:
-        """Follow ``pnav/sim/clock`` on ``session`` (callbacks on Zenoh's thread)."""
-        self._subscriber = bus.subscribe_threaded(session, keys.SIM_CLOCK, self._on_clock)
+    def attach(self, session: zenoh.Session, ledger: Ledger | None = None) -> None:
+        """Follow ``pnav/sim/clock`` on ``session`` (callbacks on Zenoh's thread); in a
+        lockstep run each clock message counts on ``ledger`` once the clock moved."""
+        self._subscriber = bus.subscribe_threaded(
+            session, keys.SIM_CLOCK, self._on_clock, ledger=ledger
+        )
 
     def _on_clock(self, key: str, payload: bytes) -> None:
         try:

@@ -6,7 +6,11 @@ the whole stack is *quiet*: every message caused by what the sim published has b
 and every command decided from it has reached the sim. The same world and seed then give the
 same run on a quiet or a loaded machine (docs/SIM.md, "Lockstep"; CONTRACT.md, "Lockstep").
 
-A participant (every process of the stack with PNAV_LOCKSTEP set; the sim is the judge):
+A participant (every process of the stack with PNAV_LOCKSTEP set; the sim is the judge) has
+one :class:`Ledger`, made by ``Runtime.open`` and handed to whatever counts on it: the
+subscriptions (``bus.subscribe(..., ledger=)``), the notifier (``bus.Notifier``), the sim
+clock, the bridge's cmd_vel publisher and the engine's trigger (:class:`LockstepTrigger`).
+Nothing finds it implicitly. The participant:
 
 - counts, per key, the messages it publishes (``Ledger.sent_on``; common.bus's Notifier and
   the bridge's cmd_vel do it), and per subscription, per key, the messages it received and
@@ -23,9 +27,10 @@ sim) say they sent on its keys, nothing is in flight anywhere. One look suffices
 chain of causes starting at the sim's own publications, the first participant whose newest
 status does not cover its part shows fewer receipts than its predecessor reported sent.
 
-How quiet is detected is the participant's business; the Engine and the bridge do it with
-:meth:`Ledger.mark` / :meth:`Ledger.report_if_settled`: take a mark, make sure everything
-received up to it is handled, then report if nothing was received since the mark.
+How quiet is detected is the participant's business; the engine's :class:`LockstepTrigger`
+and the bridge do it with :meth:`Ledger.mark` / :meth:`Ledger.report_if_settled`: take a
+mark, make sure everything received up to it is handled, then report if nothing was
+received since the mark.
 """
 
 from __future__ import annotations
@@ -38,7 +43,9 @@ from typing import Any
 import msgpack
 import zenoh
 
+from common.config import EngineSettings
 from common.contract import keys
+from common.engine.trigger import Clock, Signals
 
 log = logging.getLogger("pnav.lockstep")
 
@@ -54,7 +61,7 @@ class Tally:
 
 
 class Ledger:
-    """One participant's counts and its status publisher (thread-safe)."""
+    """One participant's counts and its status publisher (thread-safe); :meth:`close` it."""
 
     def __init__(
         self, session: zenoh.Session, service: str, instance: str, *, receipts: bool = True
@@ -150,25 +157,39 @@ class Status:
         return cls(seq, sent, subs)
 
 
-_active: Ledger | None = None
+class LockstepTrigger:
+    """The engine's trigger (common.engine.trigger) in a lockstep run; give the engine the
+    sim clock with it (``Engine(..., trigger=LockstepTrigger(ledger), clock=sim.now)``).
 
+    An activation is due on a wake, a hurry, or when F has passed in sim time; there is no
+    wall-clock period and P is not applied, so nothing runs while sim time stands still.
+    Every counted receipt makes the trigger look again (a clock message may make F due).
+    When nothing is due it reports the service quiet (:meth:`quiet`).
+    """
 
-def active() -> Ledger | None:
-    """This process's ledger while it takes part in a lockstep run."""
-    return _active
+    def __init__(self, ledger: Ledger) -> None:
+        self.ledger = ledger
 
+    def bind(self, signals: Signals) -> None:
+        self.ledger.listener = signals.look_threadsafe
 
-def start(session: zenoh.Session, service: str, instance: str, *, receipts: bool = True) -> Ledger:
-    """Take part: from now on common.bus counts on the returned ledger. One per process."""
-    global _active
-    if _active is not None:
-        raise RuntimeError("this process already takes part in a lockstep run")
-    _active = Ledger(session, service, instance, receipts=receipts)
-    return _active
+    async def wait(
+        self, signals: Signals, since: float | None, clock: Clock, settings: EngineSettings
+    ) -> None:
+        """The mark is taken before the flags are read: a notification counted in it set
+        its flag before it was counted (on the loop, or with ``Engine.wake_threadsafe``), so
+        it is either served by the activation that follows (which reads the database after
+        the row was committed) or still owed. A report never covers a notification no
+        activation has seen."""
+        while not signals.stopping:
+            signals.clear()
+            mark = self.ledger.mark()
+            if signals.pending or since is None or clock() >= since + settings.period_s:
+                return
+            await self.quiet(signals, mark)
 
-
-def stop() -> None:
-    global _active
-    ledger, _active = _active, None
-    if ledger is not None:
-        ledger.close()
+    async def quiet(self, signals: Signals, mark: int) -> None:
+        """Nothing is due: report if nothing was received since ``mark``, then wait for the
+        next look (a receipt, a wake, a hurry, a stop); else look again at once."""
+        if self.ledger.report_if_settled(mark):
+            await signals.wait()

@@ -1,7 +1,8 @@
 """What every service process needs: connections, a liveliness token, signals, clean exit.
 
-:class:`Runtime` owns the Postgres pool, the Zenoh session, the notifier, the sim clock and
-the liveliness token ``pnav/alive/{service}/{instance}``. :func:`run_service` is the process
+:class:`Runtime` owns the Postgres pool, the Zenoh session, the notifier, the sim clock, the
+liveliness token ``pnav/alive/{service}/{instance}`` and, in a lockstep run, the ledger
+(common.lockstep) it hands to the notifier and the clock. :func:`run_service` is the process
 entry point: structured logs, uvloop, SIGINT/SIGTERM handlers that ask the service to stop,
 and an exit code (0 clean, 1 failed, 2 misconfigured).
 """
@@ -38,24 +39,32 @@ class Runtime:
         self.db: Database | None = None
         self.clock = SimClock()
         self._token: Any = None
-        self.ledger: lockstep.Ledger | None = None  # taking part in a lockstep run
+        # taking part in a lockstep run: hand it to every subscription (bus.subscribe)
+        self.ledger: lockstep.Ledger | None = None
         self._closers: list[Callable[[], Any]] = []
 
     @classmethod
-    async def open(cls, config: ServiceConfig, *, with_db: bool = True) -> Runtime:
+    async def open(
+        cls, config: ServiceConfig, *, with_db: bool = True, receipts: bool = True
+    ) -> Runtime:
+        """Connect. With ``config.lockstep`` set the process takes part in a lockstep run: the
+        runtime makes its :attr:`ledger` (common.lockstep) and hands it to the sim clock and
+        the notifier; whoever subscribes or reports passes it on. ``receipts=False``: a
+        sender-only participant (a benchmark runner), whose subscriptions are not counted."""
         runtime = cls(config)
         try:
             # Zenoh's open blocks while it connects: keep the loop free meanwhile.
             runtime.session = await asyncio.to_thread(bus.open_session, config.zenoh)
             if config.lockstep:
-                # before any subscription: each one is counted from its start
-                runtime.ledger = lockstep.start(runtime.session, config.service, config.instance)
-            runtime.clock.attach(runtime.session)
+                runtime.ledger = lockstep.Ledger(
+                    runtime.session, config.service, config.instance, receipts=receipts
+                )
+            runtime.clock.attach(runtime.session, runtime.ledger)
             if with_db:
                 pool = await create_pool(
                     config.database_url, max_size=config.pool_max, wait_s=config.db_wait_s
                 )
-                runtime.db = Database(pool, bus.Notifier(runtime.session))
+                runtime.db = Database(pool, bus.Notifier(runtime.session, runtime.ledger))
             runtime._token = runtime.session.liveliness().declare_token(
                 keys.alive_key(config.service, config.instance)
             )
@@ -100,8 +109,8 @@ class Runtime:
         self._closers.clear()
         self.clock.close()
         if self.ledger is not None:
-            self.ledger = None
-            lockstep.stop()
+            ledger, self.ledger = self.ledger, None
+            ledger.close()
         if self._token is not None:
             try:
                 self._token.undeclare()

@@ -5,10 +5,11 @@ Lifecycle of a :class:`ScenarioService`:
 1. ``Runtime.open``: Postgres pool, Zenoh session, sim clock, liveliness token.
 2. :meth:`ScenarioService.seed`: the subclass adds its meta rules (``engine.add_meta``).
 3. The service subscribes to the change notifications of every table the meta rules watch;
-   each one wakes the engine at once (the callback runs on Zenoh's thread and only
-   schedules ``engine.wake`` on the loop).
-   In a lockstep run (PNAV_LOCKSTEP, common.lockstep) the engine counts F in sim time and
-   reports the service quiet whenever an activation left nothing pending.
+   each one is handed to :meth:`ScenarioService.on_notification` and wakes the engine, both
+   on the loop (:meth:`ScenarioService.watch`).
+   In a lockstep run (PNAV_LOCKSTEP, common.lockstep) the runtime's ledger counts every
+   subscription, and the engine (:meth:`ScenarioService.make_engine`) counts F in sim time
+   and reports the service quiet whenever no activation is due.
 4. Robot leases (common.lease, PNAV_LEASES=on by default): the service opens its lock
    connection and takes its share of the robots *before* the first activation (a lone
    replica owns every robot from the start). Rules act only for robots the replica owns:
@@ -38,6 +39,7 @@ from common.config import ServiceConfig
 from common.contract import keys
 from common.engine import Engine
 from common.lease import LeaseManager
+from common.lockstep import Ledger, LockstepTrigger
 from common.runtime import Runtime, run_service
 
 logger = logging.getLogger("pnav.service")
@@ -59,34 +61,24 @@ def wake_on_notifications(
     engine: Engine,
     tables: tuple[str, ...],
     observer: bus.Handler | None = None,
+    *,
+    ledger: Ledger | None = None,
 ) -> list[zenoh.Subscriber[None]]:
-    """Subscribe to ``tables``' notifications; each one wakes ``engine`` (call on its loop).
-
-    The Zenoh callback only schedules ``engine.wake`` on the loop, so the wake-up costs one
-    loop iteration. ``observer(key, payload)``, if given, runs first on Zenoh's thread
-    (instrumentation: it must be quick and thread-safe).
+    """Subscribe to ``tables``' notifications; each one wakes ``engine`` from Zenoh's thread
+    (``Engine.wake_threadsafe``: one loop iteration to the activation). No store is told:
+    for an engine without one (pnav bench engine). ``observer(key, payload)``, if given, runs
+    first on Zenoh's thread (instrumentation: it must be quick and thread-safe). With a
+    ``ledger`` (lockstep) a notification counts as handled once the engine's flag is set.
     """
-    loop = asyncio.get_running_loop()
-    wake = engine.wake
+    wake = engine.wake_threadsafe
 
     def on_notification(key: str, payload: bytes) -> None:
         if observer is not None:
             observer(key, payload)
-        try:
-            loop.call_soon_threadsafe(wake)
-        except RuntimeError:
-            pass  # loop closed: shutting down
-
-    def on_notification_lockstep(key: str, payload: bytes) -> None:
-        if observer is not None:
-            observer(key, payload)
-        engine.note_threadsafe()  # the flag is set before bus counts the message
-
-    if engine.ledger is not None:
-        on_notification = on_notification_lockstep
+        wake()
 
     return [
-        bus.subscribe_threaded(session, keys.notify_watch(table), on_notification)
+        bus.subscribe_threaded(session, keys.notify_watch(table), on_notification, ledger=ledger)
         for table in tables
     ]
 
@@ -99,15 +91,18 @@ class ScenarioService(ABC):
     def __init__(self, runtime: Runtime) -> None:
         self.runtime = runtime
         self.config: ServiceConfig = runtime.config
-        self.engine = Engine(self.config.engine, name=self.config.service)
+        self.engine = self.make_engine(runtime)
         self.leases: LeaseManager | None = None
-        ledger = runtime.ledger
-        if ledger is not None:
-            # lockstep (common.lockstep): F on sim time, and every counted receipt makes the
-            # engine look again (a clock message may make F due; a quiet engine reports)
-            self.engine.ledger = ledger
-            self.engine.clock = runtime.clock.now
-            ledger.listener = self.engine.poke_threadsafe
+
+    @staticmethod
+    def make_engine(runtime: Runtime) -> Engine:
+        """The service's engine: F on the wall clock, or in a lockstep run (common.lockstep)
+        on sim time with the lockstep trigger (which reports the service quiet)."""
+        config, ledger = runtime.config, runtime.ledger
+        if ledger is None:
+            return Engine(config.engine, name=config.service)
+        trigger = LockstepTrigger(ledger)
+        return Engine(config.engine, name=config.service, trigger=trigger, clock=runtime.clock.now)
 
     @abstractmethod
     def seed(self) -> None:
@@ -175,7 +170,10 @@ class ScenarioService(ABC):
             )
             self.runtime.on_close(alive.undeclare)
             robots = bus.subscribe_threaded(
-                session, keys.notify_watch(keys.ROBOT), lambda _key, _payload: poke()
+                session,
+                keys.notify_watch(keys.ROBOT),
+                lambda _key, _payload: poke(),
+                ledger=self.runtime.ledger,
             )
             self.runtime.on_close(robots.undeclare)
         except BaseException:
@@ -227,9 +225,10 @@ class ScenarioService(ABC):
                 note(decoded)
             engine.wake()
 
-        session = self.runtime.zenoh
+        session, ledger = self.runtime.zenoh, self.runtime.ledger
         for table in engine.watched_tables:
-            subscriber = bus.subscribe(session, keys.notify_watch(table), on_message)
+            key_expr = keys.notify_watch(table)
+            subscriber = bus.subscribe(session, key_expr, on_message, ledger=ledger)
             self.runtime.on_close(subscriber.undeclare)
 
     async def publish_stats(self) -> None:

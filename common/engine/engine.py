@@ -1,25 +1,17 @@
 """The rule-running system: two FIFO queues, N rules or F seconds per activation.
 
-Semantics (DESIGN.md section 3, thesis section 3.2):
+Semantics (DESIGN.md section 3, thesis section 3.2; docs/ENGINE.md says it all in full):
 
 - ``current`` holds the rules of this activation, ``next`` the rules generated during it.
-- One activation runs rules from the head of ``current`` until it is empty, or N rules have
-  run, or F seconds have elapsed (checked between rules: a running rule is never
-  interrupted). Then ``next`` is appended to ``current`` (so leftovers from the N or F cap run
-  first next time) and ``next`` is emptied.
-- :meth:`Engine.run` starts an activation every F seconds, or at once when :meth:`wake` is
-  called (a Zenoh notification on a watched table), and always leaves at least P seconds
-  between the end of one activation and the start of the next.
-- Every rule is run once and discarded. Rules enter the system through :meth:`add` (end of
-  ``current``) or a rule's generation step (end of ``next``).
+  An activation runs rules from the head of ``current`` until it is empty, N rules ran or F
+  elapsed (checked between rules), then appends ``next`` to ``current``. Every rule runs
+  once and is discarded; rules enter through :meth:`Engine.add` or a rule's generation.
+- :meth:`Engine.run` starts an activation when its *trigger* says (common.engine.trigger:
+  F, P, :meth:`Engine.wake`, :meth:`Engine.hurry`; in a lockstep run F in sim time and a
+  quiet report when nothing is due, common.lockstep). F is counted on the engine's clock.
 
-In a lockstep run (common.lockstep) F is counted in sim time and checked when a sim clock
-message comes, and after every activation that left nothing pending the engine reports its
-service quiet: :meth:`Engine.run` then follows ``_run_lockstep``.
-
-Our one addition to the thesis: a meta rule (``Rule.meta``) that is discarded because of an
-error would silently end its meta scenario. The engine re-seeds it from the factory given to
-:meth:`add_meta`, logs that it did, and counts it.
+Our one addition to the thesis: a meta rule (``Rule.meta``) discarded because of an error
+is re-seeded from the factory given to :meth:`Engine.add_meta`, logged and counted.
 """
 
 from __future__ import annotations
@@ -29,14 +21,13 @@ import logging
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from common.config import EngineSettings
 from common.engine.rule import Rule
 from common.engine.stats import EngineCounters, RuleStats
-
-if TYPE_CHECKING:
-    from common.lockstep import Ledger
+from common.engine.trigger import Clock, Periodic, Signals, Trigger
+from common.errors import UsageError
 
 log = logging.getLogger("pnav.engine")
 
@@ -44,23 +35,27 @@ RuleFactory = Callable[[], Rule]
 
 
 class Engine:
-    def __init__(self, settings: EngineSettings | None = None, name: str = "engine") -> None:
+    def __init__(
+        self,
+        settings: EngineSettings | None = None,
+        name: str = "engine",
+        *,
+        trigger: Trigger | None = None,
+        clock: Clock | None = None,
+    ) -> None:
+        """``trigger`` says when activations start (default :class:`Periodic`); ``clock``
+        counts F, within an activation and between two (default: monotonic wall time)."""
         self.settings = settings or EngineSettings()
         self.name = name
         self.current: deque[Rule] = deque()
         self.next: deque[Rule] = deque()
         self.counters = EngineCounters()
+        self.trigger: Trigger = trigger if trigger is not None else Periodic()
+        self.clock: Clock = clock if clock is not None else time.monotonic
+        self.signals = Signals()
         self._stats: dict[type[Rule], RuleStats] = {}
         self._meta_factories: dict[type[Rule], RuleFactory] = {}
-        self._wake: asyncio.Event | None = None
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._stopping = False
-        self._woken = False
-        self._hurried = False
         self._running = False
-        self.clock: Callable[[], float] = time.monotonic
-        # set (with ``clock`` on sim time) when the service takes part in a lockstep run
-        self.ledger: Ledger | None = None
 
     # -- putting rules in ------------------------------------------------------------------
     def add(self, rule: Rule) -> None:
@@ -167,20 +162,13 @@ class Engine:
             self._invalid(rule, stats, what, result)
         except Exception:
             stats.errors += 1
-            log.exception(
-                "%s raised; counted as false",
-                what,
-                extra={"rule": rule.name, "scenario": rule.scenario, "engine": self.name},
-            )
+            log.exception("%s raised; counted as false", what, extra=self._where(rule))
         return False
 
     def _invalid(self, rule: Rule, stats: RuleStats, what: str, value: object) -> None:
         stats.errors += 1
         log.error(
-            "%s returned %r, not a bool; counted as false",
-            what,
-            value,
-            extra={"rule": rule.name, "scenario": rule.scenario, "engine": self.name},
+            "%s returned %r, not a bool; counted as false", what, value, extra=self._where(rule)
         )
 
     def _generate(self, rule: Rule, stats: RuleStats) -> None:
@@ -196,33 +184,27 @@ class Engine:
                     log.error(
                         "rule generation produced %r, not a Rule; ignored",
                         new,
-                        extra={"rule": rule.name, "scenario": rule.scenario, "engine": self.name},
+                        extra=self._where(rule),
                     )
         except Exception:
             self._discard_on_error(rule, stats, "rule generation")
 
+    def _where(self, rule: Rule) -> dict[str, str]:
+        """A log record's ``extra``: which rule of which engine."""
+        return {"rule": rule.name, "scenario": rule.scenario, "engine": self.name}
+
     def _discard_on_error(self, rule: Rule, stats: RuleStats, step: str) -> None:
         stats.errors += 1
-        log.exception(
-            "error in %s; rule discarded",
-            step,
-            extra={"rule": rule.name, "scenario": rule.scenario, "engine": self.name},
-        )
+        log.exception("error in %s; rule discarded", step, extra=self._where(rule))
         try:
             rule.discarded(step)
         except Exception:
-            log.exception(
-                "discarded hook raised",
-                extra={"rule": rule.name, "scenario": rule.scenario, "engine": self.name},
-            )
+            log.exception("discarded hook raised", extra=self._where(rule))
         factory = self._meta_factories.get(type(rule))
         if factory is not None:
             self.next.append(factory())
             self.counters.meta_reseeded += 1
-            log.warning(
-                "meta rule re-seeded after an error",
-                extra={"rule": rule.name, "scenario": rule.scenario, "engine": self.name},
-            )
+            log.warning("meta rule re-seeded after an error", extra=self._where(rule))
 
     # -- statistics --------------------------------------------------------------------------
     def stats(self) -> list[RuleStats]:
@@ -234,117 +216,55 @@ class Engine:
 
     # -- the activation loop ---------------------------------------------------------------
     def wake(self) -> None:
-        """Start an activation as soon as possible (call on the engine's loop)."""
-        self._woken = True
-        if self._wake is not None:
-            self._wake.set()
-
-    def hurry(self) -> None:
-        """Start the next activation as soon as the one under way ends.
-
-        For a rule that generated target rules which should not wait for the next
-        notification or for F (they go to ``next``, so they run in the next activation).
-        """
-        self._hurried = True
-        if self._wake is not None:
-            self._wake.set()
-
-    def note_threadsafe(self) -> None:
-        """A notification came (any thread): the flag is set before this returns, so a
-        lockstep report taken after it sees the activation owed (see ``_run_lockstep``)."""
-        self._woken = True
-        self.poke_threadsafe()
-
-    def poke_threadsafe(self) -> None:
-        """Make the loop look again (any thread): in lockstep, after every counted receipt
-        (a clock message may make F due; a quiet engine reports)."""
-        loop, event = self._loop, self._wake
-        if loop is not None and event is not None:
-            try:
-                loop.call_soon_threadsafe(event.set)
-            except RuntimeError:
-                pass  # loop closed while shutting down
+        """A notification came: start an activation as soon as the trigger allows (call on
+        the engine's loop)."""
+        self.signals.woken = True
+        self.signals.look()
 
     def wake_threadsafe(self) -> None:
-        """:meth:`wake` from any thread, e.g. a Zenoh callback."""
-        loop = self._loop
-        if loop is not None:
-            try:
-                loop.call_soon_threadsafe(self.wake)
-            except RuntimeError:
-                pass  # loop closed while shutting down
+        """:meth:`wake` from any thread, e.g. a Zenoh callback. The flag is set before this
+        returns, so a lockstep count taken after it sees the activation owed."""
+        self.signals.woken = True
+        self.signals.look_threadsafe()
+
+    def hurry(self) -> None:
+        """A rule generated target rules that should not wait for a notification or for F
+        (they are in ``next``, so they run in the next activation): start it right after the
+        one under way (call on the engine's loop, e.g. from a rule's actions)."""
+        self.signals.hurried = True
+        self.signals.look()
 
     async def run(self) -> None:
-        """Run activations until :meth:`stop`; the activation under way always completes."""
+        """Run activations until :meth:`stop`; the activation under way always completes.
+
+        One loop: the trigger says when the next activation is due, the flags it saw name
+        what started it (counted in ``counters.woken_by_*`` from the second one on).
+        """
         if self._running:
-            raise RuntimeError(f"engine {self.name} is already running")
+            raise UsageError(f"engine {self.name} is already running")
         self._running = True
-        self._loop = asyncio.get_running_loop()
-        self._wake = asyncio.Event()
-        period, pause = self.settings.period_s, self.settings.pause_s
+        signals = self.signals
+        signals.attach()
+        self.trigger.bind(signals)
+        since: float | None = None
         try:
-            if self.ledger is not None:
-                await self._run_lockstep(self.ledger)
-                return
-            while not self._stopping:
-                self._wake.clear()
-                self._woken = self._hurried = False
-                started = self.clock()
-                await self.activation()
-                if pause > 0:
-                    await asyncio.sleep(pause)
-                if self._stopping:
+            while True:
+                await self.trigger.wait(signals, since, self.clock, self.settings)
+                if signals.stopping:
                     break
-                if not (self._woken or self._hurried):
-                    remaining = started + period - self.clock()
-                    if remaining > 0:
-                        try:
-                            await asyncio.wait_for(self._wake.wait(), remaining)
-                        except TimeoutError:
-                            pass
-                if self._woken:
-                    self.counters.woken_by_notification += 1
-                elif self._hurried:
-                    self.counters.woken_by_rule += 1
-                else:
-                    self.counters.woken_by_period += 1
+                reason = signals.take()
+                if since is not None:
+                    self.counters.woken_by(reason)
+                since = self.clock()
+                await self.activation()
         finally:
             self._running = False
-            self._stopping = False
-
-    async def _run_lockstep(self, ledger: Ledger) -> None:
-        """Activations on notifications, hurry, and F in sim time; a report when quiet.
-
-        The mark is taken before the flags are read: a notification counted in it set
-        ``_woken`` before it was counted, so it is either consumed by the activation that
-        follows (which reads the database after the row was committed) or still owed. A
-        report therefore never covers a notification no activation has seen.
-        """
-        assert self._wake is not None
-        started = -float("inf")
-        while not self._stopping:
-            self._wake.clear()
-            mark = ledger.mark()
-            woken, hurried = self._woken, self._hurried
-            if woken or hurried or self.clock() >= started + self.settings.period_s:
-                self._woken = self._hurried = False
-                started = self.clock()
-                await self.activation()
-                if woken:
-                    self.counters.woken_by_notification += 1
-                elif hurried:
-                    self.counters.woken_by_rule += 1
-                else:
-                    self.counters.woken_by_period += 1
-                continue  # look again: what came meanwhile, a hurry, a report
-            if ledger.report_if_settled(mark):
-                await self._wake.wait()
+            signals.stopping = False
 
     def stop(self) -> None:
         """Ask :meth:`run` to return after the activation under way (drain, don't cut)."""
-        self._stopping = True
-        if self._wake is not None:
-            self._wake.set()
+        self.signals.stopping = True
+        self.signals.look()
 
     @property
     def running(self) -> bool:

@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from common.engine.trigger import NOTIFICATION, RULE
+
 
 @dataclass
 class RuleStats:
@@ -49,3 +51,13 @@ class EngineCounters:
     capped_by_n: int = 0
     capped_by_f: int = 0
     meta_reseeded: int = 0
+
+    def woken_by(self, reason: str) -> None:
+        """Count an activation started by ``reason`` (common.engine.trigger: NOTIFICATION,
+        RULE or PERIOD)."""
+        if reason == NOTIFICATION:
+            self.woken_by_notification += 1
+        elif reason == RULE:
+            self.woken_by_rule += 1
+        else:
+            self.woken_by_period += 1

@@ -6,8 +6,9 @@ executions per second, for plain steps and for ``async def`` steps.
 
 Wake latency: a separate process publishes change notifications through an in-process Zenoh
 router on loopback, each stamped with CLOCK_MONOTONIC (shared by all processes of the
-machine). The engine, waiting with a period F of 1 s, is woken exactly as a service is
-(``wake_on_notifications``); a meta rule notes the clock when its data acquisition starts.
+machine). The engine, waiting with a period F of 1 s, is woken one loop hop after Zenoh's
+callback, as a service is (``wake_on_notifications``); a meta rule notes the clock when its
+data acquisition starts.
 Latency = rule start - publish time.
 """
 

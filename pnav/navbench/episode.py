@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from common import bus, lockstep
+from common import bus
 from common.config import ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime
@@ -242,15 +242,15 @@ async def run_episode(episode: Episode, log_dir: Path | None = None) -> Outcome:
     collected, window, next_collect = Collected(), [0.0, 0.0], 0.0
     async with launched(options) as stack:
         config = ServiceConfig(
-            service="navbench", database_url=stack.local.database_url, zenoh=stack.local.zenoh
+            service="navbench",
+            database_url=stack.local.database_url,
+            zenoh=stack.local.zenoh,
+            lockstep=PARTICIPANTS if episode.pacing == LOCKSTEP else (),
         )
-        rt = await Runtime.open(config)
+        # in lockstep a sender-only participant: what it writes counts, what it watches not
+        rt = await Runtime.open(config, receipts=False)
         subs: list[Any] = []
-        ledger = (
-            lockstep.start(rt.zenoh, "navbench", config.instance, receipts=False)
-            if episode.pacing == LOCKSTEP
-            else None
-        )
+        ledger = rt.ledger
         try:
             for topic, handler in (
                 (keys.ODOM, watcher.on_odom),
@@ -258,7 +258,7 @@ async def run_episode(episode: Episode, log_dir: Path | None = None) -> Outcome:
                 (keys.CMD_VEL, watcher.on_cmd_vel),
             ):
                 key = keys.robot_key(episode.robot, topic)
-                subs.append(bus.subscribe_threaded(rt.zenoh, key, handler))
+                subs.append(bus.subscribe_threaded(rt.zenoh, key, handler, ledger=ledger))
             if episode.robot not in await commands.robot_ids(rt, wait_s=30.0):
                 raise RuntimeError(f"robot {episode.robot} never registered from {episode.world}")
             await ensure_combo(rt, episode.combo)
@@ -293,8 +293,6 @@ async def run_episode(episode: Episode, log_dir: Path | None = None) -> Outcome:
             for sub in subs:
                 with contextlib.suppress(Exception):
                     sub.undeclare()
-            if ledger is not None:
-                lockstep.stop()
             await rt.close()
     end, time_s = result
     t0 = watcher.first_decision or 0.0

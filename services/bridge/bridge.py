@@ -64,9 +64,15 @@ class Bridge:
             self.counters,
             retry_s=self.settings.world_retry_s,
             on_applied=self._on_world,
+            ledger=runtime.ledger,
         )
         self.commands = CommandRelay(
-            runtime.zenoh, db.pool, runtime.clock, self.counters, self.settings
+            runtime.zenoh,
+            db.pool,
+            runtime.clock,
+            self.counters,
+            self.settings,
+            ledger=runtime.ledger,
         )
         self._malformed_log = RateLimitedLog(logger)
         self._subscribers: list[zenoh.Subscriber[None]] = []
@@ -78,14 +84,21 @@ class Bridge:
 
     # -- lifecycle -----------------------------------------------------------------------
     async def start(self) -> None:
-        session = self.runtime.zenoh
+        session, ledger = self.runtime.zenoh, self.runtime.ledger
         await self._load_robots()
         await self.writer.start()
         for topic in keys.SENSOR_TOPICS:
             handler = functools.partial(self._on_sensor, topic)
-            self._subscribers.append(bus.subscribe(session, keys.robot_watch(topic), handler))
+            self._subscribers.append(
+                bus.subscribe(session, keys.robot_watch(topic), handler, ledger=ledger)
+            )
         self._subscribers.append(
-            bus.subscribe(session, keys.notify_watch(keys.ROBOT), self._on_robot_notification)
+            bus.subscribe(
+                session,
+                keys.notify_watch(keys.ROBOT),
+                self._on_robot_notification,
+                ledger=ledger,
+            )
         )
         self.world.start()
         await self.commands.start()
@@ -93,10 +106,8 @@ class Bridge:
             asyncio.create_task(self._prune_loop(), name="prune"),
             asyncio.create_task(self._stats_loop(), name="bridge-stats"),
         ]
-        if self.runtime.ledger is not None:
-            self._tasks.append(
-                asyncio.create_task(self._report_quiet(self.runtime.ledger), name="lockstep")
-            )
+        if ledger is not None:
+            self._tasks.append(asyncio.create_task(self._report_quiet(ledger), name="lockstep"))
         log.event(
             logger,
             logging.INFO,

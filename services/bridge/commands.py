@@ -82,7 +82,12 @@ class CommandRelay:
         clock: SimClock,
         counters: Counters,
         settings: BridgeSettings,
+        *,
+        ledger: lockstep.Ledger | None = None,
     ) -> None:
+        """``ledger``: in a lockstep run, the commands sent count on it, the notifications
+        received too, and the watchdog runs when the bridge's reporter says, on sim-clock
+        messages."""
         self.session = session
         self.pool = pool
         self.clock = clock
@@ -96,8 +101,7 @@ class CommandRelay:
         self._polling = False
         # called on the loop when a read of command2robot ended (lockstep's reporter)
         self.on_idle: Callable[[], None] | None = None
-        # in lockstep the watchdog runs when the reporter says, on sim-clock messages
-        self.lockstep = lockstep.active() is not None
+        self.ledger = ledger
         self._want_all = False
         self._wanted: set[str] = set()
         self._alerts = RateLimitedLog(logger)
@@ -107,7 +111,10 @@ class CommandRelay:
     async def start(self) -> None:
         # Subscribe before the first read, so a command written in between is not missed.
         self._subscriber = bus.subscribe(
-            self.session, keys.notify_watch(keys.COMMAND2ROBOT), self._on_notification
+            self.session,
+            keys.notify_watch(keys.COMMAND2ROBOT),
+            self._on_notification,
+            ledger=self.ledger,
         )
         async with self.pool.acquire() as conn:
             rows = await conn.fetch(_NEWEST)
@@ -190,7 +197,7 @@ class CommandRelay:
         next_read = time.monotonic() + self.settings.command_period_s
         while True:
             await asyncio.sleep(tick)
-            if not self.lockstep:
+            if self.ledger is None:
                 self.check_watchdog()
             now = time.monotonic()
             if now >= next_read:
@@ -258,9 +265,8 @@ class CommandRelay:
         decided_stamp: float | None = None,
         reliable: bool = False,
     ) -> None:
-        ledger = lockstep.active()
-        if ledger is not None:
-            ledger.sent_on(keys.robot_key(robot, keys.CMD_VEL))
+        if self.ledger is not None:
+            self.ledger.sent_on(keys.robot_key(robot, keys.CMD_VEL))
         payload = bus.pack(
             {
                 "stamp": self.clock.now(),

@@ -20,6 +20,7 @@ import zenoh
 from common import bus, log
 from common.contract import keys
 from common.db import Database
+from common.lockstep import Ledger
 from common.tasks import cancel_and_wait
 from services.bridge.counters import Counters, RateLimitedLog
 from services.bridge.messages import MalformedMessage
@@ -39,8 +40,11 @@ class WorldSync:
         *,
         retry_s: float,
         on_applied: Callable[[World], None],
+        ledger: Ledger | None = None,
     ) -> None:
+        """``ledger``: in a lockstep run, the world messages count on it once handled."""
         self.session = session
+        self.ledger = ledger
         self.db = db
         self.counters = counters
         self.retry_s = retry_s
@@ -58,7 +62,9 @@ class WorldSync:
         self._tasks: list[asyncio.Task[None]] = []
 
     def start(self) -> None:
-        self._subscriber = bus.subscribe(self.session, keys.SIM_WORLD, self.offer)
+        self._subscriber = bus.subscribe(
+            self.session, keys.SIM_WORLD, self.offer, ledger=self.ledger
+        )
         self._tasks = [
             asyncio.create_task(self._apply_loop(), name="world-apply"),
             asyncio.create_task(self._query_loop(), name="world-query"),

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import threading
 from collections.abc import Iterable, Iterator
 
 import pytest
@@ -15,6 +16,7 @@ import pytest
 from common.config import EngineSettings
 from common.engine import Engine, Rule
 from common.engine.engine import rules_in
+from common.engine.trigger import Clock, Signals
 
 
 class Probe(Rule):
@@ -447,5 +449,68 @@ async def test_hurry_runs_generated_targets_without_waiting_for_f() -> None:
     # activation 1: Spawner (target -> next); activation 2 at once: target runs
     assert ran(journal) == ["target"]
     assert e.counters.woken_by_rule == 1 and e.counters.woken_by_notification == 0
+    e.stop()
+    await asyncio.wait_for(task, 2)
+
+
+async def test_wake_threadsafe_from_another_thread_starts_an_activation() -> None:
+    journal: list[str] = []
+    e = engine(period_s=30.0)
+    e.add_meta(lambda: Meta(journal))
+    task = asyncio.create_task(e.run())
+    await asyncio.sleep(0.05)
+    assert journal.count("meta") == 1  # the first activation, then a wait of F = 30 s
+    waker = threading.Thread(target=e.wake_threadsafe)
+    waker.start()
+    waker.join()
+    await asyncio.sleep(0.05)
+    assert journal.count("meta") == 2
+    assert e.counters.woken_by_notification == 1
+    e.stop()
+    await asyncio.wait_for(task, 2)
+
+
+class Ticks:
+    """A trigger that starts an activation per tick put in its queue (a test's own seam)."""
+
+    def __init__(self) -> None:
+        self.ticks: asyncio.Queue[None] = asyncio.Queue()
+        self.seen: list[tuple[float | None, bool]] = []
+
+    def bind(self, signals: Signals) -> None:
+        return None
+
+    async def wait(
+        self, signals: Signals, since: float | None, clock: Clock, settings: EngineSettings
+    ) -> None:
+        while not signals.stopping:
+            if not self.ticks.empty():
+                self.ticks.get_nowait()
+                self.seen.append((since, signals.pending))
+                return
+            await signals.wait(0.01)
+
+
+async def test_a_plugged_trigger_and_clock_decide_when_activations_start() -> None:
+    journal: list[str] = []
+    now = [100.0]
+    trigger = Ticks()
+    e = Engine(EngineSettings(period_s=0.001), trigger=trigger, clock=lambda: now[0])
+    e.add_meta(lambda: Meta(journal))
+    task = asyncio.create_task(e.run())
+    await asyncio.sleep(0.05)
+    assert journal == []  # no tick: no activation, F or not
+    trigger.ticks.put_nowait(None)
+    await asyncio.sleep(0.05)
+    assert journal == ["meta"] and trigger.seen == [(None, False)]
+    now[0] = 101.0
+    e.wake()  # the trigger sees the flag, still waits for its tick
+    await asyncio.sleep(0.05)
+    assert journal == ["meta"]
+    trigger.ticks.put_nowait(None)
+    await asyncio.sleep(0.05)
+    # ``since`` is the previous start on the plugged clock; the wake named this one
+    assert journal == ["meta", "meta"] and trigger.seen[1] == (100.0, True)
+    assert e.counters.woken_by_notification == 1
     e.stop()
     await asyncio.wait_for(task, 2)

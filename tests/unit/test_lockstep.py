@@ -10,15 +10,18 @@ from __future__ import annotations
 import asyncio
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from dataclasses import replace
 
 import pytest
 
-from common import bus, lockstep
-from common.config import EngineSettings, ZenohSettings
+from common import bus
+from common.config import EngineSettings, ServiceConfig, ZenohSettings
 from common.contract import keys
 from common.engine import Engine, Rule
-from common.lockstep import Ledger, Status
+from common.lockstep import Ledger, LockstepTrigger, Status
+from common.runtime import Runtime
+from common.service import ScenarioService
 from common.testing import eventually
 from services.sim.lockstep import Barrier
 
@@ -38,11 +41,11 @@ def session(zenoh_settings: ZenohSettings) -> Iterator[object]:
 
 @pytest.fixture
 def ledger(session: object) -> Iterator[Ledger]:
-    led = lockstep.start(session, "bridge", "b-1")  # type: ignore[arg-type]
+    led = Ledger(session, "bridge", "b-1")  # type: ignore[arg-type]
     try:
         yield led
     finally:
-        lockstep.stop()
+        led.close()
 
 
 def status(seq: int, sent: dict[str, int], subs: list[tuple[str, dict[str, int]]]) -> bytes:
@@ -61,7 +64,7 @@ def test_bus_counts_a_receipt_after_its_handler_and_a_notification_as_sent(
     def handler(key: str, payload: bytes) -> None:
         seen.append(ledger.mark())  # not counted yet while the handler runs
 
-    sub = bus.subscribe_threaded(session, keys.robot_watch(keys.ODOM), handler)  # type: ignore[arg-type]
+    sub = bus.subscribe_threaded(session, keys.robot_watch(keys.ODOM), handler, ledger=ledger)  # type: ignore[arg-type]
     try:
         mark = ledger.mark()  # 0
         session.put(ODOM, b"x")  # type: ignore[attr-defined]
@@ -72,7 +75,7 @@ def test_bus_counts_a_receipt_after_its_handler_and_a_notification_as_sent(
         assert ledger.tallies[0].key_expr == keys.robot_watch(keys.ODOM)
         assert ledger.tallies[0].counts == {ODOM: 1}
         assert not ledger.report_if_settled(mark)  # a receipt since the mark: not quiet
-        bus.Notifier(session).notify(keys.ODOMETRY, "r1", 7)  # type: ignore[arg-type]
+        bus.Notifier(session, ledger).notify(keys.ODOMETRY, "r1", 7)  # type: ignore[arg-type]
         assert ledger.sent == {ODOM_NOTE: 1}
     finally:
         sub.undeclare()
@@ -103,15 +106,67 @@ def test_a_report_carries_counts_that_decode_to_the_same_status(
 
 
 def test_a_sender_only_ledger_counts_no_receipts(session: object) -> None:
-    led = lockstep.start(session, "navbench", "n-1", receipts=False)  # type: ignore[arg-type]
+    led = Ledger(session, "navbench", "n-1", receipts=False)  # type: ignore[arg-type]
     try:
         assert led.tally(keys.SIM_CLOCK) is None
-        assert lockstep.active() is led
-        with pytest.raises(RuntimeError):
-            lockstep.start(session, "other", "o-1")  # type: ignore[arg-type]
+        sub = bus.subscribe_threaded(session, keys.SIM_CLOCK, lambda k, p: None, ledger=led)  # type: ignore[arg-type]
+        sub.undeclare()
+        assert led.tallies == []
     finally:
-        lockstep.stop()
-    assert lockstep.active() is None
+        led.close()
+
+
+def test_only_what_is_handed_the_ledger_counts_on_it(session: object, ledger: Ledger) -> None:
+    got: list[str] = []
+    counted = bus.subscribe_threaded(
+        session,  # type: ignore[arg-type]
+        ODOM,
+        lambda k, p: got.append("counted"),
+        ledger=ledger,
+    )
+    plain = bus.subscribe_threaded(session, ODOM, lambda k, p: got.append("plain"))  # type: ignore[arg-type]
+    try:
+        session.put(ODOM, b"x")  # type: ignore[attr-defined]
+        deadline = time.monotonic() + 5
+        while len(got) < 2 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert sorted(got) == ["counted", "plain"]
+        assert [t.counts for t in ledger.tallies] == [{ODOM: 1}]
+        bus.Notifier(session).notify(keys.ODOMETRY, "r1", 7)  # type: ignore[arg-type]
+        assert ledger.sent == {}
+    finally:
+        counted.undeclare()
+        plain.undeclare()
+
+
+async def test_a_runtime_in_lockstep_counts_the_sim_clock_on_its_ledger(
+    zenoh_settings: ZenohSettings,
+) -> None:
+    config = ServiceConfig(
+        service="planner",
+        database_url="postgresql://unused",
+        zenoh=zenoh_settings,
+        instance="p-9",
+        lockstep=("planner",),
+    )
+    runtime = await Runtime.open(config, with_db=False)
+    try:
+        ledger = runtime.ledger
+        assert ledger is not None and ledger.service == "planner"
+        runtime.zenoh.put(keys.SIM_CLOCK, bus.pack({"stamp": 1.5, "rate": 0.0}))
+        await eventually(lambda: ledger.mark() == 1)
+        assert runtime.clock.now() == 1.5  # the clock moved before the receipt counted
+        assert [(t.key_expr, t.counts) for t in ledger.tallies] == [
+            (keys.SIM_CLOCK, {keys.SIM_CLOCK: 1})
+        ]
+    finally:
+        await runtime.close()
+    assert runtime.ledger is None
+    plain = await Runtime.open(replace(config, lockstep=()), with_db=False)
+    try:
+        assert plain.ledger is None
+    finally:
+        await plain.close()
 
 
 def test_a_malformed_status_is_refused() -> None:
@@ -287,10 +342,12 @@ async def test_engine_in_lockstep_runs_on_notes_and_on_sim_time_and_reports_when
 ) -> None:
     sim_now = [0.0]
     runs: list[float] = []
-    engine = Engine(EngineSettings(period_s=0.05), name="t")
-    engine.ledger = ledger
-    engine.clock = lambda: sim_now[0]
-    ledger.listener = engine.poke_threadsafe
+    engine = Engine(
+        EngineSettings(period_s=0.05),
+        name="t",
+        trigger=LockstepTrigger(ledger),
+        clock=lambda: sim_now[0],
+    )
     engine.add_meta(lambda: Counter(runs, sim_now))
     clock_tally = ledger.tally(keys.SIM_CLOCK)
     note_tally = ledger.tally(NOTE_SUBS)
@@ -316,7 +373,7 @@ async def test_engine_in_lockstep_runs_on_notes_and_on_sim_time_and_reports_when
         reports = ledger.reports
 
         # a notification (flag set, then counted): an activation at the same sim time
-        engine.note_threadsafe()
+        engine.wake_threadsafe()
         ledger.received(note_tally, ODOM_NOTE)
         await eventually(lambda: ledger.reports > reports)
         assert runs == [0.0, 0.05, 0.05]
@@ -327,3 +384,67 @@ async def test_engine_in_lockstep_runs_on_notes_and_on_sim_time_and_reports_when
     finally:
         engine.stop()
         await asyncio.wait_for(task, 5)
+
+
+class CountingService(ScenarioService):
+    service = "planner"
+
+    def __init__(self, runtime: Runtime, runs: list[float]) -> None:
+        super().__init__(runtime)
+        self.runs = runs
+
+    def seed(self) -> None:
+        clock = self.runtime.clock
+        self.engine.add_meta(lambda: SimStamp(self.runs, clock.now))
+
+
+class SimStamp(Rule):
+    """A meta rule that notes the sim time of each of its runs."""
+
+    meta = True
+    scenario = "count"
+
+    def __init__(self, runs: list[float], now: Callable[[], float]) -> None:
+        self.runs = runs
+        self.now = now
+
+    def actions(self) -> None:
+        self.runs.append(self.now())
+
+    def rule_generation(self) -> list[Rule]:
+        return [self.clone()]
+
+
+async def test_a_service_in_lockstep_runs_its_engine_on_sim_clock_messages_and_reports(
+    zenoh_settings: ZenohSettings,
+) -> None:
+    config = ServiceConfig(
+        service="planner",
+        database_url="postgresql://unused",
+        zenoh=zenoh_settings,
+        engine=EngineSettings(period_s=0.05),
+        instance="p-7",
+        lockstep=("planner",),
+    )
+    runtime = await Runtime.open(config, with_db=False)
+    runs: list[float] = []
+    service = CountingService(runtime, runs)
+    service.seed()
+    task = asyncio.create_task(service.engine.run())
+    try:
+        ledger = runtime.ledger
+        assert ledger is not None
+        await eventually(lambda: ledger.reports >= 1)
+        assert runs == [0.0]
+        runtime.zenoh.put(keys.SIM_CLOCK, bus.pack({"stamp": 0.02, "rate": 0.0}))
+        await eventually(lambda: ledger.reports >= 2)  # F not due at 0.02 s: quiet again
+        assert runs == [0.0]
+        runtime.zenoh.put(keys.SIM_CLOCK, bus.pack({"stamp": 0.05, "rate": 0.0}))
+        await eventually(lambda: ledger.reports >= 3)
+        assert runs == [0.0, 0.05]  # F is due on sim time: an activation, then a report
+        await asyncio.sleep(0.2)
+        assert runs == [0.0, 0.05]  # no wall-clock period
+    finally:
+        service.engine.stop()
+        await asyncio.wait_for(task, 5)
+        await runtime.close()

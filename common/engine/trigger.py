@@ -1,0 +1,128 @@
+"""When the engine starts an activation: its wake signals, the trigger seam, and the trigger
+of a normal run.
+
+:meth:`Engine.run <common.engine.Engine.run>` is one loop: ``await trigger.wait(...)``, then
+an activation, again and again. The *trigger* decides when the next activation is due from
+the wake signals (:class:`Signals`), F and P (``EngineSettings``), the start of the previous
+activation and the engine's clock:
+
+- :class:`Periodic` (a normal run): at once after a wake or a hurry, else F after the
+  previous start, never sooner than P after the previous end; F on the wall clock;
+- ``common.lockstep.LockstepTrigger`` (a lockstep run): on a wake, a hurry, or F in sim time,
+  looked at on every counted message; when nothing is due it reports the service quiet.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+from typing import Protocol
+
+from common.config import EngineSettings
+from common.errors import InternalError
+
+Clock = Callable[[], float]
+
+NOTIFICATION, RULE, PERIOD = "notification", "rule", "period"
+
+
+class Signals:
+    """What asks the engine for an activation, and the event its loop waits on.
+
+    ``woken`` (a notification: ``Engine.wake``), ``hurried`` (a rule: ``Engine.hurry``) and
+    ``stopping`` are plain flags: setting one is atomic, so another thread may set it
+    before it asks the loop to look again (:meth:`look_threadsafe`).
+    """
+
+    def __init__(self) -> None:
+        self.woken = False
+        self.hurried = False
+        self.stopping = False
+        self._event: asyncio.Event | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+
+    @property
+    def pending(self) -> bool:
+        """A wake or a hurry is owed an activation."""
+        return self.woken or self.hurried
+
+    def attach(self) -> None:
+        """Bind to the running loop (``Engine.run`` does it before its first wait)."""
+        self._loop = asyncio.get_running_loop()
+        self._event = asyncio.Event()
+
+    def look(self) -> None:
+        """Make a waiting trigger look again (on the engine's loop)."""
+        if self._event is not None:
+            self._event.set()
+
+    def look_threadsafe(self) -> None:
+        """:meth:`look` from any thread (nothing before the loop runs, or once it closed)."""
+        loop, event = self._loop, self._event
+        if loop is not None and event is not None:
+            try:
+                loop.call_soon_threadsafe(event.set)
+            except RuntimeError:
+                pass  # loop closed while shutting down
+
+    def clear(self) -> None:
+        """Forget the looks asked so far (read the flags after this, not before)."""
+        if self._event is not None:
+            self._event.clear()
+
+    async def wait(self, limit_s: float | None = None) -> bool:
+        """Until a look is asked (True, and it is cleared) or ``limit_s`` passed (False)."""
+        event = self._event
+        if event is None:
+            raise InternalError("Signals.wait() before attach()")
+        try:
+            await asyncio.wait_for(event.wait(), limit_s)
+        except TimeoutError:
+            return False
+        event.clear()
+        return True
+
+    def take(self) -> str:
+        """What starts the activation about to run (:data:`NOTIFICATION`, :data:`RULE` or
+        :data:`PERIOD`); both flags are cleared: a wake from now on asks for another."""
+        reason = NOTIFICATION if self.woken else RULE if self.hurried else PERIOD
+        self.woken = self.hurried = False
+        self.clear()
+        return reason
+
+
+class Trigger(Protocol):
+    """When the next activation starts (the engine's pluggable seam)."""
+
+    def bind(self, signals: Signals) -> None:
+        """Called by ``Engine.run`` on its loop, before the first :meth:`wait`."""
+
+    async def wait(
+        self, signals: Signals, since: float | None, clock: Clock, settings: EngineSettings
+    ) -> None:
+        """Return when the next activation is due, or as soon as ``signals.stopping``.
+
+        ``since`` is the start of the previous activation on ``clock`` (None: none ran yet);
+        the engine reads and clears the wake flags (:meth:`Signals.take`) once this returns.
+        """
+
+
+class Periodic:
+    """A normal run: the first activation at once; then, after P, at once if woken or
+    hurried, else when F has passed since the previous start (F on ``clock``)."""
+
+    def bind(self, signals: Signals) -> None:
+        return None
+
+    async def wait(
+        self, signals: Signals, since: float | None, clock: Clock, settings: EngineSettings
+    ) -> None:
+        if since is None:
+            return
+        if settings.pause_s > 0:
+            await asyncio.sleep(settings.pause_s)
+        while not (signals.stopping or signals.pending):
+            remaining = since + settings.period_s - clock()
+            # a look without a flag (one whose wake an activation already served) waits on
+            if remaining <= 0 or not await signals.wait(remaining):
+                return
