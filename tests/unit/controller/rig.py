@@ -89,7 +89,9 @@ class Rig:
         return [r["source"] for r in self.recommendations()[before:]]
 
     def recommendations(self) -> list[dict[str, Any]]:
-        return list(self.contract[keys.COMMAND_RECOMMENDATION].all_rows())
+        """Every command_recommendation row, in id order (as written)."""
+        rows = self.contract[keys.COMMAND_RECOMMENDATION].all_rows()
+        return sorted(rows, key=lambda row: int(row["id"]))
 
     def running(self) -> list[Key]:
         return sorted(self.state.supervisor.running)
