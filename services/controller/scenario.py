@@ -23,7 +23,7 @@ controller scenario").
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
 
@@ -159,8 +159,9 @@ class ControllerScenario(Supervised[Key, ScenarioSpec]):
         except Exception as exc:
             self.failure = exc
 
-    def activation_guards(self) -> tuple[bool, ...]:
-        return (self.live, self._new_fresh_scan())
+    def activation_guards(self) -> Iterator[bool]:
+        yield self.live
+        yield self._new_fresh_scan()
 
     def conditions(self) -> bool:
         if self.failure is not None:

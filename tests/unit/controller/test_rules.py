@@ -5,16 +5,19 @@ switches."""
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterable
+from typing import Any
 
 import pytest
 
 from common.contract.records import Robot, Strategy
+from common.engine import Rule
 from pnav.monolith.contract import MemoryContract
 from pnav.monolith.controller import MemoryControllerSource
 from services.controller.avoid_left import AvoidLeft
 from services.controller.avoid_right import AvoidRight
 from services.controller.safety_stop import SafetyStop
-from services.controller.scenario import installed_scenarios
+from services.controller.scenario import Command, installed_scenarios
 from services.controller.store import ScanAndOdometry
 from tests.unit.controller.rig import Rig
 
@@ -191,4 +194,56 @@ def test_the_installed_scenarios_name_every_builtin() -> None:
         "avoid_left": AvoidLeft,
         "avoid_right": AvoidRight,
         "safety_stop": SafetyStop,
+    }
+
+
+class Brittle(SafetyStop):
+    """safety_stop, whose policy fails on every scan."""
+
+    @classmethod
+    def decide(cls, *args: Any) -> Command | None:
+        raise ZeroDivisionError("a bug in the policy")
+
+
+async def test_a_policy_error_counts_as_a_false_condition_and_the_rule_lives_on() -> None:
+    rig = Rig(scenarios={"safety_stop": Brittle})
+    rig.set_strategy("r1", DIRECT)
+    await rig.tick()
+    rig.odometry(0.15)
+    rig.new_scan((-10, 10, 0.14))
+    assert await rig.tick() == []
+    assert rig.engine.stats_for(Brittle).errors == 1  # logged and counted, as a test
+    assert rig.queued() == ["Brittle", "MetaController"]  # not discarded: no restart
+    assert rig.state.supervisor.restarted == 0
+
+
+def verdict(rule: Rule) -> tuple[bool, bool]:
+    """The guards and the conditions, AND-ed as the engine does."""
+
+    def held(tests: bool | Iterable[bool]) -> bool:
+        return tests if isinstance(tests, bool) else all(tests)
+
+    return held(rule.activation_guards()), held(rule.conditions())
+
+
+async def test_the_guards_and_conditions_only_test(rig: Rig) -> None:
+    rig.set_strategy("r1", AVOID)
+    rig.odometry(0.15)
+    await rig.tick()  # the three scenarios start
+    rig.set_strategy("r1", DIRECT)  # the meta has work: end avoid_left and avoid_right
+    rig.new_scan((-10, 10, 0.14), RIGHT_OBSTACLE)  # and safety_stop, avoid_left a command
+    rules = list(rig.engine.current)
+    verdicts = []
+    for rule in rules:
+        await rule.data_acquisition()
+        before = (dict(vars(rule)), rig.running())
+        verdicts.append(verdict(rule))
+        assert verdict(rule) == verdicts[-1]  # asked again: the same answer
+        assert (dict(vars(rule)), rig.running()) == before  # and nothing changed
+    by_name = dict(zip([type(rule).__name__ for rule in rules], verdicts, strict=True))
+    assert by_name == {
+        "MetaController": (True, True),
+        "AvoidLeft": (True, True),
+        "AvoidRight": (True, False),
+        "SafetyStop": (True, True),
     }
