@@ -3,20 +3,25 @@ controller scenarios its strategy names, any number at once.
 
 It is a continuous meta rule: every activation (a notification on active_strategy, strategy,
 laser_scan or robot wakes the engine, and the period F is the fallback) it reads the robots
-and their active strategies and compares the scenarios they name with those running:
+and their active strategies, works out which (robot, scenario) pairs are wanted and with
+which spec (robot, strategy code, params), and hands that to a
+:class:`~common.engine.supervisor.Supervisor`, which
 
-- a newly named scenario starts: a fresh target rule with its own :class:`Handle`;
-- a scenario no longer named (or whose robot left, or is now owned by another replica of
-  the controller, docs/REPLICAS.md) ends: its handle goes inactive, so its
-  target rule recommends nothing more and stops cloning itself;
-- a scenario still named follows the strategy's new params and the robot's new limits;
-- an unknown name is logged once and ignored;
-- a target rule that no longer runs (the engine discards a rule whose data acquisition or
-  actions failed, e.g. while the database restarts) is replaced, so a lost connection never
-  silently ends safety_stop.
+- starts a newly named scenario: a fresh target rule on its own ticket;
+- ends a scenario no longer named (or whose robot left, or is now owned by another replica
+  of the controller, docs/REPLICAS.md): its ticket dies, so its rule recommends nothing
+  more and stops cloning itself;
+- updates a scenario still named in place when the strategy's params or the robot's limits
+  change;
+- restarts a target rule the engine discarded on an error (e.g. while the database
+  restarts), at its next run, so a lost connection never silently ends safety_stop.
 
-Its state lives in :class:`ControllerState`, outside the rule, so a meta rule the engine
-re-seeds after an error carries on with the scenarios already running.
+An unknown name is logged once and ignored. What a scenario recommended on survives any of
+this: the store remembers the newest scan each (robot, scenario) recommended on.
+
+Its state (the supervisor, the names already warned about) lives in
+:class:`ControllerState`, outside the rule, so a meta rule the engine re-seeds after an
+error carries on with the scenarios already running.
 """
 
 from __future__ import annotations
@@ -28,34 +33,22 @@ from dataclasses import dataclass, field
 from common import log
 from common.contract import keys
 from common.contract.records import ActiveStrategy, Robot
-from common.engine import Rule
-from services.controller.registry import SCENARIOS
-from services.controller.scenario import ControllerScenario, Handle, Host
+from common.engine import Engine, Rule
+from common.engine.supervisor import Supervisor, Ticket
+from services.controller.scenario import ControllerScenario, Host, Key, ScenarioSpec
 
 logger = logging.getLogger("pnav.controller")
 
-Key = tuple[str, str]  # (robot id, scenario name)
-
-# Meta runs in a row without a generation of a target rule before it is deemed lost. A rule
-# left over by the engine's N cap runs first in the next activation, so a live rule is never
-# this late.
-STALL_LIMIT = 20
+Scenarios = Mapping[str, type[ControllerScenario]]
 
 
 @dataclass
 class ControllerState:
-    running: dict[Key, Handle] = field(default_factory=dict)
-    # The newest scan each ended scenario recommended on: a restarted scenario does not
-    # recommend again on a scan it already used.
-    last_scan: dict[Key, int] = field(default_factory=dict)
-    unknown: set[str] = field(default_factory=set)
+    """What the meta-controller keeps across its runs (and across a re-seed)."""
 
-
-@dataclass(frozen=True)
-class Wanted:
-    robot: Robot
-    strategy: str
-    params: Mapping[str, object]
+    supervisor: Supervisor[Key, ScenarioSpec]
+    scenarios: Scenarios
+    unknown: set[str] = field(default_factory=set)  # names already warned about
 
 
 class MetaController(Rule):
@@ -67,18 +60,12 @@ class MetaController(Rule):
         self,
         host: Host,
         state: ControllerState,
-        scenarios: Mapping[str, type[ControllerScenario]] = SCENARIOS,
         owns: Callable[[str], bool] = lambda _robot_id: True,
     ) -> None:
         self.host = host
         self.state = state
-        self.scenarios = scenarios
         self.owns = owns  # replicas: run scenarios only for the robots this one owns
-        self.wanted: dict[Key, Wanted] = {}
-        self.starts: list[Key] = []
-        self.ends: list[Key] = []
-        self.updates: list[Key] = []
-        self.lost: list[Key] = []
+        self.wanted: dict[Key, ScenarioSpec] = {}
         self.generated: list[Rule] = []
 
     async def data_acquisition(self) -> None:
@@ -91,28 +78,10 @@ class MetaController(Rule):
         return True  # every activation compares what should run with what runs
 
     def conditions(self) -> bool:
-        running = self.state.running
-        self.starts = [key for key in self.wanted if key not in running]
-        self.ends = [key for key in running if key not in self.wanted]
-        self.updates = [
-            key
-            for key, want in self.wanted.items()
-            if key in running and _differs(running[key], want)
-        ]
-        self.lost = [key for key in self.wanted if key in running and _stalled(running[key])]
-        return bool(self.starts or self.ends or self.updates or self.lost)
+        return out_of_date(self.state.supervisor.running, self.wanted)
 
     def actions(self) -> None:
-        for key in self.ends:
-            self._end(key, "no longer in the strategy")
-        for key in self.lost:
-            self._end(key, "its rule was lost")
-            self._start(key, "restarted")
-        for key in self.starts:
-            self._start(key, "started")
-        for key in self.updates:
-            handle, want = self.state.running[key], self.wanted[key]
-            handle.robot, handle.strategy, handle.params = want.robot, want.strategy, want.params
+        self.generated = self.state.supervisor.reconcile(self.wanted)
 
     def rule_generation(self) -> list[Rule]:
         # Clone first: the meta-controller stays at the head of the queue, so in every
@@ -122,72 +91,56 @@ class MetaController(Rule):
     # -- helpers -------------------------------------------------------------------------
     def _wanted(
         self, active: dict[str, ActiveStrategy], robots: dict[str, Robot]
-    ) -> dict[Key, Wanted]:
-        wanted: dict[Key, Wanted] = {}
+    ) -> dict[Key, ScenarioSpec]:
+        wanted: dict[Key, ScenarioSpec] = {}
         for robot_id, current in sorted(active.items()):
             robot = robots.get(robot_id)
             if robot is None or not self.owns(robot_id):
                 continue  # gone, or served by another replica: its scenarios end
             strategy = current.strategy
             for name in strategy.controller_scenarios:
-                if name not in self.scenarios:
-                    if name not in self.state.unknown:
-                        self.state.unknown.add(name)
-                        log.event(
-                            logger,
-                            logging.WARNING,
-                            "unknown controller scenario ignored",
-                            scenario=name,
-                            strategy=strategy.code,
-                            known=",".join(sorted(self.scenarios)),
-                        )
-                    continue
-                wanted[(robot_id, name)] = Wanted(robot, strategy.code, strategy.params)
+                if name in self.state.scenarios:
+                    wanted[(robot_id, name)] = ScenarioSpec(robot, strategy.code, strategy.params)
+                else:
+                    self._unknown(name, strategy.code)
         return wanted
 
-    def _start(self, key: Key, why: str) -> None:
-        want = self.wanted[key]
-        handle = Handle(want.robot, want.strategy, want.params)
-        handle.last_scan_id = self.state.last_scan.pop(key, None)
-        self.state.running[key] = handle
-        self.generated.append(self.scenarios[key[1]](self.host, handle))
+    def _unknown(self, name: str, strategy: str) -> None:
+        if name in self.state.unknown:
+            return
+        self.state.unknown.add(name)
         log.event(
             logger,
-            logging.INFO,
-            f"controller scenario {why}",
-            robot=key[0],
-            scenario=key[1],
-            strategy=want.strategy,
-        )
-
-    def _end(self, key: Key, why: str) -> None:
-        handle = self.state.running.pop(key)
-        handle.active = False
-        if handle.last_scan_id is not None:
-            self.state.last_scan[key] = handle.last_scan_id
-        log.event(
-            logger,
-            logging.INFO,
-            "controller scenario ended",
-            robot=key[0],
-            scenario=key[1],
-            strategy=handle.strategy,
-            why=why,
+            logging.WARNING,
+            "unknown controller scenario ignored",
+            scenario=name,
+            strategy=strategy,
+            known=",".join(sorted(self.state.scenarios)),
         )
 
 
-def _differs(handle: Handle, want: Wanted) -> bool:
-    return (handle.robot, handle.strategy, handle.params) != (
-        want.robot,
-        want.strategy,
-        want.params,
-    )
+def out_of_date(
+    running: Mapping[Key, Ticket[Key, ScenarioSpec]], wanted: Mapping[Key, ScenarioSpec]
+) -> bool:
+    """Whether ``Supervisor.reconcile(wanted)`` has anything to do (start, end, restart,
+    update): a pure test, for the meta rule's conditions."""
+    if running.keys() != wanted.keys():
+        return True
+    return any(ticket.lost or ticket.spec != wanted[key] for key, ticket in running.items())
 
 
-def _stalled(handle: Handle) -> bool:
-    """Count meta runs without a generation of the handle's rule; True once it is lost."""
-    if handle.beats != handle.seen_beats:
-        handle.seen_beats, handle.stalled = handle.beats, 0
-        return False
-    handle.stalled += 1
-    return handle.stalled > STALL_LIMIT
+def seed_controller(
+    engine: Engine,
+    host: Host,
+    scenarios: Scenarios,
+    owns: Callable[[str], bool] = lambda _robot_id: True,
+) -> ControllerState:
+    """Seed the meta-controller on ``engine``, running ``scenarios`` against ``host``; its
+    state (for tests and the monolith to look at)."""
+
+    def start(ticket: Ticket[Key, ScenarioSpec]) -> ControllerScenario:
+        return scenarios[ticket.key[1]](host, ticket)
+
+    state = ControllerState(Supervisor("controller", start), scenarios)
+    engine.add_meta(lambda: MetaController(host, state, owns))
+    return state

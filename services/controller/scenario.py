@@ -1,30 +1,48 @@
-"""The base of every controller scenario: a target rule per (robot, scenario) that clones
-itself while the robot's strategy names the scenario, and recommends on each fresh scan.
+"""The base of every controller scenario: a target rule per (robot, scenario) that lives while
+the robot's strategy names the scenario, and recommends on each fresh scan.
 
 A scenario class only says *what* to recommend, in :meth:`ControllerScenario.decide`, a pure
 function of the scan, the odometry, the robot's limits and the strategy's params (unit tests
 drive it tick by tick). The base does the rest the same way for every scenario:
 
-1. data acquisition: the robot's newest laser scan (and odometry if ``needs_odometry``);
-2. activation guards: the scenario is still wanted, the scan is one this scenario has not
-   recommended on yet, and it is fresh (stamp within ``scan_max_age_s`` of sim now);
-3. conditions: ``decide`` returns a command;
+1. data acquisition: the robot's newest laser scan; if it is one to act on (new to this
+   scenario, fresh), the odometry read with it (if ``needs_odometry``) and ``decide``'s
+   command for it;
+2. activation guards: the scenario is still wanted (its ticket is live), the scan is one
+   this scenario has not recommended on yet, and it is fresh (stamp within
+   ``scan_max_age_s`` of sim now);
+3. conditions: ``decide`` returned a command;
 4. actions: write the recommendation (priority, validity from the scan's stamp, inputs);
-5. rule generation: a clone, while the meta-controller keeps the scenario active.
+5. rule generation: a clone, while the meta-controller's supervisor keeps the ticket live.
+
+Scenarios are found, not listed: the controller loads every class named under the
+entry-point group :data:`SCENARIO_GROUP` when it starts (docs/CONTROLLER.md, "Adding a
+controller scenario").
 """
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
 
+from common import log
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
-from common.engine import Rule
+from common.engine.supervisor import Supervised, Ticket
+from common.errors import InternalError
+from common.plugins import load_scenarios
 from services.controller.params import number
+
+logger = logging.getLogger("pnav.controller")
+
+# The entry-point group that names the controller scenarios (name = what strategies list).
+SCENARIO_GROUP = "pnav.controller.scenarios"
 
 # A scan older than this (sim s) describes a world that has moved on: recommend nothing.
 DEFAULT_SCAN_MAX_AGE_S = 0.5
+
+Key = tuple[str, str]  # (robot id, scenario name): one running scenario
 
 
 @dataclass(frozen=True)
@@ -50,9 +68,26 @@ class Recommendation:
     reason: str
     inputs: dict[str, Any]
 
+    @property
+    def scan_id(self) -> int | None:
+        """The laser_scan row it was derived from (``inputs.laser_scan``)."""
+        value = self.inputs.get("laser_scan")
+        return value if isinstance(value, int) else None
+
+
+@dataclass(frozen=True)
+class ScenarioSpec:
+    """What a running scenario follows: its robot (limits), the strategy naming it, and the
+    strategy's params. A change is applied in place (``Supervised.update``)."""
+
+    robot: Robot
+    strategy: str
+    params: Mapping[str, Any]
+
 
 class Host(Protocol):
-    """What the rules need from their service; unit tests pass an in-memory fake."""
+    """What the rules see of their service: the controller's store (store.py), or any
+    object with these methods."""
 
     def sim_now(self) -> float | None:
         """Sim time now, or None before the first clock message."""
@@ -63,27 +98,17 @@ class Host(Protocol):
 
     async def newest_scan(self, robot_id: str) -> LaserScan | None: ...
 
-    async def newest_odometry(self, robot_id: str) -> Odometry | None: ...
+    async def odometry_at(self, scan: LaserScan) -> Odometry | None:
+        """The robot's odometry as of ``scan``: its motion when the scan was read, which is
+        what a decision about the scan needs."""
+
+    def last_recommended_scan(self, robot_id: str, source: str) -> int | None:
+        """The newest scan ``source`` recommended on for the robot (this tenure), if any."""
 
     async def recommend(self, recommendation: Recommendation) -> int: ...
 
 
-@dataclass(eq=False)
-class Handle:
-    """One running scenario of one robot. The meta-controller owns it (ends it, updates its
-    strategy and limits); the target rule and its clones read it and live while it is active."""
-
-    robot: Robot
-    strategy: str
-    params: Mapping[str, Any]
-    active: bool = True
-    last_scan_id: int | None = None  # the newest scan this scenario recommended on
-    beats: int = 0  # rule generations so far: how the meta-controller sees a lost rule
-    seen_beats: int = -1  # beats at the meta-controller's previous look
-    stalled: int = 0  # meta-controller runs in a row that saw no beat
-
-
-class ControllerScenario(Rule):
+class ControllerScenario(Supervised[Key, ScenarioSpec]):
     """Base target rule; subclasses set ``scenario``, ``priority`` and ``decide``."""
 
     scenario: ClassVar[str] = ""
@@ -91,13 +116,14 @@ class ControllerScenario(Rule):
     validity_s: ClassVar[float] = 0.5  # CONTRACT.md, "Conventions the shipped scenarios follow"
     needs_odometry: ClassVar[bool] = False
 
-    def __init__(self, host: Host, handle: Handle) -> None:
+    def __init__(self, host: Host, ticket: Ticket[Key, ScenarioSpec]) -> None:
+        super().__init__(ticket)
         self.host = host
-        self.handle = handle
         self.now: float | None = None
         self.scan: LaserScan | None = None
         self.odom: Odometry | None = None
         self.command: Command | None = None
+        self.failure: Exception | None = None
 
     @classmethod
     def decide(
@@ -106,37 +132,52 @@ class ControllerScenario(Rule):
         """The scenario's policy: a command for this scan, or None to stay silent."""
         raise NotImplementedError
 
-    # -- the five steps ----------------------------------------------------------------------
+    # -- lifecycle (common.engine.supervisor) --------------------------------------------------
+    def initialise(self) -> None:
+        self._log("controller scenario started")
+
+    def terminate(self, why: str) -> None:
+        self._log("controller scenario ended", why=why)
+
+    # -- the five steps ------------------------------------------------------------------------
     async def data_acquisition(self) -> None:
-        self.scan, self.odom, self.command = None, None, None
+        self.scan, self.odom, self.command, self.failure = None, None, None, None
         self.now = self.host.sim_now()
-        if not self.handle.active:
+        if not self.live:
             return
-        robot_id = self.handle.robot.robot_id
-        self.scan = await self.host.newest_scan(robot_id)
-        # Odometry only when the scan will be used: most activations see no new scan.
-        if self.needs_odometry and self._new_fresh_scan():
-            self.odom = await self.host.newest_odometry(robot_id)
+        spec = self.spec
+        scan = self.scan = await self.host.newest_scan(spec.robot.robot_id)
+        if scan is None or not self._new_fresh_scan():
+            return  # most activations see no new scan: nothing more to read or judge
+        if self.needs_odometry:
+            self.odom = await self.host.odometry_at(scan)
+        # ``decide`` is judged here, once, so that the guards and conditions only test. Its
+        # error is kept for conditions to raise: a failing policy counts as a false test
+        # there (logged, counted; the rule lives on), as it did when conditions called it.
+        try:
+            self.command = self.decide(scan, self.odom, spec.robot, spec.params)
+        except Exception as exc:
+            self.failure = exc
 
     def activation_guards(self) -> Iterator[bool]:
-        yield self.handle.active
+        yield self.live
         yield self._new_fresh_scan()
 
-    def conditions(self) -> Iterator[bool]:
-        assert self.scan is not None  # the guards held
-        # ``decide`` is pure; its result is kept for actions rather than computed twice.
-        self.command = self.decide(self.scan, self.odom, self.handle.robot, self.handle.params)
-        yield self.command is not None
+    def conditions(self) -> bool:
+        if self.failure is not None:
+            raise self.failure
+        return self.command is not None
 
     async def actions(self) -> None:
         scan, command = self.scan, self.command
-        assert scan is not None and command is not None
+        if scan is None or command is None:
+            raise InternalError(f"{self.name}: actions ran without a scan and a command")
         inputs: dict[str, Any] = {"laser_scan": scan.id, "scan_stamp": scan.stamp}
         if self.odom is not None:
             inputs.update(odometry=self.odom.id, odometry_stamp=self.odom.stamp)
         await self.host.recommend(
             Recommendation(
-                robot_id=self.handle.robot.robot_id,
+                robot_id=self.spec.robot.robot_id,
                 source=self.scenario,
                 priority=self.priority,
                 linear=command.linear,
@@ -147,20 +188,34 @@ class ControllerScenario(Rule):
                 inputs=inputs,
             )
         )
-        self.handle.last_scan_id = scan.id
 
-    def rule_generation(self) -> list[Rule]:
-        self.handle.beats += 1
-        return [self.clone()] if self.handle.active else []
-
-    # -- helpers -----------------------------------------------------------------------------
+    # -- helpers -------------------------------------------------------------------------------
     def _new_fresh_scan(self) -> bool:
-        scan, now = self.scan, self.now
-        if scan is None or now is None or scan.id == self.handle.last_scan_id:
+        scan, now, spec = self.scan, self.now, self.spec
+        if scan is None or now is None:
             return False
-        max_age = number(self.handle.params, "scan_max_age_s", DEFAULT_SCAN_MAX_AGE_S)
+        if scan.id == self.host.last_recommended_scan(spec.robot.robot_id, self.scenario):
+            return False
+        max_age = number(spec.params, "scan_max_age_s", DEFAULT_SCAN_MAX_AGE_S)
         # abs(): our clock may trail the sim's by a few ms, so a new scan can look "early".
         return abs(now - scan.stamp) <= max_age
 
+    def _log(self, message: str, **fields: Any) -> None:
+        spec = self.spec
+        log.event(
+            logger,
+            logging.INFO,
+            message,
+            robot=spec.robot.robot_id,
+            scenario=self.scenario,
+            strategy=spec.strategy,
+            **fields,
+        )
+
     def __repr__(self) -> str:
-        return f"<{self.name} robot={self.handle.robot.robot_id} active={self.handle.active}>"
+        return f"<{self.name} robot={self.spec.robot.robot_id} live={self.live}>"
+
+
+def installed_scenarios() -> dict[str, type[ControllerScenario]]:
+    """Every controller scenario the installed packages name (common.plugins)."""
+    return load_scenarios(SCENARIO_GROUP, ControllerScenario)

@@ -90,13 +90,33 @@ async def example_controller(
     db_url: str, zenoh_settings: ZenohSettings, log: Path
 ) -> AsyncIterator[None]:
     """``python -m examples.sql_controller`` from the repository root, until SIGTERM."""
+    async with controller_process("examples.sql_controller", db_url, zenoh_settings, log):
+        yield
+
+
+@contextlib.asynccontextmanager
+async def controller_process(
+    module: str,
+    db_url: str,
+    zenoh_settings: ZenohSettings,
+    log: Path,
+    python_path: Path | None = None,
+) -> AsyncIterator[None]:
+    """``python -m <module>`` from the repository root (``python_path`` on PYTHONPATH, as
+    an installed package's directory would be), ready as :func:`example_ready` says, until
+    SIGTERM; it must exit 0."""
+    env = compose_like_env(db_url, zenoh_settings)
+    if python_path is not None:
+        env["PYTHONPATH"] = os.pathsep.join(
+            p for p in (str(python_path), env.get("PYTHONPATH")) if p
+        )
     with log.open("wb") as sink:
         process = await asyncio.create_subprocess_exec(
             sys.executable,
             "-m",
-            "examples.sql_controller",
+            module,
             cwd=ROOT,
-            env=compose_like_env(db_url, zenoh_settings),
+            env=env,
             stdin=asyncio.subprocess.DEVNULL,
             stdout=sink,
             stderr=sink,
@@ -116,14 +136,15 @@ async def example_controller(
 
 
 def tail(log: Path) -> str:
-    """The end of the example's log, for a failure message."""
+    """The end of the process's log, for a failure message."""
     return log.read_text(errors="replace")[-3000:]
 
 
 async def example_ready(
     process: asyncio.subprocess.Process, db_url: str, zenoh_settings: ZenohSettings, log: Path
 ) -> None:
-    """Its liveliness token is up (it declares it last) and it holds every robot's lease."""
+    """Its liveliness token is up (it declares it last) and it holds every robot's lease
+    (the example, or any controller process started by :func:`controller_process`)."""
     conn = await connect(db_url)
     session = await asyncio.to_thread(bus.open_session, zenoh_settings)
     # PNAV_INSTANCE is unset, so it must announce itself as <hostname>-<pid>
@@ -146,7 +167,7 @@ async def example_ready(
         return unleased == 0
 
     try:
-        await eventually(ready, "examples.sql_controller to be ready", 30.0)
+        await eventually(ready, "the controller process to be ready", 30.0)
     finally:
         await conn.close()
         await asyncio.to_thread(session.close)
