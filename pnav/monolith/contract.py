@@ -1,20 +1,14 @@
 """The contract tables in memory: what Postgres is to the stack, for one process.
 
-The scenario services read and write the contract through asyncpg (``pool.fetch*``) and
-``common.db.Database.write``. Their rules are written against those calls, so the monolith
-hands them a :class:`MemoryPool` that answers the same statements from Python lists, and a
-real :class:`~common.db.Database` built on it: the rows come back through the very functions
-the services call (``common.contract.records``, ``services.decision.store``...), so every
-rule gets the same record types, built by the same code, as in the stack.
+Each scenario service reaches the contract through its store (``services/<svc>/store.py``),
+which reads and writes through a *source*: in the stack the SQL one, here the in-memory one of
+``pnav/monolith/<svc>.py``, over these tables. The store above the source (its caches, what
+notifications told it) is the service's own and runs here unchanged.
 
-Only the statements the monolith's services issue are understood (sql.py): a plain
-single-table ``SELECT`` is evaluated generically (columns, ``col = $n`` / ``col = 'text'``
-filters, ``ORDER BY``, ``LIMIT``); the joins and the writes are matched by their text, taken
-from the modules that issue them. Anything else raises :class:`UnsupportedStatement`: a
-service that starts issuing a new statement makes the monolith fail loudly, not drift.
-
-Sensor tables keep as many rows per robot as the contract's retention policy (schema.sql),
-so memory stays flat however long a run is.
+Rows are dicts with the contract's column names. :meth:`MemoryContract.insert` gives a row
+its id and then tells the listeners, as a commit followed by a Zenoh notification does in the
+stack. Sensor tables keep as many rows per robot as the contract's retention policy
+(schema.sql), so memory stays flat however long a run is.
 """
 
 from __future__ import annotations
@@ -23,7 +17,6 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from typing import Any
 
-from common.bus import Notifier
 from common.contract import keys
 
 Row = dict[str, Any]
@@ -41,11 +34,6 @@ RETENTION = {
 
 class AdapterError(RuntimeError):
     """The monolith's own plumbing failed (not a scenario's logic): always fatal."""
-
-
-class UnsupportedStatement(AdapterError):
-    def __init__(self, sql: str) -> None:
-        super().__init__(f"the in-memory contract does not know this statement: {sql!r}")
 
 
 class Table:
@@ -106,6 +94,7 @@ class MemoryContract:
                 keys.COMMAND_RECOMMENDATION,
                 keys.COMMAND2ROBOT,
                 keys.SYSTEM_COMMAND,
+                keys.USER_COMMAND,
             )
         }
         self.listeners: list[Listener] = []
@@ -140,16 +129,3 @@ class MemoryContract:
         live = [r for r in self._live.get(robot, ()) if r["expires_stamp"] > now]
         self._live[robot] = live
         return live
-
-
-class MemoryNotifier(Notifier):
-    """``Database.write`` notifies through this: straight to the contract's listeners."""
-
-    def __init__(self, contract: MemoryContract) -> None:  # no Zenoh session: no super()
-        self.contract = contract
-
-    def notify(self, table: str, robot: str | None, row_id: int | None) -> None:
-        self.contract.changed(table, robot, row_id)
-
-    def close(self) -> None:
-        return None

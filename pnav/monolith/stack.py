@@ -1,50 +1,46 @@
 """The navigation stack in one process: sim, bridge, controller, planner, decision.
 
-What each part is made of (docs/MONOLITH.md has the whole list):
+What each part is made of (docs/MONOLITH.md has the whole list): every scenario service's
+own store (caches, what notifications told it) and rules, seeded by the service's own seeding
+code, on the in-memory source of pnav/monolith/<svc>.py instead of the SQL one:
 
-- controller: the service's own meta rule (``MetaController``) and scenario rules, seeded in
-  an engine as ``ControllerService.seed`` does; :class:`ControllerHost` is the in-memory
-  :class:`~services.controller.scenario.Host` (the protocol exists for exactly that) and
-  reads through ``common.contract.records`` like the service;
-- planner: ``PlannerState`` and ``MetaPlanner`` as ``PlannerService`` builds them, on a
-  ``Database`` whose pool is the in-memory contract; the move and battery rules are the
-  service's, unchanged;
-- decision: a real ``DecisionService`` object (its ``MetaDecision`` and issue rules, hence
-  ``decide_robot``/``decide_system``), on a ``Runtime`` that never connects: its database is
-  the in-memory one, its sim clock is set from the sim every step;
+- controller: ``pnav.monolith.controller.controller_engine``, the meta-controller and its
+  scenarios on a ``ControllerStore``;
+- planner: ``pnav.monolith.planner.planner_engine``, the meta-planner and its rules on a
+  ``PlannerStore`` whose gates count sim time;
+- decision: ``pnav.monolith.decision.decision_engine``, the meta-decision and issue rules on
+  a ``DecisionStore``;
 - bridge: pnav/monolith/bridge.py; the strategy service is not run: the episode's strategy is
   written to ``active_strategy`` once, as ``SET_STRATEGY`` would, and no system command is
   acted on (none arises in a navigation episode: the battery starts full).
 
 One :meth:`MonolithStack.step`: the sim senses and advances one physics step; its readings
-become rows; then every engine that is due (a notification for a table it watches, a
-``hurry``, or F = 50 ms of sim time since its last start) runs an activation, controller,
-planner, decision in that order, and the bridge sends what was decided, until nothing more
-is due. The command reaches the sim before its next physics step.
+become rows; every row written is announced to the stores whose service watches its table
+(``note``, as ``ScenarioService.on_notification``) and wakes their engines; then every engine
+that is due (a notification for a table it watches, a ``hurry``, or F = 50 ms of sim time
+since its last start) runs an activation, controller, planner, decision in that order, on
+the monolith's own event loop, and the bridge sends what was decided, until nothing more is
+due. The command reaches the sim before its next physics step.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
+
+import uvloop
 
 from common import bus
-from common.config import ServiceConfig
+from common.bus import Notification
 from common.contract import keys, records
-from common.db import Database
-from common.runtime import Runtime
 from pnav.monolith.bridge import Applied, Bridge
-from pnav.monolith.contract import AdapterError, MemoryContract, MemoryNotifier
-from pnav.monolith.engines import LockstepEngine
-from pnav.monolith.sql import MemoryPool
+from pnav.monolith.contract import AdapterError, MemoryContract
+from pnav.monolith.controller import controller_engine
+from pnav.monolith.decision import decision_engine
+from pnav.monolith.engines import SteppedEngine
+from pnav.monolith.planner import planner_engine
 from services.bridge.world import parse_world
-from services.controller.meta import ControllerState, MetaController
-from services.controller.scenario import Recommendation
-from services.controller.service import store_recommendation
-from services.decision.service import DecisionService
-from services.planner.meta import MetaPlanner
-from services.planner.state import PlannerState
 from services.sim.sim import SimConfig, Simulation
 from services.sim.world import World
 
@@ -52,31 +48,10 @@ GOAL_TOLERANCE_M = 0.15  # pnav.commands.set_goal's default, and the goal table'
 MAX_PASSES = 50  # engine passes in one step before the loop is deemed to spin
 
 
-class ControllerHost:
-    """The controller rules' view of the contract, read through ``records`` as the service
-    reads it (without its caches: a read here costs a dict lookup, not a round trip)."""
+class Store(Protocol):
+    """What every service's store does with a change notification."""
 
-    def __init__(self, db: Database, now: Callable[[], float]) -> None:
-        self.db = db
-        self.now = now
-
-    def sim_now(self) -> float | None:
-        return self.now()
-
-    async def robots(self) -> list[records.Robot]:
-        return await records.robots(self.db.pool)
-
-    async def active_strategies(self) -> dict[str, records.ActiveStrategy]:
-        return await records.active_strategies(self.db.pool)
-
-    async def newest_scan(self, robot_id: str) -> records.LaserScan | None:
-        return await records.newest_scan(self.db.pool, robot_id)
-
-    async def newest_odometry(self, robot_id: str) -> records.Odometry | None:
-        return await records.newest_odometry(self.db.pool, robot_id)
-
-    async def recommend(self, recommendation: Recommendation) -> int:
-        return await store_recommendation(self.db, recommendation)
+    def note(self, note: Notification) -> None: ...
 
 
 class MonolithStack:
@@ -90,30 +65,28 @@ class MonolithStack:
     ) -> None:
         self.now = 0.0  # sim time the logic sees: the sim's, after each step
         self.contract = MemoryContract()
-        self.db = Database(MemoryPool(self.contract), MemoryNotifier(self.contract))
         self.on_message = on_message
         self._readings: list[tuple[str, str, dict[str, Any], float]] = []
+        self._loop = uvloop.new_event_loop()
 
         def sim_now() -> float:
             return self.now
 
-        self.controller_state = ControllerState()
-        host = ControllerHost(self.db, sim_now)
-        self.controller = LockstepEngine("controller", sim_now)
-        self.controller.add_meta(lambda: MetaController(host, self.controller_state))
+        self.controller = SteppedEngine("controller", sim_now)
+        self.controller_store = controller_engine(self.contract, self.controller, sim_now)
         # the planner's own gates (re-reads, replanning, battery checks) count sim time
-        # here, as they count wall time in the service at rate 1: deterministic runs
-        self.planner_state = PlannerState(self.db, sim_now, lambda: True, wall=sim_now)
-        self.planner = LockstepEngine("planner", sim_now)
-        self.planner.add_meta(lambda: MetaPlanner(self.planner_state))
-        runtime = Runtime(ServiceConfig(service="decision", database_url="memory://monolith"))
-        runtime.db = self.db
-        self.decision_service = DecisionService(runtime)
-        self.decision = self.decision_service.engine = LockstepEngine("decision", sim_now)
-        self.decision_service.seed()
+        # here, as they do in a lockstep run of the stack: deterministic runs
+        self.planner = SteppedEngine("planner", sim_now)
+        self.planner_store = planner_engine(self.contract, self.planner, sim_now)
+        self.decision = SteppedEngine("decision", sim_now)
+        self.decision_store = decision_engine(self.contract, self.decision, sim_now)
         self.engines = (self.controller, self.planner, self.decision)
-        # the tables each service subscribes to: those its meta rules watch
-        self._watching = [(e, frozenset(e.watched_tables)) for e in self.engines]
+        # what each service subscribes to: the tables its meta rules watch
+        stores: tuple[Store, ...] = (self.controller_store, self.planner_store, self.decision_store)
+        self._watching = [
+            (engine, store, frozenset(engine.watched_tables))
+            for engine, store in zip(self.engines, stores, strict=True)
+        ]
         self.contract.listeners.append(self._notify)
 
         self.sim = Simulation(world, config, self._sink)
@@ -168,31 +141,36 @@ class MonolithStack:
     def _sink(self, robot_id: str, topic: str, message: dict[str, Any]) -> None:
         self._readings.append((robot_id, topic, message, time.perf_counter()))
 
-    def _notify(self, table: str, robot: str | None, _row_id: int | None) -> None:
-        """A change notification: wake the engines that watch the table (their services
-        subscribe to exactly those), and let the planner note it as its observer does."""
-        for engine, tables in self._watching:
+    def _notify(self, table: str, robot: str | None, row_id: int | None) -> None:
+        """A change notification: what ``ScenarioService.watch`` does for each service that
+        watches ``table``: tell its store, then wake its engine."""
+        note = Notification(table, robot, row_id)
+        for engine, store, tables in self._watching:
             if table in tables:
+                store.note(note)
                 engine.wake()
-        self.planner_state.note(keys.notify_key(table, robot), b"")
 
     def step(self) -> None:
         self.sim.step()
         self.now = now = self.sim.time
-        self.decision_service.runtime.clock.update(now, 0.0)  # rate 0: exactly ``now``
         readings, self._readings = self._readings, []
         for robot_id, topic, message, produced in readings:
             self.bridge.ingest(robot_id, topic, message, produced)
             self.on_message(robot_id, topic, message)
         self.bridge.tick(now)
+        self._loop.run_until_complete(self._settle(now))
+
+    async def _settle(self, now: float) -> None:
+        """Activations until no engine is due (each in the order the stack's would start)."""
         for _ in range(MAX_PASSES):
             for engine in self.engines:
                 if engine.due(now):
-                    engine.activate(now)
+                    await engine.activate(now)
             self.bridge.relay(now)
-            if not any(e.woken or e.hurried for e in self.engines):
+            if not any(e.signals.pending for e in self.engines):
                 return
         raise AdapterError(f"the engines were still due after {MAX_PASSES} passes at {now} s")
 
     def close(self) -> None:
         self.sim.close()
+        self._loop.close()

@@ -17,7 +17,7 @@ from datetime import UTC, datetime
 
 from common.contract import keys
 from common.engine import Engine
-from pnav.monolith.contract import MemoryContract, Row, Table
+from pnav.monolith.contract import MemoryContract, Row
 from services.strategy import meta
 from services.strategy.commands import Outcome
 from services.strategy.store import COMMAND_TABLES, CommandTable, StrategyStore
@@ -32,10 +32,6 @@ class MemoryStrategySource:
 
     def __init__(self, contract: MemoryContract) -> None:
         self.contract = contract
-        # MemoryContract has no user_command table (the monolith never had people typing
-        # commands); the strategy source brings it.
-        if keys.USER_COMMAND not in contract.tables:
-            contract.tables[keys.USER_COMMAND] = Table(keys.USER_COMMAND)
 
     # -- reads -------------------------------------------------------------------------------
     def _known(self, robot_id: str) -> bool:

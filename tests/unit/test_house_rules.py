@@ -54,3 +54,29 @@ def test_the_check_catches_a_cross_import(tmp_path: Path) -> None:
         "def f():\n    import services.planner.rules\n"
     )
     assert cross_imports(tmp_path) == ["services/controller/bad.py imports services.planner.rules"]
+
+
+MAX_MODULE_LINES = 400
+SOURCE_DIRS = ("common", "services", "pnav", "examples")
+
+
+def long_modules(root: Path, limit: int = MAX_MODULE_LINES) -> list[str]:
+    """Non-test modules over ``limit`` lines: a module holds one concept, mostly < 300."""
+    found = []
+    for top in SOURCE_DIRS:
+        for path in sorted((root / top).rglob("*.py")) if (root / top).is_dir() else ():
+            lines = len(path.read_text().splitlines())
+            if lines > limit:
+                found.append(f"{path.relative_to(root)}: {lines} lines")
+    return found
+
+
+def test_no_module_is_over_400_lines() -> None:
+    assert long_modules(ROOT) == []
+
+
+def test_the_length_check_catches_a_long_module(tmp_path: Path) -> None:
+    (tmp_path / "common").mkdir()
+    (tmp_path / "common" / "short.py").write_text("x = 1\n" * 400)
+    (tmp_path / "common" / "long.py").write_text("x = 1\n" * 401)
+    assert long_modules(tmp_path) == ["common/long.py: 401 lines"]

@@ -1,32 +1,33 @@
-"""The monolith's adapters on their own: the in-memory contract, the strategy rows read
-from schema.sql, the planner's clock, the engine's failure handling, the bridge's watchdog."""
+"""The monolith's adapters: the in-memory sources, the stepped engines, the strategy rows
+from schema.sql, the bridge's watchdog."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import pytest
 
-from common.bus import Notifier
-from common.contract import keys, records
-from common.db import Database
+from common.contract import keys
 from common.engine import Rule
 from pnav.monolith.bridge import Applied, Bridge
-from pnav.monolith.contract import MemoryContract, MemoryNotifier, UnsupportedStatement
-from pnav.monolith.engines import LockstepEngine, run_sync
-from pnav.monolith.sql import MemoryPool
+from pnav.monolith.contract import AdapterError, MemoryContract
+from pnav.monolith.controller import MemoryControllerSource
+from pnav.monolith.decision import MemoryDecisionSource
+from pnav.monolith.engines import SteppedEngine
+from pnav.monolith.stack import MonolithStack
 from pnav.monolith.strategies import combo_strategy, shipped_strategies
 from pnav.navbench.episode import Combo
-from services.decision import store
+from services.controller.scenario import Recommendation
 from services.decision.arbitration import RobotDecision
-from services.planner.state import PlannerState, RobotInfo, RobotState, Target
+from services.sim.sim import SimConfig
+from services.sim.world import load_world
 
 
-def contract_with_rows() -> tuple[MemoryContract, Database, list[tuple[str, Any, Any]]]:
+def contract_with_rows() -> tuple[MemoryContract, list[tuple[str, Any, Any]]]:
     contract = MemoryContract()
     notes: list[tuple[str, Any, Any]] = []
     contract.listeners.append(lambda table, robot, row_id: notes.append((table, robot, row_id)))
-    db = Database(MemoryPool(contract), MemoryNotifier(contract))
     for robot in ("r2", "r1"):
         contract.insert(
             keys.ROBOT,
@@ -41,41 +42,33 @@ def contract_with_rows() -> tuple[MemoryContract, Database, list[tuple[str, Any,
     for i in range(3):
         row = {"robot_id": "r1", "stamp": i / 30, "seq": i, "x": float(i), "y": 0.0, "yaw": 0.0}
         contract.insert(keys.ODOMETRY, row | {"linear_mps": 0.1, "angular_rps": 0.0})
-    return contract, db, notes
+    return contract, notes
 
 
-def test_the_records_functions_read_the_in_memory_rows() -> None:
-    _contract, db, _notes = contract_with_rows()
-    odom = run_sync(records.newest_odometry(db.pool, "r1"))
-    assert odom == records.Odometry(3, "r1", 2 / 30, 2.0, 0.0, 0.0, 0.1, 0.0)
-    assert run_sync(records.newest_odometry(db.pool, "r3")) is None
-    assert [r.robot_id for r in run_sync(records.robots(db.pool))] == ["r1", "r2"]  # ORDER BY
+async def test_the_controller_source_reads_the_in_memory_rows() -> None:
+    contract, _notes = contract_with_rows()
+    source = MemoryControllerSource(contract)
+    assert [r.robot_id for r in await source.robots()] == ["r1", "r2"]  # ORDER BY robot_id
+    odom = await source.newest_odometry("r1")
+    assert odom is not None and (odom.id, odom.stamp, odom.x) == (3, 2 / 30, 2.0)
+    assert await source.newest_odometry("r3") is None
 
 
-def test_a_write_notifies_after_it_and_the_decision_marks_what_it_considered() -> None:
-    contract, db, notes = contract_with_rows()
-    rec = run_sync(
-        records.recommend_velocity(
-            db, "r1", source="x", priority=5, linear=0.1, angular=0.0, stamp=1.0, ttl_s=0.5,
-            reason="",
-        )
-    )  # fmt: skip
+async def test_a_write_notifies_after_it_and_the_decision_marks_what_it_considered() -> None:
+    contract, notes = contract_with_rows()
+    rec = await MemoryControllerSource(contract).recommend(
+        Recommendation("r1", "x", 5, 0.1, 0.0, stamp=1.0, ttl_s=0.5, reason="", inputs={})
+    )
     assert notes[-1] == (keys.COMMAND_RECOMMENDATION, "r1", rec)
-    live = run_sync(store.live_recommendations(db.pool, 1.2))
+    decisions = MemoryDecisionSource(contract)
+    live = await decisions.live_recommendations(1.2)
     assert [r.id for r in live["r1"]] == [rec] and live["r2"] == []
-    assert run_sync(store.live_recommendations(db.pool, 1.5))["r1"] == []  # expired
+    assert (await decisions.live_recommendations(1.5))["r1"] == []  # expired
     decision = RobotDecision("r1", 1.2, 0.1, 0.0, rec, "x", (rec,), "why")
-    issued = run_sync(store.write_robot_command(db, decision))
+    issued = await decisions.write_robot_command(decision)
     assert contract[keys.COMMAND_RECOMMENDATION].by_id[rec]["treated_by"] == issued
-    assert run_sync(store.last_issued(db.pool))["r1"].recommendation_id == rec
-
-
-def test_a_statement_the_contract_does_not_know_is_refused() -> None:
-    _contract, db, _notes = contract_with_rows()
-    with pytest.raises(UnsupportedStatement):
-        run_sync(db.pool.fetch("SELECT count(*) FROM odometry"))
-    with pytest.raises(UnsupportedStatement):
-        run_sync(db.pool.fetch("SELECT id FROM no_such_table"))
+    assert notes[-1] == (keys.COMMAND2ROBOT, "r1", issued)  # after treated_by was set
+    assert (await decisions.last_issued())["r1"].recommendation_id == rec
 
 
 class Broken(Rule):
@@ -89,25 +82,28 @@ class Broken(Rule):
         raise self.error
 
 
-def test_a_plumbing_failure_stops_the_run_and_a_rule_error_does_not() -> None:
-    engine = LockstepEngine("test", lambda: 0.0)
-    engine.add_meta(lambda: Broken(UnsupportedStatement("SELECT 1")))
-    with pytest.raises(UnsupportedStatement):
-        engine.activate(0.0)
-    engine = LockstepEngine("test", lambda: 0.0)
+async def test_a_plumbing_failure_stops_the_run_and_a_rule_error_does_not() -> None:
+    engine = SteppedEngine("test", lambda: 0.0)
+    engine.add_meta(lambda: Broken(AdapterError("the in-memory contract broke")))
+    with pytest.raises(AdapterError):
+        await engine.activate(0.0)
+    engine = SteppedEngine("test", lambda: 0.0)
     engine.add_meta(lambda: Broken(ValueError("the rule's own bug")))
-    engine.activate(0.0)  # logged and discarded, the meta rule re-seeded: as in the stack
+    await engine.activate(0.0)  # logged and discarded, the meta rule re-seeded: as in the stack
     assert engine.errors == 1 and len(engine.current) == 1
 
 
-def test_the_engine_is_due_on_a_notification_a_hurry_or_f_of_sim_time() -> None:
-    engine = LockstepEngine("test", lambda: 0.0)
+async def test_the_engine_is_due_on_a_notification_a_hurry_or_f_of_sim_time() -> None:
+    engine = SteppedEngine("test", lambda: 0.0)
     assert engine.due(0.0)  # a service starts with an activation
-    engine.activate(0.0)
+    await engine.activate(0.0)
     assert not engine.due(0.01)
     assert engine.due(engine.settings.period_s)
     engine.wake()
     assert engine.due(0.01)
+    await engine.activate(0.01)
+    engine.hurry()
+    assert engine.due(0.02)
 
 
 def test_the_strategy_rows_come_from_schema_sql() -> None:
@@ -128,23 +124,13 @@ def test_the_strategy_rows_come_from_schema_sql() -> None:
     assert combo.params == shipped["GOTO_DIRECT"].params
 
 
-def test_the_planner_counts_its_own_gates_on_the_clock_it_is_given() -> None:
-    # the monolith hands the planner sim time for its gates (re-reads, replanning): a route
-    # is born at that clock's time, not at the wall clock's
-    t = [42.0]
-    state = PlannerState(None, lambda: 0.0, lambda: True, wall=lambda: t[0])  # type: ignore[arg-type]
-    robot = RobotState(RobotInfo("r1", None, 0.22, 2.84, 0.105))
-    state.route_for(robot, 0.0, 0.0, Target("goal", "1", 1.0, 0.0, 0.15, 0.3), 0.0)
-    assert robot.route is not None and robot.route.made_at == 42.0
-
-
-def test_the_bridge_clamps_sends_once_and_stops_a_robot_left_without_commands() -> None:
-    contract, db, _notes = contract_with_rows()
+async def test_the_bridge_clamps_sends_once_and_stops_a_robot_left_without_commands() -> None:
+    contract, _notes = contract_with_rows()
     sent: list[tuple[str, float, float]] = []
     applied: list[Applied] = []
     bridge = Bridge(contract, lambda r, v, w: sent.append((r, v, w)) is None, applied.append)
     decision = RobotDecision("r1", 1.0, 5.0, float("nan"), None, None, (), "too fast")
-    run_sync(store.write_robot_command(db, decision))
+    await MemoryDecisionSource(contract).write_robot_command(decision)
     assert bridge.relay(1.0) == 1 and bridge.relay(1.01) == 0  # each row once
     assert sent == [("r1", 0.22, 0.0)]  # clamped; NaN is 0
     bridge.tick(1.49)
@@ -155,10 +141,15 @@ def test_the_bridge_clamps_sends_once_and_stops_a_robot_left_without_commands() 
     assert len(sent) == 2  # the watchdog stops once
 
 
-def test_the_notifier_is_the_contracts_listener() -> None:
-    contract = MemoryContract()
-    notes: list[Any] = []
-    contract.listeners.append(lambda *note: notes.append(note))
-    notifier: Notifier = MemoryNotifier(contract)
-    notifier.notify(keys.GOAL, "r1", 7)
-    assert notes == [(keys.GOAL, "r1", 7)]
+async def test_a_row_written_is_noted_by_the_stores_that_watch_its_table_and_wakes_them() -> None:
+    world = load_world(Path(__file__).parents[3] / "worlds" / "open_room.yaml")
+    stack = MonolithStack(world, SimConfig(), [])
+    try:
+        for engine in stack.engines:
+            await engine.activate(0.0)
+        assert not any(e.signals.pending for e in stack.engines)
+        stack.contract.insert(keys.GOAL, {"robot_id": "r1", "x": 1.0, "y": 1.0, "status": "active"})
+        # the planner watches goals; the controller and the decision do not
+        assert [e.name for e in stack.engines if e.signals.woken] == ["planner"]
+    finally:
+        stack.close()
