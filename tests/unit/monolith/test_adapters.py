@@ -14,12 +14,14 @@ from common.engine import Rule
 from pnav.monolith.bridge import Applied, Bridge
 from pnav.monolith.contract import MemoryContract, MemoryNotifier, UnsupportedStatement
 from pnav.monolith.engines import LockstepEngine, run_sync
+from pnav.monolith.planner import planner_engine
 from pnav.monolith.sql import MemoryPool
 from pnav.monolith.strategies import combo_strategy, shipped_strategies
 from pnav.navbench.episode import Combo
 from services.decision import store
 from services.decision.arbitration import RobotDecision
-from services.planner.state import PlannerState, RobotInfo, RobotState, Target
+from services.planner.routes import Target
+from services.planner.world import RobotInfo, RobotState
 
 
 def contract_with_rows() -> tuple[MemoryContract, Database, list[tuple[str, Any, Any]]]:
@@ -132,9 +134,9 @@ def test_the_planner_counts_its_own_gates_on_the_clock_it_is_given() -> None:
     # the monolith hands the planner sim time for its gates (re-reads, replanning): a route
     # is born at that clock's time, not at the wall clock's
     t = [42.0]
-    state = PlannerState(None, lambda: 0.0, lambda: True, wall=lambda: t[0])  # type: ignore[arg-type]
+    store = planner_engine(MemoryContract(), LockstepEngine("planner", lambda: t[0]), lambda: t[0])
     robot = RobotState(RobotInfo("r1", None, 0.22, 2.84, 0.105))
-    state.route_for(robot, 0.0, 0.0, Target("goal", "1", 1.0, 0.0, 0.15, 0.3), 0.0)
+    store.route_for(robot, 0.0, 0.0, Target("goal", "1", 1.0, 0.0, 0.15, 0.3), 0.0)
     assert robot.route is not None and robot.route.made_at == 42.0
 
 
