@@ -79,6 +79,10 @@ class PlannerRules:
         )
         return ticket.spec.rule(self.view, ticket)
 
+    def running(self, robot_id: str) -> list[str]:
+        """The kinds of rule running for the robot ("move", "battery")."""
+        return [kind for rid, kind in self.supervisor.running if rid == robot_id]
+
     def forget(self, robot_ids: Iterable[str]) -> None:
         """End these robots' rules now (ownership changed: the next meta run starts afresh
         those this replica still owns)."""
