@@ -45,9 +45,10 @@ MOVE, BATTERY = "move", "battery"
 
 def move_scenarios() -> dict[str, type[MoveScenario]]:
     """The move scenarios installed now: scenario name -> class (the shipped ones first)."""
-    # the base is only the test of what a plug-in must be: abstract, as it should be
+    # MoveScenario is abstract (``select``): here it is only what a plug-in must subclass
     found = load_scenarios(SCENARIO_GROUP, MoveScenario)  # type: ignore[type-abstract]
-    order = sorted(found, key=lambda name: (SHIPPED.index(name) if name in SHIPPED else 2, name))
+    rank = {name: i for i, name in enumerate(SHIPPED)}
+    order = sorted(found, key=lambda name: (rank.get(name, len(SHIPPED)), name))
     return {name: found[name] for name in order}
 
 
