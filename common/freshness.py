@@ -86,6 +86,17 @@ class FreshCache(Generic[K, T]):
             return False
         return entry.read_id is None or announced > entry.read_id
 
+    def hinted(self, key: K) -> bool:
+        """Whether a hint came for ``key`` since it was last read (``recheck_s`` aside);
+        False if it was never read."""
+        entry = self._entries.get(key)
+        if entry is None or not entry.has_value:
+            return False
+        if entry.dirty:
+            return True
+        announced = entry.announced
+        return announced is not None and (entry.read_id is None or announced > entry.read_id)
+
     def peek(self, key: K) -> T | None:
         """The value last read for ``key`` (None if never read), fresh or not."""
         entry = self._entries.get(key)

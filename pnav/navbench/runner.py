@@ -59,9 +59,10 @@ def navigation_strategies(sql: str) -> list[str]:
 def shipped_combos() -> list[Combo]:
     from common.contract.migrate import schema_text
     from pnav.navbench.episode import Combo
-    from services.planner.meta import SCENARIOS  # the planner's registry of move scenarios
+    from services.planner.meta import move_scenarios  # installed, the planner's own first
 
-    return [Combo(s, p) for s in navigation_strategies(schema_text()) for p in SCENARIOS]
+    planners = list(move_scenarios())
+    return [Combo(s, p) for s in navigation_strategies(schema_text()) for p in planners]
 
 
 def pick_combos(spec: str | None, available: Sequence[Combo]) -> list[Combo]:

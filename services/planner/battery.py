@@ -18,14 +18,17 @@ The arithmetic is in plain functions, unit-tested on their own.
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from common import log
 from common.contract import records
-from common.engine import Rule
+from common.engine.supervisor import Ticket
+from services.planner.routes import Target
 from services.planner.scenario import ODOM_MAX_AGE_S
-from services.planner.state import PlannerState, RobotState, Target
+from services.planner.target import RuleKey, Spec, TargetRule
+from services.planner.view import PlannerView
+from services.planner.world import RobotState
 
 logger = logging.getLogger("pnav.planner")
 
@@ -37,7 +40,7 @@ VALIDITY_S = 2.0
 BATTERY_MAX_AGE_S = 5.0  # the sim reports the battery at 1 Hz
 RESUME_RETRY_S = 10.0
 # The battery is reported at 1 Hz: looking at it on every odometry wake-up (30 Hz) would only
-# cost queries. Wall seconds between two evaluations.
+# cost queries. Seconds of the store's clock between two evaluations.
 EVAL_PERIOD_S = 0.2
 CHARGE_CODE = "CHARGE"
 
@@ -76,13 +79,11 @@ def number(params: dict[str, Any], key: str) -> float | None:
     return float(value)
 
 
-class _BatteryRule(Rule):
+class _BatteryRule(TargetRule):
     kind: ClassVar[str] = "battery"
 
-    def __init__(self, state: PlannerState, robot_id: str, token: int) -> None:
-        self.state = state
-        self.robot_id = robot_id
-        self.token = token
+    def __init__(self, view: PlannerView, ticket: Ticket[RuleKey, Spec]) -> None:
+        super().__init__(view, ticket)
         self.quiet_until = float("-inf")  # sim time before which we do not recommend again
         self.robot: RobotState | None = None
         self.params: dict[str, Any] = {}
@@ -95,28 +96,28 @@ class _BatteryRule(Rule):
 
     async def _read(self) -> bool:
         self.ready = False
-        self.robot = self.state.claim(self.robot_id, self.kind, self.token)
+        self.robot = self.claim()
         if self.robot is None or self.robot.strategy is None:
             return False
-        if self.state.wall() < self._next_eval:
+        view = self.view
+        if view.clock() < self._next_eval:
             return False
-        self._next_eval = self.state.wall() + EVAL_PERIOD_S
+        self._next_eval = view.clock() + EVAL_PERIOD_S
         self.ready = True
         self.params = self.robot.strategy.params
-        self.sim_now = self.state.now()
-        pool = self.state.db.pool
-        self.battery = await records.newest_battery(pool, self.robot_id)
-        self.odom = await records.newest_odometry(pool, self.robot_id)
-        self.goal = await records.active_goal(pool, self.robot_id)
+        self.sim_now = view.now()
+        self.battery = await view.newest_battery(self.robot_id)
+        self.odom = await view.newest_odometry(self.robot_id)
+        self.goal = await view.current_goal(self.robot_id)
         return True
 
     def _fresh(self, stamp: float, max_age: float) -> bool:
-        return self.state.clock_started() and self.sim_now - stamp <= max_age
+        return self.view.started() and self.sim_now - stamp <= max_age
 
     async def _recommend(self, command: str, source: str, priority: int, reason: str) -> None:
         """Write the recommendation unless one is still live (ours from before a restart, or
         another replica's); either way stay quiet until it expires."""
-        live_until = await self.state.live_system(self.robot_id, command)
+        live_until = await self.view.live_system(self.robot_id, command)
         if live_until is not None:
             self.quiet_until = live_until
             return
@@ -127,8 +128,7 @@ class _BatteryRule(Rule):
             inputs["odometry"] = self.odom.id
         if self.goal is not None:
             inputs["goal"] = self.goal.id
-        await records.recommend_system(
-            self.state.db,
+        await self.view.recommend_system(
             self.robot_id,
             source=source,
             priority=priority,
@@ -148,19 +148,16 @@ class _BatteryRule(Rule):
             reason=reason,
         )
 
-    def rule_generation(self) -> Iterable[Rule]:
-        robot = self.state.robots.get(self.robot_id)
-        slot = robot.slots.get(self.kind) if robot else None
-        return [self.clone()] if slot is not None and slot.token == self.token else []
-
 
 class BatteryCheck(_BatteryRule):
     scenario = "battery_check"
 
-    def __init__(self, state: PlannerState, robot_id: str, token: int) -> None:
-        super().__init__(state, robot_id, token)
+    def __init__(self, view: PlannerView, ticket: Ticket[RuleKey, Spec]) -> None:
+        super().__init__(view, ticket)
         self.need_wh = 0.0
         self.remaining_m = 0.0
+        self.wh_per_m = 0.0
+        self.reserve_wh = 0.0
 
     async def data_acquisition(self) -> None:
         if not await self._read():
@@ -168,8 +165,11 @@ class BatteryCheck(_BatteryRule):
         assert self.robot is not None
         if self.odom is not None and self.goal is not None:
             target = Target.of_goal(self.goal)
-            progress = self.state.route_for(self.robot, self.odom.x, self.odom.y, target)
+            progress = self.view.route_for(self.robot, self.odom.x, self.odom.y, target)
             self.remaining_m = progress.remaining_m
+        self.wh_per_m = number(self.params, "battery_wh_per_m") or 0.0
+        self.reserve_wh = number(self.params, "battery_reserve_wh") or 0.0
+        self.need_wh = energy_needed(self.remaining_m, self.wh_per_m, self.reserve_wh)
 
     def activation_guards(self) -> Iterator[bool]:
         yield self.ready
@@ -184,10 +184,7 @@ class BatteryCheck(_BatteryRule):
     def conditions(self) -> Iterator[bool]:
         assert self.battery is not None
         yield self.sim_now >= self.quiet_until
-        wh_per_m = number(self.params, "battery_wh_per_m") or 0.0
-        reserve = number(self.params, "battery_reserve_wh") or 0.0
-        self.need_wh = energy_needed(self.remaining_m, wh_per_m, reserve)
-        yield needs_charge(self.battery.energy_wh, self.remaining_m, wh_per_m, reserve)
+        yield needs_charge(self.battery.energy_wh, self.remaining_m, self.wh_per_m, self.reserve_wh)
 
     async def actions(self) -> None:
         assert self.battery is not None
@@ -203,8 +200,8 @@ class BatteryCheck(_BatteryRule):
 class ChargeComplete(_BatteryRule):
     scenario = "charge_complete"
 
-    def __init__(self, state: PlannerState, robot_id: str, token: int) -> None:
-        super().__init__(state, robot_id, token)
+    def __init__(self, view: PlannerView, ticket: Ticket[RuleKey, Spec]) -> None:
+        super().__init__(view, ticket)
         self.need_wh: float | None = None
         self._need_key: tuple[Any, ...] | None = None
         self._need_m = 0.0
@@ -215,7 +212,7 @@ class ChargeComplete(_BatteryRule):
         assert self.robot is not None
         station = self.robot.station
         if station is None and self.odom is not None:
-            station = self.state.choose_station(self.robot, self.odom.x, self.odom.y)
+            station = self.view.choose_station(self.robot, self.odom.x, self.odom.y)
         self.need_wh = None
         wh_per_m = number(self.params, "battery_wh_per_m")
         if self.goal is None or wh_per_m is None:
@@ -227,11 +224,11 @@ class ChargeComplete(_BatteryRule):
         else:
             return
         # The station-to-goal path is planned once per (station, goal, map).
-        data = self.state.map_for(self.robot.info)
+        data = self.view.map_for(self.robot.info)
         key = (start, self.goal.id, data.version if data else None)
         if key != self._need_key:
             self._need_key = key
-            self._need_m = self.state.distance(self.robot, start, (self.goal.x, self.goal.y))
+            self._need_m = self.view.distance(self.robot, start, (self.goal.x, self.goal.y))
         reserve = number(self.params, "battery_reserve_wh") or 0.0
         self.need_wh = energy_needed(self._need_m, wh_per_m, reserve)
 

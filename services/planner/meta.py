@@ -1,46 +1,94 @@
 """The meta-planner: per robot, exactly one planner scenario, the one its strategy names.
 
-A continuous rule (it clones itself). Each activation it refreshes the shared state (the
-active strategies; robots, maps and chargers when they changed) and, per robot, makes sure
-the right target rules are alive (for the robots this replica owns, docs/REPLICAS.md):
+A continuous rule (it clones itself). Each activation it refreshes the store (the active
+strategies; robots, maps and chargers when they changed) and says which target rules it
+wants alive, per robot this replica owns (docs/REPLICAS.md):
 
-- "move": the strategy's ``planner_scenario`` (``turn_then_move`` or ``move_while_turning``),
-  none for a strategy without one (IDLE). An unknown name is logged once and ignored.
-- "battery": ``BatteryCheck`` when the strategy drives to the goal, ``ChargeComplete`` when
-  it drives to the nearest charger.
+- (robot, "move"): the strategy's ``planner_scenario``, one of the move scenarios found at
+  start under the ``pnav.planner.scenarios`` entry points (``turn_then_move``,
+  ``move_while_turning``, or a plug-in's: docs/PLANNER.md); none for a strategy without one
+  (IDLE). An unknown name is logged once and ignored.
+- (robot, "battery"): ``BatteryCheck`` when the strategy drives to the goal,
+  ``ChargeComplete`` when it drives to the nearest charger.
 
-Each kind has one slot per robot holding a token. A target rule clones itself only while
-the slot still holds its token, so a strategy change ends the old rule (its generation step
-sees the new token) and starts the new one in the same activation, with no overlap. A
-target rule stamps the slot every time it runs; one that stopped (an error discards a rule
-for good) is replaced after STALE_ROUNDS activations.
+A ``common.engine.supervisor.Supervisor`` does the rest: a rule no longer wanted (IDLE, a
+robot gone or owned by another replica) ends, its next generation does not clone it; a
+changed spec (another scenario, or another strategy) ends the old rule and starts the new
+one in the same activation, with no overlap; a rule the engine discarded after an error is
+started again at the next run of the meta-planner.
 """
 
 from __future__ import annotations
 
-import itertools
 import logging
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 
 from common import log
 from common.contract import keys
-from common.engine import Rule
+from common.engine import Engine, Rule
+from common.engine.supervisor import Supervisor, Ticket
+from common.plugins import load_scenarios
 from services.planner.battery import BatteryCheck, ChargeComplete
-from services.planner.move_while_turning import MoveWhileTurning
 from services.planner.scenario import MoveScenario
-from services.planner.state import PlannerState, RobotState, Slot
-from services.planner.turn_then_move import TurnThenMove
+from services.planner.target import RuleKey, Spec, TargetRule
+from services.planner.view import PlannerStoreView, PlannerView
+from services.planner.world import RobotState
 
 logger = logging.getLogger("pnav.planner")
 
-SCENARIOS: dict[str, type[MoveScenario]] = {
-    TurnThenMove.scenario: TurnThenMove,
-    MoveWhileTurning.scenario: MoveWhileTurning,
-}
+SCENARIO_GROUP = "pnav.planner.scenarios"  # the entry points naming the move scenarios
+# The planner's own scenarios, listed first (the thesis' order); plug-ins follow by name.
+SHIPPED = ("turn_then_move", "move_while_turning")
 TARGETS = ("goal", "nearest_charger")
-STALE_ROUNDS = 20
+MOVE, BATTERY = "move", "battery"
 
-TargetRule = type[MoveScenario] | type[BatteryCheck] | type[ChargeComplete]
+
+def move_scenarios() -> dict[str, type[MoveScenario]]:
+    """The move scenarios installed now: scenario name -> class (the shipped ones first)."""
+    # MoveScenario is abstract (``select``): here it is only what a plug-in must subclass
+    found = load_scenarios(SCENARIO_GROUP, MoveScenario)  # type: ignore[type-abstract]
+    rank = {name: i for i, name in enumerate(SHIPPED)}
+    order = sorted(found, key=lambda name: (rank.get(name, len(SHIPPED)), name))
+    return {name: found[name] for name in order}
+
+
+class PlannerRules:
+    """The target rules the planner keeps alive, and the move scenarios it can start.
+
+    Held outside the meta rule so that a meta rule re-seeded after an error takes over the
+    rules already running instead of starting them twice.
+    """
+
+    def __init__(self, view: PlannerView, scenarios: Mapping[str, type[MoveScenario]]) -> None:
+        self.view = view
+        self.scenarios = dict(scenarios)
+        # any change of spec starts a fresh rule: a new strategy never inherits a route
+        # follower's or a battery rule's memory
+        self.supervisor: Supervisor[RuleKey, Spec] = Supervisor(
+            "planner", self._start, restart_on=lambda _old, _new: True
+        )
+
+    def _start(self, ticket: Ticket[RuleKey, Spec]) -> TargetRule:
+        robot_id, _kind = ticket.key
+        log.event(
+            logger,
+            logging.INFO,
+            "planner rule started",
+            robot=robot_id,
+            rule=ticket.spec.rule.scenario,
+            strategy=ticket.spec.strategy,
+        )
+        return ticket.spec.rule(self.view, ticket)
+
+    def running(self, robot_id: str) -> list[str]:
+        """The kinds of rule running for the robot ("move", "battery")."""
+        return [kind for rid, kind in self.supervisor.running if rid == robot_id]
+
+    def forget(self, robot_ids: Iterable[str]) -> None:
+        """End these robots' rules now (ownership changed: the next meta run starts afresh
+        those this replica still owns)."""
+        robots = set(robot_ids)
+        self.supervisor.end_all(k for k in self.supervisor.running if k[0] in robots)
 
 
 class MetaPlanner(Rule):
@@ -57,41 +105,43 @@ class MetaPlanner(Rule):
         keys.CHARGING_STATION,
     )
 
-    _tokens = itertools.count(1)
-
     def __init__(
-        self, state: PlannerState, owns: Callable[[str], bool] = lambda _robot_id: True
+        self,
+        store: PlannerStoreView,
+        rules: PlannerRules | None = None,
+        owns: Callable[[str], bool] = lambda _robot_id: True,
     ) -> None:
-        self.state = state
+        self.store = store
+        # without ``rules`` (a meta-planner of its own, in a test), the installed scenarios
+        self.rules = rules if rules is not None else PlannerRules(store, move_scenarios())
         self.owns = owns  # replicas: plan only for the robots this one owns
         self.spawned: list[Rule] = []
 
     async def data_acquisition(self) -> None:
-        await self.state.refresh()
+        await self.store.refresh()
 
     def actions(self) -> None:
-        self.state.meta_round += 1
-        self.spawned = []
-        for robot in self.state.robots.values():
-            if not self.owns(robot.info.robot_id):
-                # Another replica's robot: end its rules here (docs/REPLICAS.md).
-                self.keep(robot, "move", None)
-                self.keep(robot, "battery", None)
-                continue
-            move, battery = self.wanted(robot)
-            self.keep(robot, "move", move)
-            self.keep(robot, "battery", battery)
+        wanted: dict[RuleKey, Spec] = {}
+        for robot in self.store.robots():
+            robot_id = robot.info.robot_id
+            if not self.owns(robot_id):
+                continue  # another replica's robot: its rules end here (docs/REPLICAS.md)
             strategy = robot.strategy
+            for kind, rule in zip((MOVE, BATTERY), self.wanted(robot), strict=True):
+                if rule is not None and strategy is not None:
+                    wanted[(robot_id, kind)] = Spec(rule, strategy.code)
             if strategy is None or strategy.params.get("target") != "nearest_charger":
                 robot.station = None  # the next CHARGE session chooses its charger afresh
+        self.spawned = self.rules.supervisor.reconcile(wanted)
 
-    def wanted(self, robot: RobotState) -> tuple[type[MoveScenario] | None, TargetRule | None]:
+    def wanted(self, robot: RobotState) -> tuple[type[TargetRule] | None, type[TargetRule] | None]:
+        """The robot's move and battery rules under its strategy (None: none)."""
         strategy = robot.strategy
         if strategy is None or strategy.planner_scenario is None:
             return None, None
-        move = SCENARIOS.get(strategy.planner_scenario)
+        move = self.rules.scenarios.get(strategy.planner_scenario)
         if move is None:
-            self.state.warn_once(
+            self.store.warn_once(
                 f"scenario-{strategy.planner_scenario}",
                 "unknown planner scenario: ignored",
                 scenario=strategy.planner_scenario,
@@ -100,7 +150,7 @@ class MetaPlanner(Rule):
             return None, None
         target = strategy.params.get("target")
         if target not in TARGETS:
-            self.state.warn_once(
+            self.store.warn_once(
                 f"target-{strategy.code}-{target}",
                 "strategy has no known target param: no planner",
                 strategy=strategy.code,
@@ -109,36 +159,18 @@ class MetaPlanner(Rule):
             return None, None
         return move, BatteryCheck if target == "goal" else ChargeComplete
 
-    def keep(self, robot: RobotState, kind: str, rule: TargetRule | None) -> None:
-        robot_id = robot.info.robot_id
-        if rule is None or robot.strategy is None:
-            if robot.slots.pop(kind, None) is not None:
-                log.event(logger, logging.INFO, "planner rule ended", robot=robot_id, kind=kind)
-            return
-        spec = (rule.__name__, robot.strategy.code)
-        slot = robot.slots.get(kind)
-        if slot is not None and slot.spec == spec:
-            if self.state.meta_round - slot.beat <= STALE_ROUNDS:
-                return
-            log.event(
-                logger,
-                logging.WARNING,
-                "planner rule stopped; replaced",
-                robot=robot_id,
-                rule=rule.__name__,
-            )
-        token = next(self._tokens)
-        robot.slots[kind] = Slot(spec, token, self.state.meta_round)
-        self.spawned.append(rule(self.state, robot_id, token))
-        log.event(
-            logger,
-            logging.INFO,
-            "planner rule started",
-            robot=robot_id,
-            rule=rule.scenario,
-            strategy=robot.strategy.code,
-        )
-
     def rule_generation(self) -> Iterable[Rule]:
         spawned, self.spawned = self.spawned, []
         return [*spawned, self.clone()]
+
+
+def seed(
+    engine: Engine,
+    store: PlannerStoreView,
+    scenarios: Mapping[str, type[MoveScenario]],
+    owns: Callable[[str], bool] = lambda _robot_id: True,
+) -> PlannerRules:
+    """Seed the meta-planner on ``engine``, as the service does; the rules it keeps."""
+    rules = PlannerRules(store, scenarios)
+    engine.add_meta(lambda: MetaPlanner(store, rules, owns))
+    return rules

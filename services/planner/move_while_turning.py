@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 from services.planner.scenario import Movement, MoveScenario, clamp, cruise_speed
-from services.planner.state import RobotInfo
+from services.planner.world import RobotInfo
 
 TURN_GAIN = 1.2  # rad/s per rad of heading error
 MAX_TURN_RPS = 1.5

@@ -1,13 +1,17 @@
 """What both planner scenarios do; they differ only in how they turn a heading error into a
 velocity (``select``).
 
-One rule per robot, created by the meta-planner and cloning itself while it is still the
-robot's planner scenario (its slot token matches). Per activation:
+One rule per robot, started by the meta-planner's supervisor and cloning itself while it is
+still the robot's planner scenario (its ticket lives). A new scenario is a subclass in any
+package, registered under the ``pnav.planner.scenarios`` entry points (docs/PLANNER.md).
+Per activation:
 
 1. acquisition: the newest odometry (at most every EVAL_PERIOD_S of sim time, unless a
    goal notification came or a recommendation is due by the cadence), the target (the active
    goal, or the chosen charging station, per the strategy's ``target`` param), and every
-   SCAN_PERIOD_S the newest laser scan, for the unmapped obstacles to plan around;
+   SCAN_PERIOD_S the newest laser scan, for the unmapped obstacles to plan around; then,
+   if the guards will hold, what the conditions test (the route, the velocity), so that
+   guards and conditions only look;
 2. guards: still the robot's scenario, fresh odometry (within ODOM_MAX_AGE_S of sim time),
    a target;
 3. conditions: something new to say: a new odometry row or a new target, and then either
@@ -23,15 +27,18 @@ from __future__ import annotations
 import logging
 import math
 from abc import abstractmethod
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from common import log
 from common.contract import records
-from common.engine import Rule
-from services.planner.state import PlannerState, RobotInfo, RobotState, Target
+from common.engine.supervisor import Ticket
+from services.planner.routes import Target
+from services.planner.target import RuleKey, Spec, TargetRule
 from services.planner.tracking import Progress, heading_error
+from services.planner.view import PlannerView
+from services.planner.world import RobotInfo, RobotState
 
 logger = logging.getLogger("pnav.planner")
 
@@ -98,38 +105,41 @@ def cruise_speed(max_linear: float, remaining_m: float) -> float:
     return max_linear * fraction
 
 
-async def target_of(state: PlannerState, robot: RobotState, x: float, y: float) -> Target | None:
+async def target_of(view: PlannerView, robot: RobotState, x: float, y: float) -> Target | None:
     """The robot's target under its strategy's ``target`` param (None: nothing to go to)."""
     strategy = robot.strategy
     kind = strategy.params.get("target") if strategy else None
     if kind == "goal":
-        goal = await state.active_goal(robot)
+        goal = await view.active_goal(robot)
         return Target.of_goal(goal) if goal else None
     if kind == "nearest_charger":
-        station = state.choose_station(robot, x, y)
+        station = view.choose_station(robot, x, y)
         return Target.of_station(station) if station else None
     return None
 
 
-class MoveScenario(Rule):
+class MoveScenario(TargetRule):
+    """A planner scenario: subclasses say how a heading error becomes a velocity."""
+
     kind: ClassVar[str] = "move"
 
-    def __init__(self, state: PlannerState, robot_id: str, token: int) -> None:
-        self.state = state
-        self.robot_id = robot_id
-        self.token = token
+    def __init__(self, view: PlannerView, ticket: Ticket[RuleKey, Spec]) -> None:
+        super().__init__(view, ticket)
         self.turning = False  # turn_then_move's hysteresis: turning in place last time
         self.last_said: tuple[Any, ...] | None = None  # (odometry id, target key) handled
         self.said: Said | None = None  # the last velocity recommended
         self.evaluated_at = -math.inf  # sim time the odometry was last read
         self.odometry_mark = -1  # the robot's odometry notifications already looked at
-        self.odometry_read_at = -math.inf  # the planner's clock at the last read
+        self.odometry_read_at = -math.inf  # the store's clock at the last read
         self.held: set[tuple[Any, ...]] = set()  # targets reached and stopped at
         self.robot: RobotState | None = None
         self.odom: records.Odometry | None = None
         self.target: Target | None = None
         self.sim_now = 0.0
-        # What this activation found (conditions) for actions to write.
+        # What this activation found (data acquisition) for the conditions to test and the
+        # actions to write.
+        self.news = False  # a new odometry row or a new target
+        self.worth_saying = False  # reached and not stopped there yet, or the velocity is due
         self.arrived: float | None = None  # the distance to the target when it is reached
         self.move: Movement | None = None
         self.why = ""
@@ -142,21 +152,23 @@ class MoveScenario(Rule):
         measured turn rate (rad/s, from the odometry)."""
 
     async def data_acquisition(self) -> None:
-        self.robot = self.state.claim(self.robot_id, self.kind, self.token)
+        self.robot = self.claim()
         self.odom = self.target = None
+        self.news = False
         if self.robot is None:
             return
-        self.sim_now = self.state.now()
+        view = self.view
+        self.sim_now = view.now()
         robot = self.robot
         said = self.said
         cadence_due = said is None or self.sim_now >= said.stamp + RECOMMEND_PERIOD_S - 0.005
-        goal_news = self.state.goal_news(robot)
+        goal_news = view.goal_news(robot)
         # Every robot's odometry wakes the planner. This robot's rule looks only when a row
         # of its own was announced (or ODOM_RECHECK_S passed: notifications are hints), and
         # a row it skips is consumed: looking later, at another robot's wake-up, would act
         # on a row already tens of milliseconds old.
-        notes, wall = self.state.odometry_notes.get(self.robot_id, 0), self.state.wall()
-        recheck = wall - self.odometry_read_at >= ODOM_RECHECK_S
+        notes, clock = view.odometry_notes(self.robot_id), view.clock()
+        recheck = clock - self.odometry_read_at >= ODOM_RECHECK_S
         if notes == self.odometry_mark and not recheck and not goal_news:
             return
         self.odometry_mark = notes
@@ -166,46 +178,59 @@ class MoveScenario(Rule):
             and not goal_news
         ):
             return  # looked a moment ago, nothing is due, no new goal: skip this row
-        self.odometry_read_at = wall
+        self.odometry_read_at = clock
         self.evaluated_at = self.sim_now
-        pool = self.state.db.pool
-        self.odom = await records.newest_odometry(pool, self.robot_id)
+        self.odom = await view.newest_odometry(self.robot_id)
         if self.odom is None:
             return
         robot.note_pose(self.odom)
-        self.target = await target_of(self.state, robot, self.odom.x, self.odom.y)
+        self.target = await target_of(view, robot, self.odom.x, self.odom.y)
         if self.target is not None and abs(self.sim_now - robot.scan_read_at) >= SCAN_PERIOD_S:
-            # The lidar, for the unmapped obstacles the route should go around (state.see).
+            # The lidar, for the unmapped obstacles the route should go around (view.see).
             robot.scan_read_at = self.sim_now
-            scan = await records.newest_scan(pool, self.robot_id)
+            scan = await view.newest_scan(self.robot_id)
             if scan is not None and scan.id != (robot.seen.scan_id if robot.seen else None):
-                self.state.see(robot, scan)
+                view.see(robot, scan)
+        if self._ready():
+            self._evaluate()
+
+    def _ready(self) -> bool:
+        """The activation guards, as one test."""
+        return all(self.activation_guards())
 
     def activation_guards(self) -> Iterator[bool]:
         yield self.robot is not None
-        yield self.odom is not None and self.state.clock_started()
+        yield self.odom is not None and self.view.started()
         assert self.odom is not None
         yield self.sim_now - self.odom.stamp <= ODOM_MAX_AGE_S
         yield self.target is not None
 
-    def conditions(self) -> Iterator[bool]:
+    def _evaluate(self) -> None:
+        """What the conditions test: something new, then whether it is worth saying (and
+        the velocity or the arrival to say)."""
         odom, target, robot = self.odom, self.target, self.robot
         assert odom is not None and target is not None and robot is not None
-        yield (odom.id, target.key) != self.last_said
+        self.news = (odom.id, target.key) != self.last_said
+        if not self.news:
+            return
         self.last_said = (odom.id, target.key)
         self.arrived, self.move = None, None
         distance = math.hypot(target.x - odom.x, target.y - odom.y)
         if distance <= target.reach_m or (target.key in self.held and distance <= target.hold_m):
             self.arrived = distance
-            yield target.key not in self.held  # stopped there already: nothing more to say
+            self.worth_saying = target.key not in self.held  # stopped there already: no
             return
         self.held.discard(target.key)
-        progress = self.state.route_for(robot, odom.x, odom.y, target, odom.stamp)
+        progress = self.view.route_for(robot, odom.x, odom.y, target, odom.stamp)
         error = heading_error(odom.x, odom.y, odom.yaw, progress.lookahead)
         move = self.select(error, progress.remaining_m, robot.info, odom.angular_rps)
         self.move = move
         self.why = self._reason(move, error, progress, target)
-        yield due(self.said, odom.stamp, target.key, move)
+        self.worth_saying = due(self.said, odom.stamp, target.key, move)
+
+    def conditions(self) -> Iterator[bool]:
+        yield self.news
+        yield self.worth_saying
 
     async def actions(self) -> None:
         odom, target = self.odom, self.target
@@ -224,7 +249,7 @@ class MoveScenario(Rule):
             return  # already stopped here: say nothing, the decision service stops the robot
         self.held.add(target.key)
         if target.goal_id is not None:
-            if not await self.state.mark_reached(target.goal_id, self.robot_id, self.sim_now):
+            if not await self.view.mark_reached(target.goal_id, self.robot_id, self.sim_now):
                 return  # superseded or cancelled meanwhile: not ours to close
             log.event(
                 logger, logging.INFO, "goal reached", robot=self.robot_id, goal=target.goal_id
@@ -242,8 +267,7 @@ class MoveScenario(Rule):
         strategy = self.robot.strategy if self.robot else None
         if strategy is not None:
             inputs["strategy"] = strategy.code
-        await records.recommend_velocity(
-            self.state.db,
+        await self.view.recommend_velocity(
             self.robot_id,
             source=self.scenario,
             priority=PRIORITY,
@@ -261,9 +285,3 @@ class MoveScenario(Rule):
             f"{verb} waypoint {progress.waypoint}/{progress.waypoints}, heading error "
             f"{error:.2f} rad, {progress.remaining_m:.2f} m to {target.label}"
         )
-
-    def rule_generation(self) -> Iterable[Rule]:
-        # Live on only while still the robot's planner scenario: a strategy change ends us.
-        robot = self.state.robots.get(self.robot_id)
-        slot = robot.slots.get(self.kind) if robot else None
-        return [self.clone()] if slot is not None and slot.token == self.token else []

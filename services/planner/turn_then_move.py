@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 
 from services.planner.scenario import Movement, MoveScenario, clamp, cruise_speed
-from services.planner.state import RobotInfo
+from services.planner.world import RobotInfo
 
 THRESHOLD_RAD = 0.3  # turn in place above this heading error
 ALIGNED_RAD = 0.15  # ...until the error is below this

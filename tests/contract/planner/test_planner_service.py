@@ -342,7 +342,7 @@ async def test_two_replicas_split_the_robots_and_plan_for_each_once(
             await asyncio.sleep(1.0)
             # Each robot's planner rules live in the replica that owns it, and only there.
             for robot in robots:
-                planned_by = [s for s in (a, b) if s.state.robots[robot].slots]
+                planned_by = [s for s in (a, b) if s.rules and s.rules.running(robot)]
                 owners = [s for s, share in zip((a, b), shares, strict=True) if robot in share]
                 assert planned_by == owners, robot
             assert await split_between([a, b], robots) == shares

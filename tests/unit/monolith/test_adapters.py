@@ -15,11 +15,14 @@ from pnav.monolith.contract import AdapterError, MemoryContract
 from pnav.monolith.controller import MemoryControllerSource
 from pnav.monolith.decision import MemoryDecisionSource
 from pnav.monolith.engines import SteppedEngine
+from pnav.monolith.planner import planner_engine
 from pnav.monolith.stack import MonolithStack
 from pnav.monolith.strategies import combo_strategy, shipped_strategies
 from pnav.navbench.episode import Combo
 from services.controller.scenario import Recommendation
 from services.decision.arbitration import RobotDecision
+from services.planner.routes import Target
+from services.planner.world import RobotInfo, RobotState
 from services.sim.sim import SimConfig
 from services.sim.world import load_world
 
@@ -122,6 +125,16 @@ def test_the_strategy_rows_come_from_schema_sql() -> None:
         "move_while_turning",
     )
     assert combo.params == shipped["GOTO_DIRECT"].params
+
+
+def test_the_planner_counts_its_own_gates_on_the_clock_it_is_given() -> None:
+    # the monolith hands the planner sim time for its gates (re-reads, replanning): a route
+    # is born at that clock's time, not at the wall clock's
+    t = [42.0]
+    store = planner_engine(MemoryContract(), SteppedEngine("planner", lambda: t[0]), lambda: t[0])
+    robot = RobotState(RobotInfo("r1", None, 0.22, 2.84, 0.105))
+    store.route_for(robot, 0.0, 0.0, Target("goal", "1", 1.0, 0.0, 0.15, 0.3), 0.0)
+    assert robot.route is not None and robot.route.made_at == 42.0
 
 
 async def test_the_bridge_clamps_sends_once_and_stops_a_robot_left_without_commands() -> None:

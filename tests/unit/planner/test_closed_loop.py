@@ -6,16 +6,18 @@ it."""
 from __future__ import annotations
 
 import math
-from typing import Any, cast
+import time
 
 import numpy as np
 import pytest
 
 from common.contract.records import LaserScan, Odometry
 from services.planner import move_while_turning, turn_then_move
+from services.planner.obstacles import see
+from services.planner.routes import Router, Target
 from services.planner.scenario import Movement
-from services.planner.state import MapData, PlannerState, RobotInfo, RobotState, Target
 from services.planner.tracking import heading_error
+from services.planner.world import MapData, RobotInfo, RobotState, World
 
 RES = 0.05
 FOOTPRINT = 0.105
@@ -34,8 +36,9 @@ def drive(
     scenario: str, start: tuple[float, float, float], goal: tuple[float, float]
 ) -> tuple[bool, float]:
     occupied = walled_map()
-    state = PlannerState(cast(Any, None), lambda: 0.0, lambda: True)
-    state.maps["walled"] = MapData("walled", "1", occupied, RES, (0.0, 0.0, 0.0))
+    world = World()
+    world.maps["walled"] = MapData("walled", "1", occupied, RES, (0.0, 0.0, 0.0))
+    router = Router(world, time.monotonic)
     info = RobotInfo("r1", "walled", 0.22, 2.84, FOOTPRINT)
     robot = RobotState(info)
     target = Target("goal", "1", goal[0], goal[1], 0.15, 0.0, 1)
@@ -50,7 +53,7 @@ def drive(
     for step in range(int(90 / dt)):
         if math.hypot(goal[0] - x, goal[1] - y) <= target.reach_m:
             return True, closest
-        progress = state.route_for(robot, x, y, target, step * dt)
+        progress = router.route_for(robot, x, y, target, step * dt)
         error = heading_error(x, y, yaw, progress.lookahead)
         if scenario == "turn_then_move":
             move = turn_then_move.select_movement(
@@ -100,8 +103,9 @@ def test_a_crate_the_map_does_not_show_is_planned_around_once_the_lidar_sees_it(
         np.nonzero(truth & ~occupied)[1] * RES,
         np.nonzero(truth & ~occupied)[0] * RES,
     )
-    state = PlannerState(cast(Any, None), lambda: 0.0, lambda: True)
-    state.maps["room"] = MapData("room", "1", occupied, RES, (0.0, 0.0, 0.0))
+    world = World()
+    world.maps["room"] = MapData("room", "1", occupied, RES, (0.0, 0.0, 0.0))
+    router = Router(world, time.monotonic)
     robot = RobotState(RobotInfo("r1", "room", 0.22, 2.84, FOOTPRINT))
     target = Target("goal", "1", 6.5, 1.5, 0.15, 0.0, 1)
     x, y, yaw, rate, turning = 0.5, 1.5, 0.0, 0.0, False
@@ -114,9 +118,9 @@ def test_a_crate_the_map_does_not_show_is_planned_around_once_the_lidar_sees_it(
             break
         robot.note_pose(Odometry(step, "r1", now, x, y, yaw, 0.0, rate))
         if step % 6 == 0:  # 5 Hz
-            state.see(robot, lidar(truth, x, y, yaw, now))
+            see(world, robot, lidar(truth, x, y, yaw, now))
         before = robot.route
-        progress = state.route_for(robot, x, y, target, now)
+        progress = router.route_for(robot, x, y, target, now)
         replans += robot.route is not before
         error = heading_error(x, y, yaw, progress.lookahead)
         move = turn_then_move.select_movement(

@@ -4,13 +4,15 @@ the scan's stamp, and the new plan they call for (no database, no engine)."""
 from __future__ import annotations
 
 import math
-from typing import Any, cast
+import time
 
 import numpy as np
 import pytest
 
 from common.contract.records import Odometry
-from services.planner.state import MapData, PlannerState, RobotInfo, RobotState, Target
+from services.planner.obstacles import see
+from services.planner.routes import Router, Target
+from services.planner.world import MapData, RobotInfo, RobotState, World
 from tests.unit.planner.test_closed_loop import RES, lidar
 
 
@@ -21,10 +23,10 @@ def room() -> np.ndarray:
     return occupied
 
 
-def planner(occupied: np.ndarray) -> tuple[PlannerState, RobotState]:
-    state = PlannerState(cast(Any, None), lambda: 0.0, lambda: True)
-    state.maps["room"] = MapData("room", "1", occupied, RES, (0.0, 0.0, 0.0))
-    return state, RobotState(RobotInfo("r1", "room", 0.22, 2.84, 0.105))
+def planner(occupied: np.ndarray) -> tuple[Router, RobotState]:
+    world = World()
+    world.maps["room"] = MapData("room", "1", occupied, RES, (0.0, 0.0, 0.0))
+    return Router(world, time.monotonic), RobotState(RobotInfo("r1", "room", 0.22, 2.84, 0.105))
 
 
 def odom(stamp: float, x: float, y: float, yaw: float) -> Odometry:
@@ -45,13 +47,13 @@ def test_the_pose_at_a_scan_is_interpolated_between_odometry_rows() -> None:
 
 def test_only_hits_the_map_does_not_explain_are_obstacles() -> None:
     occupied = room()
-    state, robot = planner(occupied)
+    router, robot = planner(occupied)
     robot.note_pose(odom(5.0, 1.0, 1.5, 0.3))
-    state.see(robot, lidar(occupied, 1.0, 1.5, 0.3, 5.0))
+    see(router.world, robot, lidar(occupied, 1.0, 1.5, 0.3, 5.0))
     assert robot.seen is not None and len(robot.seen.points) == 0  # the walls are on the map
     truth = occupied.copy()
     truth[26:34, 46:54] = True  # a 0.4 m crate at (2.5, 1.5)
-    state.see(robot, lidar(truth, 1.0, 1.5, 0.3, 5.0))
+    see(router.world, robot, lidar(truth, 1.0, 1.5, 0.3, 5.0))
     points = robot.seen.points
     assert len(points) > 5
     assert np.all(np.abs(points[:, 0] - 2.5) < 0.25) and np.all(np.abs(points[:, 1] - 1.5) < 0.25)
@@ -59,10 +61,10 @@ def test_only_hits_the_map_does_not_explain_are_obstacles() -> None:
 
 def test_a_new_obstacle_on_the_route_calls_for_one_new_plan() -> None:
     occupied = room()
-    state, robot = planner(occupied)
+    router, robot = planner(occupied)
     target = Target("goal", "1", 5.5, 1.5, 0.15, 0.0, 1)
     robot.note_pose(odom(1.0, 0.5, 1.5, 0.0))
-    first = state.route_for(robot, 0.5, 1.5, target, 1.0)
+    first = router.route_for(robot, 0.5, 1.5, target, 1.0)
     assert first.waypoints == 1  # straight across the empty room
     route = robot.route
     truth = occupied.copy()
@@ -70,14 +72,14 @@ def test_a_new_obstacle_on_the_route_calls_for_one_new_plan() -> None:
     for step in range(1, 6):  # the robot stands still; a scan every 0.2 s
         now = 1.0 + 0.2 * step
         robot.note_pose(odom(now, 0.5, 1.5, 0.0))
-        state.see(robot, lidar(truth, 0.5, 1.5, 0.0, now))
-        progress = state.route_for(robot, 0.5, 1.5, target, now)
+        see(router.world, robot, lidar(truth, 0.5, 1.5, 0.0, now))
+        progress = router.route_for(robot, 0.5, 1.5, target, now)
         if step < 3:
             assert robot.route is route  # at most one such plan every 0.5 s of sim time
     assert robot.route is not route  # planned again, round the crate...
     assert progress.waypoints > 1 and progress.remaining_m > 5.0
     again = robot.route
     robot.note_pose(odom(3.0, 0.5, 1.5, 0.0))
-    state.see(robot, lidar(truth, 0.5, 1.5, 0.0, 3.0))
-    state.route_for(robot, 0.5, 1.5, target, 3.0)
+    see(router.world, robot, lidar(truth, 0.5, 1.5, 0.0, 3.0))
+    router.route_for(robot, 0.5, 1.5, target, 3.0)
     assert robot.route is again  # ...once: the same crate is not new any more

@@ -1,0 +1,166 @@
+"""The planner in the monolith: its store on the in-memory contract, its engine seeded as the
+service seeds it.
+
+:class:`MemoryPlannerSource` answers the planner's reads and writes
+(``services.planner.store.PlannerSource``) from :class:`MemoryContract`'s rows, each as
+Postgres would answer the statement ``PgPlannerSource`` sends (the same rows, in the same
+order, as the same records); a write inserts or updates the row, then notifies, as
+``Database.write`` does after its commit. :func:`planner_engine` builds the real
+``PlannerStore`` on it, on sim time, so the planner's caches and gates run here as in a
+lockstep stack.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from common.contract import keys, records
+from common.engine import Engine
+from pnav.monolith.contract import MemoryContract, Row
+from services.planner import meta
+from services.planner.store import PlannerStore, Recommendation
+from services.planner.world import MapRow, RobotInfo, Station
+
+
+def _strategy(row: Row) -> records.Strategy:
+    return records.Strategy(
+        code=row["code"],
+        planner_scenario=row["planner_scenario"],
+        controller_scenarios=tuple(row["controller_scenarios"]),
+        params=dict(row["params"] or {}),
+    )
+
+
+class MemoryPlannerSource:
+    """``PlannerSource`` over the in-memory contract."""
+
+    def __init__(self, contract: MemoryContract) -> None:
+        self.contract = contract
+
+    def _newest(self, table: str, robot_id: str) -> Row | None:
+        return self.contract[table].newest(robot_id)
+
+    async def robots(self) -> list[RobotInfo]:
+        return [
+            RobotInfo(
+                r["robot_id"],
+                r["world"],
+                r["max_linear_mps"],
+                r["max_angular_rps"],
+                r["footprint_radius_m"],
+            )
+            for r in self.contract[keys.ROBOT].all_rows()
+        ]
+
+    async def map_versions(self) -> dict[str, str]:
+        return {r["map_id"]: str(r["loaded_at"]) for r in self.contract[keys.MAP].all_rows()}
+
+    async def map(self, map_id: str, version: str) -> MapRow | None:
+        row = next((r for r in self.contract[keys.MAP].all_rows() if r["map_id"] == map_id), None)
+        if row is None:
+            return None
+        cells = np.frombuffer(row["grid"], dtype=np.uint8).reshape(row["height"], row["width"])
+        origin = (row["origin_x"], row["origin_y"], row["origin_yaw"])
+        return MapRow(map_id, version, cells, row["resolution_m"], origin)
+
+    async def stations(self) -> list[Station]:
+        rows = sorted(
+            self.contract[keys.CHARGING_STATION].all_rows(), key=lambda r: r["station_id"]
+        )
+        return [Station(r["station_id"], r["map_id"], r["x"], r["y"], r["radius_m"]) for r in rows]
+
+    async def active_strategies(self) -> dict[str, records.ActiveStrategy]:
+        # the join of records.active_strategies; a robot's newest row wins (the table keeps
+        # one per robot, which the monolith updates by inserting)
+        strategies = {r["code"]: r for r in self.contract[keys.STRATEGY].all_rows()}
+        out: dict[str, records.ActiveStrategy] = {}
+        for active in self.contract[keys.ACTIVE_STRATEGY].all_rows():
+            strategy = strategies.get(active["strategy_code"])
+            if strategy is not None:
+                robot_id = active["robot_id"]
+                out[robot_id] = records.ActiveStrategy(
+                    robot_id, _strategy(strategy), active["resume_code"], active["source"]
+                )
+        return out
+
+    async def active_goal(self, robot_id: str) -> records.Goal | None:
+        for r in self.contract[keys.GOAL].rows(robot_id):
+            if r["status"] == "active":
+                return records.Goal(r["id"], r["robot_id"], r["x"], r["y"], r["tolerance_m"])
+        return None
+
+    async def newest_odometry(self, robot_id: str) -> records.Odometry | None:
+        r = self._newest(keys.ODOMETRY, robot_id)
+        if r is None:
+            return None
+        return records.Odometry(
+            r["id"], r["robot_id"], r["stamp"], r["x"], r["y"], r["yaw"], r["linear_mps"],
+            r["angular_rps"],
+        )  # fmt: skip
+
+    async def newest_scan(self, robot_id: str) -> records.LaserScan | None:
+        r = self._newest(keys.LASER_SCAN, robot_id)
+        if r is None:
+            return None
+        return records.LaserScan(
+            r["id"], r["robot_id"], r["stamp"], r["angle_min"], r["angle_increment"],
+            r["range_min"], r["range_max"], np.asarray(r["ranges"], dtype=np.float32),
+        )  # fmt: skip
+
+    async def newest_battery(self, robot_id: str) -> records.Battery | None:
+        r = self._newest(keys.BATTERY, robot_id)
+        if r is None:
+            return None
+        return records.Battery(
+            r["id"], r["robot_id"], r["stamp"], r["energy_wh"], r["capacity_wh"],
+            r["percentage"], r["charging"],
+        )  # fmt: skip
+
+    async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
+        goal = self.contract[keys.GOAL].by_id.get(goal_id)
+        updated = goal is not None and goal["status"] == "active"
+        if goal is not None and updated:
+            goal.update(status="reached", finished_stamp=stamp)
+        # notified either way, as Database.write does (with no id when nothing changed)
+        self.contract.changed(keys.GOAL, robot_id, goal_id if updated else None)
+        return updated
+
+    async def live_system(self, robot_id: str, command: str, now: float) -> float | None:
+        expiries = [
+            float(r["expires_stamp"])
+            for r in self.contract.live_recommendations(robot_id, now)
+            if r["kind"] == "system" and r["system_command"] == command
+        ]
+        return max(expiries) if expiries else None
+
+    async def recommend(self, rec: Recommendation) -> int:
+        system = rec.command is not None
+        row: Row = {
+            "robot_id": rec.robot_id,
+            "kind": "system" if system else "robot",
+            "source": rec.source,
+            "priority": rec.priority,
+            "linear_mps": None if system else float(rec.linear),
+            "angular_rps": None if system else float(rec.angular),
+            "system_command": rec.command,
+            "stamp": rec.stamp,
+            "expires_stamp": rec.stamp + rec.ttl_s,
+            "inputs": rec.inputs or {},
+            "reason": rec.reason,
+            "treated_by": None,
+        }
+        return self.contract.insert(keys.COMMAND_RECOMMENDATION, row)
+
+
+def planner_engine(
+    contract: MemoryContract, engine: Engine, now: Callable[[], float]
+) -> PlannerStore:
+    """Seed the meta-planner on ``engine`` as ``PlannerService.seed`` does, with the move
+    scenarios installed, and return its store: on sim time for its gates too (a lockstep
+    run's clock), so a run depends on the sim alone. Hand it every change the contract
+    announces (``store.note``)."""
+    store = PlannerStore(MemoryPlannerSource(contract), now, now, lambda: True)
+    meta.seed(engine, store, meta.move_scenarios())
+    return store

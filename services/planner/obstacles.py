@@ -1,0 +1,125 @@
+"""The lidar obstacle layer: what the map does not show, seen by the robot's laser.
+
+Nav2 calls this an obstacle layer: hits of the newest scan that are farther than UNMAPPED_M
+from every obstacle of the map are placed in the world with the robot's pose at the scan's
+stamp (interpolated between the odometry rows around it), and the route is planned around
+them (routes.py) rather than through a pallet or a crate for the controllers to fight over.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from common.contract import records
+
+if TYPE_CHECKING:
+    from services.planner.world import RobotState, World
+
+SEEN_RANGE_M = 2.5  # lidar hits farther than this are not used (pose error grows with range)
+UNMAPPED_M = 0.15  # a hit farther than this from every mapped obstacle is an unmapped one
+SEEN_MAX_AGE_S = 1.0  # sim s: older obstacles are not planned around
+POSE_MATCH_S = 0.05  # the scan's pose: odometry within this (sim s) of the scan's stamp
+POSES_KEPT = 90  # odometry poses remembered per robot (3 s at 30 Hz)
+OBSTACLE_BUCKET_M = 0.1  # obstacles within about this of one planned around are not new
+
+Pose = tuple[float, float, float, float]  # (stamp, x, y, yaw)
+Points = np.ndarray[Any, np.dtype[np.float64]]
+
+NO_POINTS: Points = np.zeros((0, 2))
+
+
+@dataclass(frozen=True)
+class Seen:
+    """The unmapped obstacles of one laser scan: its hits farther than UNMAPPED_M from every
+    obstacle of the map, in the world frame (an (n, 2) array)."""
+
+    scan_id: int
+    stamp: float
+    points: Points
+
+
+@dataclass
+class PoseTrail:
+    """The robot's recent odometry poses, to place a scan with the pose at its stamp."""
+
+    poses: deque[Pose] = field(default_factory=lambda: deque(maxlen=POSES_KEPT))
+
+    def note(self, odom: records.Odometry) -> None:
+        poses = self.poses
+        if not poses or odom.stamp > poses[-1][0]:
+            poses.append((odom.stamp, odom.x, odom.y, odom.yaw))
+        elif odom.stamp < poses[-1][0] - 1.0:  # sim time went back: the sim restarted
+            poses.clear()
+            poses.append((odom.stamp, odom.x, odom.y, odom.yaw))
+
+    def at(self, stamp: float) -> tuple[float, float, float] | None:
+        """The robot's pose at sim time ``stamp``, interpolated between the odometry rows
+        around it; None if no row is within POSE_MATCH_S of it."""
+        before = after = None
+        for pose in reversed(self.poses):
+            if pose[0] <= stamp:
+                before = pose
+                break
+            after = pose
+        if before is not None and after is not None and after[0] - before[0] <= 2 * POSE_MATCH_S:
+            f = (stamp - before[0]) / max(after[0] - before[0], 1e-9)
+            turn = math.atan2(math.sin(after[3] - before[3]), math.cos(after[3] - before[3]))
+            return (
+                before[1] + f * (after[1] - before[1]),
+                before[2] + f * (after[2] - before[2]),
+                before[3] + f * turn,
+            )
+        near = [p for p in (before, after) if p is not None and abs(p[0] - stamp) <= POSE_MATCH_S]
+        if not near:
+            return None
+        best = min(near, key=lambda p: abs(p[0] - stamp))
+        return best[1], best[2], best[3]
+
+
+def see(world: World, state: RobotState, scan: records.LaserScan) -> None:
+    """Remember the unmapped obstacles of ``scan`` on ``state.seen``: hits within
+    SEEN_RANGE_M that are farther than UNMAPPED_M from every obstacle of the robot's map,
+    placed in the world with the robot's pose at the scan's stamp (nothing changes when
+    there is no map or no pose for that stamp)."""
+    data = world.map_for(state.info)
+    pose = state.poses.at(scan.stamp)
+    if data is None or pose is None:
+        return
+    x, y, yaw = pose
+    ranges = np.asarray(scan.ranges, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        valid = (ranges >= scan.range_min - 1e-4) & (ranges <= SEEN_RANGE_M)
+    angles = scan.angles()[valid] + yaw
+    hits = np.column_stack((x + ranges[valid] * np.cos(angles), y + ranges[valid] * np.sin(angles)))
+    grid = data.grid(state.info.footprint_radius_m)
+    if grid.clearance is not None and len(hits):
+        cols, rows, inside = grid.cells_of(hits)  # hits off the map are dropped
+        mapped = grid.clearance[rows[inside], cols[inside]] <= UNMAPPED_M
+        hits = hits[inside][~mapped]
+    state.seen = Seen(scan.id, scan.stamp, hits)
+
+
+def recent(seen: Seen | None, now: float | None) -> Points:
+    """The unmapped obstacles to plan around: the newest scan's, unless it is stale."""
+    if seen is None or (now is not None and now - seen.stamp > SEEN_MAX_AGE_S):
+        return NO_POINTS
+    return seen.points
+
+
+def bucket(x: float, y: float) -> tuple[int, int]:
+    return math.floor(x / OBSTACLE_BUCKET_M), math.floor(y / OBSTACLE_BUCKET_M)
+
+
+def buckets(points: Points) -> set[tuple[int, int]]:
+    return {bucket(float(px), float(py)) for px, py in points}
+
+
+def known(avoided: set[tuple[int, int]], x: float, y: float) -> bool:
+    """Whether (x, y) is within a bucket of an obstacle the route was planned around."""
+    bx, by = bucket(x, y)
+    return any((bx + i, by + j) in avoided for i in (-1, 0, 1) for j in (-1, 0, 1))

@@ -1,0 +1,181 @@
+"""Routes: where a robot is going (``Target``) and the cached A* route that takes it there.
+
+:class:`Router` keeps one route per robot and plans again only when it must: the target or
+the map changed, the robot strayed, a straight fallback is due a retry, or a newly seen
+unmapped obstacle (obstacles.py) is close to the route ahead. Its own gates (replanning,
+retries) count on the store's clock: wall time in a service, sim time in lockstep and in
+the monolith; the obstacle checks count sim time.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from common import log
+from common.contract import records
+from services.planner.obstacles import Points, Seen, buckets, known, recent
+from services.planner.path import path_length, plan_path, with_obstacles
+from services.planner.tracking import Progress, Route, follow
+from services.planner.world import RobotState, Station, World
+
+logger = logging.getLogger("pnav.planner")
+
+STRAY_M = 0.4  # farther than this from the route: plan again from where the robot is
+REPLAN_MIN_S = 0.5  # ...but not more often than this (store clock), so avoidance cannot thrash
+RETRY_PLAN_S = 2.0  # how long a straight-line fallback stands before A* is tried again
+CHARGER_MARGIN_M = 0.1  # a charger is reached this far inside its radius
+BLOCKED_M = 0.3  # a new obstacle closer than this to the route ahead: plan again...
+BLOCKED_RANGE_M = 2.0  # ...if it is within this of the robot
+REPLAN_BLOCKED_S = 0.5  # ...at most this often (sim s)
+
+
+@dataclass(frozen=True)
+class Target:
+    """Where the robot is going: the active goal, or the chosen charging station."""
+
+    kind: str  # "goal" or "charger"
+    ref: str  # the goal id or the station id
+    x: float
+    y: float
+    reach_m: float  # closer than this: reached
+    hold_m: float  # once reached, stay stopped while closer than this
+    goal_id: int | None = None
+
+    @property
+    def key(self) -> tuple[Any, ...]:
+        return (self.kind, self.ref, self.x, self.y)
+
+    @property
+    def label(self) -> str:
+        return f"{self.kind} {self.ref}"
+
+    def inputs(self) -> dict[str, Any]:
+        return {"goal": self.goal_id} if self.kind == "goal" else {"charger": self.ref}
+
+    @classmethod
+    def of_goal(cls, goal: records.Goal) -> Target:
+        return cls("goal", str(goal.id), goal.x, goal.y, goal.tolerance_m, 0.0, goal.id)
+
+    @classmethod
+    def of_station(cls, station: Station) -> Target:
+        reach = max(station.radius_m - CHARGER_MARGIN_M, station.radius_m / 2)
+        return cls("charger", station.station_id, station.x, station.y, reach, station.radius_m)
+
+
+def check_due(route: Route, seen: Seen | None, now: float | None) -> bool:
+    """Whether ``seen`` is a scan not yet checked against ``route`` that may be checked now:
+    at most one replan for obstacles every REPLAN_BLOCKED_S, and each scan once."""
+    if seen is None or seen.scan_id == route.checked_scan or now is None:
+        return False
+    return not now - route.made_stamp < REPLAN_BLOCKED_S
+
+
+def blocks(route: Route, points: Points, x: float, y: float) -> bool:
+    """Whether ``points`` hold an obstacle the route was not planned around within BLOCKED_M
+    of the route ahead and BLOCKED_RANGE_M of the robot at (x, y)."""
+    if not len(points):
+        return False
+    near = np.hypot(points[:, 0] - x, points[:, 1] - y) <= BLOCKED_RANGE_M
+    points = points[near]
+    if not len(points):
+        return False
+    close = points[route.clearance_ahead(x, y, points) < BLOCKED_M]
+    return any(not known(route.avoided, px, py) for px, py in close)
+
+
+class Router:
+    def __init__(self, world: World, clock: Callable[[], float]) -> None:
+        self.world = world
+        self.clock = clock
+
+    def route_for(
+        self, state: RobotState, x: float, y: float, target: Target, now: float | None = None
+    ) -> Progress:
+        """Progress along the robot's cached route to ``target``; plans (again) when the
+        target or the map changed, the robot strayed, a straight fallback is due a retry, or
+        a newly seen unmapped obstacle is close to the route ahead. ``now``: sim time."""
+        data = self.world.map_for(state.info)
+        version = data.version if data else None
+        route = state.route
+        clock = self.clock()
+        if route is not None and route.target_key == target.key and route.map_version == version:
+            progress = follow(route, x, y)
+            age = clock - route.made_at
+            retry = data is not None and not route.planned and age > RETRY_PLAN_S
+            blocked = False
+            if data is not None and check_due(route, state.seen, now):
+                assert state.seen is not None  # check_due holds
+                route.checked_scan = state.seen.scan_id
+                blocked = blocks(route, recent(state.seen, now), x, y)
+            if (
+                not retry
+                and not blocked
+                and (progress.deviation_m <= STRAY_M or age < REPLAN_MIN_S)
+            ):
+                return progress
+        obstacles = recent(state.seen, now)
+        points = self.plan(state, (x, y), (target.x, target.y), target.label, obstacles)
+        if points is None and len(obstacles):
+            # They close every way (or cover the goal): the map alone, and these obstacles
+            # count as considered, so the next scans do not call for the same failed plan.
+            points = self.plan(state, (x, y), (target.x, target.y), target.label)
+        planned = points is not None
+        if not planned and data is not None:
+            self.world.warn_once(
+                f"nopath-{state.info.robot_id}-{target.key}",
+                "no path on the map; heading straight (retried every few seconds)",
+                robot=state.info.robot_id,
+                target=target.label,
+            )
+        state.route = Route.of(
+            target.key, version, points or [(x, y), (target.x, target.y)], planned
+        )
+        state.route.made_at = self.clock()
+        state.route.made_stamp = now if now is not None else 0.0
+        state.route.avoided = buckets(obstacles)
+        state.route.checked_scan = state.seen.scan_id if state.seen is not None else None
+        return follow(state.route, x, y)
+
+    def plan(
+        self,
+        state: RobotState,
+        start: tuple[float, float],
+        goal: tuple[float, float],
+        what: str,
+        obstacles: Points | None = None,
+    ) -> list[tuple[float, float]] | None:
+        """A* on the robot's map, around ``obstacles`` too if given (None: no map, or no path
+        on it)."""
+        data = self.world.map_for(state.info)
+        if data is None:
+            return None
+        started = time.perf_counter()
+        grid = data.grid(state.info.footprint_radius_m)
+        if obstacles is not None and len(obstacles):
+            grid = with_obstacles(grid, obstacles)
+        points = plan_path(grid, start, goal)
+        elapsed_ms = (time.perf_counter() - started) * 1000
+        log.event(
+            logger,
+            logging.DEBUG,
+            "path planned" if points else "no path",
+            robot=state.info.robot_id,
+            target=what,
+            waypoints=len(points) - 1 if points else 0,
+            length_m=round(path_length(points), 2) if points else None,
+            unmapped=len(obstacles) if obstacles is not None else 0,
+            ms=round(elapsed_ms, 1),
+        )
+        return points
+
+    def distance(self, state: RobotState, a: tuple[float, float], b: tuple[float, float]) -> float:
+        """Path length from a to b on the robot's map; straight line without one."""
+        points = self.plan(state, a, b, "distance")
+        return path_length(points) if points else math.hypot(b[0] - a[0], b[1] - a[1])

@@ -1,0 +1,361 @@
+"""Every read and write of the contract the planner does, and what notifications told it.
+
+- :class:`PlannerSource`: the raw typed reads and writes (a Protocol);
+- :class:`PgPlannerSource`: them in SQL, on an asyncpg pool (the planner's only SQL);
+- :class:`PlannerStore`: the one object the planner service holds. It takes a source and a
+  clock, keeps the caches (the world, the active strategies, each robot's active goal, on
+  ``common.freshness.FreshCache``), counts each robot's odometry notifications, and gives the
+  rules the Protocols of view.py.
+
+The caches are read again when a notification says their table changed, and at least every
+REFRESH_S (the world: robots, maps, stations) or FAST_REFRESH_S (strategies, goals) of the
+store's clock in case one was lost. Goal rows change in place (a status), so a goal
+notification always means "read it again", whatever id it names; the planner hears every
+odometry row (30 Hz per robot) and reads neither the world nor the strategies for those.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from common.bus import Notification
+from common.contract import keys, records
+from common.db import Database
+from common.freshness import FreshCache
+from services.planner import chargers, obstacles
+from services.planner.routes import Router, Target
+from services.planner.tracking import Progress
+from services.planner.world import MapData, MapRow, RobotInfo, RobotState, Station, World
+
+REFRESH_S = 2.0  # re-read robots, maps and stations at least this often (store clock)
+# Re-read the active strategies, and each robot's active goal, when a notification says they
+# changed, and at least this often (store clock) in case one was lost.
+FAST_REFRESH_S = 0.5
+
+ROBOTS_SQL = (
+    "SELECT robot_id, world, max_linear_mps, max_angular_rps, footprint_radius_m FROM robot"
+)
+MAP_VERSIONS_SQL = "SELECT map_id, loaded_at FROM map"
+MAP_SQL = (
+    "SELECT resolution_m, origin_x, origin_y, origin_yaw, width, height, grid "
+    "FROM map WHERE map_id = $1"
+)
+STATIONS_SQL = "SELECT station_id, map_id, x, y, radius_m FROM charging_station ORDER BY station_id"
+MARK_REACHED_SQL = (
+    "UPDATE goal SET status = 'reached', finished_stamp = $2 "
+    "WHERE id = $1 AND status = 'active' RETURNING id"
+)
+LIVE_SYSTEM_SQL = (
+    "SELECT max(expires_stamp) FROM command_recommendation WHERE robot_id = $1 "
+    "AND kind = 'system' AND system_command = $2 AND expires_stamp > $3"
+)
+
+_WORLD_TABLES = (keys.ROBOT, keys.MAP, keys.CHARGING_STATION)
+_STRATEGY_TABLES = (keys.ACTIVE_STRATEGY, keys.STRATEGY)
+_WORLD, _ACTIVE = "world", "active"  # the keys of the two whole-table caches
+
+
+@dataclass(frozen=True)
+class Recommendation:
+    """A command_recommendation row to write: a velocity, or a system ``command``, valid
+    from ``stamp`` for ``ttl_s`` (sim s)."""
+
+    robot_id: str
+    source: str
+    priority: int
+    stamp: float
+    ttl_s: float
+    reason: str
+    inputs: dict[str, Any]
+    linear: float = 0.0
+    angular: float = 0.0
+    command: str | None = None  # a system recommendation (no velocity) when set
+
+
+class PlannerSource(Protocol):
+    """The planner's reads and writes of the contract, typed (CONTRACT.md has the tables)."""
+
+    async def robots(self) -> list[RobotInfo]: ...
+
+    async def map_versions(self) -> dict[str, str]:
+        """map_id -> its version (loaded_at, as text)."""
+
+    async def map(self, map_id: str, version: str) -> MapRow | None: ...
+
+    async def stations(self) -> list[Station]:
+        """By station id."""
+
+    async def active_strategies(self) -> dict[str, records.ActiveStrategy]: ...
+
+    async def active_goal(self, robot_id: str) -> records.Goal | None: ...
+
+    async def newest_odometry(self, robot_id: str) -> records.Odometry | None: ...
+
+    async def newest_scan(self, robot_id: str) -> records.LaserScan | None: ...
+
+    async def newest_battery(self, robot_id: str) -> records.Battery | None: ...
+
+    async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
+        """Set the goal 'reached' if it is still active, and notify; whether it was."""
+
+    async def live_system(self, robot_id: str, command: str, now: float) -> float | None:
+        """The newest expiry after ``now`` of the robot's ``command`` recommendations."""
+
+    async def recommend(self, rec: Recommendation) -> int:
+        """Write a command_recommendation row and notify; its id."""
+
+
+class PgPlannerSource:
+    """:class:`PlannerSource` on Postgres: ``Database.write`` notifies after each write."""
+
+    def __init__(self, db: Database) -> None:
+        self.db = db
+
+    async def robots(self) -> list[RobotInfo]:
+        return [RobotInfo(**dict(r)) for r in await self.db.pool.fetch(ROBOTS_SQL)]
+
+    async def map_versions(self) -> dict[str, str]:
+        rows = await self.db.pool.fetch(MAP_VERSIONS_SQL)
+        return {r["map_id"]: str(r["loaded_at"]) for r in rows}
+
+    async def map(self, map_id: str, version: str) -> MapRow | None:
+        row = await self.db.pool.fetchrow(MAP_SQL, map_id)
+        if row is None:
+            return None
+        cells = np.frombuffer(row["grid"], dtype=np.uint8).reshape(row["height"], row["width"])
+        origin = (row["origin_x"], row["origin_y"], row["origin_yaw"])
+        return MapRow(map_id, version, cells, row["resolution_m"], origin)
+
+    async def stations(self) -> list[Station]:
+        return [Station(**dict(r)) for r in await self.db.pool.fetch(STATIONS_SQL)]
+
+    async def active_strategies(self) -> dict[str, records.ActiveStrategy]:
+        return await records.active_strategies(self.db.pool)
+
+    async def active_goal(self, robot_id: str) -> records.Goal | None:
+        return await records.active_goal(self.db.pool, robot_id)
+
+    async def newest_odometry(self, robot_id: str) -> records.Odometry | None:
+        return await records.newest_odometry(self.db.pool, robot_id)
+
+    async def newest_scan(self, robot_id: str) -> records.LaserScan | None:
+        return await records.newest_scan(self.db.pool, robot_id)
+
+    async def newest_battery(self, robot_id: str) -> records.Battery | None:
+        return await records.newest_battery(self.db.pool, robot_id)
+
+    async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
+        updated = await self.db.write(keys.GOAL, robot_id, MARK_REACHED_SQL, goal_id, stamp)
+        return updated is not None
+
+    async def live_system(self, robot_id: str, command: str, now: float) -> float | None:
+        value = await self.db.pool.fetchval(LIVE_SYSTEM_SQL, robot_id, command, now)
+        return float(value) if value is not None else None
+
+    async def recommend(self, rec: Recommendation) -> int:
+        if rec.command is None:
+            return await records.recommend_velocity(
+                self.db,
+                rec.robot_id,
+                source=rec.source,
+                priority=rec.priority,
+                linear=rec.linear,
+                angular=rec.angular,
+                stamp=rec.stamp,
+                ttl_s=rec.ttl_s,
+                reason=rec.reason,
+                inputs=rec.inputs,
+            )
+        return await records.recommend_system(
+            self.db,
+            rec.robot_id,
+            source=rec.source,
+            priority=rec.priority,
+            command=rec.command,
+            stamp=rec.stamp,
+            ttl_s=rec.ttl_s,
+            reason=rec.reason,
+            inputs=rec.inputs,
+        )
+
+
+class PlannerStore:
+    """The planner's one view of the contract: caches, notifications, the world, routes."""
+
+    def __init__(
+        self,
+        source: PlannerSource,
+        clock: Callable[[], float],
+        now: Callable[[], float],
+        started: Callable[[], bool] = lambda: True,
+    ) -> None:
+        self.source = source
+        self._clock = clock  # the planner's own gates: wall time, or sim time in lockstep
+        self._now = now  # sim time
+        self._started = started
+        self.world = World()
+        self.router = Router(self.world, clock)
+        # FreshCache reads again once ``recheck_s`` has passed; the planner always read
+        # again only once it was exceeded: the next float up keeps that to the last tick.
+        self._world = FreshCache[str, None](clock, math.nextafter(REFRESH_S, math.inf))
+        self._active = FreshCache[str, dict[str, records.ActiveStrategy]](
+            clock, math.nextafter(FAST_REFRESH_S, math.inf)
+        )
+        self._goals = FreshCache[str, records.Goal | None](
+            clock, math.nextafter(FAST_REFRESH_S, math.inf)
+        )
+        self._odometry_notes: dict[str, int] = {}
+
+    # -- clocks ------------------------------------------------------------------------------
+    def now(self) -> float:
+        return self._now()
+
+    def started(self) -> bool:
+        return self._started()
+
+    def clock(self) -> float:
+        return self._clock()
+
+    # -- notifications -----------------------------------------------------------------------
+    def note(self, note: Notification) -> None:
+        """A change notification (on the loop): flag what changed, so the rules read robots,
+        maps, stations, strategies and goals again only then (or after a fallback time)."""
+        if note.table in _WORLD_TABLES:
+            self._world.announce(_WORLD)
+        elif note.table in _STRATEGY_TABLES:
+            self._active.announce(_ACTIVE)
+        elif note.table == keys.GOAL:
+            if note.robot is None:
+                self._goals.announce_all()
+            else:
+                self._goals.announce(note.robot)
+        elif note.table == keys.ODOMETRY and note.robot is not None:
+            self._odometry_notes[note.robot] = self._odometry_notes.get(note.robot, 0) + 1
+
+    def forget(self, robot_ids: Iterable[str]) -> None:
+        """Drop what is kept in memory about these robots (replicas: ownership changed)."""
+        for robot_id in robot_ids:
+            self.world.forget(robot_id)
+            self._goals.forget(robot_id)
+
+    # -- the meta-planner's view -------------------------------------------------------------
+    async def refresh(self) -> None:
+        """The world when it changed; the active strategies on every notification of theirs
+        (a strategy switch acts at once), not on every odometry row."""
+        if self._world.stale(_WORLD):
+            await self._world.get(_WORLD, self._read_world)
+            self._active.announce(_ACTIVE)  # with the robots just read
+        if self._active.stale(_ACTIVE):
+            active = await self._active.get(_ACTIVE, self.source.active_strategies)
+            for robot_id, state in self.world.robots.items():
+                entry = active.get(robot_id)
+                state.strategy = entry.strategy if entry else None
+
+    async def _read_world(self) -> None:
+        world = self.world
+        for robot_id in world.set_robots(await self.source.robots()):
+            self._goals.forget(robot_id)  # a robot that comes back reads its goal afresh
+        for map_id in world.stale_maps(versions := await self.source.map_versions()):
+            row = await self.source.map(map_id, versions[map_id])
+            if row is not None:
+                world.maps[map_id] = MapData.of_row(row)
+        world.stations = await self.source.stations()
+
+    def robots(self) -> Iterable[RobotState]:
+        return self.world.robots.values()
+
+    def warn_once(self, what: str, message: str, **fields: Any) -> None:
+        self.world.warn_once(what, message, **fields)
+
+    # -- the target rules' view: reads -------------------------------------------------------
+    def odometry_notes(self, robot_id: str) -> int:
+        return self._odometry_notes.get(robot_id, 0)
+
+    def goal_news(self, robot: RobotState) -> bool:
+        return self._goals.hinted(robot.info.robot_id)
+
+    async def active_goal(self, robot: RobotState) -> records.Goal | None:
+        robot_id = robot.info.robot_id
+        return await self._goals.get(robot_id, lambda: self.source.active_goal(robot_id))
+
+    async def current_goal(self, robot_id: str) -> records.Goal | None:
+        return await self.source.active_goal(robot_id)
+
+    async def newest_odometry(self, robot_id: str) -> records.Odometry | None:
+        return await self.source.newest_odometry(robot_id)
+
+    async def newest_scan(self, robot_id: str) -> records.LaserScan | None:
+        return await self.source.newest_scan(robot_id)
+
+    async def newest_battery(self, robot_id: str) -> records.Battery | None:
+        return await self.source.newest_battery(robot_id)
+
+    # -- writes ------------------------------------------------------------------------------
+    async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
+        return await self.source.mark_reached(goal_id, robot_id, stamp)
+
+    async def live_system(self, robot_id: str, command: str) -> float | None:
+        return await self.source.live_system(robot_id, command, self.now())
+
+    async def recommend_velocity(
+        self,
+        robot_id: str,
+        *,
+        source: str,
+        priority: int,
+        linear: float,
+        angular: float,
+        stamp: float,
+        ttl_s: float,
+        reason: str,
+        inputs: dict[str, Any],
+    ) -> int:
+        return await self.source.recommend(
+            Recommendation(
+                robot_id, source, priority, stamp, ttl_s, reason, inputs, linear, angular
+            )
+        )
+
+    async def recommend_system(
+        self,
+        robot_id: str,
+        *,
+        source: str,
+        priority: int,
+        command: str,
+        stamp: float,
+        ttl_s: float,
+        reason: str,
+        inputs: dict[str, Any],
+    ) -> int:
+        return await self.source.recommend(
+            Recommendation(
+                robot_id, source, priority, stamp, ttl_s, reason, inputs, command=command
+            )
+        )
+
+    # -- the world and routes ----------------------------------------------------------------
+    def robot(self, robot_id: str) -> RobotState | None:
+        return self.world.robots.get(robot_id)
+
+    def map_for(self, info: RobotInfo) -> MapData | None:
+        return self.world.map_for(info)
+
+    def see(self, robot: RobotState, scan: records.LaserScan) -> None:
+        obstacles.see(self.world, robot, scan)
+
+    def route_for(
+        self, robot: RobotState, x: float, y: float, target: Target, now: float | None = None
+    ) -> Progress:
+        return self.router.route_for(robot, x, y, target, now)
+
+    def distance(self, robot: RobotState, a: tuple[float, float], b: tuple[float, float]) -> float:
+        return self.router.distance(robot, a, b)
+
+    def choose_station(self, robot: RobotState, x: float, y: float) -> Station | None:
+        return chargers.choose_station(self.world, self.router, robot, x, y)

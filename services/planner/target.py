@@ -1,0 +1,48 @@
+"""What the planner's target rules share: a supervised rule per robot and kind.
+
+The meta-planner wants, per robot, one "move" rule (the strategy's planner scenario) and one
+"battery" rule; ``common.engine.supervisor.Supervisor`` starts, ends and restarts them
+(meta.py). Each is keyed ``(robot_id, kind)`` and its spec names the rule class and the
+strategy that wants it: any change of either ends the rule and starts a new one in the same
+activation, so a new strategy always starts from a blank rule.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import ClassVar, NamedTuple
+
+from common import log
+from common.engine.supervisor import Supervised, Ticket
+from services.planner.view import PlannerView
+from services.planner.world import RobotState
+
+logger = logging.getLogger("pnav.planner")
+
+RuleKey = tuple[str, str]  # (robot_id, kind)
+
+
+class Spec(NamedTuple):
+    rule: type[TargetRule]
+    strategy: str  # the strategy code that wants it
+
+
+class TargetRule(Supervised[RuleKey, Spec]):
+    """A planner target rule: it sees the store through ``view`` and lives while its ticket
+    does (the base's rule generation clones it then)."""
+
+    kind: ClassVar[str] = ""  # "move" or "battery": one of each per robot
+
+    def __init__(self, view: PlannerView, ticket: Ticket[RuleKey, Spec]) -> None:
+        super().__init__(ticket)
+        self.view = view
+        self.robot_id = ticket.key[0]
+
+    def claim(self) -> RobotState | None:
+        """The robot's state while this rule is still wanted (None once it has ended)."""
+        return self.view.robot(self.robot_id) if self.live else None
+
+    def terminate(self, why: str) -> None:
+        log.event(
+            logger, logging.INFO, "planner rule ended", robot=self.robot_id, kind=self.kind, why=why
+        )

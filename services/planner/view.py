@@ -1,0 +1,123 @@
+"""What the planner's rules see of the store: two small Protocols, never a pool or a service.
+
+``PlannerStore`` (store.py) implements them over Postgres in the service and over the
+in-memory contract in the monolith (pnav/monolith/planner.py); a test may implement them
+however it likes. Target rules (the move scenarios, the battery rules) take a
+:class:`PlannerView`; the meta-planner a :class:`MetaView`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any, Protocol
+
+from common.contract import records
+from services.planner.routes import Target
+from services.planner.tracking import Progress
+from services.planner.world import MapData, RobotInfo, RobotState, Station
+
+
+class Clocks(Protocol):
+    def now(self) -> float:
+        """Sim time."""
+
+    def started(self) -> bool:
+        """Whether sim time is known yet."""
+
+    def clock(self) -> float:
+        """The clock of the planner's own gates: wall s in a service, sim s in lockstep."""
+
+
+class Contract(Clocks, Protocol):
+    """The rows the target rules read and write, and what notifications told the store."""
+
+    def odometry_notes(self, robot_id: str) -> int:
+        """How many odometry notifications named the robot so far."""
+
+    def goal_news(self, robot: RobotState) -> bool:
+        """Whether a goal notification for the robot came since its goal was last read."""
+
+    async def active_goal(self, robot: RobotState) -> records.Goal | None:
+        """The robot's active goal, read again only after a goal notification for it (or
+        FAST_REFRESH_S after the last read)."""
+
+    async def current_goal(self, robot_id: str) -> records.Goal | None:
+        """The robot's active goal, read now."""
+
+    async def newest_odometry(self, robot_id: str) -> records.Odometry | None: ...
+
+    async def newest_scan(self, robot_id: str) -> records.LaserScan | None: ...
+
+    async def newest_battery(self, robot_id: str) -> records.Battery | None: ...
+
+    async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
+        """Set the goal 'reached' and notify; False if it was no longer active."""
+
+    async def live_system(self, robot_id: str, command: str) -> float | None:
+        """Expiry of this robot's newest unexpired ``command`` recommendation, if any."""
+
+    async def recommend_velocity(
+        self,
+        robot_id: str,
+        *,
+        source: str,
+        priority: int,
+        linear: float,
+        angular: float,
+        stamp: float,
+        ttl_s: float,
+        reason: str,
+        inputs: dict[str, Any],
+    ) -> int: ...
+
+    async def recommend_system(
+        self,
+        robot_id: str,
+        *,
+        source: str,
+        priority: int,
+        command: str,
+        stamp: float,
+        ttl_s: float,
+        reason: str,
+        inputs: dict[str, Any],
+    ) -> int: ...
+
+
+class Planning(Protocol):
+    """The world and the routes on it."""
+
+    def robot(self, robot_id: str) -> RobotState | None: ...
+
+    def map_for(self, info: RobotInfo) -> MapData | None: ...
+
+    def see(self, robot: RobotState, scan: records.LaserScan) -> None:
+        """Note the scan's unmapped obstacles (obstacles.py)."""
+
+    def route_for(
+        self, robot: RobotState, x: float, y: float, target: Target, now: float | None = None
+    ) -> Progress: ...
+
+    def distance(self, robot: RobotState, a: tuple[float, float], b: tuple[float, float]) -> float:
+        """Path length on the robot's map (a straight line without one)."""
+
+    def choose_station(self, robot: RobotState, x: float, y: float) -> Station | None: ...
+
+
+class PlannerView(Contract, Planning, Protocol):
+    """Everything a target rule sees."""
+
+
+class MetaView(Protocol):
+    """What the meta-planner sees."""
+
+    async def refresh(self) -> None:
+        """Read what changed: robots, maps and stations; the active strategies."""
+
+    def robots(self) -> Iterable[RobotState]: ...
+
+    def warn_once(self, what: str, message: str, **fields: Any) -> None: ...
+
+
+class PlannerStoreView(MetaView, PlannerView, Protocol):
+    """Both views: what the planner's store (store.PlannerStore) is."""

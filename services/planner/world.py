@@ -1,0 +1,164 @@
+"""The world as the planner knows it: robots, maps with their planning grids, charging stations.
+
+The store (store.py) fills it from the contract (robot, map and charging_station rows) when
+a notification says they changed, or every REFRESH_S as a fallback; the rules read it. Per
+robot it also holds what the planner works out between two activations: the strategy, the
+cached route, the charger of a CHARGE session, the poses and the obstacles seen.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from common import log
+from common.contract import records
+from services.planner.grid import OCCUPIED_AT, PlanGrid, plan_grid
+from services.planner.obstacles import PoseTrail, Seen
+from services.planner.tracking import Route
+
+logger = logging.getLogger("pnav.planner")
+
+INFLATION_MARGIN_M = 0.05  # clearance kept beyond the footprint radius when planning
+
+
+@dataclass(frozen=True)
+class RobotInfo:
+    robot_id: str
+    world: str | None
+    max_linear_mps: float
+    max_angular_rps: float
+    footprint_radius_m: float
+
+
+@dataclass(frozen=True)
+class Station:
+    station_id: str
+    map_id: str | None
+    x: float
+    y: float
+    radius_m: float
+
+
+@dataclass(frozen=True)
+class MapRow:
+    """One row of the map table, as the source reads it (cells: height x width, row 0 at the
+    bottom)."""
+
+    map_id: str
+    version: str
+    cells: np.ndarray[Any, np.dtype[np.uint8]]
+    resolution: float
+    origin: tuple[float, float, float]
+
+
+class MapData:
+    """One map row, with its planning grids per inflation radius (built on first use)."""
+
+    def __init__(
+        self,
+        map_id: str,
+        version: str,
+        occupied: np.ndarray[Any, np.dtype[np.bool_]],
+        resolution: float,
+        origin: tuple[float, float, float],
+    ) -> None:
+        self.map_id = map_id
+        self.version = version
+        self.occupied = occupied
+        self.resolution = resolution
+        self.origin = origin
+        self._grids: dict[float, PlanGrid] = {}
+
+    @classmethod
+    def of_row(cls, row: MapRow) -> MapData:
+        log.event(logger, logging.INFO, "map loaded", map=row.map_id, cells=int(row.cells.size))
+        return cls(row.map_id, row.version, row.cells >= OCCUPIED_AT, row.resolution, row.origin)
+
+    def grid(self, footprint_m: float) -> PlanGrid:
+        radius = round(footprint_m + INFLATION_MARGIN_M, 3)
+        grid = self._grids.get(radius)
+        if grid is None:
+            grid = self._grids[radius] = plan_grid(
+                self.occupied, self.resolution, self.origin, radius
+            )
+        return grid
+
+
+@dataclass
+class RobotState:
+    info: RobotInfo
+    strategy: records.Strategy | None = None
+    route: Route | None = None
+    station: Station | None = None  # charger chosen for the current CHARGE session
+    poses: PoseTrail = field(default_factory=PoseTrail)
+    seen: Seen | None = None
+    scan_read_at: float = -math.inf  # sim time the newest scan was last read
+
+    def note_pose(self, odom: records.Odometry) -> None:
+        self.poses.note(odom)
+
+    def pose_at(self, stamp: float) -> tuple[float, float, float] | None:
+        return self.poses.at(stamp)
+
+
+class World:
+    """Robots by id (in the order the contract lists them), maps by id, stations."""
+
+    def __init__(self) -> None:
+        self.robots: dict[str, RobotState] = {}
+        self.maps: dict[str, MapData] = {}
+        self.stations: list[Station] = []
+        self._warned: set[str] = set()
+
+    def set_robots(self, infos: Iterable[RobotInfo]) -> set[str]:
+        """Take the robot rows as read; the ids of the robots that came or went."""
+        seen: set[str] = set()
+        changed: set[str] = set()
+        for info in infos:
+            seen.add(info.robot_id)
+            state = self.robots.get(info.robot_id)
+            if state is None:
+                self.robots[info.robot_id] = RobotState(info)
+                changed.add(info.robot_id)
+            elif state.info != info:
+                state.info = info
+                state.route = None  # new footprint or world: plan again
+        for gone in set(self.robots) - seen:
+            del self.robots[gone]
+            changed.add(gone)
+        return changed
+
+    def stale_maps(self, versions: dict[str, str]) -> list[str]:
+        """Drop the maps no longer in ``versions``; the ids of those to (re)load, in order."""
+        for map_id in set(self.maps) - set(versions):
+            del self.maps[map_id]
+        return [
+            map_id
+            for map_id, version in versions.items()
+            if map_id not in self.maps or self.maps[map_id].version != version
+        ]
+
+    def map_for(self, info: RobotInfo) -> MapData | None:
+        """The robot's world's map; the only map if the robot names none."""
+        if info.world and info.world in self.maps:
+            return self.maps[info.world]
+        if len(self.maps) == 1:
+            return next(iter(self.maps.values()))
+        return None
+
+    def forget(self, robot_id: str) -> None:
+        """Start the robot afresh (its strategy stays: it is the contract's, read as usual)."""
+        state = self.robots.get(robot_id)
+        if state is not None:
+            self.robots[robot_id] = RobotState(state.info, strategy=state.strategy)
+
+    def warn_once(self, what: str, message: str, **fields: Any) -> None:
+        if what not in self._warned:
+            self._warned.add(what)
+            log.event(logger, logging.WARNING, message, **fields)

@@ -1,0 +1,112 @@
+"""The planner as the service seeds it, on the in-memory contract and the real store, driven
+one engine activation at a time on a sim clock the test moves (no database, no Zenoh)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from common.bus import Notification
+from common.config import EngineSettings
+from common.contract import keys
+from common.engine import Engine
+from pnav.monolith.contract import MemoryContract
+from pnav.monolith.planner import MemoryPlannerSource
+from pnav.monolith.strategies import shipped_strategies
+from services.planner import meta
+from services.planner.scenario import MoveScenario
+from services.planner.store import PlannerStore
+from services.planner.target import TargetRule
+
+ROBOT = "r1"
+
+
+class Planner:
+    """One robot standing at (0, 0) facing +x, its odometry and battery written every tick."""
+
+    def __init__(
+        self,
+        scenarios: Mapping[str, type[MoveScenario]] | None = None,
+        extra_strategies: tuple[dict[str, Any], ...] = (),
+    ) -> None:
+        self.t = 100.0
+        self.contract = MemoryContract()
+        self.store = PlannerStore(MemoryPlannerSource(self.contract), self.now, self.now)
+        self.contract.listeners.append(
+            lambda table, robot, row_id: self.store.note(Notification(table, robot, row_id))
+        )
+        self.engine = Engine(EngineSettings(period_s=60.0), name="planner")
+        self.engine.clock = self.now
+        self.owned = {ROBOT}
+        found = meta.move_scenarios() if scenarios is None else scenarios
+        self.rules = meta.seed(self.engine, self.store, found, owns=self.owned.__contains__)
+        for strategy in shipped_strategies().values():
+            row = {
+                "code": strategy.code,
+                "planner_scenario": strategy.planner_scenario,
+                "controller_scenarios": list(strategy.controller_scenarios),
+                "params": dict(strategy.params),
+            }
+            self.contract.insert(keys.STRATEGY, row)
+        for row in extra_strategies:
+            self.contract.insert(keys.STRATEGY, {"controller_scenarios": [], **row})
+        self.contract.insert(
+            keys.ROBOT,
+            {
+                "robot_id": ROBOT,
+                "world": None,
+                "max_linear_mps": 0.22,
+                "max_angular_rps": 2.84,
+                "footprint_radius_m": 0.105,
+            },
+        )
+        self.contract.insert(
+            keys.CHARGING_STATION,
+            {"station_id": "dock", "map_id": None, "x": -2.0, "y": 0.0, "radius_m": 0.3},
+        )
+
+    def now(self) -> float:
+        return self.t
+
+    # -- what the other parties write --------------------------------------------------------
+    def strategy(self, code: str) -> None:
+        row = {"robot_id": ROBOT, "strategy_code": code, "resume_code": None, "source": "user"}
+        self.contract.insert(keys.ACTIVE_STRATEGY, row)
+
+    def goal(self, x: float, y: float) -> int:
+        row = {"robot_id": ROBOT, "x": x, "y": y, "tolerance_m": 0.15, "status": "active"}
+        return self.contract.insert(keys.GOAL, row | {"stamp": self.t, "finished_stamp": None})
+
+    async def tick(self, dt: float = 0.05) -> None:
+        """Sim time moves on, a sensor row of each kind comes, the engine runs once."""
+        self.sense(dt)
+        await self.engine.activation()
+
+    def sense(self, dt: float) -> None:
+        """Sim time moves on; the robot's odometry and battery rows come."""
+        self.t += dt
+        odometry = {"robot_id": ROBOT, "stamp": self.t, "x": 0.0, "y": 0.0, "yaw": 0.0}
+        self.contract.insert(keys.ODOMETRY, odometry | {"linear_mps": 0.0, "angular_rps": 0.0})
+        battery = {"robot_id": ROBOT, "stamp": self.t, "energy_wh": 15.0, "capacity_wh": 19.98}
+        self.contract.insert(keys.BATTERY, battery | {"percentage": 75.0, "charging": False})
+
+    # -- what the test looks at --------------------------------------------------------------
+    def running(self) -> dict[str, tuple[str, str]]:
+        """kind -> (rule, strategy) of the robot's live rules."""
+        return {
+            kind: (ticket.spec.rule.__name__, ticket.spec.strategy)
+            for (_robot, kind), ticket in self.rules.supervisor.running.items()
+        }
+
+    def queue(self) -> list[str]:
+        """The rules the next activation runs, in order."""
+        return [rule.name for rule in self.engine.current]
+
+    def live_rule(self, kind: str) -> TargetRule:
+        ticket = self.rules.supervisor.ticket((ROBOT, kind))
+        assert ticket is not None and isinstance(ticket.rule, TargetRule)
+        return ticket.rule
+
+    def recommendations(self, source: str | None = None) -> list[dict[str, Any]]:
+        rows = self.contract[keys.COMMAND_RECOMMENDATION].rows(ROBOT)
+        return [r for r in rows if source is None or r["source"] == source]

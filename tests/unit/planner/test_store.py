@@ -1,0 +1,103 @@
+"""The planner's store: what it reads again, and when (notifications, fallback times), on
+the in-memory contract. A row written with no notification stands for a lost one."""
+
+from __future__ import annotations
+
+from common.contract import keys
+from services.planner.store import FAST_REFRESH_S, REFRESH_S
+from tests.unit.planner.harness import ROBOT, Planner
+
+
+def robot_row(robot_id: str) -> dict[str, object]:
+    return {
+        "robot_id": robot_id,
+        "world": None,
+        "max_linear_mps": 0.22,
+        "max_angular_rps": 2.84,
+        "footprint_radius_m": 0.105,
+    }
+
+
+async def test_the_world_is_read_again_on_a_notification_or_once_refresh_s_is_exceeded() -> None:
+    p = Planner()
+    store = p.store
+    await store.refresh()
+    assert [r.info.robot_id for r in store.robots()] == [ROBOT]
+    p.contract.insert(keys.ROBOT, robot_row("r2"), notify=False)  # its notification is lost
+    p.t += REFRESH_S
+    await store.refresh()
+    assert [r.info.robot_id for r in store.robots()] == [ROBOT]  # not yet: exactly REFRESH_S
+    p.t += 1e-6
+    await store.refresh()
+    assert [r.info.robot_id for r in store.robots()] == [ROBOT, "r2"]
+    p.contract.insert(keys.ROBOT, robot_row("r3"))  # notified: read at the next refresh
+    await store.refresh()
+    assert [r.info.robot_id for r in store.robots()] == [ROBOT, "r2", "r3"]
+
+
+async def test_a_strategy_change_is_read_at_once_and_a_lost_one_after_fast_refresh_s() -> None:
+    p = Planner()
+    store = p.store
+    p.strategy("GOTO_AVOID")
+    await store.refresh()
+    robot = store.robot(ROBOT)
+    assert robot is not None and robot.strategy is not None
+    assert robot.strategy.code == "GOTO_AVOID"
+    p.strategy("CHARGE")
+    await store.refresh()
+    assert robot.strategy.code == "CHARGE"
+    row = {"robot_id": ROBOT, "strategy_code": "IDLE", "resume_code": None, "source": "user"}
+    p.contract.insert(keys.ACTIVE_STRATEGY, row, notify=False)
+    p.t += FAST_REFRESH_S
+    await store.refresh()
+    assert robot.strategy.code == "CHARGE"
+    p.t += 1e-6
+    await store.refresh()
+    assert robot.strategy.code == "IDLE"
+
+
+async def test_the_goal_is_read_again_after_a_goal_notification_and_says_it_has_news() -> None:
+    p = Planner()
+    store = p.store
+    await store.refresh()
+    robot = store.robot(ROBOT)
+    assert robot is not None
+    assert not store.goal_news(robot)  # never read: nothing to compare with
+    assert await store.active_goal(robot) is None
+    first = p.goal(1.0, 0.0)  # notified
+    assert store.goal_news(robot)
+    goal = await store.active_goal(robot)
+    assert goal is not None and goal.id == first
+    assert not store.goal_news(robot)
+    p.contract[keys.GOAL].by_id[first]["status"] = "cancelled"  # changed in place, not told
+    assert await store.active_goal(robot) == goal  # the cached read stands...
+    p.t += FAST_REFRESH_S + 1e-6
+    assert await store.active_goal(robot) is None  # ...until FAST_REFRESH_S is exceeded
+    second = p.goal(2.0, 0.0)
+    p.contract.changed(keys.GOAL, None, None)  # a hint naming no robot: every robot's goal
+    assert store.goal_news(robot)
+    goal = await store.active_goal(robot)
+    assert goal is not None and goal.id == second
+
+
+async def test_marking_a_goal_reached_notifies_and_the_next_read_sees_it() -> None:
+    p = Planner()
+    store = p.store
+    await store.refresh()
+    robot = store.robot(ROBOT)
+    assert robot is not None
+    goal_id = p.goal(1.0, 0.0)
+    assert await store.active_goal(robot) is not None
+    assert await store.mark_reached(goal_id, ROBOT, p.t)
+    assert not await store.mark_reached(goal_id, ROBOT, p.t)  # no longer active
+    assert p.contract[keys.GOAL].by_id[goal_id]["status"] == "reached"
+    assert await store.active_goal(robot) is None  # read again: our own write notified
+
+
+async def test_odometry_notifications_are_counted_per_robot() -> None:
+    p = Planner()
+    before = p.store.odometry_notes(ROBOT)
+    p.sense(0.05)
+    p.sense(0.05)
+    assert p.store.odometry_notes(ROBOT) == before + 2
+    assert p.store.odometry_notes("r9") == 0
