@@ -13,8 +13,9 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import secrets
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -142,45 +143,94 @@ def unpack(payload: bytes) -> Any:
 
 @dataclass(frozen=True)
 class Notification:
-    """A change hint: ``table`` changed for ``robot`` (None: not robot-scoped), newest ``id``."""
+    """A change hint: ``table`` changed for ``robot`` (None: not robot-scoped), newest ``id``.
+
+    Since contract version 3 (DESIGN.md section 7) a notification may carry ``row``, the image
+    of the committed row ``id`` (its contract columns, CONTRACT.md "Row images"), so a reader
+    can act on it and skip its query. ``src`` names the publisher (one per process) and ``seq``
+    counts its notifications on this key: a reader that sees a ``seq`` skip (or no image)
+    reads the table. The table stays the source of truth.
+    """
 
     table: str
     robot: str | None
     id: int | None
+    row: Mapping[str, Any] | None = None
+    src: str | None = None
+    seq: int | None = None
 
     def encode(self) -> bytes:
-        return pack({"table": self.table, "robot": self.robot, "id": self.id})
+        body: dict[str, Any] = {"table": self.table, "robot": self.robot, "id": self.id}
+        if self.row is not None:
+            body["row"] = dict(self.row)
+        if self.src is not None:
+            body["src"], body["seq"] = self.src, self.seq
+        return pack(body)
 
     @classmethod
     def decode(cls, key: str, payload: bytes) -> Notification:
         table, robot = keys.parse_notify_key(key)
         body = unpack(payload) if payload else {}
-        row_id = body.get("id") if isinstance(body, dict) else None
-        return cls(table, robot, row_id if isinstance(row_id, int) else None)
+        if not isinstance(body, dict):
+            return cls(table, robot, None)
+        row_id = body.get("id")
+        row_id = row_id if isinstance(row_id, int) else None
+        row = body.get("row")
+        src, seq = body.get("src"), body.get("seq")
+        return cls(
+            table,
+            robot,
+            row_id,
+            # an image is only an image of the row it names
+            row
+            if isinstance(row, dict) and row_id is not None and row.get("id") == row_id
+            else None,
+            src if isinstance(src, str) else None,
+            seq if isinstance(seq, int) else None,
+        )
 
 
 class Notifier:
     """Publishes change notifications, one cached express publisher per key; each one counted
-    as sent on ``ledger`` in a lockstep run."""
+    as sent on ``ledger`` in a lockstep run.
 
-    def __init__(self, session: zenoh.Session, ledger: Ledger | None = None) -> None:
+    ``images=False`` publishes no row images (PNAV_NOTIFY_IMAGES=off): every reader then
+    falls back on its query, which is what a contract test checks.
+    """
+
+    def __init__(
+        self, session: zenoh.Session, ledger: Ledger | None = None, *, images: bool = True
+    ) -> None:
         self._session = session
         self._ledger = ledger
+        self.images = images
+        self.src = secrets.token_hex(4)
         self._publishers: dict[str, zenoh.Publisher] = {}
+        self._seqs: dict[str, int] = {}
         self._lock = threading.Lock()
 
-    def notify(self, table: str, robot: str | None, row_id: int | None) -> None:
+    def notify(
+        self,
+        table: str,
+        robot: str | None,
+        row_id: int | None,
+        row: Mapping[str, Any] | None = None,
+    ) -> None:
+        """Publish that ``table`` changed for ``robot``; call only after the commit.
+
+        ``row``: the committed row ``row_id``'s image (its contract columns, with ``id``).
+        """
         key = keys.notify_key(table, robot)
-        publisher = self._publishers.get(key)
-        if publisher is None:
-            with self._lock:
-                publisher = self._publishers.get(key)
-                if publisher is None:
-                    publisher = self._session.declare_publisher(key, express=True)
-                    self._publishers[key] = publisher
+        with self._lock:
+            publisher = self._publishers.get(key)
+            if publisher is None:
+                publisher = self._session.declare_publisher(key, express=True)
+                self._publishers[key] = publisher
+            seq = self._seqs[key] = self._seqs.get(key, 0) + 1
         if self._ledger is not None:
             self._ledger.sent_on(key)
-        publisher.put(Notification(table, robot, row_id).encode())
+        image = row if self.images and row is not None and row_id is not None else None
+        publisher.put(Notification(table, robot, row_id, image, self.src, seq).encode())
 
     def close(self) -> None:
         with self._lock:

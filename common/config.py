@@ -206,6 +206,10 @@ class ServiceConfig:
     log_level: str = "INFO"
     # PNAV_LOCKSTEP: the services a lockstep sim waits for; non-empty: this one takes part
     lockstep: tuple[str, ...] = ()
+    # PNAV_NOTIFY_IMAGES: notifications carry the committed row's image (CONTRACT.md, "Row
+    # images"); off: hints only, every reader queries the table (a fallback test, or a
+    # network where payload size matters more than a round trip)
+    notify_images: bool = True
 
     @classmethod
     def from_env(cls, service: str, env: Env | None = None) -> ServiceConfig:
@@ -228,4 +232,5 @@ class ServiceConfig:
             instance=_get(env, "PNAV_INSTANCE", default_instance()),
             log_level=_get(env, "PNAV_LOG_LEVEL", cls.log_level).upper(),
             lockstep=lockstep_from_env(env),
+            notify_images=_bool(env, "PNAV_NOTIFY_IMAGES", cls.notify_images),
         )

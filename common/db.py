@@ -11,7 +11,7 @@ import asyncio
 import json
 import logging
 import time
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Mapping
 from contextlib import asynccontextmanager
 from typing import Any
 
@@ -102,17 +102,26 @@ class Changes:
 
     def __init__(self, conn: asyncpg.Connection) -> None:
         self.conn = conn
-        self._pending: dict[tuple[str, str | None], int | None] = {}
+        self._pending: dict[tuple[str, str | None], tuple[int | None, Mapping[str, Any] | None]]
+        self._pending = {}
 
-    def changed(self, table: str, robot: str | None, row_id: int | None = None) -> None:
-        """Announce ``table`` changed for ``robot``; the newest id per (table, robot) wins."""
+    def changed(
+        self,
+        table: str,
+        robot: str | None,
+        row_id: int | None = None,
+        row: Mapping[str, Any] | None = None,
+    ) -> None:
+        """Announce ``table`` changed for ``robot``; the newest id per (table, robot) wins,
+        with its image ``row`` (if given)."""
         key = (table, robot)
-        previous = self._pending.get(key)
-        if row_id is None or previous is None or row_id > previous:
-            self._pending[key] = row_id if row_id is not None else previous
+        held = self._pending.get(key, (None, None))[0] if key in self._pending else -1
+        # an id-less change keeps the newest id already announced (and its image)
+        if held == -1 or (row_id is not None and (held is None or row_id > held)):
+            self._pending[key] = (row_id, row)
 
-    def items(self) -> list[tuple[str, str | None, int | None]]:
-        return [(table, robot, row_id) for (table, robot), row_id in self._pending.items()]
+    def items(self) -> list[tuple[str, str | None, int | None, Mapping[str, Any] | None]]:
+        return [(t, robot, row_id, row) for (t, robot), (row_id, row) in self._pending.items()]
 
 
 class Database:
@@ -122,28 +131,38 @@ class Database:
         self.pool = pool
         self.notifier = notifier
 
-    async def write(self, table: str, robot: str | None, sql: str, *args: Any) -> Any:
+    async def write(
+        self,
+        table: str,
+        robot: str | None,
+        sql: str,
+        *args: Any,
+        image: Mapping[str, Any] | None = None,
+    ) -> Any:
         """Run one statement (autocommit), then notify ``table``/``robot``.
 
         If the statement returns a value (``RETURNING id``) it is the notification's id and
-        the return value.
+        the return value; ``image``, the row's contract columns as written, then goes with
+        the notification (with that ``id``), so readers may skip their query.
         """
         async with self.pool.acquire() as conn:
             value = await conn.fetchval(sql, *args)
-        self.notifier.notify(table, robot, value if isinstance(value, int) else None)
+        row_id = value if isinstance(value, int) else None
+        row = {**image, "id": row_id} if image is not None and row_id is not None else None
+        self.notifier.notify(table, robot, row_id, row)
         return value
 
     @asynccontextmanager
     async def transaction(self) -> AsyncIterator[Changes]:
-        """``async with db.transaction() as tx: ... tx.changed(table, robot, id)``.
+        """``async with db.transaction() as tx: ... tx.changed(table, robot, id, row)``.
 
         Notifications go out after COMMIT, and not at all on rollback.
         """
         async with self.pool.acquire() as conn, conn.transaction():
             changes = Changes(conn)
             yield changes
-        for table, robot, row_id in changes.items():
-            self.notifier.notify(table, robot, row_id)
+        for table, robot, row_id, row in changes.items():
+            self.notifier.notify(table, robot, row_id, row)
 
     async def close(self, timeout_s: float = 5.0) -> None:
         try:

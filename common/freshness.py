@@ -133,3 +133,25 @@ class FreshCache(Generic[K, T]):
 
     def clear(self) -> None:
         self._entries.clear()
+
+
+class Sequences:
+    """Which notifications were lost: per (key, publisher), the ``seq`` seen last.
+
+    A publisher numbers its notifications per key (``common.bus.Notifier``); a skip in that
+    numbering means one never arrived, and whatever a reader holds from images may be missing
+    a row: read the table. The first notification from a publisher is no gap (the reader
+    read the table when it started, or reads it at its period F anyway).
+    """
+
+    def __init__(self) -> None:
+        self._last: dict[tuple[str, str], int] = {}
+
+    def gap(self, key: str, src: str | None, seq: int | None) -> bool:
+        """Record this notification; whether one from the same publisher was skipped (a
+        notification without numbering counts as a gap: nothing can be known)."""
+        if src is None or seq is None:
+            return True
+        last = self._last.get((key, src))
+        self._last[(key, src)] = seq if last is None else max(last, seq)
+        return last is not None and seq != last + 1

@@ -64,7 +64,10 @@ class Runtime:
                 pool = await create_pool(
                     config.database_url, max_size=config.pool_max, wait_s=config.db_wait_s
                 )
-                runtime.db = Database(pool, bus.Notifier(runtime.session, runtime.ledger))
+                runtime.db = Database(
+                    pool,
+                    bus.Notifier(runtime.session, runtime.ledger, images=config.notify_images),
+                )
             runtime._token = runtime.session.liveliness().declare_token(
                 keys.alive_key(config.service, config.instance)
             )

@@ -1,0 +1,67 @@
+"""Notifications that carry the committed row (DESIGN.md section 7): encoding, the write that
+sends them, numbering per publisher and key, and the gap a reader sees."""
+
+from __future__ import annotations
+
+import asyncio
+
+from common import bus
+from common.bus import Notification
+from common.config import ZenohSettings
+from common.contract import keys
+from common.db import Database, create_pool
+from common.freshness import Sequences
+
+GOAL_KEY = keys.notify_key(keys.GOAL, "r1")
+
+
+def test_an_image_travels_with_its_row_id_and_nothing_else_is_taken_for_one() -> None:
+    note = Notification(keys.GOAL, "r1", 7, {"id": 7, "x": 1.5}, "ab12", 3)
+    back = Notification.decode(GOAL_KEY, note.encode())
+    assert back == note
+    # an image naming another row, or no row id at all, is not an image of this change
+    stray = Notification(keys.GOAL, "r1", 7, {"id": 6, "x": 1.5}).encode()
+    assert Notification.decode(GOAL_KEY, stray).row is None
+    idless = Notification(keys.GOAL, "r1", None, {"id": 6}).encode()
+    assert Notification.decode(GOAL_KEY, idless).row is None
+    # a hint from a client that knows nothing of images still reads
+    plain = bus.pack({"table": keys.GOAL, "robot": "r1", "id": 9})
+    assert Notification.decode(GOAL_KEY, plain) == Notification(keys.GOAL, "r1", 9)
+
+
+def test_a_skipped_seq_from_one_publisher_is_a_gap_and_other_publishers_are_apart() -> None:
+    seqs = Sequences()
+    assert not seqs.gap(GOAL_KEY, "a", 5)  # the first heard from "a": no gap
+    assert not seqs.gap(GOAL_KEY, "a", 6)
+    assert not seqs.gap(GOAL_KEY, "b", 1)  # another publisher counts on its own
+    assert seqs.gap(GOAL_KEY, "a", 8)  # 7 never came
+    assert not seqs.gap(GOAL_KEY, "a", 9)
+    assert seqs.gap(GOAL_KEY, None, None)  # unnumbered: nothing can be known
+
+
+async def test_a_write_with_an_image_notifies_it_with_the_committed_id(
+    db_url: str, zenoh_settings: ZenohSettings
+) -> None:
+    got: asyncio.Queue[Notification] = asyncio.Queue()
+    session = bus.open_session(zenoh_settings)
+    sub = bus.subscribe(
+        session,
+        keys.notify_watch(keys.ROBOT),
+        lambda key, payload: got.put_nowait(Notification.decode(key, payload)),
+    )
+    pool = await create_pool(db_url, max_size=2)
+    plain = Database(pool, bus.Notifier(session, images=False))
+    imaged = Database(pool, bus.Notifier(session))
+    try:
+        sql = "INSERT INTO robot (robot_id) VALUES ($1) RETURNING 41"
+        await imaged.write(keys.ROBOT, "r1", sql, "r1", image={"robot_id": "r1"})
+        first = await asyncio.wait_for(got.get(), 10)
+        assert (first.id, first.row, first.seq) == (41, {"robot_id": "r1", "id": 41}, 1)
+        await plain.write(keys.ROBOT, "r2", sql, "r2", image={"robot_id": "r2"})
+        second = await asyncio.wait_for(got.get(), 10)
+        assert (second.id, second.row) == (41, None)  # PNAV_NOTIFY_IMAGES=off: a hint only
+        assert first.src != second.src  # two notifiers, two publishers
+    finally:
+        sub.undeclare()
+        await pool.close()
+        session.close()
