@@ -215,9 +215,9 @@ class Engine:
         return self._stats.get(rule_type) or RuleStats(rule_type.__name__, rule_type.scenario)
 
     # -- the activation loop ---------------------------------------------------------------
-    def wake(self) -> None:
-        """A notification came: start an activation as soon as the trigger allows (call on
-        the engine's loop)."""
+    def wake(self, robot: str | None = None) -> None:
+        """A notification came (about ``robot``, if it named one): start an activation as
+        soon as the trigger allows (call on the engine's loop)."""
         self.signals.woken = True
         self.signals.look()
 
@@ -227,10 +227,11 @@ class Engine:
         self.signals.woken = True
         self.signals.look_threadsafe()
 
-    def hurry(self) -> None:
-        """A rule generated target rules that should not wait for a notification or for F
-        (they are in ``next``, so they run in the next activation): start it right after the
-        one under way (call on the engine's loop, e.g. from a rule's actions)."""
+    def hurry(self, robot: str | None = None) -> None:
+        """A rule generated target rules (for ``robot``, if they are one robot's) that should
+        not wait for a notification or for F (they are in ``next``, so they run in the next
+        activation): start it right after the one under way (call on the engine's loop, e.g.
+        from a rule's actions)."""
         self.signals.hurried = True
         self.signals.look()
 

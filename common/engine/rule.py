@@ -46,6 +46,9 @@ class Rule:
     scenario: ClassVar[str] = ""
     meta: ClassVar[bool] = False
     watches: ClassVar[tuple[str, ...]] = ()
+    # The robot this rule works for (None: every robot, or none; meta rules): an activation
+    # woken by one robot's notifications runs that robot's rules and the robot-less ones.
+    robot_id: str | None = None
 
     # Set by the engine after step 2 (the thesis' local variable "activated").
     activated: bool = False
