@@ -31,6 +31,8 @@ class TargetRule(Supervised[RuleKey, Spec]):
     """A planner target rule: it sees the store through ``view`` and lives while its ticket
     does (the base's rule generation clones it then)."""
 
+    robot_id: str  # always one robot's rule
+
     kind: ClassVar[str] = ""  # "move" or "battery": one of each per robot
 
     def __init__(self, view: PlannerView, ticket: Ticket[RuleKey, Spec]) -> None:

@@ -36,6 +36,8 @@ class Chain:
 class ApplyCommand(Rule):
     """Apply one pending user_command or system_command row to its robot's strategy."""
 
+    robot_id: str  # always one robot's rule
+
     scenario = "strategy"
 
     def __init__(
@@ -116,6 +118,8 @@ class ApplyCommand(Rule):
 
 class ApplyDefaultStrategy(Rule):
     """Give a robot with no active_strategy row the default strategy (source 'default')."""
+
+    robot_id: str  # always one robot's rule
 
     scenario = "strategy"
 
