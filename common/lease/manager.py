@@ -17,7 +17,7 @@ from common.contract import keys
 from common.errors import ConnectionFailure
 from common.lease.cycle import Cycle, LeaseCounters
 from common.lease.holdings import Holdings
-from common.lease.session import LockSession, statement_timeout
+from common.lease.session import LockSession, open_session, statement_timeout
 from common.lease.sql import SHUTDOWN
 
 logger = logging.getLogger("pnav.lease")
@@ -128,31 +128,13 @@ class LeaseManager:
         self._loop = self._held.loop = asyncio.get_running_loop()
         self._closing = False
         try:
-            await self._open_first()
+            await self._open(self.connect_wait_s)
             async with self._lock:
                 await self._step()
         except BaseException:
             self._terminate()
             raise
         self._task = asyncio.create_task(self._run(), name=f"leases-{self.service}")
-
-    async def _open_first(self) -> None:
-        deadline = time.monotonic() + self.connect_wait_s
-        while True:
-            try:
-                await self._open()
-                return
-            except Exception as exc:
-                if isinstance(exc, asyncpg.UndefinedFunctionError):
-                    raise ConnectionFailure(
-                        f"the database has no robot leases (contract migration 2): run "
-                        f"`pnav migrate` ({exc})"
-                    ) from exc
-                if time.monotonic() >= deadline:
-                    raise ConnectionFailure(
-                        f"{self.service}: cannot open the lease connection: {exc}"
-                    ) from exc
-            await asyncio.sleep(0.2)
 
     async def stop(self) -> None:
         """Give every robot back (history closed as ``shutdown``), leave, close."""
@@ -181,13 +163,7 @@ class LeaseManager:
             except ConnectionFailure:
                 logger.warning("lease connection did not close cleanly", exc_info=True)
         if owned:
-            log.event(
-                logger,
-                logging.INFO,
-                "leases released",
-                service=self.service,
-                robots=",".join(owned),
-            )
+            self._event(logging.INFO, "leases released", robots=",".join(owned))
 
     def _terminate(self) -> None:
         session, self._session = self._session, None
@@ -215,26 +191,20 @@ class LeaseManager:
                 loop.call_soon_threadsafe(self._poke.set)
 
     # -- the connection -----------------------------------------------------------------------
-    async def _open(self) -> None:
-        session, closed = await LockSession.open(
+    async def _open(self, wait_s: float = 0.0) -> None:
+        session, closed = await open_session(
             self.url,
             self.service,
             self.instance,
             self.settings,
             old_pid=self._old_pid,
             on_closed=self._on_closed,
+            wait_s=wait_s,
         )
         self._session, self._old_pid = session, None
         for robot in closed:
             self._notify(robot, None)
-        log.event(
-            logger,
-            logging.INFO,
-            "lease connection open",
-            service=self.service,
-            instance=self.instance,
-            backend_pid=session.pid,
-        )
+        self._event(logging.INFO, "lease connection open", backend_pid=session.pid)
 
     def _on_closed(self, conn: asyncpg.Connection) -> None:
         # asyncpg calls this when the socket closes; a session ended while the connection
@@ -262,15 +232,7 @@ class LeaseManager:
         self.counters.lost += len(lost)
         self._failures += 1
         self._retry_at = time.monotonic() + self._backoff()
-        log.event(
-            logger,
-            logging.WARNING,
-            "leases lost",
-            service=self.service,
-            instance=self.instance,
-            why=why,
-            robots=",".join(sorted(lost)) or "-",
-        )
+        self._event(logging.WARNING, "leases lost", why=why, robots=",".join(sorted(lost)) or "-")
         self._poke.set()
 
     def _backoff(self) -> float:
@@ -325,6 +287,9 @@ class LeaseManager:
         await self._cycle.run(session, view)
 
     # -- reporting ------------------------------------------------------------------------------
+    def _event(self, level: int, what: str, **fields: object) -> None:
+        log.event(logger, level, what, service=self.service, instance=self.instance, **fields)
+
     def _changed(self, gained: frozenset[str], lost: frozenset[str]) -> None:
         if self.on_change is not None:
             try:

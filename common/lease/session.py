@@ -12,6 +12,8 @@ queries are written so that nothing expected makes them fail.
 
 from __future__ import annotations
 
+import asyncio
+import time
 from collections.abc import Awaitable, Callable
 from typing import Any
 
@@ -131,6 +133,37 @@ class LockSession:
         await self._call(self.conn.execute, sql.CLOSE_MINE, self.service, reason)
         await self._call(self.conn.fetchval, sql.LEAVE, self.service)
         await self._call(self.conn.close)
+
+
+async def open_session(
+    url: str,
+    service: str,
+    instance: str,
+    settings: LeaseSettings,
+    *,
+    old_pid: int | None,
+    on_closed: Callable[[asyncpg.Connection], None],
+    wait_s: float = 0.0,
+) -> tuple[LockSession, list[str]]:
+    """:meth:`LockSession.open`, tried again for ``wait_s`` (Postgres starting up); raises
+    :class:`ConnectionFailure`, at once for a database without the lease migration."""
+    deadline = time.monotonic() + wait_s
+    while True:
+        try:
+            return await LockSession.open(
+                url, service, instance, settings, old_pid=old_pid, on_closed=on_closed
+            )
+        except Exception as exc:
+            if isinstance(exc, asyncpg.UndefinedFunctionError):
+                raise ConnectionFailure(
+                    f"the database has no robot leases (contract migration 2): run "
+                    f"`pnav migrate` ({exc})"
+                ) from exc
+            if time.monotonic() >= deadline:
+                raise ConnectionFailure(
+                    f"{service}: cannot open the lease connection: {exc!r}"
+                ) from exc
+        await asyncio.sleep(0.2)
 
 
 def statement_timeout(settings: LeaseSettings) -> float:
