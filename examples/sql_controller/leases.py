@@ -16,6 +16,18 @@ nothing else:
 
 We stop acting for a robot *before* releasing it: :attr:`Leases.acting` is held by the
 controller while it decides and writes, and a release first waits for it.
+
+Two rules keep one controller per robot even when the lock connection dies in a way we
+learn of late (Postgres ends the session, asyncpg gets the FATAL while idle and only fails
+its next query, whatever exception type that is):
+
+- we act only while the lock connection is open and our last successful read of
+  ``pg_locks`` started less than 80 % of ``idle_session_timeout`` ago; *any* error from a
+  query on that connection drops every robot at once, closes it, and we reconnect;
+- a robot whose previous holder vanished (``robot_lease_acquire`` closed its row as
+  ``holder gone``) is not acted on before 80 % of the timeout after that: the old holder's
+  last confirmed read started before its session ended, so by then it has stopped trusting
+  it. A robot given back cleanly (``rebalance``, ``shutdown``) is acted on at once.
 """
 
 from __future__ import annotations
@@ -46,14 +58,16 @@ SELECT r.robot_id, l.pid FROM robot r
 UNION ALL
 SELECT NULL, pid FROM locks WHERE key = 0 AND mode = 'ShareLock'
 """
-_CONNECTION_ERRORS = (
-    asyncpg.PostgresConnectionError,
-    asyncpg.InterfaceError,
-    asyncpg.AdminShutdownError,
-    asyncpg.CannotConnectNowError,
-    OSError,
-    TimeoutError,
-)
+# A robot deleted since the snapshot yields no row rather than a foreign-key error.
+_ACQUIRE = "SELECT robot_lease_acquire($1, $2, $3) FROM robot WHERE robot_id = $2"
+# Seconds still to wait before acting for robot $2: $3 after its newest "holder gone" end.
+_TAKEOVER_WAIT = """
+SELECT greatest(0.0, $3::float8
+                     - extract(epoch FROM clock_timestamp() - max(released_at))::float8)
+  FROM robot_lease
+ WHERE service = $1 AND robot_id = $2 AND reason = 'holder gone'
+   AND released_at > clock_timestamp() - make_interval(secs => $3::float8)
+"""
 Notify = Callable[[str, int | None], None]  # (robot, robot_lease id or None)
 
 
@@ -98,20 +112,26 @@ class Leases:
         self.settings = settings
         self.notify = notify
         self.acting = asyncio.Lock()  # held by the controller while it acts for our robots
-        self._owned: set[str] = set()
+        self._owned: set[str] = set()  # robots whose lock we hold
+        self._ready_at: dict[str, float] = {}  # taken over from a vanished holder: act after
         self._conn: asyncpg.Connection | None = None
         self._me = 0
         self._confirmed = 0.0  # monotonic start of the last cycle that read our locks
+        self._valid_s = 0.8 * settings.lease_timeout_s
         self._excess_cycles = 0
+        self._failures = 0  # failed cycles or connects in a row
         self._poke = asyncio.Event()
         self._timeout = max(1.0, settings.lease_timeout_s / 2)
 
     def owned(self) -> frozenset[str]:
-        """Our robots; none once our view is older than 80 % of the idle timeout, since by
-        then Postgres may have ended our session and handed them to someone else."""
-        if time.monotonic() - self._confirmed > 0.8 * self.settings.lease_timeout_s:
+        """Our robots: none unless the lock connection is open and our view younger than
+        80 % of the idle timeout (by then Postgres may have ended our session and handed
+        them on); not those whose takeover wait runs."""
+        conn = self._conn
+        now = time.monotonic()
+        if conn is None or conn.is_closed() or now - self._confirmed > self._valid_s:
             return frozenset()
-        return frozenset(self._owned)
+        return frozenset(r for r in self._owned if self._ready_at.get(r, 0.0) <= now)
 
     def poke(self) -> None:
         """Revise now (a replica came or went, a robot was registered)."""
@@ -125,17 +145,18 @@ class Leases:
                 await self._connect()
                 await self._cycle()
                 return
-            except _CONNECTION_ERRORS:
+            except Exception:
                 self._drop_all("could not start")
                 if time.monotonic() >= deadline:
                     raise
                 await asyncio.sleep(0.2)
 
     async def run(self, stop: asyncio.Event) -> None:
-        """Revise every period until ``stop``; survive a lost connection by reconnecting."""
+        """Revise every period until ``stop``. Never ends on an error: whatever fails, we
+        stop acting for every robot, close the lock connection and connect again."""
         while not stop.is_set():
             with contextlib.suppress(TimeoutError):
-                async with asyncio.timeout(self.settings.lease_period_s):
+                async with asyncio.timeout(self._nap()):
                     await self._poke.wait()
             self._poke.clear()
             if stop.is_set():
@@ -144,17 +165,24 @@ class Leases:
                 if self._conn is None:
                     await self._connect()
                 await self._cycle()
-            except _CONNECTION_ERRORS as exc:
-                self._drop_all(f"lease connection failed: {exc!r}")
-            except asyncpg.PostgresError:
-                logger.warning("lease cycle failed", exc_info=True)
+                self._failures = 0
+            except Exception as exc:
+                self._failures += 1
+                self._drop_all(f"lease cycle failed: {exc!r}")
             await asyncio.sleep(0.05)  # at most 20 cycles a second, however often poked
+
+    def _nap(self) -> float:
+        """A period; after failures in a row, longer (up to 5 s), so an outage is not
+        hammered."""
+        if self._failures <= 1:
+            return self.settings.lease_period_s
+        return min(self.settings.lease_period_s * 2.0 ** (self._failures - 1), 5.0)
 
     async def stop(self) -> None:
         """Give every robot back (reason ``shutdown``), leave, close the lock connection."""
         conn = self._conn
         if conn is None or conn.is_closed():
-            self._owned.clear()
+            self._drop_all("stopping")
             return
         try:
             await self._give_back(conn, set(self._owned), "shutdown")
@@ -166,6 +194,7 @@ class Leases:
             logger.warning("lease connection did not close cleanly", exc_info=True)
             conn.terminate()  # closing the session frees its locks anyway
         self._conn = None
+        self._owned.clear()
 
     # -- internals ---------------------------------------------------------------------------
     async def _connect(self) -> None:
@@ -199,10 +228,14 @@ class Leases:
             self._drop_all("the lock connection closed")
 
     def _drop_all(self, why: str) -> None:
-        """The connection is gone, and our locks with it: stop acting for every robot now."""
+        """The connection is gone or unusable, and our locks with it (or about to be, once
+        we close it): stop acting for every robot now."""
         if self._owned:
             logger.warning("%s: no longer acting for %s", why, ",".join(sorted(self._owned)))
+        elif self._conn is not None:
+            logger.warning("%s", why)
         self._owned.clear()
+        self._ready_at.clear()
         self._confirmed = 0.0
         conn, self._conn = self._conn, None
         if conn is not None and not conn.is_closed():
@@ -224,6 +257,7 @@ class Leases:
         # pg_locks is the truth; a robot whose row was deleted still has our lock: free it.
         gone = {r for r in self._owned if r not in holders}
         self._owned = {r for r, pid in holders.items() if pid == self._me}
+        self._ready_at = {r: t for r, t in self._ready_at.items() if r in self._owned}
         await self._give_back(conn, gone, "robot gone")
 
         decision = plan(holders, members, self._me, self.settings.instance)
@@ -236,25 +270,26 @@ class Leases:
         for robot in decision.take:
             if len(taken) >= decision.want:
                 break
-            try:
-                lease_id = await conn.fetchval(
-                    "SELECT robot_lease_acquire($1, $2, $3)",
-                    SERVICE,
-                    robot,
-                    self.settings.instance,
-                    timeout=self._timeout,
-                )
-            except asyncpg.PostgresError as exc:
-                if isinstance(exc, _CONNECTION_ERRORS):
-                    raise
-                logger.warning("could not lease %s: %s", robot, exc)  # e.g. just deleted
-                continue
-            if lease_id is not None:  # None: another replica was quicker
-                self._owned.add(robot)
+            if await self._take(conn, robot):
                 taken.append(robot)
-                self.notify(robot, int(lease_id))
         if taken:
             logger.info("leased %s (replicas %d)", ",".join(taken), len(members | {self._me}))
+
+    async def _take(self, conn: asyncpg.Connection, robot: str) -> bool:
+        lease_id = await conn.fetchval(
+            _ACQUIRE, SERVICE, robot, self.settings.instance, timeout=self._timeout
+        )
+        if lease_id is None:  # another replica was quicker (or the robot is gone)
+            return False
+        wait_s = await conn.fetchval(
+            _TAKEOVER_WAIT, SERVICE, robot, self._valid_s, timeout=self._timeout
+        )
+        self._owned.add(robot)
+        if wait_s:
+            self._ready_at[robot] = time.monotonic() + float(wait_s)
+            logger.info("took %s over from a vanished holder: acting in %.1f s", robot, wait_s)
+        self.notify(robot, int(lease_id))
+        return True
 
     async def _give_back(self, conn: asyncpg.Connection, robots: set[str], reason: str) -> None:
         if not robots:
@@ -270,5 +305,6 @@ class Leases:
                 reason,
                 timeout=self._timeout,
             )
+            self._ready_at.pop(robot, None)
             self.notify(robot, None)
         logger.info("gave back %s (%s)", ",".join(sorted(robots)), reason)
