@@ -5,7 +5,7 @@
 
 Options fall back to environment variables (for containers): PNAV_SIM_WORLD, PNAV_SIM_RATE,
 PNAV_SIM_ROBOTS, PNAV_SIM_BATTERY, PNAV_SIM_SEED, PNAV_SIM_SCAN_HZ, PNAV_SIM_ODOM_HZ,
-PNAV_SIM_TRACE, PNAV_SIM_MAX_LAG, PNAV_LOCKSTEP; Zenoh comes from the
+PNAV_SIM_TRACE, PNAV_SIM_MAX_LAG, PNAV_SIM_CMD_TIMEOUT, PNAV_LOCKSTEP; Zenoh comes from the
 PNAV_ZENOH_* variables (common.config.ZenohSettings). SIGINT and SIGTERM stop it cleanly.
 """
 
@@ -30,7 +30,7 @@ from common.log import event, setup
 from services.sim.bench import report, run_bench
 from services.sim.clock import parse_rate
 from services.sim.lidar import LidarParams
-from services.sim.sim import SimConfig
+from services.sim.sim import CMD_TIMEOUT_S, SimConfig
 from services.sim.world import World, load_world
 
 log = logging.getLogger("services.sim")
@@ -89,6 +89,14 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         type=float,
         default=_float_env("PNAV_SIM_ODOM_HZ") or 30.0,
         help="odometry rate in sim time [PNAV_SIM_ODOM_HZ, default 30]",
+    )
+    ap.add_argument(
+        "--cmd-timeout",
+        type=float,
+        default=_float_env("PNAV_SIM_CMD_TIMEOUT"),
+        metavar="S",
+        help="stop a robot's wheels when no cmd_vel came for it for S sim seconds, as robot "
+        f"firmware does; 0: never [PNAV_SIM_CMD_TIMEOUT, default {CMD_TIMEOUT_S:g}]",
     )
     ap.add_argument(
         "--max-lag",
@@ -171,6 +179,7 @@ def build(args: argparse.Namespace) -> tuple[World, SimConfig, float]:
     if not args.physics_hz > 0 or not args.scan_hz > 0 or not args.odom_hz > 0:
         raise ConfigError("--physics-hz, --scan-hz and --odom-hz must be positive")
     config = SimConfig(
+        cmd_timeout_s=CMD_TIMEOUT_S if args.cmd_timeout is None else args.cmd_timeout,
         physics_hz=args.physics_hz,
         scan_hz=args.scan_hz,
         odom_hz=args.odom_hz,

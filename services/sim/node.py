@@ -97,6 +97,8 @@ class SimNode:
         self._queryable = session.declare_queryable(keys.SIM_WORLD, self._on_world_query)
         self._token = session.liveliness().declare_token(keys.alive_key(SERVICE, instance))
         self.commands_received = 0
+        # paced by the stack, the sim time of the next clock the gate owes (_pass_gate)
+        self._next_gate_clock = 0.0
 
     # -- Zenoh callbacks (Zenoh's threads) --------------------------------------------------
     def _on_cmd_vel(self, key: str, payload: bytes) -> None:
@@ -163,12 +165,10 @@ class SimNode:
         self.publish_world()
         next_world = time.monotonic() + WORLD_PERIOD_S
         next_clock = 0.0
-        gate, next_gate_clock = self.gate, 0.0
+        self._next_gate_clock = 0.0
         self._await_listeners(stop)
         self._log_running(max_lag=None if self.gate is None else self.gate.max_lag_s)
-        while not stop.is_set():
-            if until_sim_s is not None and sim.time >= until_sim_s:
-                break
+        while not stop.is_set() and not _reached(sim, until_sim_s):
             now = time.monotonic()
             if now >= next_clock:
                 self.publish_clock()
@@ -182,21 +182,7 @@ class SimNode:
             if owed == 0:
                 stop.wait(min(pacer.wall_until_next(sim.steps), max(0.0, next_clock - now)))
                 continue
-            for k in range(owed):
-                if gate is not None and not gate.heard:
-                    # services still starting: real time, not max (services/sim/gate.py)
-                    stop.wait(sim.dt)
-                if gate is not None:
-                    gate.wait(sim.time, stop, self.publish_clock)
-                    if sim.time >= next_gate_clock:
-                        self.publish_clock()
-                        next_gate_clock = sim.time + GATE_CLOCK_SIM_S
-                sim.step()
-                # come back in time for the clock however many steps are owed
-                if k & 15 == 15 and time.monotonic() >= next_clock:
-                    break
-                if until_sim_s is not None and sim.time >= until_sim_s:
-                    break
+            self._step_owed(owed, stop, until_sim_s, next_clock)
         self.publish_clock()
         if pacer.slips:
             event(
@@ -207,6 +193,33 @@ class SimNode:
                 slips=pacer.slips,
             )
         self._log_stopped()
+
+    def _step_owed(
+        self, owed: int, stop: threading.Event, until_sim_s: float | None, next_clock: float
+    ) -> None:
+        """Run the ``owed`` steps, each once the gate (if any) lets it; back early when the
+        clock is due at ``next_clock`` (wall) or sim time reaches ``until_sim_s``."""
+        for k in range(owed):
+            if self.gate is not None:
+                self._pass_gate(self.gate, stop)
+            self.sim.step()
+            # come back in time for the clock however many steps are owed
+            if k & 15 == 15 and time.monotonic() >= next_clock:
+                break
+            if _reached(self.sim, until_sim_s):
+                break
+
+    def _pass_gate(self, gate: Gate, stop: threading.Event) -> None:
+        """Wait until the next step is no further than max_lag past every robot's newest
+        decision (gate.py), publishing the clock every GATE_CLOCK_SIM_S of sim time."""
+        sim = self.sim
+        if not gate.heard:
+            # services still starting: real time, not max (services/sim/gate.py)
+            stop.wait(sim.dt)
+        gate.wait(sim.time, stop, self.publish_clock)
+        if sim.time >= self._next_gate_clock:
+            self.publish_clock()
+            self._next_gate_clock = sim.time + GATE_CLOCK_SIM_S
 
     def _run_lockstep(
         self, barrier: Barrier, stop: threading.Event, until_sim_s: float | None
@@ -229,9 +242,7 @@ class SimNode:
         self._clock_barrier(barrier, stop)
         self._log_running(lockstep=",".join(sorted(barrier.expected)))
         next_clock = sim.time + LOCKSTEP_CLOCK_S
-        while not stop.is_set():
-            if until_sim_s is not None and sim.time >= until_sim_s:
-                break
+        while not stop.is_set() and not _reached(sim, until_sim_s):
             if self.rate and pacer.steps_due(sim.steps) == 0:
                 stop.wait(pacer.wall_until_next(sim.steps))
                 continue
@@ -257,6 +268,7 @@ class SimNode:
             "sim stopped",
             sim_time=round(self.sim.time, 3),
             commands=self.commands_received,
+            cmd_timeout_stops=self.sim.cmd_timeout_stops,
             **self.gate_figures(),
         )
 
@@ -271,6 +283,7 @@ class SimNode:
             **pacing,
             robots=[r.robot_id for r in sim.robots],
             physics_hz=sim.config.physics_hz,
+            cmd_timeout_s=sim.config.cmd_timeout_s,
         )
 
     def _clock_barrier(self, barrier: Barrier, stop: threading.Event) -> None:
@@ -327,3 +340,7 @@ class SimNode:
         self.sim.close()
         if self.tracer is not None:
             self.tracer.close()
+
+
+def _reached(sim: Simulation, until_sim_s: float | None) -> bool:
+    return until_sim_s is not None and sim.time >= until_sim_s

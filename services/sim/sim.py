@@ -8,6 +8,7 @@ sink calls into Zenoh publications; the benchmark (bench.py) runs steps flat out
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 from collections.abc import Callable
@@ -18,12 +19,21 @@ import numpy as np
 
 import services.sim.messages as messages
 from common.contract import keys
+from common.errors import ConfigError
+from common.log import event
 from services.sim.battery import Battery, BatteryModel
 from services.sim.clock import Every
 from services.sim.lidar import Lidar, LidarParams
 from services.sim.physics import CONTACT_TOLERANCE_M, Scene
 from services.sim.robot import RobotState, clamp_command, integrate
 from services.sim.world import World
+
+log = logging.getLogger(__name__)
+
+# Robot firmware stops the wheels when its command stream goes quiet for this long (the
+# TurtleBot3's OpenCR firmware and ROS's diff_drive_controller both use 0.5 s): the bridge's
+# watchdog cannot stop a robot when what is down is the network between them.
+CMD_TIMEOUT_S = 0.5
 
 # (robot_id, topic, message): topic is one of common.contract.keys.SENSOR_TOPICS
 Sink = Callable[[str, str, dict[str, Any]], None]
@@ -43,6 +53,16 @@ class SimConfig:
     battery_percent: float | None = None  # start charge of every robot; None: the world's
     seed: int = 0
     gui: bool = False
+    # stop a robot's wheels when no command came for this many sim seconds; 0: never
+    cmd_timeout_s: float = CMD_TIMEOUT_S
+
+    def __post_init__(self) -> None:
+        # NaN fails both tests; inf is refused too: 0 is how to say "never"
+        if not 0.0 <= self.cmd_timeout_s < math.inf:
+            raise ConfigError(
+                f"cmd timeout {self.cmd_timeout_s} (--cmd-timeout, PNAV_SIM_CMD_TIMEOUT) must "
+                "be a number of sim seconds >= 0 (0: never time out)"
+            )
 
 
 class Simulation:
@@ -85,6 +105,13 @@ class Simulation:
         # commands arrive on Zenoh's threads; the loop takes them under this lock
         self._lock = threading.Lock()
         self._pending: dict[int, tuple[float, float]] = {}
+        # the step each robot's newest command was taken at, None once it timed out (or
+        # before the first): counted in whole steps, so the timeout is exact in sim time
+        self._commanded_at: list[int | None] = [None for _ in self.robots]
+        self._timeout_steps = (
+            math.ceil(config.cmd_timeout_s / self.dt - 1e-9) if config.cmd_timeout_s > 0 else 0
+        )
+        self.cmd_timeout_stops = 0  # robots whose wheels the timeout stopped
         self.counts: dict[str, int] = {SCAN: 0, ODOM: 0, BATTERY: 0, COLLISION: 0}
         # contact tests skipped per robot while its clearance lasts; the closing speed bound
         # is two robots driving at each other flat out
@@ -99,8 +126,8 @@ class Simulation:
         return self.steps * self.dt
 
     def set_command(self, robot_id: str, linear: float, angular: float) -> bool:
-        """Obey (linear, angular) from the next step on, until another command; thread-safe.
-        False if there is no such robot."""
+        """Obey (linear, angular) from the next step on, until another command or for
+        ``cmd_timeout_s`` of sim time at most; thread-safe. False if there is no such robot."""
         i = self.index.get(robot_id)
         if i is None:
             return False
@@ -116,6 +143,9 @@ class Simulation:
                 pending, self._pending = self._pending, {}
             for i, (v, w) in pending.items():
                 self.robots[i].cmd_linear, self.robots[i].cmd_angular = v, w
+                self._commanded_at[i] = self.steps
+        if self._timeout_steps:
+            self._time_out_commands()
         self.steps += 1
         for i, robot in enumerate(self.robots):
             self._advance(i, robot)
@@ -128,6 +158,27 @@ class Simulation:
         self.scene.close()
 
     # -- internals -------------------------------------------------------------------------
+    def _time_out_commands(self) -> None:
+        """Stop the wheels of every robot whose newest command is cmd_timeout_s old: it has
+        then been obeyed for exactly that long."""
+        for i, since in enumerate(self._commanded_at):
+            if since is None or self.steps - since < self._timeout_steps:
+                continue
+            self._commanded_at[i] = None
+            robot = self.robots[i]
+            if robot.cmd_linear == 0.0 and robot.cmd_angular == 0.0:
+                continue  # already standing: nothing to stop, nothing to count
+            robot.cmd_linear = robot.cmd_angular = 0.0
+            self.cmd_timeout_stops += 1
+            event(
+                log,
+                logging.WARNING,
+                "no cmd_vel: wheels stopped",
+                robot=robot.robot_id,
+                sim_time=round(self.time, 3),
+                timeout_s=self.config.cmd_timeout_s,
+            )
+
     def _advance(self, i: int, robot: RobotState) -> None:
         bat = self.batteries[i]
         v, w = clamp_command(robot.params, robot.cmd_linear, robot.cmd_angular)

@@ -46,6 +46,16 @@ async def test_same_world_and_seed_give_the_same_run_quiet_or_loaded(tmp_path: P
     assert len(quiet.trajectory) > 100
     assert quiet.trajectory == loaded.trajectory  # every odometry reading, exactly
     assert quiet.collisions == loaded.collisions
+    # a healthy stack re-issues its commands every 0.1 s of sim time: the sim's own command
+    # timeout (0.5 s) never stopped the robot
+    for run in (quiet, loaded):
+        stops = [line for line in sim_log(run).splitlines() if "sim stopped" in line]
+        assert stops and "cmd_timeout_stops=0" in stops[-1]
+
+
+def sim_log(outcome: Outcome) -> str:
+    assert outcome.log_dir
+    return (Path(outcome.log_dir) / "sim.log").read_text()
 
 
 def test_an_unknown_pacing_is_refused() -> None:

@@ -94,6 +94,12 @@ WORLD_STATION = {
 }
 
 
+# Tests that send a command once and watch the robot obey it for seconds hold it, as the
+# stack's re-issues every 0.1 s would; the command timeout has tests of its own.
+HELD = {"cmd_timeout_s": 0.0}
+DT = 1.0 / 240.0  # the physics step
+
+
 def check(payload: Any, schema: Mapping[str, type]) -> None:
     assert isinstance(payload, dict)
     assert set(payload) == set(schema), f"fields {sorted(payload)} != {sorted(schema)}"
@@ -182,7 +188,7 @@ def test_payloads_follow_the_contract_and_cmd_vel_moves_the_robot(
 ) -> None:
     odom_key, scan_key = keys.robot_key("r1", keys.ODOM), keys.robot_key("r1", keys.SCAN)
     battery_key = keys.robot_key("r1", keys.BATTERY_MSG)
-    with running_sim(zenoh_settings, rate=4.0):
+    with running_sim(zenoh_settings, rate=4.0, **HELD):
         listener.wait(lambda: listener.of(scan_key) and listener.of(battery_key))
         start = listener.wait(lambda: listener.of(odom_key))[-1]
 
@@ -253,7 +259,7 @@ def test_payloads_follow_the_contract_and_cmd_vel_moves_the_robot(
 
 def test_collision_event_on_the_wire(zenoh_settings: ZenohSettings, listener: Listener) -> None:
     key = keys.robot_key("r1", keys.COLLISION)
-    with running_sim(zenoh_settings, rate=0.0):
+    with running_sim(zenoh_settings, rate=0.0, **HELD):
         listener.send("r1", cmd(0.22, 0.0))
         (event,) = listener.wait(lambda: listener.of(key), timeout=20.0)
     check(event, COLLISION)
@@ -265,6 +271,61 @@ def test_collision_event_on_the_wire(zenoh_settings: ZenohSettings, listener: Li
     at_rest, set_off = odom[moving - 1]["stamp"], odom[moving]["stamp"]
     drive = (5.0 - 0.105 - 1.0) / 0.22
     assert at_rest + drive - 0.01 <= event["stamp"] <= set_off + drive + 0.01
+
+
+def test_a_robot_whose_cmd_vel_stops_coming_stops_after_half_a_second_of_sim_time(
+    zenoh_settings: ZenohSettings, listener: Listener
+) -> None:
+    """As robot firmware does: the sim's own stop, for when the bridge's watchdog cannot get
+    through (CONTRACT.md, cmd_vel). Flat out, so 0.5 s of sim time is a few ms of wall."""
+    odom_key = keys.robot_key("r1", keys.ODOM)
+    with running_sim(zenoh_settings, rate=0.0) as node:  # the default timeout, 0.5 s
+        listener.wait(lambda: listener.of(odom_key))
+        listener.send("r1", cmd(0.2, 0.0))
+        moved = listener.wait(lambda: [m for m in listener.of(odom_key) if m["linear"] > 0])
+        listener.wait(lambda: listener.of(odom_key)[-1]["stamp"] > moved[0]["stamp"] + 2.0)
+        stops, robot = node.sim.cmd_timeout_stops, node.sim.robots[0]
+    assert stops == 1
+    # it obeyed for 0.5 s of sim time, and one physics step at most besides: from rest, a
+    # straight run covers exactly 0.2 m/s times the time it ran
+    assert 0.2 * 0.5 - 1e-9 <= robot.x - 1.0 <= 0.2 * (0.5 + DT) + 1e-9
+    odom = listener.of(odom_key)
+    driving = [m["stamp"] for m in odom if m["linear"] > 0]
+    assert driving[-1] - driving[0] <= 0.5 + DT
+    after = [m for m in odom if m["stamp"] > driving[-1]]
+    assert after and all(m["linear"] == 0.0 and m["x"] == robot.x for m in after)
+
+
+def test_commands_every_tenth_of_a_second_of_sim_time_keep_the_robot_going(
+    zenoh_settings: ZenohSettings, listener: Listener
+) -> None:
+    """The decision service re-issues at least every 0.1 s of sim time: the timeout never
+    fires. Paced by the stack (a Gate) so that the sim waits for each command, however slow
+    this machine is: the commands come every 0.1 s of sim time, not of wall time."""
+    odom_key = keys.robot_key("r1", keys.ODOM)
+    gate = Gate(0.1, timeout_s=30.0)
+    with running_sim(zenoh_settings, rate=0.0, gate=gate) as node:
+        listener.wait(lambda: listener.of(odom_key))
+        first = node.sim.time
+        for _ in range(25):
+            waits, now = gate.waits, node.sim.time
+            listener.send("r1", pack({**_decision(now, 0.2), "decided_stamp": now}))
+            # the sim runs 0.1 s past the decision and waits for the next one
+            listener.wait(lambda w=waits: gate.waits > w)
+        last, stops = node.sim.time, node.sim.cmd_timeout_stops
+        x = node.sim.robots[0].x
+    assert gate.timeouts == 0 and last - first >= 2.5
+    assert stops == 0
+    # it drove all along: the first command landed within a few steps of `first` (the sim
+    # runs at real time until a first decision), and it never stood still since
+    assert x == pytest.approx(1.0 + 0.2 * (last - first), abs=0.2 * 0.05)
+    driving = [m for m in listener.of(odom_key) if first + 0.1 <= m["stamp"] <= last]
+    # flat out, a few odometry messages may be dropped (congestion control DROP)
+    assert len(driving) >= 30 and all(m["linear"] == pytest.approx(0.2) for m in driving)
+
+
+def _decision(stamp: float, linear: float) -> dict[str, Any]:
+    return {"stamp": stamp, "linear": linear, "angular": 0.0, "command_id": 1}
 
 
 def scans_per_sim_second(listener: Listener) -> tuple[float, float]:
@@ -380,6 +441,8 @@ def test_cli_reads_the_environment_and_stops_on_sigterm(
             proc.wait()
     assert proc.returncode == 0, stderr.decode()
     assert b"sim stopped" in stderr
+    # nobody sent a command: the command timeout (0.5 s by default) had nothing to stop
+    assert b"cmd_timeout_s=0.5" in stderr and b"cmd_timeout_stops=0" in stderr
 
 
 def test_cli_rejects_a_bad_world_naming_the_file(tmp_path: Path) -> None:

@@ -86,7 +86,8 @@ def test_in_the_sim_a_robot_drains_when_moving_and_charges_at_a_station(
         if topic == "battery":
             last[robot] = msg
 
-    sim = Simulation(load_world(path), SimConfig(), sink)
+    # the mover's command is held all along, as the stack's re-issues would hold it
+    sim = Simulation(load_world(path), SimConfig(cmd_timeout_s=0.0), sink)
     try:
         sim.set_command("mover", 0.2, 0.5)
         sim.run_for(30.0)

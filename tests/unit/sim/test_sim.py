@@ -23,11 +23,16 @@ class Recorder:
         self.msgs[(robot, topic)].append(msg)
 
 
+# A command set once is held for the whole run, as the stack's re-issues every 0.1 s would
+# hold it: these tests are about motion and sensors; the command timeout has its own.
+HELD = {"cmd_timeout_s": 0.0}
+
+
 def simulate(
     path: Path, commands: dict[str, tuple[float, float]], seconds: float, **config: Any
 ) -> tuple[Simulation, Recorder]:
     rec = Recorder()
-    sim = Simulation(load_world(path), SimConfig(**config), rec)
+    sim = Simulation(load_world(path), SimConfig(**{**HELD, **config}), rec)
     try:
         for robot, (v, w) in commands.items():
             assert sim.set_command(robot, v, w)
@@ -74,7 +79,7 @@ def test_driving_into_a_wall_stops_at_it_with_one_collision(make_world: MakeWorl
 def test_backing_off_and_driving_in_again_is_a_new_contact(make_world: MakeWorld) -> None:
     path = make_world(4.0, 4.0, [(2.0, 0.0, 2.2, 4.0)])
     rec = Recorder()
-    sim = Simulation(load_world(path), SimConfig(), rec)
+    sim = Simulation(load_world(path), SimConfig(**HELD), rec)
     try:
         sim.set_command("r1", 0.22, 0.0)
         sim.run_for(5.0)
@@ -90,7 +95,7 @@ def test_backing_off_and_driving_in_again_is_a_new_contact(make_world: MakeWorld
 def test_turning_in_place_against_a_wall_is_free(make_world: MakeWorld) -> None:
     path = make_world(4.0, 4.0, [(2.0, 0.0, 2.2, 4.0)])
     rec = Recorder()
-    sim = Simulation(load_world(path), SimConfig(), rec)
+    sim = Simulation(load_world(path), SimConfig(**HELD), rec)
     try:
         sim.set_command("r1", 0.22, 0.0)
         sim.run_for(5.0)

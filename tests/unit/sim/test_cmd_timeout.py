@@ -1,0 +1,134 @@
+"""The sim's command timeout: like robot firmware, a robot whose commands stop coming stops
+its wheels after cmd_timeout_s of sim time; commands that keep coming keep it going."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from common.errors import ConfigError
+from services.sim.__main__ import build, parse_args
+from services.sim.sim import CMD_TIMEOUT_S, SimConfig, Simulation
+from services.sim.world import load_world
+from tests.unit.sim.conftest import MakeWorld
+
+pytestmark = pytest.mark.timeout(30)
+
+
+@pytest.fixture
+def open_floor(make_world: MakeWorld) -> Path:
+    return make_world(8.0, 4.0)  # r1 at (1, 1) facing +x, nothing within 6 m ahead
+
+
+@pytest.fixture
+def sim(open_floor: Path) -> Iterator[Simulation]:
+    simulation = Simulation(load_world(open_floor), SimConfig(), lambda *_: None)
+    try:
+        yield simulation
+    finally:
+        simulation.close()
+
+
+def test_the_default_is_the_firmwares_half_second() -> None:
+    assert CMD_TIMEOUT_S == 0.5 and SimConfig().cmd_timeout_s == 0.5
+
+
+def test_a_robot_whose_commands_stop_coming_stops_after_the_timeout(sim: Simulation) -> None:
+    robot = sim.robots[0]
+    sim.set_command("r1", 0.2, 0.0)
+    sim.run_for(0.5 - sim.dt)
+    assert robot.linear == pytest.approx(0.2)  # still obeying, one step before the timeout
+    sim.step()  # the command has been obeyed for 0.5 s now
+    sim.step()
+    assert robot.linear == 0.0 and (robot.cmd_linear, robot.cmd_angular) == (0.0, 0.0)
+    # it drove on its last command for exactly 0.5 s, then stood still
+    sim.run_for(2.0)
+    assert robot.x == pytest.approx(1.0 + 0.2 * 0.5, abs=1e-9)
+    assert sim.cmd_timeout_stops == 1
+
+
+def test_commands_every_tenth_of_a_second_keep_it_going(sim: Simulation) -> None:
+    for _ in range(30):
+        sim.set_command("r1", 0.2, 0.0)
+        sim.run_for(0.1)
+    assert sim.robots[0].x == pytest.approx(1.0 + 0.2 * 3.0, abs=1e-9)
+    assert sim.robots[0].linear == pytest.approx(0.2)
+    assert sim.cmd_timeout_stops == 0
+
+
+def test_the_next_command_after_a_stop_moves_it_again(sim: Simulation) -> None:
+    sim.set_command("r1", 0.0, 1.0)
+    sim.run_for(1.0)
+    assert sim.robots[0].yaw == pytest.approx(0.5, abs=1e-9)  # turned for 0.5 s only
+    sim.set_command("r1", 0.0, 1.0)
+    sim.run_for(0.25)
+    assert sim.robots[0].yaw == pytest.approx(0.75, abs=1e-9)
+    assert sim.robots[0].angular == 1.0
+    assert sim.cmd_timeout_stops == 1
+
+
+def test_a_standing_robot_is_not_counted_as_stopped(sim: Simulation) -> None:
+    sim.set_command("r1", 0.0, 0.0)
+    sim.run_for(2.0)
+    assert sim.cmd_timeout_stops == 0
+
+
+def test_each_robot_times_out_on_its_own_commands(make_world: MakeWorld) -> None:
+    robots = [{"id": "a", "x": 1.0, "y": 1.0}, {"id": "b", "x": 1.0, "y": 3.0}]
+    sim = Simulation(load_world(make_world(8.0, 4.0, robots=robots)), SimConfig(), lambda *_: None)
+    try:
+        sim.set_command("a", 0.2, 0.0)
+        for _ in range(20):
+            sim.set_command("b", 0.1, 0.0)  # b's commands say nothing about a's
+            sim.run_for(0.1)
+        a, b = sim.robots
+        assert a.x == pytest.approx(1.1, abs=1e-9) and b.x == pytest.approx(1.2, abs=1e-9)
+        assert sim.cmd_timeout_stops == 1
+    finally:
+        sim.close()
+
+
+def test_the_timeout_is_counted_in_sim_steps_at_any_physics_rate(open_floor: Path) -> None:
+    config = SimConfig(physics_hz=120.0, cmd_timeout_s=0.25)
+    sim = Simulation(load_world(open_floor), config, lambda *_: None)
+    try:
+        sim.set_command("r1", 0.2, 0.0)
+        sim.run_for(1.0)
+        assert sim.robots[0].x == pytest.approx(1.0 + 0.2 * 0.25, abs=1e-9)
+    finally:
+        sim.close()
+
+
+def test_zero_disables_it(open_floor: Path) -> None:
+    sim = Simulation(load_world(open_floor), SimConfig(cmd_timeout_s=0.0), lambda *_: None)
+    try:
+        sim.set_command("r1", 0.2, 0.0)
+        sim.run_for(2.0)
+        assert sim.robots[0].x == pytest.approx(1.4, abs=1e-9)
+        assert sim.cmd_timeout_stops == 0
+    finally:
+        sim.close()
+
+
+@pytest.mark.parametrize("bad", [-0.1, math.nan, math.inf])
+def test_a_bad_timeout_is_refused(bad: float) -> None:
+    with pytest.raises(ConfigError, match="--cmd-timeout"):
+        SimConfig(cmd_timeout_s=bad)
+
+
+def test_the_option_and_its_variable(open_floor: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("PNAV_SIM_CMD_TIMEOUT", raising=False)
+    world = ["--world", str(open_floor)]
+    assert build(parse_args(world))[1].cmd_timeout_s == 0.5
+    assert build(parse_args([*world, "--cmd-timeout", "0"]))[1].cmd_timeout_s == 0.0
+    monkeypatch.setenv("PNAV_SIM_CMD_TIMEOUT", "0.3")
+    assert build(parse_args(world))[1].cmd_timeout_s == 0.3
+    assert build(parse_args([*world, "--cmd-timeout", "1"]))[1].cmd_timeout_s == 1.0
+    monkeypatch.setenv("PNAV_SIM_CMD_TIMEOUT", "0")
+    assert build(parse_args(world))[1].cmd_timeout_s == 0.0  # 0 is "never", not "unset"
+    monkeypatch.setenv("PNAV_SIM_CMD_TIMEOUT", "-1")
+    with pytest.raises(ConfigError, match="PNAV_SIM_CMD_TIMEOUT"):
+        build(parse_args(world))
