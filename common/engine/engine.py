@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import sys
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
@@ -122,8 +123,8 @@ class Engine:
                     await result
         except asyncio.CancelledError:
             raise
-        except Exception as exc:
-            self._discard_on_error(rule, stats, "data acquisition", exc)
+        except Exception:
+            self._discard_on_error(rule, stats, "data acquisition")
             stats.record_time(time.perf_counter() - started)
             return
 
@@ -139,8 +140,8 @@ class Engine:
                             await result
                 except asyncio.CancelledError:
                     raise
-                except Exception as exc:
-                    self._discard_on_error(rule, stats, "actions", exc)
+                except Exception:
+                    self._discard_on_error(rule, stats, "actions")
                     stats.record_time(time.perf_counter() - started)
                     return
                 stats.acted += 1
@@ -194,8 +195,8 @@ class Engine:
                         f"rule generation produced {new!r}, not a Rule; ignored",
                         detail=f"not a Rule: {type(new).__qualname__}",
                     )
-        except Exception as exc:
-            self._discard_on_error(rule, stats, "rule generation", exc)
+        except Exception:
+            self._discard_on_error(rule, stats, "rule generation")
 
     def _where(self, rule: Rule) -> dict[str, str]:
         """A log record's ``extra``: which rule of which engine."""
@@ -216,11 +217,14 @@ class Engine:
         key = error_key(type(rule), step, exc, detail)
         self.error_log.report(key, level, message, self._where(rule), exc_info=exc)
 
-    def _discard_on_error(
-        self, rule: Rule, stats: RuleStats, step: str, exc: BaseException
-    ) -> None:
+    def _discard_on_error(self, rule: Rule, stats: RuleStats, step: str) -> None:
+        """Count, log and discard ``rule`` after an error in ``step``; call it inside the
+        ``except`` that caught the error (subclasses, e.g. the monolith's, override it with
+        this signature and read the error the same way)."""
+        exc = sys.exc_info()[1]
         stats.errors += 1
-        self._report(rule, step, f"error in {step}; rule discarded: {_describe(exc)}", exc)
+        what = _describe(exc) if exc is not None else "unknown error"
+        self._report(rule, step, f"error in {step}; rule discarded: {what}", exc)
         try:
             rule.discarded(step)
         except Exception as hook_exc:
