@@ -63,11 +63,7 @@ _port = _number("a port number from 1 to 65535", lambda v: 1 <= v <= 65535, int)
 def _strategy_code(text: str) -> str:
     """A strategy code as the strategy table spells them (upper case, ``[A-Z0-9_]+``)."""
     code = text.strip().upper()
-    if (
-        not code
-        or len(code) > 64
-        or not all(c.isascii() and (c.isalnum() or c == "_") for c in code)
-    ):
+    if not code or not all(c.isascii() and (c.isalnum() or c == "_") for c in code):
         raise argparse.ArgumentTypeError(
             f"must be a strategy code of letters, digits and _ (e.g. GOTO_AVOID), got {text!r}"
         )
