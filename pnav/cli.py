@@ -3,13 +3,71 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, NoReturn, cast
 
 import uvloop
 
+from common.contract import limits
 from common.errors import PnavError, UsageError
 from pnav.navbench.worlds_cli import add_worlds_parser
+
+if TYPE_CHECKING:
+    from common.runtime import Runtime
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line (what is wrong, and where help is), exit 2:
+    the usage block argparse prints first buries the reason under every option."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: {message} (see `{self.prog} --help`)\n")
+
+
+def _number(
+    meaning: str, accepts: Callable[[float], bool], convert: Callable[[str], float] = float
+) -> Callable[[str], float]:
+    """An argparse ``type``: a number ``accepts`` holds for, else an error saying
+    ``meaning`` (e.g. "a finite number of metres within +-100000")."""
+
+    def parse(text: str) -> float:
+        try:
+            value = convert(text)
+        except (ValueError, OverflowError):
+            value = math.nan
+        if not (math.isfinite(value) and accepts(value)):
+            raise argparse.ArgumentTypeError(f"must be {meaning}, got {text!r}")
+        return value
+
+    return parse
+
+
+_GOAL_M = limits.GOAL_MAX_ABS_M
+_MAX_TOL_M = limits.GOAL_MAX_TOLERANCE_M
+_coordinate = _number(
+    f"a finite number of metres within +-{_GOAL_M:.0f}", lambda v: abs(v) <= _GOAL_M
+)
+_tolerance = _number(
+    f"a finite number of metres in (0, {_MAX_TOL_M:.0f}]", lambda v: 0 < v <= _MAX_TOL_M
+)
+_positive = _number("a finite number above 0", lambda v: v > 0)
+_not_negative = _number("a finite number, 0 or more", lambda v: v >= 0)
+_percent = _number("a percentage from 0 to 100", lambda v: 0 <= v <= 100)
+_count = _number("a whole number, 1 or more", lambda v: v >= 1, int)
+_port = _number("a port number from 1 to 65535", lambda v: 1 <= v <= 65535, int)
+
+
+def _strategy_code(text: str) -> str:
+    """A strategy code as the strategy table spells them (upper case, ``[A-Z0-9_]+``)."""
+    code = text.strip().upper()
+    if not code or not all(c.isascii() and (c.isalnum() or c == "_") for c in code):
+        raise argparse.ArgumentTypeError(
+            f"must be a strategy code of letters, digits and _ (e.g. GOTO_AVOID), got {text!r}"
+        )
+    return code
 
 
 def _stack_options(parser: argparse.ArgumentParser) -> None:
@@ -18,20 +76,18 @@ def _stack_options(parser: argparse.ArgumentParser) -> None:
         "--rate", default="1", help="sim seconds per wall second, or 'max' (default 1)"
     )
     parser.add_argument("--gui", action="store_true", help="open the pybullet window")
-    parser.add_argument("--robots", type=int, help="run exactly N robots")
-    parser.add_argument("--battery", type=float, help="start charge of every robot, percent")
+    parser.add_argument("--robots", type=_count, help="run exactly N robots")
+    parser.add_argument("--battery", type=_percent, help="start charge of every robot, percent")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="pnav", description="proactive-nav: rule-based robot navigation"
-    )
+    parser = _Parser(prog="pnav", description="proactive-nav: rule-based robot navigation")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     up = commands.add_parser("up", help="run the whole stack until Ctrl-C")
     _stack_options(up)
     up.add_argument("--data-dir", type=Path, help="keep Postgres data here (default: fresh)")
-    up.add_argument("--zenoh-port", type=int, default=7447, help="router port (7447)")
+    up.add_argument("--zenoh-port", type=_port, default=7447, help="router port (7447)")
     up.add_argument("--log-dir", type=Path, help="service logs (default: a temp dir)")
     up.add_argument("--quiet", action="store_true", help="do not echo the services' logs")
     up.add_argument(
@@ -56,13 +112,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
 
     goal = commands.add_parser("goal", help="send a robot to X Y (replaces its goal)")
-    goal.add_argument("x", type=float)
-    goal.add_argument("y", type=float)
+    goal.add_argument("x", type=_coordinate, help=f"metres, within +-{_GOAL_M:.0f}")
+    goal.add_argument("y", type=_coordinate, help=f"metres, within +-{_GOAL_M:.0f}")
     goal.add_argument("--robot", help="robot id (needed when there are several)")
-    goal.add_argument("--tolerance", type=float, help="metres (default 0.15)")
+    goal.add_argument(
+        "--tolerance", type=_tolerance, help=f"metres, in (0, {_MAX_TOL_M:.0f}] (default 0.15)"
+    )
 
     strategy = commands.add_parser("strategy", help="switch strategy (GOTO_AVOID, ...)")
-    strategy.add_argument("code")
+    strategy.add_argument("code", type=_strategy_code)
     strategy.add_argument("--robot", help="robot id (default: every robot)")
 
     cancel = commands.add_parser("cancel", help="cancel the active goal")
@@ -76,7 +134,9 @@ def build_parser() -> argparse.ArgumentParser:
     migrate = commands.add_parser(
         "migrate", help="apply the contract to PNAV_DATABASE_URL (waits for the server)"
     )
-    migrate.add_argument("--wait", type=float, default=60.0, help="seconds to wait for Postgres")
+    migrate.add_argument(
+        "--wait", type=_not_negative, default=60.0, help="seconds to wait for Postgres"
+    )
 
     demo = commands.add_parser("demo", help="the demo mission (see README)")
     demo.add_argument("--json", metavar="FILE", help="also write the summary as JSON")
@@ -86,13 +146,13 @@ def build_parser() -> argparse.ArgumentParser:
     benches = bench.add_subparsers(dest="bench", metavar="BENCH", required=True)
     engine = benches.add_parser("engine", help="engine rules/s and wake-up latency")
     engine.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
-    engine.add_argument("--seconds", type=float, default=3.0, help="throughput run length")
+    engine.add_argument("--seconds", type=_positive, default=3.0, help="throughput run length")
     engine.add_argument(
-        "--notifications", type=int, default=1000, help="notifications for the latency run"
+        "--notifications", type=_count, default=1000, help="notifications for the latency run"
     )
     startup = benches.add_parser("startup", help="start-up time to first command, and memory")
     startup.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
-    startup.add_argument("--runs", type=int, default=3, help="how many start-ups to time")
+    startup.add_argument("--runs", type=_count, default=3, help="how many start-ups to time")
     latency = benches.add_parser(
         "latency", help="sense-to-act latency by stage, CPU and memory per process"
     )
@@ -101,9 +161,9 @@ def build_parser() -> argparse.ArgumentParser:
         default="1,10,50",
         help="robot counts, one run each (comma-separated, default 1,10,50)",
     )
-    latency.add_argument("--hz", type=float, default=20.0, help="lidar and odometry rate")
+    latency.add_argument("--hz", type=_positive, default=20.0, help="lidar and odometry rate")
     latency.add_argument(
-        "--seconds", type=float, default=30.0, help="sim seconds measured per run (default 30)"
+        "--seconds", type=_positive, default=30.0, help="sim seconds measured per run (default 30)"
     )
     latency.add_argument(
         "--replicas",
@@ -124,7 +184,7 @@ def build_parser() -> argparse.ArgumentParser:
     nav.add_argument(
         "--suite", type=Path, default=Path("worlds/barn"), help="suite folder (worlds/barn)"
     )
-    nav.add_argument("--runs", type=int, default=1, help="runs per world and combo, seed = run")
+    nav.add_argument("--runs", type=_count, default=1, help="runs per world and combo, seed = run")
     nav.add_argument("--levels", help="only these levels, comma-separated (e.g. easy,medium)")
     nav.add_argument(
         "--worlds", metavar="N|NAMES", help="the first N worlds of each level, or these names"
@@ -158,7 +218,8 @@ def build_parser() -> argparse.ArgumentParser:
     nav.add_argument(
         "--compare", type=Path, metavar="FILE", help="compare each run with an earlier --json"
     )
-    add_worlds_parser(commands)
+    # _SubParsersAction is invariant in its parser class; ours only makes _Parser ones
+    add_worlds_parser(cast("argparse._SubParsersAction[argparse.ArgumentParser]", commands))
     return parser
 
 
@@ -267,26 +328,35 @@ async def _drive(args: argparse.Namespace) -> int:
 
     rt = await commands.open_runtime()
     try:
-        if args.command == "goal":
-            (robot,) = await commands.pick_robots(rt, args.robot, one=True)
-            goal_id = await commands.set_goal(rt, robot, args.x, args.y, args.tolerance)
-            print(f"{robot}: goal {goal_id} set to ({args.x}, {args.y})")
-            return 0
-        if args.command == "cancel":
-            for robot in await commands.pick_robots(rt, args.robot, one=False):
-                cancelled = await commands.cancel_goal(rt, robot)
-                print(f"{robot}: " + (f"goal {cancelled} cancelled" if cancelled else "no goal"))
-            return 0
-        failed = 0
-        for robot in await commands.pick_robots(rt, args.robot, one=False):
-            verdict, reason = await commands.send_user_command(
-                rt, robot, "SET_STRATEGY", args.code.upper()
-            )
-            print(f"{robot}: {verdict}: {reason}")
-            failed += verdict != "accepted"
-        return 1 if failed else 0
+        # a row the database refuses (a CHECK, say) is the user's input: one line, exit 2
+        with commands.refusal_as_contract_error():
+            if args.command == "goal":
+                (robot,) = await commands.pick_robots(rt, args.robot, one=True)
+                goal_id = await commands.set_goal(rt, robot, args.x, args.y, args.tolerance)
+                print(f"{robot}: goal {goal_id} set to ({args.x}, {args.y})")
+                return 0
+            if args.command == "cancel":
+                for robot in await commands.pick_robots(rt, args.robot, one=False):
+                    cancelled = await commands.cancel_goal(rt, robot)
+                    print(
+                        f"{robot}: " + (f"goal {cancelled} cancelled" if cancelled else "no goal")
+                    )
+                return 0
+            return await _set_strategy(rt, args.code, args.robot)
     finally:
         await rt.close()
+
+
+async def _set_strategy(rt: Runtime, code: str, robot_arg: str | None) -> int:
+    from pnav import commands
+
+    await commands.check_strategy(rt, code)
+    failed = 0
+    for robot in await commands.pick_robots(rt, robot_arg, one=False):
+        verdict, reason = await commands.send_user_command(rt, robot, "SET_STRATEGY", code)
+        print(f"{robot}: {verdict}: {reason}")
+        failed += verdict != "accepted"
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":

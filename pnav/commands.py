@@ -12,12 +12,15 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any
 
+import asyncpg
+
 from common.config import ServiceConfig
-from common.contract import keys
-from common.errors import UsageError
+from common.contract import keys, limits
+from common.errors import ContractError, UsageError
 from common.runtime import Runtime
 from pnav import stackfile
 
@@ -51,10 +54,35 @@ async def pick_robots(rt: Runtime, robot: str | None, *, one: bool) -> list[str]
     return known
 
 
+@contextmanager
+def refusal_as_contract_error() -> Iterator[None]:
+    """Turn the database refusing a row (a CHECK, a foreign key, a value it cannot store)
+    into a one-line ContractError: the row came from the user, so it is a usage error, and
+    the constraint's name finds its reason in CONTRACT.md ("Refused values")."""
+    try:
+        yield
+    except (asyncpg.IntegrityConstraintViolationError, asyncpg.DataError) as exc:
+        # asyncpg's client-side DataError may run over several lines; the first says it
+        detail = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise ContractError(f"the database refused the row: {detail}") from None
+
+
+async def check_strategy(rt: Runtime, code: str) -> None:
+    """UsageError unless ``code`` is a row of the strategy table."""
+    known = [
+        r["code"] for r in await rt.database.pool.fetch("SELECT code FROM strategy ORDER BY code")
+    ]
+    if code not in known:
+        raise UsageError(f"unknown strategy {code!r}; known strategies: {', '.join(known)}")
+
+
 async def set_goal(
     rt: Runtime, robot: str, x: float, y: float, tolerance: float | None = None
 ) -> int:
-    """Supersede the robot's active goal and set a new one, in one transaction."""
+    """Supersede the robot's active goal and set a new one, in one transaction.
+
+    A value the goal table would refuse raises ContractError before anything is written."""
+    limits.check_goal(x, y, tolerance)
     async with rt.database.transaction() as tx:
         await tx.conn.execute(
             "UPDATE goal SET status = 'superseded', reason = 'replaced by a new goal' "

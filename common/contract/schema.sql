@@ -339,3 +339,112 @@ BEGIN
     RETURN pg_advisory_unlock(lease_key(p_service), lease_key(p_robot));
 END;
 $$;
+
+-- migration 3: refuse non-finite and absurd values
+--
+-- Postgres accepts NaN, Infinity and -Infinity in double precision columns, and sorts NaN
+-- above every number: a CHECK such as `tolerance_m > 0` lets NaN through. From here on every
+-- number a person, a recommender or a sensor writes must be finite, and the numbers that
+-- steer a robot must also lie within bounds no real ground robot comes near (CONTRACT.md,
+-- "Refused values", gives each bound and why). A refused row fails its INSERT or UPDATE with
+-- SQLSTATE 23514 (check_violation), naming the constraint.
+--
+-- Rows already present that break the new rules: the rows that are only the last seconds of
+-- sensing and recommending (sensor rows, recommendations) and goals (which could
+-- never have been obeyed) are deleted, so their constraints hold for every row. Rows that
+-- others refer to or that are state and history (robot, map, charging_station, strategy,
+-- active_strategy, system_command: deleting would cascade, break a reference or reset a
+-- robot) keep their values; their constraints are added NOT VALID: enforced on every row
+-- inserted or updated from now on.
+
+-- true for every number but NaN, Infinity and -Infinity; NULL for NULL, which a CHECK
+-- accepts, so a nullable column stays nullable. Not STRICT (NULL gives NULL anyway): a STRICT
+-- function around a non-strict AND is never inlined, and sensor rows check it at 30 Hz a robot.
+CREATE FUNCTION is_finite(v double precision) RETURNS boolean
+LANGUAGE sql IMMUTABLE PARALLEL SAFE AS $$
+    SELECT v > '-Infinity'::double precision AND v < 'Infinity'::double precision
+$$;
+
+-- strategy.params: a JSON object whose top-level numbers are within +-1e6 (JSON itself has no
+-- NaN or Infinity, but 1e400 is valid JSON and reads back as Infinity in most languages)
+CREATE FUNCTION strategy_params_sane(p jsonb) RETURNS boolean
+LANGUAGE sql IMMUTABLE STRICT PARALLEL SAFE AS $$
+    SELECT jsonb_typeof(p) = 'object' AND NOT EXISTS (
+        SELECT 1 FROM jsonb_each(p) AS e
+         WHERE jsonb_typeof(e.value) = 'number' AND abs(e.value::numeric) > 1e6)
+$$;
+
+-- people: goal
+DELETE FROM goal
+ WHERE NOT (abs(x) <= 1e5 AND abs(y) <= 1e5 AND tolerance_m > 0 AND tolerance_m <= 100
+            AND coalesce(is_finite(stamp), true) AND coalesce(is_finite(finished_stamp), true));
+ALTER TABLE goal
+    ADD CONSTRAINT goal_xy_bounded CHECK (abs(x) <= 1e5 AND abs(y) <= 1e5),
+    ADD CONSTRAINT goal_tolerance_bounded CHECK (tolerance_m > 0 AND tolerance_m <= 100),
+    ADD CONSTRAINT goal_stamps_finite CHECK (is_finite(stamp) AND is_finite(finished_stamp));
+
+-- people and migrations: strategy (referenced by active_strategy: NOT VALID, see above)
+ALTER TABLE strategy
+    ADD CONSTRAINT strategy_params_sane CHECK (strategy_params_sane(params)) NOT VALID;
+
+-- recommenders: command_recommendation
+DELETE FROM command_recommendation
+ WHERE NOT (priority BETWEEN 0 AND 1000
+            AND (priority < 100 OR (kind = 'robot' AND linear_mps = 0))
+            AND coalesce(abs(linear_mps) <= 10, true) AND coalesce(abs(angular_rps) <= 20, true)
+            AND is_finite(stamp) AND is_finite(expires_stamp));
+ALTER TABLE command_recommendation
+    ADD CONSTRAINT command_recommendation_priority_bounded CHECK (priority BETWEEN 0 AND 1000),
+    -- the safety band: a recommendation at priority 100 or above may only stop the robot's
+    -- travel (turning in place is allowed), so nothing that outranks safety_stop can drive
+    ADD CONSTRAINT command_recommendation_safety_band
+        CHECK (priority < 100 OR (kind = 'robot' AND linear_mps = 0)),
+    ADD CONSTRAINT command_recommendation_velocity_bounded
+        CHECK (abs(linear_mps) <= 10 AND abs(angular_rps) <= 20),
+    ADD CONSTRAINT command_recommendation_stamps_finite
+        CHECK (is_finite(stamp) AND is_finite(expires_stamp));
+
+-- the decision service. command2robot gets no constraint: its values are copied from the
+-- recommendations above, and its reader (the bridge) clamps to the robot's limits and turns
+-- NaN into 0 for any writer (docs/BRIDGE.md), a guard that stays testable through the table.
+ALTER TABLE system_command
+    ADD CONSTRAINT system_command_stamp_finite CHECK (is_finite(stamp)) NOT VALID;
+ALTER TABLE active_strategy
+    ADD CONSTRAINT active_strategy_stamp_finite CHECK (is_finite(stamp)) NOT VALID;
+
+-- the bridge: sensor rows (it already refuses non-finite messages; the database now says so
+-- to every other writer too). laser_scan.ranges keeps Infinity: "nothing within range_max".
+DELETE FROM odometry
+ WHERE NOT (is_finite(stamp) AND is_finite(x) AND is_finite(y) AND is_finite(yaw)
+            AND is_finite(linear_mps) AND is_finite(angular_rps));
+ALTER TABLE odometry
+    ADD CONSTRAINT odometry_finite CHECK (is_finite(stamp) AND is_finite(x) AND is_finite(y)
+        AND is_finite(yaw) AND is_finite(linear_mps) AND is_finite(angular_rps));
+DELETE FROM laser_scan
+ WHERE NOT (is_finite(stamp) AND is_finite(angle_min) AND is_finite(angle_increment)
+            AND is_finite(range_min) AND is_finite(range_max));
+ALTER TABLE laser_scan
+    ADD CONSTRAINT laser_scan_finite CHECK (is_finite(stamp) AND is_finite(angle_min)
+        AND is_finite(angle_increment) AND is_finite(range_min) AND is_finite(range_max));
+DELETE FROM battery
+ WHERE NOT (is_finite(stamp) AND is_finite(energy_wh) AND is_finite(capacity_wh)
+            AND is_finite(power_w));
+ALTER TABLE battery
+    ADD CONSTRAINT battery_finite CHECK (is_finite(stamp) AND is_finite(energy_wh)
+        AND is_finite(capacity_wh) AND is_finite(power_w));
+DELETE FROM collision_event WHERE NOT (is_finite(stamp) AND is_finite(x) AND is_finite(y));
+ALTER TABLE collision_event
+    ADD CONSTRAINT collision_event_finite CHECK (is_finite(stamp) AND is_finite(x) AND is_finite(y));
+
+-- the bridge: the world (referenced by other rows: NOT VALID, see above)
+ALTER TABLE robot
+    ADD CONSTRAINT robot_limits_finite CHECK (is_finite(wheel_radius_m)
+        AND is_finite(wheel_separation_m) AND is_finite(max_linear_mps)
+        AND is_finite(max_angular_rps) AND is_finite(footprint_radius_m)
+        AND is_finite(battery_capacity_wh)) NOT VALID;
+ALTER TABLE map
+    ADD CONSTRAINT map_finite CHECK (is_finite(resolution_m) AND is_finite(origin_x)
+        AND is_finite(origin_y) AND is_finite(origin_yaw)) NOT VALID;
+ALTER TABLE charging_station
+    ADD CONSTRAINT charging_station_finite CHECK (is_finite(x) AND is_finite(y)
+        AND is_finite(radius_m) AND is_finite(charge_power_w)) NOT VALID;

@@ -18,12 +18,14 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import sys
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any
 
 from common.config import EngineSettings
+from common.engine.errorlog import ErrorLog, error_key
 from common.engine.rule import Rule
 from common.engine.stats import EngineCounters, RuleStats
 from common.engine.trigger import Clock, Periodic, Signals, Trigger
@@ -56,6 +58,8 @@ class Engine:
         self._stats: dict[type[Rule], RuleStats] = {}
         self._meta_factories: dict[type[Rule], RuleFactory] = {}
         self._running = False
+        # errors are counted every time (stats), logged once per distinct error + a count
+        self.error_log = ErrorLog(log)
 
     # -- putting rules in ------------------------------------------------------------------
     def add(self, rule: Rule) -> None:
@@ -99,6 +103,7 @@ class Engine:
         self.next.clear()
         self.counters.activations += 1
         self.counters.rules_run += ran
+        self.error_log.flush()
         return ran
 
     async def run_rule(self, rule: Rule) -> None:
@@ -160,15 +165,18 @@ class Engine:
                         return False
                 return True
             self._invalid(rule, stats, what, result)
-        except Exception:
+        except Exception as exc:
             stats.errors += 1
-            log.exception("%s raised; counted as false", what, extra=self._where(rule))
+            self._report(rule, what, f"{what} raised {_describe(exc)}; counted as false", exc)
         return False
 
     def _invalid(self, rule: Rule, stats: RuleStats, what: str, value: object) -> None:
         stats.errors += 1
-        log.error(
-            "%s returned %r, not a bool; counted as false", what, value, extra=self._where(rule)
+        self._report(
+            rule,
+            what,
+            f"{what} returned {value!r}, not a bool; counted as false",
+            detail=f"not a bool: {type(value).__qualname__}",
         )
 
     def _generate(self, rule: Rule, stats: RuleStats) -> None:
@@ -181,10 +189,11 @@ class Engine:
                     self.next.append(new)
                 else:
                     stats.errors += 1
-                    log.error(
-                        "rule generation produced %r, not a Rule; ignored",
-                        new,
-                        extra=self._where(rule),
+                    self._report(
+                        rule,
+                        "rule generation",
+                        f"rule generation produced {new!r}, not a Rule; ignored",
+                        detail=f"not a Rule: {type(new).__qualname__}",
                     )
         except Exception:
             self._discard_on_error(rule, stats, "rule generation")
@@ -193,18 +202,46 @@ class Engine:
         """A log record's ``extra``: which rule of which engine."""
         return {"rule": rule.name, "scenario": rule.scenario, "engine": self.name}
 
+    def _report(
+        self,
+        rule: Rule,
+        step: str,
+        message: str,
+        exc: BaseException | None = None,
+        *,
+        detail: str = "",
+        level: int = logging.ERROR,
+    ) -> None:
+        """Log an error of ``rule`` once per distinct error, then a count now and then
+        (common.engine.errorlog): a rule failing on every tick must not flood the log."""
+        key = error_key(type(rule), step, exc, detail)
+        self.error_log.report(key, level, message, self._where(rule), exc_info=exc)
+
     def _discard_on_error(self, rule: Rule, stats: RuleStats, step: str) -> None:
+        """Count, log and discard ``rule`` after an error in ``step``; call it inside the
+        ``except`` that caught the error (subclasses, e.g. the monolith's, override it with
+        this signature and read the error the same way)."""
+        exc = sys.exc_info()[1]
         stats.errors += 1
-        log.exception("error in %s; rule discarded", step, extra=self._where(rule))
+        what = _describe(exc) if exc is not None else "unknown error"
+        self._report(rule, step, f"error in {step}; rule discarded: {what}", exc)
         try:
             rule.discarded(step)
-        except Exception:
-            log.exception("discarded hook raised", extra=self._where(rule))
+        except Exception as hook_exc:
+            self._report(
+                rule, "discarded hook", f"discarded hook raised {_describe(hook_exc)}", hook_exc
+            )
         factory = self._meta_factories.get(type(rule))
         if factory is not None:
             self.next.append(factory())
             self.counters.meta_reseeded += 1
-            log.warning("meta rule re-seeded after an error", extra=self._where(rule))
+            self._report(
+                rule,
+                "re-seed",
+                "meta rule re-seeded after an error",
+                detail=step,
+                level=logging.WARNING,
+            )
 
     # -- statistics --------------------------------------------------------------------------
     def stats(self) -> list[RuleStats]:
@@ -261,6 +298,7 @@ class Engine:
         finally:
             self._running = False
             signals.stopping = False
+            self.error_log.flush(force=True)  # the counts not yet logged
 
     def stop(self) -> None:
         """Ask :meth:`run` to return after the activation under way (drain, don't cut)."""
@@ -273,6 +311,12 @@ class Engine:
 
     def __len__(self) -> int:
         return len(self.current) + len(self.next)
+
+
+def _describe(exc: BaseException) -> str:
+    """``ValueError: actuator refused``: the one-line form of an exception."""
+    text = str(exc)
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
 def rules_in(rules: Iterable[Rule]) -> list[str]:

@@ -73,7 +73,7 @@ async def test_up_goal_strategy_cancel_status_down(tmp_path: Path) -> None:
         code, out = await pnav("strategy", "GOTO_DIRECT", env=env)
         assert code == 0 and "r1: accepted" in out, out
         code, out = await pnav("strategy", "NO_SUCH_THING", env=env)
-        assert code == 1 and "r1: rejected" in out, out
+        assert code == 2 and "unknown strategy 'NO_SUCH_THING'" in out, out
 
         code, out = await pnav("status", "--once", env=env)
         assert code == 0 and "GOTO_DIRECT" in out and "(3.0,3.0)" in out, out
