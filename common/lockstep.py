@@ -161,8 +161,10 @@ class LockstepTrigger:
     """The engine's trigger (common.engine.trigger) in a lockstep run; give the engine the
     sim clock with it (``Engine(..., trigger=LockstepTrigger(ledger), clock=sim.now)``).
 
-    An activation is due on a wake, a hurry, or when F has passed in sim time; there is no
-    wall-clock period and P is not applied, so nothing runs while sim time stands still.
+    An activation is due on a wake, a hurry, or when F has passed in sim time since the last
+    full activation started (``since``: a stream of one robot's wakes does not put off
+    another robot's rules); there is no wall-clock period and P is not applied, so nothing
+    runs while sim time stands still. Which rules it runs is the engine's business.
     Every counted receipt makes the trigger look again (a clock message may make F due).
     When nothing is due it reports the service quiet (:meth:`quiet`).
     """

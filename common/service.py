@@ -208,8 +208,10 @@ class ScenarioService(ABC):
 
     def watch(self) -> None:
         """On every notification of a table the meta rules watch: :meth:`on_notification`,
-        then wake the engine. Both run on the event loop (one hop from Zenoh's thread), so a
-        store needs no locks; in a lockstep run the message counts as handled after both."""
+        then wake the engine for the notification's robot (docs/ENGINE.md, "Per-robot
+        wake-ups": the meta rules and that robot's rules run). Both run on the event loop
+        (one hop from Zenoh's thread), so a store needs no locks; in a lockstep run the
+        message counts as handled after both."""
         engine, note = self.engine, self.on_notification
 
         def on_message(key: str, payload: bytes) -> None:
@@ -223,7 +225,8 @@ class ScenarioService(ABC):
                 decoded = Notification(table, robot, None)
             if decoded.table:
                 note(decoded)
-            engine.wake()
+            # focused on the notification's robot (a robot-less one wakes for anything)
+            engine.wake(decoded.robot)
 
         session, ledger = self.runtime.zenoh, self.runtime.ledger
         for table in engine.watched_tables:
@@ -299,6 +302,7 @@ class ScenarioService(ABC):
                 except TimeoutError:
                     logger.error("engine did not drain in time; cancelled")
             await self.stop_leases()
+            log.event(logger, logging.INFO, "engine stopped", **self.engine.counters.as_dict())
             try:
                 await self.publish_stats()
             except Exception:

@@ -10,8 +10,21 @@ Semantics (DESIGN.md section 3, thesis section 3.2; docs/ENGINE.md says it all i
   F, P, :meth:`Engine.wake`, :meth:`Engine.hurry`; in a lockstep run F in sim time and a
   quiet report when nothing is due, common.lockstep). F is counted on the engine's clock.
 
-Our one addition to the thesis: a meta rule (``Rule.meta``) discarded because of an error
-is re-seeded from the factory given to :meth:`Engine.add_meta`, logged and counted.
+Our additions to the thesis:
+
+- A meta rule (``Rule.meta``) discarded because of an error is re-seeded from the factory
+  given to :meth:`Engine.add_meta`, logged and counted.
+- Per-robot wake-ups. ``wake(robot)`` and ``hurry(robot)`` record the robot they are about
+  (None: anything). An activation started only by wakes and hurries that all named robots
+  is *focused* on those robots: it runs, in queue order, the rules whose ``Rule.robot_id``
+  is None or in the focus; every other rule keeps its place in ``current``, ahead of what
+  the activation generates (as leftovers of the N cap do). N counts the rules that ran, F
+  bounds the activation as before. Any other activation (the first one, one started by F,
+  or by a robot-less wake or hurry) is *full*: exactly the thesis' algorithm. F, the
+  fallback, is counted from the start of the last full activation, so every rule still runs
+  at least every F under a stream of one robot's wakes. A focused activation that passed
+  over no rule ran what a full one would have, and counts as full for F. An activation cut
+  by N or F makes the next one full: what the cut left runs first, as in the thesis.
 """
 
 from __future__ import annotations
@@ -60,6 +73,12 @@ class Engine:
         self._running = False
         # errors are counted every time (stats), logged once per distinct error + a count
         self.error_log = ErrorLog(log)
+        # When the last full activation started, on ``clock`` (None: none yet): F counts
+        # from it (see the module's docstring).
+        self.full_started: float | None = None
+        # The last activation was cut by N or F: the next one is full, so what the cut left
+        # runs first, as in the thesis (a meta rule never overtakes the targets it made).
+        self.cut = False
 
     # -- putting rules in ------------------------------------------------------------------
     def add(self, rule: Rule) -> None:
@@ -84,27 +103,74 @@ class Engine:
         return tuple(sorted(tables))
 
     # -- one activation --------------------------------------------------------------------
-    async def activation(self) -> int:
-        """Run one activation; return how many rules ran."""
-        max_rules = self.settings.max_rules
-        deadline = self.clock() + self.settings.period_s
-        current = self.current
-        ran = 0
-        while current:
-            if ran >= max_rules:
-                self.counters.capped_by_n += 1
-                break
-            if ran and self.clock() >= deadline:
-                self.counters.capped_by_f += 1
-                break
-            await self.run_rule(current.popleft())
-            ran += 1
-        current.extend(self.next)
+    async def activation(self, focus: frozenset[str] | None = None) -> int:
+        """Run one activation; return how many rules ran. ``focus``: the robots whose rules
+        run (with the robot-less ones); None: a full activation, every rule."""
+        started = self.clock()
+        deadline = started + self.settings.period_s
+        self.cut = False
+        if focus is None:
+            ran = await self._run_all(deadline)
+            passed_over = 0
+            self.counters.full_activations += 1
+        else:
+            ran, passed_over = await self._run_focused(focus, deadline)
+            self.counters.focused_activations += 1
+            self.counters.out_of_focus += passed_over
+        if not passed_over:
+            self.full_started = started
+        self.current.extend(self.next)
         self.next.clear()
         self.counters.activations += 1
         self.counters.rules_run += ran
         self.error_log.flush()
         return ran
+
+    async def _run_all(self, deadline: float) -> int:
+        """The thesis' activation: rules from the head of ``current`` until N or F."""
+        max_rules = self.settings.max_rules
+        current = self.current
+        ran = 0
+        while current:
+            if ran >= max_rules:
+                self.counters.capped_by_n += 1
+                self.cut = True
+                break
+            if ran and self.clock() >= deadline:
+                self.counters.capped_by_f += 1
+                self.cut = True
+                break
+            await self.run_rule(current.popleft())
+            ran += 1
+        return ran
+
+    async def _run_focused(self, focus: frozenset[str], deadline: float) -> tuple[int, int]:
+        """A focused activation: the rules of ``focus`` and the robot-less ones, in queue
+        order, until N or F; return (rules run, rules passed over). A rule passed over goes
+        back to the head of ``current`` in its order, ahead of the rules not reached."""
+        max_rules = self.settings.max_rules
+        current = self.current
+        passed: list[Rule] = []
+        ran = 0
+        while current:
+            rule = current[0]
+            robot = rule.robot_id
+            if robot is not None and robot not in focus:
+                passed.append(current.popleft())
+                continue
+            if ran >= max_rules:
+                self.counters.capped_by_n += 1
+                self.cut = True
+                break
+            if ran and self.clock() >= deadline:
+                self.counters.capped_by_f += 1
+                self.cut = True
+                break
+            current.popleft()
+            await self.run_rule(rule)
+            ran += 1
+        current.extendleft(reversed(passed))
+        return ran, len(passed)
 
     async def run_rule(self, rule: Rule) -> None:
         """Run the five steps of ``rule`` (thesis figure 3.2) and file its statistics."""
@@ -254,29 +320,52 @@ class Engine:
     # -- the activation loop ---------------------------------------------------------------
     def wake(self, robot: str | None = None) -> None:
         """A notification came (about ``robot``, if it named one): start an activation as
-        soon as the trigger allows (call on the engine's loop)."""
-        self.signals.woken = True
-        self.signals.look()
+        soon as the trigger allows, focused on ``robot`` unless something else asks for
+        more (call on the engine's loop)."""
+        signals = self.signals
+        signals.ask(robot)
+        signals.woken = True
+        signals.look()
 
-    def wake_threadsafe(self) -> None:
+    def wake_threadsafe(self, robot: str | None = None) -> None:
         """:meth:`wake` from any thread, e.g. a Zenoh callback. The flag is set before this
         returns, so a lockstep count taken after it sees the activation owed."""
-        self.signals.woken = True
-        self.signals.look_threadsafe()
+        signals = self.signals
+        signals.ask(robot)
+        signals.woken = True
+        signals.look_threadsafe()
 
     def hurry(self, robot: str | None = None) -> None:
         """A rule generated target rules (for ``robot``, if they are one robot's) that should
         not wait for a notification or for F (they are in ``next``, so they run in the next
         activation): start it right after the one under way (call on the engine's loop, e.g.
-        from a rule's actions)."""
-        self.signals.hurried = True
-        self.signals.look()
+        from a rule's actions). A rule that generated several robots' targets calls it once
+        per robot, or once with None."""
+        signals = self.signals
+        signals.ask(robot)
+        signals.hurried = True
+        signals.look()
+
+    def focus(self, first: bool = False) -> frozenset[str] | None:
+        """What the activation about to start runs, from the robots the wakes and hurries
+        named (read and forgotten: call after ``signals.take()``): their focus, or None for
+        a full activation (the ``first``, a robot-less wake or hurry, none named, the last
+        activation cut by N or F, or F passed since the last full activation started)."""
+        robots = self.signals.take_focus()
+        last = self.full_started
+        if robots is None or first or last is None or self.cut:
+            return None
+        if self.clock() >= last + self.settings.period_s:
+            return None
+        return robots
 
     async def run(self) -> None:
         """Run activations until :meth:`stop`; the activation under way always completes.
 
-        One loop: the trigger says when the next activation is due, the flags it saw name
-        what started it (counted in ``counters.woken_by_*`` from the second one on).
+        One loop: the trigger says when the next activation is due (F counted from the last
+        full activation's start), the flags it saw name what started it (counted in
+        ``counters.woken_by_*`` from the second one on) and the robots they named make it
+        focused or full (:meth:`focus`).
         """
         if self._running:
             raise UsageError(f"engine {self.name} is already running")
@@ -284,17 +373,19 @@ class Engine:
         signals = self.signals
         signals.attach()
         self.trigger.bind(signals)
-        since: float | None = None
+        first = True
         try:
             while True:
+                since = None if first else self.full_started
                 await self.trigger.wait(signals, since, self.clock, self.settings)
                 if signals.stopping:
                     break
                 reason = signals.take()
-                if since is not None:
+                focus = self.focus(first)
+                if not first:
                     self.counters.woken_by(reason)
-                since = self.clock()
-                await self.activation()
+                first = False
+                await self.activation(focus)
         finally:
             self._running = False
             signals.stopping = False

@@ -41,9 +41,18 @@ class RuleStats:
 
 @dataclass
 class EngineCounters:
-    """Engine-wide counters: activations and what started them."""
+    """Engine-wide counters: activations, what started them and what they ran.
+
+    ``full_activations`` ran every rule in the queue (the thesis' algorithm);
+    ``focused_activations`` ran the robot-less rules and those of the robots their wakes
+    named; ``out_of_focus`` counts the rules a focused activation passed over (they kept
+    their place). ``activations`` = full + focused.
+    """
 
     activations: int = 0
+    full_activations: int = 0
+    focused_activations: int = 0
+    out_of_focus: int = 0
     woken_by_notification: int = 0
     woken_by_period: int = 0
     woken_by_rule: int = 0
@@ -61,3 +70,6 @@ class EngineCounters:
             self.woken_by_rule += 1
         else:
             self.woken_by_period += 1
+
+    def as_dict(self) -> dict[str, int]:
+        return asdict(self)

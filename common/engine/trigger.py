@@ -7,16 +7,20 @@ the wake signals (:class:`Signals`), F and P (``EngineSettings``), the start of 
 activation and the engine's clock:
 
 - :class:`Periodic` (a normal run): at once after a wake or a hurry, else F after the
-  previous start, never sooner than P after the previous end; F on the wall clock;
+  start of the last *full* activation, never sooner than P after the previous end; F on the
+  wall clock;
 - ``common.lockstep.LockstepTrigger`` (a lockstep run): on a wake, a hurry, or F in sim time,
   looked at on every counted message; when nothing is due it reports the service quiet.
+
+A trigger only says *when*; what the activation runs (all rules, or those of the robots the
+wakes named: :meth:`Signals.take_focus`, ``Engine.focus``) is the engine's business.
 """
 
 from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
-from typing import Protocol
+from typing import Protocol, cast
 
 from common.config import EngineSettings
 from common.errors import InternalError
@@ -32,12 +36,18 @@ class Signals:
     ``woken`` (a notification: ``Engine.wake``), ``hurried`` (a rule: ``Engine.hurry``) and
     ``stopping`` are plain flags: setting one is atomic, so another thread may set it
     before it asks the loop to look again (:meth:`look_threadsafe`).
+
+    ``asked`` lists the robots the wakes and hurries named since the last
+    :meth:`take_focus` (None: a robot-less one, "anything"). It is only ever appended to
+    (atomic) and cut from its head, never replaced, so a name appended from another thread
+    while the loop takes the list is either taken now or left for the next activation.
     """
 
     def __init__(self) -> None:
         self.woken = False
         self.hurried = False
         self.stopping = False
+        self.asked: list[str | None] = []
         self._event: asyncio.Event | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
 
@@ -82,6 +92,27 @@ class Signals:
         event.clear()
         return True
 
+    def ask(self, robot: str | None) -> None:
+        """Record what a wake or a hurry is about (call before setting its flag: a flag
+        seen set means its robot is already recorded)."""
+        self.asked.append(robot)
+
+    def take_focus(self) -> frozenset[str] | None:
+        """The robots named since the last call, and forget them: None when a wake or hurry
+        named none, or when none was recorded (a flag set directly, or a name taken by the
+        previous activation while its flag was set again: a full activation is always safe).
+        Call after :meth:`take`."""
+        asked = self.asked
+        count = len(asked)
+        if count == 0:
+            return None
+        names = asked[:count]
+        del asked[:count]  # what another thread appended meanwhile stays for the next
+        robots = frozenset(names)
+        if None in robots:
+            return None
+        return cast("frozenset[str]", robots)
+
     def take(self) -> str:
         """What starts the activation about to run (:data:`NOTIFICATION`, :data:`RULE` or
         :data:`PERIOD`); both flags are cleared: a wake from now on asks for another."""
@@ -102,14 +133,17 @@ class Trigger(Protocol):
     ) -> None:
         """Return when the next activation is due, or as soon as ``signals.stopping``.
 
-        ``since`` is the start of the previous activation on ``clock`` (None: none ran yet);
-        the engine reads and clears the wake flags (:meth:`Signals.take`) once this returns.
+        ``since`` is the start of the last *full* activation on ``clock`` (None: none ran
+        yet): F bounds the time between two full ones, however many focused ones ran in
+        between. The engine reads and clears the wake flags (:meth:`Signals.take`) and the
+        robots they named (:meth:`Signals.take_focus`) once this returns.
         """
 
 
 class Periodic:
     """A normal run: the first activation at once; then, after P, at once if woken or
-    hurried, else when F has passed since the previous start (F on ``clock``)."""
+    hurried, else when F has passed since the last full activation started (F on
+    ``clock``)."""
 
     def bind(self, signals: Signals) -> None:
         return None

@@ -6,8 +6,9 @@ rules, seeded by the service's own seeding code; what changes is who starts an a
 - in the stack, ``Engine.run`` starts one when its trigger says so: a Zenoh notification for
   a watched table (``wake``), a rule's ``hurry``, or F (50 ms wall) after the previous start;
 - here the monolith's loop asks :meth:`SteppedEngine.due` after every physics step (the same
-  three reasons, read from the engine's own ``signals``, with F counted in *sim* seconds) and
-  awaits :meth:`SteppedEngine.activate` while one is due.
+  three reasons, read from the engine's own ``signals``, with F counted in *sim* seconds from
+  the last full activation) and awaits :meth:`SteppedEngine.activate` while one is due,
+  focused on the robots the wakes named exactly as ``Engine.run`` does (``Engine.focus``).
 
 Activations run on a real event loop (the monolith's), so a rule's async steps await the
 in-memory stores exactly as they await Postgres in the stack.
@@ -15,7 +16,6 @@ in-memory stores exactly as they await Postgres in the stack.
 
 from __future__ import annotations
 
-import math
 import sys
 from collections.abc import Callable
 
@@ -34,17 +34,16 @@ class SteppedEngine(Engine):
         # cuts one short (in the stack F is wall time: a slow rule can leave work for later)
         super().__init__(EngineSettings.from_env(), name=name, clock=now)
         self.signals.woken = True  # a service's first activation starts at once
-        self.started_at = -math.inf
 
     def due(self, now: float) -> bool:
-        """A notification came, a rule hurried, or F has passed since the last start."""
-        return self.signals.pending or now >= self.started_at + self.settings.period_s
+        """A notification came, a rule hurried, or F has passed since the last full start."""
+        last = self.full_started
+        return self.signals.pending or last is None or now >= last + self.settings.period_s
 
     async def activate(self, now: float) -> int:
-        """One activation at sim time ``now``; how many rules ran."""
+        """One activation at sim time ``now`` (the engine's clock); how many rules ran."""
         self.signals.take()
-        self.started_at = now
-        return await self.activation()
+        return await self.activation(self.focus())
 
     @property
     def errors(self) -> int:

@@ -143,12 +143,12 @@ class MonolithStack:
 
     def _notify(self, table: str, robot: str | None, row_id: int | None) -> None:
         """A change notification: what ``ScenarioService.watch`` does for each service that
-        watches ``table``: tell its store, then wake its engine."""
+        watches ``table``: tell its store, then wake its engine for ``robot``."""
         note = Notification(table, robot, row_id)
         for engine, store, tables in self._watching:
             if table in tables:
                 store.note(note)
-                engine.wake()
+                engine.wake(robot)
 
     def step(self) -> None:
         self.sim.step()

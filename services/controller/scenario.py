@@ -118,6 +118,7 @@ class ControllerScenario(Supervised[Key, ScenarioSpec]):
 
     def __init__(self, host: Host, ticket: Ticket[Key, ScenarioSpec]) -> None:
         super().__init__(ticket)
+        self.robot_id = ticket.key[0]  # a wake for this robot runs it (docs/ENGINE.md)
         self.host = host
         self.now: float | None = None
         self.scan: LaserScan | None = None

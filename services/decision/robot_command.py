@@ -23,6 +23,7 @@ class IssueRobotCommand(Rule):
     def __init__(self, store: DecisionView, decision: RobotDecision) -> None:
         self.store = store
         self.decision = decision
+        self.robot_id = decision.robot_id  # a wake or hurry for this robot runs it
 
     async def actions(self) -> None:
         d = self.decision
