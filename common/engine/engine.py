@@ -29,18 +29,16 @@ Our additions to the thesis:
 
 from __future__ import annotations
 
-import asyncio
 import logging
-import sys
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
-from typing import Any
 
 from common.config import EngineSettings
-from common.engine.errorlog import ErrorLog, error_key
+from common.engine.errorlog import ErrorLog
 from common.engine.rule import Rule
 from common.engine.stats import EngineCounters, RuleStats
+from common.engine.steps import StepRunner
 from common.engine.trigger import Clock, Periodic, Signals, Trigger
 from common.errors import UsageError
 
@@ -49,7 +47,7 @@ log = logging.getLogger("pnav.engine")
 RuleFactory = Callable[[], Rule]
 
 
-class Engine:
+class Engine(StepRunner):
     def __init__(
         self,
         settings: EngineSettings | None = None,
@@ -172,143 +170,6 @@ class Engine:
         current.extendleft(reversed(passed))
         return ran, len(passed)
 
-    async def run_rule(self, rule: Rule) -> None:
-        """Run the five steps of ``rule`` (thesis figure 3.2) and file its statistics."""
-        cls = type(rule)
-        stats = self._stats.get(cls)
-        if stats is None:
-            stats = self._stats[cls] = RuleStats(rule.name, cls.scenario)
-        started = time.perf_counter()
-        stats.executed += 1
-        steps = cls._steps
-        try:
-            overridden, is_async = steps["data_acquisition"]
-            if overridden:
-                result = rule.data_acquisition()
-                if is_async:
-                    await result
-        except asyncio.CancelledError:
-            raise
-        except Exception:
-            self._discard_on_error(rule, stats, "data acquisition")
-            stats.record_time(time.perf_counter() - started)
-            return
-
-        rule.activated = self._tests(rule, stats, rule.activation_guards, "activation guard")
-        if rule.activated:
-            stats.activated += 1
-            if self._tests(rule, stats, rule.conditions, "condition"):
-                try:
-                    overridden, is_async = steps["actions"]
-                    if overridden:
-                        result = rule.actions()
-                        if is_async:
-                            await result
-                except asyncio.CancelledError:
-                    raise
-                except Exception:
-                    self._discard_on_error(rule, stats, "actions")
-                    stats.record_time(time.perf_counter() - started)
-                    return
-                stats.acted += 1
-
-        self._generate(rule, stats)
-        stats.record_time(time.perf_counter() - started)
-
-    def _tests(self, rule: Rule, stats: RuleStats, step: Callable[[], Any], what: str) -> bool:
-        """Evaluate AND-ed tests; anything but True (or an exception) counts as false."""
-        try:
-            result = step()
-            if result is True:
-                return True
-            if result is False:
-                return False
-            if isinstance(result, Iterable) and not isinstance(result, (str, bytes)):
-                for test in result:
-                    if test is not True:
-                        if test is not False:
-                            self._invalid(rule, stats, what, test)
-                        return False
-                return True
-            self._invalid(rule, stats, what, result)
-        except Exception as exc:
-            stats.errors += 1
-            self._report(rule, what, f"{what} raised {_describe(exc)}; counted as false", exc)
-        return False
-
-    def _invalid(self, rule: Rule, stats: RuleStats, what: str, value: object) -> None:
-        stats.errors += 1
-        self._report(
-            rule,
-            what,
-            f"{what} returned {value!r}, not a bool; counted as false",
-            detail=f"not a bool: {type(value).__qualname__}",
-        )
-
-    def _generate(self, rule: Rule, stats: RuleStats) -> None:
-        try:
-            generated = rule.rule_generation()
-            if generated is None:
-                return
-            for new in generated:
-                if isinstance(new, Rule):
-                    self.next.append(new)
-                else:
-                    stats.errors += 1
-                    self._report(
-                        rule,
-                        "rule generation",
-                        f"rule generation produced {new!r}, not a Rule; ignored",
-                        detail=f"not a Rule: {type(new).__qualname__}",
-                    )
-        except Exception:
-            self._discard_on_error(rule, stats, "rule generation")
-
-    def _where(self, rule: Rule) -> dict[str, str]:
-        """A log record's ``extra``: which rule of which engine."""
-        return {"rule": rule.name, "scenario": rule.scenario, "engine": self.name}
-
-    def _report(
-        self,
-        rule: Rule,
-        step: str,
-        message: str,
-        exc: BaseException | None = None,
-        *,
-        detail: str = "",
-        level: int = logging.ERROR,
-    ) -> None:
-        """Log an error of ``rule`` once per distinct error, then a count now and then
-        (common.engine.errorlog): a rule failing on every tick must not flood the log."""
-        key = error_key(type(rule), step, exc, detail)
-        self.error_log.report(key, level, message, self._where(rule), exc_info=exc)
-
-    def _discard_on_error(self, rule: Rule, stats: RuleStats, step: str) -> None:
-        """Count, log and discard ``rule`` after an error in ``step``; call it inside the
-        ``except`` that caught the error (subclasses, e.g. the monolith's, override it with
-        this signature and read the error the same way)."""
-        exc = sys.exc_info()[1]
-        stats.errors += 1
-        what = _describe(exc) if exc is not None else "unknown error"
-        self._report(rule, step, f"error in {step}; rule discarded: {what}", exc)
-        try:
-            rule.discarded(step)
-        except Exception as hook_exc:
-            self._report(
-                rule, "discarded hook", f"discarded hook raised {_describe(hook_exc)}", hook_exc
-            )
-        factory = self._meta_factories.get(type(rule))
-        if factory is not None:
-            self.next.append(factory())
-            self.counters.meta_reseeded += 1
-            self._report(
-                rule,
-                "re-seed",
-                "meta rule re-seeded after an error",
-                detail=step,
-                level=logging.WARNING,
-            )
-
     # -- statistics --------------------------------------------------------------------------
     def stats(self) -> list[RuleStats]:
         """A snapshot of the statistics per rule type (copies; safe to keep)."""
@@ -402,12 +263,6 @@ class Engine:
 
     def __len__(self) -> int:
         return len(self.current) + len(self.next)
-
-
-def _describe(exc: BaseException) -> str:
-    """``ValueError: actuator refused``: the one-line form of an exception."""
-    text = str(exc)
-    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
 def rules_in(rules: Iterable[Rule]) -> list[str]:
