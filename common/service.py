@@ -6,7 +6,9 @@ Lifecycle of a :class:`ScenarioService`:
 2. :meth:`ScenarioService.seed`: the subclass adds its meta rules (``engine.add_meta``).
 3. The service subscribes to the change notifications of every table the meta rules watch;
    each one is handed to :meth:`ScenarioService.on_notification` and wakes the engine, both
-   on the loop (:meth:`ScenarioService.watch`).
+   on the loop (:meth:`ScenarioService.watch`). The tables of
+   :attr:`ScenarioService.listens` are handed to ``on_notification`` too, without waking
+   the engine (row images a store keeps for later, e.g. the controller's odometry).
    In a lockstep run (PNAV_LOCKSTEP, common.lockstep) the runtime's ledger counts every
    subscription, and the engine (:meth:`ScenarioService.make_engine`) counts F in sim time
    and reports the service quiet whenever no activation is due.
@@ -87,6 +89,10 @@ class ScenarioService(ABC):
     """A service made of scenarios run by one Proactive Engine."""
 
     service: ClassVar[str] = ""
+    # Tables whose notifications go to on_notification without waking the engine: a store
+    # keeps their row images for the rules a watched table wakes (the controller keeps each
+    # robot's newest odometry image for its next scan). Tables the meta rules watch wake.
+    listens: frozenset[str] = frozenset()
 
     def __init__(self, runtime: Runtime) -> None:
         self.runtime = runtime
@@ -209,10 +215,11 @@ class ScenarioService(ABC):
     def watch(self) -> None:
         """On every notification of a table the meta rules watch: :meth:`on_notification`,
         then wake the engine. Both run on the event loop (one hop from Zenoh's thread), so a
-        store needs no locks; in a lockstep run the message counts as handled after both."""
+        store needs no locks; in a lockstep run the message counts as handled after both.
+        A table of :attr:`listens` only the meta rules do not watch: on_notification alone."""
         engine, note = self.engine, self.on_notification
 
-        def on_message(key: str, payload: bytes) -> None:
+        def decode(key: str, payload: bytes) -> Notification:
             try:
                 decoded = Notification.decode(key, payload)
             except ValueError:
@@ -221,14 +228,26 @@ class ScenarioService(ABC):
                 except ValueError:
                     table, robot = "", None
                 decoded = Notification(table, robot, None)
+            return decoded
+
+        def on_message(key: str, payload: bytes) -> None:
+            decoded = decode(key, payload)
             if decoded.table:
                 note(decoded)
             engine.wake()
 
+        def on_listened(key: str, payload: bytes) -> None:
+            decoded = decode(key, payload)
+            if decoded.table:
+                note(decoded)
+
         session, ledger = self.runtime.zenoh, self.runtime.ledger
-        for table in engine.watched_tables:
+        watched = tuple(engine.watched_tables)
+        handlers = [(t, on_message) for t in watched]
+        handlers += [(t, on_listened) for t in sorted(self.listens) if t not in watched]
+        for table, handler in handlers:
             key_expr = keys.notify_watch(table)
-            subscriber = bus.subscribe(session, key_expr, on_message, ledger=ledger)
+            subscriber = bus.subscribe(session, key_expr, handler, ledger=ledger)
             self.runtime.on_close(subscriber.undeclare)
 
     async def publish_stats(self) -> None:

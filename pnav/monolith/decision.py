@@ -35,6 +35,7 @@ def _recommendation(row: Row) -> Recommendation:
         system_command=row["system_command"],
         reason=row["reason"],
         treated_by=row["treated_by"],
+        expires_stamp=row["expires_stamp"],
     )
 
 
@@ -109,7 +110,7 @@ class MemoryDecisionSource:
             rec = by_id.get(rec_id)
             if rec is not None:  # UPDATE ... WHERE id = ANY(...) skips a missing row too
                 rec["treated_by"] = row_id
-        self.contract.changed(table, row["robot_id"], row_id)
+        self.contract.changed(table, row["robot_id"], row_id, row)
         return row_id
 
 

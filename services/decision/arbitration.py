@@ -7,6 +7,7 @@ id). A new scenario family is obeyed the moment it writes a row with a priority.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Final
@@ -34,6 +35,8 @@ class Recommendation:
     system_command: str | None
     reason: str
     treated_by: int | None
+    # when it stops being live (sim s): the decision's store drops it then
+    expires_stamp: float = math.inf
 
 
 @dataclass(frozen=True)
@@ -101,6 +104,12 @@ def explain(win: Recommendation, considered: Sequence[Recommendation]) -> str:
     if win.reason:
         text += f": {win.reason}"
     return text
+
+
+def reissue_due(last: Issued | None, now: float) -> bool:
+    """Whether :func:`decide_robot` would re-issue ``last``'s winner unchanged at ``now``:
+    REISSUE_PERIOD_S of sim time passed since it (or sim time went back). True with none."""
+    return last is None or not (last.stamp <= now < last.stamp + REISSUE_PERIOD_S - _EPS)
 
 
 def decide_robot(
