@@ -130,6 +130,7 @@ def decision_engine(
     replica's leases (one process owns every robot, unless a test says otherwise). Hand the
     store every change notification (``store.note``) as the service does.
     """
-    store = DecisionStore(MemoryDecisionSource(contract), now, owns)
+    # the store's period fallback counts sim time too (a run depends on the sim alone)
+    store = DecisionStore(MemoryDecisionSource(contract), now, owns, clock=lambda: now() or 0.0)
     meta.seed(engine, store)
     return store

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from collections import defaultdict
 from collections.abc import Callable
 from typing import Any, Final, Protocol
@@ -37,7 +38,7 @@ from services.decision.live import LiveRecommendations, recommendation_of
 
 logger = logging.getLogger("pnav.decision")
 
-# The period fallback (sim s): the live recommendations are read from the table at least this
+# The period fallback (store clock s): the live recommendations are read from the table at least this
 # often even while every notification carried its image, in case one was lost unseen.
 REREAD_S: Final = 0.25
 
@@ -254,8 +255,10 @@ class DecisionStore:
     (:class:`~services.decision.live.LiveRecommendations`); the table is read (LIVE_SQL) at
     the first look, after a notification without a usable image (none, a ``seq`` gap, no
     robot) or about the robot table, after an ownership change, and at least every
-    ``reread_s`` of sim time (the period fallback, on the store's side: the engine's F only
-    says when the meta rule looks, and a look needs no read). :meth:`live` gives only the
+    ``reread_s`` of ``clock`` (the period fallback, on the store's side: the engine's F only
+    says when the meta rule looks, and a look needs no read; wall time in a service, sim
+    time in a lockstep or in-process run, so a run does not depend on the machine's speed;
+    sim time may stand still, the fallback must not). :meth:`live` gives only the
     robots to decide for: those whose recommendations changed (new, expired, or read
     again) and those whose re-issue is due.
     """
@@ -266,9 +269,11 @@ class DecisionStore:
         sim_now: Callable[[], float | None],
         owns: Callable[[str], bool] = _everyone,
         reread_s: float = REREAD_S,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.source = source
         self._sim_now = sim_now
+        self._clock = clock
         self._owns = owns
         self.reread_s = reread_s
         # Robot id -> newest command2robot row; read from the table on the first look.
@@ -293,8 +298,9 @@ class DecisionStore:
 
     async def live(self, now: float) -> dict[str, list[Recommendation]]:
         await self._catch_up()
-        if self._stale or not (self._read_at <= now < self._read_at + self.reread_s):
-            await self._read(now)
+        at = self._clock()
+        if self._stale or not (self._read_at <= at < self._read_at + self.reread_s):
+            await self._read(now, at)
         live = self._live
         live.expire(now)
         due = {
@@ -352,10 +358,10 @@ class DecisionStore:
         self._regained |= gained
         self._stale = self._stale or bool(gained)
 
-    async def _read(self, now: float) -> None:
+    async def _read(self, now: float, at: float) -> None:
         """Every live recommendation from the table; robots gone from it are dropped."""
         self._stale = False
-        self._read_at = now
+        self._read_at = at
         self._live.reading()
         try:
             read = await self.source.live_recommendations(now)
