@@ -38,8 +38,8 @@ from services.decision.live import LiveRecommendations, recommendation_of
 
 logger = logging.getLogger("pnav.decision")
 
-# The period fallback (store clock s): the live recommendations are read from the table at least this
-# often even while every notification carried its image, in case one was lost unseen.
+# The period fallback (store clock s): the live recommendations are read from the table at
+# least this often even while every notification carried its image, in case one was lost.
 REREAD_S: Final = 0.25
 
 # Every robot, with each of its live recommendations (none: one row of NULLs). The table is
