@@ -8,7 +8,8 @@ Lifecycle of a :class:`ScenarioService`:
    each one is handed to :meth:`ScenarioService.on_notification` and wakes the engine, both
    on the loop (:meth:`ScenarioService.watch`). The tables of
    :attr:`ScenarioService.listens` are handed to ``on_notification`` too, without waking
-   the engine (row images a store keeps for later, e.g. the controller's odometry).
+   the engine (row images a store keeps for later, e.g. odometry for a controller's next
+   scan: services/controller/store.py says why the shipped one does not).
    In a lockstep run (PNAV_LOCKSTEP, common.lockstep) the runtime's ledger counts every
    subscription, and the engine (:meth:`ScenarioService.make_engine`) counts F in sim time
    and reports the service quiet whenever no activation is due.
@@ -90,8 +91,8 @@ class ScenarioService(ABC):
 
     service: ClassVar[str] = ""
     # Tables whose notifications go to on_notification without waking the engine: a store
-    # keeps their row images for the rules a watched table wakes (the controller keeps each
-    # robot's newest odometry image for its next scan). Tables the meta rules watch wake.
+    # keeps their row images for the rules a watched table wakes (e.g. each robot's newest
+    # odometry image for the controller's next scan). Tables the meta rules watch wake.
     listens: frozenset[str] = frozenset()
 
     def __init__(self, runtime: Runtime) -> None:

@@ -25,7 +25,7 @@ logger = logging.getLogger("pnav.controller")
 
 class ControllerService(ScenarioService):
     service = "controller"
-    listens = ControllerStore.listens  # odometry images, kept for the next scan (store.py)
+    listens = ControllerStore.listens  # none by default: why in store.py
 
     def __init__(self, runtime: Runtime) -> None:
         super().__init__(runtime)

@@ -11,11 +11,10 @@
 
 Row images (CONTRACT.md "Row images"): a laser_scan notification with its row becomes the
 robot's newest scan without a query; the odometry the scan is decided with is the newest
-odometry image heard (the store listens to odometry without waking the engine:
-:attr:`ControllerStore.listens`). Either falls back to the table as the contract says: no
-image, a ``seq`` gap (``common.freshness.Sequences``), or nothing heard for ``recheck_s``
-(the scan cache's period, as without images); a scan from an image with no usable odometry
-image reads the odometry alone.
+odometry image heard, if the service hears odometry (:attr:`ControllerStore.listens`: it
+does not by default), else one query for the odometry alone. Either falls back to the table
+as the contract says: no image, a ``seq`` gap (``common.freshness.Sequences``), or nothing
+heard for ``recheck_s`` (the scan cache's period, as without images).
 """
 
 from __future__ import annotations
@@ -37,6 +36,7 @@ logger = logging.getLogger("pnav.controller")
 # Notifications are hints: a row is read again after this long (store clock) even if none
 # came, in case one was lost.
 RECHECK_S = 0.25
+ODOMETRY_LISTENS = frozenset((keys.ODOMETRY,))  # see ControllerStore.listens
 
 ScanAndOdometry = tuple[LaserScan | None, Odometry | None]
 Tables = tuple[list[Robot], dict[str, ActiveStrategy]]
@@ -108,10 +108,14 @@ class ControllerStore:
     first clock message; ``clock`` if not given).
     """
 
-    # tables the store hears without the engine being woken for them (ScenarioService.watch
-    # subscribes to these besides the meta rules' watches): the odometry images, 30 Hz per
-    # robot, are kept for the next scan, which is what wakes the controller
-    listens: frozenset[str] = frozenset((keys.ODOMETRY,))
+    # Tables the service should hear without waking the engine (ScenarioService.listens):
+    # none. Hearing odometry (an image per row, 20-30 Hz per robot) would spare the one
+    # odometry query per scan, and note() keeps those images if they come; measured on the
+    # latency bench (10 robots, with the bridge sending images) it cost the controller about
+    # 10 points of a core more than the query it saves, with no latency gain to see: each
+    # notification crosses from Zenoh's thread to the loop (and takes the GIL) for a row
+    # that only matters at the next scan. ODOMETRY_LISTENS is the set to hear it.
+    listens: frozenset[str] = frozenset()
 
     def __init__(
         self,

@@ -2,7 +2,8 @@
 
 - The records built from a row's image are the records the queries read back from the table.
 - The shipped controller, fed scans and odometry whose notifications carry their images (as
-  the bridge sends them), recommends without reading the scan or the odometry table.
+  the bridge sends them), recommends without reading the scan table; the odometry is one
+  query per scan, unless the service hears odometry too (``listens``), then none.
 - With images off (PNAV_NOTIFY_IMAGES=off) for the controller and for the test's own writes,
   it works as before, reading the table for every scan.
 """
@@ -22,7 +23,7 @@ from common.db import Database
 from common.runtime import Runtime
 from common.testing import publish_clock, running_service
 from services.controller.service import ControllerService
-from services.controller.store import ControllerStore
+from services.controller.store import ODOMETRY_LISTENS, ControllerStore
 from tests.contract.controller.conftest import BEAMS, ROBOT, SIM_START, eventually
 
 RIGHT_DEG = range(-40, -19)  # an obstacle front-right at 0.30 m: avoid_left turns away
@@ -105,18 +106,25 @@ async def test_the_records_of_images_are_the_records_read_from_the_table(
     assert records.odometry_of({**odometry, "id": odometry_id}) == read_odometry
 
 
-@pytest.fixture(params=["images", "images off"])
-def images(request: pytest.FixtureRequest) -> bool:
-    return bool(request.param == "images")
+class HearingController(ControllerService):
+    """The controller hearing odometry too (off by default: see ControllerStore.listens)."""
+
+    listens = ODOMETRY_LISTENS
+
+
+@pytest.fixture(params=["images", "images off", "images, odometry heard"])
+def variant(request: pytest.FixtureRequest) -> str:
+    return str(request.param)
 
 
 async def test_the_controller_recommends_from_images_without_reading_the_table(
-    db_url: str, zenoh_settings: ZenohSettings, client: Runtime, images: bool
+    db_url: str, zenoh_settings: ZenohSettings, client: Runtime, variant: str
 ) -> None:
     """With images, the scan and odometry come with their notifications: no query (the
     period fallback aside: nothing is lost here, and the scans come faster than it). With
     PNAV_NOTIFY_IMAGES=off on both sides, the controller reads the table for every scan and
-    recommends the same."""
+    recommends the same. Hearing odometry (not by default), the odometry query goes too."""
+    images, hearing = variant != "images off", variant == "images, odometry heard"
     client.database.notifier.images = images  # the test's writes, as PNAV_NOTIFY_IMAGES says
     config = ServiceConfig(
         service="controller",
@@ -135,7 +143,8 @@ async def test_the_controller_recommends_from_images_without_reading_the_table(
         "VALUES ($1, 'GOTO_AVOID', 'user', 0)",
         ROBOT,
     )
-    async with running_service(ControllerService, config, settle_s=0.5) as service:
+    service_cls = HearingController if hearing else ControllerService
+    async with running_service(service_cls, config, settle_s=0.5) as service:
         store = service.store  # type: ignore[attr-defined]
         assert isinstance(store, ControllerStore)
         now = SIM_START
@@ -162,10 +171,14 @@ async def test_the_controller_recommends_from_images_without_reading_the_table(
         # from the third scan on (the first looks may come before the strategy is read)
         scan_reads = reads[-1][0] - reads[1][0]
         odometry_reads = reads[-1][1] - reads[1][1]
-        if images:
+        if hearing:
             assert store.images_used >= 10
             assert (scan_reads, odometry_reads) == (0, 0)  # no query: the images stood in
             assert store.odometry_images_used >= 5
+        elif images:
+            assert store.images_used >= 10
+            assert scan_reads == 0  # the scans' images stood in for the scan query
+            assert odometry_reads >= 5 and store.odometry_images_used == 0  # odometry: read
         else:
             assert store.images_used == 0 and store.odometry_images_used == 0
             assert scan_reads >= 5  # every scan it looked at was read from the table
