@@ -205,8 +205,9 @@ class ScenarioService(ABC):
 
     def on_notification(self, note: Notification) -> None:
         """A change notification of a table the meta rules watch, on the event loop, just
-        before it wakes the engine (or of a table of :attr:`listens`, which wakes nothing). A service hands it to its store, which keeps what the
-        notifications told it (common.freshness); the default does nothing.
+        before it wakes the engine (or of a table of :attr:`listens`, which wakes nothing).
+        A service hands it to its store, which keeps what the notifications told it
+        (common.freshness); the default does nothing.
 
         ``note.id`` is None when the notification named no row or its payload was
         unreadable: then anything of ``note.table`` (for ``note.robot``) may have changed.
