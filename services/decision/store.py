@@ -6,11 +6,14 @@
   in-memory one).
 - :class:`DecisionStore`: the one object the service holds. It keeps the last command issued
   per robot (read from the table on the first look and for robots regained from another
-  replica) and implements :class:`~services.decision.view.DecisionView`, all the rules see.
+  replica) and the live recommendations (from the rows' images, CONTRACT.md "Row images";
+  the table read as the fallback), and implements
+  :class:`~services.decision.view.DecisionView`, all the rules see.
 
 Each write is a single statement (a data-modifying CTE): the decision row and the
 ``treated_by`` of the rows it considered commit together, in one round trip, which keeps
-the decision's latency to one query in and one out.
+the decision's latency to one query out (and, with images, none in); each notification
+carries the row's image.
 """
 
 from __future__ import annotations
