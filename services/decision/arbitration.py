@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Final
+from typing import Any, Final
 
 # Re-issue the current winner at least this often (sim s), so the bridge's 0.5 s watchdog
 # never stops a robot that has a live recommendation.
@@ -64,6 +64,19 @@ class RobotDecision:
     considered_ids: tuple[int, ...]
     reason: str
 
+    def image(self) -> dict[str, Any]:
+        """The command2robot row's image: its columns as written (CONTRACT.md "Row images")."""
+        return {
+            "robot_id": self.robot_id,
+            "stamp": self.stamp,
+            "linear_mps": self.linear_mps,
+            "angular_rps": self.angular_rps,
+            "recommendation_id": self.recommendation_id,
+            "source": self.source,
+            "considered_ids": list(self.considered_ids),
+            "reason": self.reason,
+        }
+
 
 @dataclass(frozen=True)
 class SystemDecision:
@@ -75,6 +88,18 @@ class SystemDecision:
     recommendation_id: int
     considered_ids: tuple[int, ...]
     reason: str
+
+    def image(self) -> dict[str, Any]:
+        """The system_command row's image: its columns as written, ``pending``."""
+        return {
+            "robot_id": self.robot_id,
+            "command": self.command,
+            "recommendation_id": self.recommendation_id,
+            "considered_ids": list(self.considered_ids),
+            "reason": self.reason,
+            "status": "pending",
+            "stamp": self.stamp,
+        }
 
 
 def winner(recommendations: Sequence[Recommendation]) -> Recommendation:

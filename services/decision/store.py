@@ -140,33 +140,6 @@ async def last_issued(db: Any) -> dict[str, Issued]:
     }
 
 
-def robot_command_image(d: RobotDecision) -> dict[str, Any]:
-    """The command2robot row's image: its columns as WRITE_COMMAND2ROBOT_SQL writes them."""
-    return {
-        "robot_id": d.robot_id,
-        "stamp": d.stamp,
-        "linear_mps": d.linear_mps,
-        "angular_rps": d.angular_rps,
-        "recommendation_id": d.recommendation_id,
-        "source": d.source,
-        "considered_ids": list(d.considered_ids),
-        "reason": d.reason,
-    }
-
-
-def system_command_image(d: SystemDecision) -> dict[str, Any]:
-    """The system_command row's image: its columns as WRITE_SYSTEM_COMMAND_SQL writes them."""
-    return {
-        "robot_id": d.robot_id,
-        "command": d.command,
-        "recommendation_id": d.recommendation_id,
-        "considered_ids": list(d.considered_ids),
-        "reason": d.reason,
-        "status": "pending",
-        "stamp": d.stamp,
-    }
-
-
 async def write_robot_command(db: Database, d: RobotDecision) -> int:
     """Insert the command2robot row, mark what it considered, then notify command2robot
     with the row's image (the bridge sends it without reading the table)."""
@@ -182,7 +155,7 @@ async def write_robot_command(db: Database, d: RobotDecision) -> int:
         d.source,
         list(d.considered_ids),
         d.reason,
-        image=robot_command_image(d),
+        image=d.image(),
     )
     return int(value)
 
@@ -200,7 +173,7 @@ async def write_system_command(db: Database, d: SystemDecision) -> int:
         list(d.considered_ids),
         d.reason,
         d.stamp,
-        image=system_command_image(d),
+        image=d.image(),
     )
     return int(value)
 
