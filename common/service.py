@@ -6,7 +6,10 @@ Lifecycle of a :class:`ScenarioService`:
 2. :meth:`ScenarioService.seed`: the subclass adds its meta rules (``engine.add_meta``).
 3. The service subscribes to the change notifications of every table the meta rules watch;
    each one is handed to :meth:`ScenarioService.on_notification` and wakes the engine, both
-   on the loop (:meth:`ScenarioService.watch`).
+   on the loop (:meth:`ScenarioService.watch`). The tables of
+   :attr:`ScenarioService.listens` are handed to ``on_notification`` too, without waking
+   the engine (row images a store keeps for later, e.g. odometry for a controller's next
+   scan: services/controller/store.py says why the shipped one does not).
    In a lockstep run (PNAV_LOCKSTEP, common.lockstep) the runtime's ledger counts every
    subscription, and the engine (:meth:`ScenarioService.make_engine`) counts F in sim time
    and reports the service quiet whenever no activation is due.
@@ -87,6 +90,10 @@ class ScenarioService(ABC):
     """A service made of scenarios run by one Proactive Engine."""
 
     service: ClassVar[str] = ""
+    # Tables whose notifications go to on_notification without waking the engine: a store
+    # keeps their row images for the rules a watched table wakes (e.g. each robot's newest
+    # odometry image for the controller's next scan). Tables the meta rules watch wake.
+    listens: frozenset[str] = frozenset()
 
     def __init__(self, runtime: Runtime) -> None:
         self.runtime = runtime
@@ -198,8 +205,9 @@ class ScenarioService(ABC):
 
     def on_notification(self, note: Notification) -> None:
         """A change notification of a table the meta rules watch, on the event loop, just
-        before it wakes the engine. A service hands it to its store, which keeps what the
-        notifications told it (common.freshness); the default does nothing.
+        before it wakes the engine (or of a table of :attr:`listens`, which wakes nothing).
+        A service hands it to its store, which keeps what the notifications told it
+        (common.freshness); the default does nothing.
 
         ``note.id`` is None when the notification named no row or its payload was
         unreadable: then anything of ``note.table`` (for ``note.robot``) may have changed.
@@ -211,10 +219,11 @@ class ScenarioService(ABC):
         then wake the engine for the notification's robot (docs/ENGINE.md, "Per-robot
         wake-ups": the meta rules and that robot's rules run). Both run on the event loop
         (one hop from Zenoh's thread), so a store needs no locks; in a lockstep run the
-        message counts as handled after both."""
+        message counts as handled after both. A table of :attr:`listens` only (the meta
+        rules do not watch it): on_notification alone."""
         engine, note = self.engine, self.on_notification
 
-        def on_message(key: str, payload: bytes) -> None:
+        def decode(key: str, payload: bytes) -> Notification:
             try:
                 decoded = Notification.decode(key, payload)
             except ValueError:
@@ -223,15 +232,27 @@ class ScenarioService(ABC):
                 except ValueError:
                     table, robot = "", None
                 decoded = Notification(table, robot, None)
+            return decoded
+
+        def on_message(key: str, payload: bytes) -> None:
+            decoded = decode(key, payload)
             if decoded.table:
                 note(decoded)
             # focused on the notification's robot (a robot-less one wakes for anything)
             engine.wake(decoded.robot)
 
+        def on_listened(key: str, payload: bytes) -> None:
+            decoded = decode(key, payload)
+            if decoded.table:
+                note(decoded)
+
         session, ledger = self.runtime.zenoh, self.runtime.ledger
-        for table in engine.watched_tables:
+        watched = tuple(engine.watched_tables)
+        handlers = [(t, on_message) for t in watched]
+        handlers += [(t, on_listened) for t in sorted(self.listens) if t not in watched]
+        for table, handler in handlers:
             key_expr = keys.notify_watch(table)
-            subscriber = bus.subscribe(session, key_expr, on_message, ledger=ledger)
+            subscriber = bus.subscribe(session, key_expr, handler, ledger=ledger)
             self.runtime.on_close(subscriber.undeclare)
 
     async def publish_stats(self) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, TypeAlias
 
@@ -188,6 +189,54 @@ async def newest_scan_and_odometry(
     return scan, odom
 
 
+# -- records from row images (CONTRACT.md "Row images"): the same record the query gives ----
+def odometry_of(image: Mapping[str, Any]) -> Odometry:
+    """The :class:`Odometry` of an odometry row's image (as :func:`newest_odometry` reads it)."""
+    return Odometry(
+        id=int(image["id"]),
+        robot_id=image["robot_id"],
+        stamp=float(image["stamp"]),
+        x=float(image["x"]),
+        y=float(image["y"]),
+        yaw=float(image["yaw"]),
+        linear_mps=float(image["linear_mps"]),
+        angular_rps=float(image["angular_rps"]),
+    )
+
+
+def laser_scan_of(image: Mapping[str, Any]) -> LaserScan:
+    """The :class:`LaserScan` of a laser_scan row's image. ``ranges`` is the real[] column:
+    a list of floats (``inf`` kept), or the float32 bytes of one (a writer may pack it)."""
+    ranges = image["ranges"]
+    if isinstance(ranges, bytes | bytearray | memoryview):
+        values = np.frombuffer(ranges, dtype=np.float32)
+    else:
+        values = np.asarray(ranges, dtype=np.float32)
+    return LaserScan(
+        id=int(image["id"]),
+        robot_id=image["robot_id"],
+        stamp=float(image["stamp"]),
+        angle_min=float(image["angle_min"]),
+        angle_increment=float(image["angle_increment"]),
+        range_min=float(image["range_min"]),
+        range_max=float(image["range_max"]),
+        ranges=values,
+    )
+
+
+def battery_of(image: Mapping[str, Any]) -> Battery:
+    """The :class:`Battery` of a battery row's image (as :func:`newest_battery` reads it)."""
+    return Battery(
+        id=int(image["id"]),
+        robot_id=image["robot_id"],
+        stamp=float(image["stamp"]),
+        energy_wh=float(image["energy_wh"]),
+        capacity_wh=float(image["capacity_wh"]),
+        percentage=float(image["percentage"]),
+        charging=bool(image.get("charging", False)),
+    )
+
+
 async def newest_battery(db: Executor, robot_id: str) -> Battery | None:
     row = await db.fetchrow(
         "SELECT id, robot_id, stamp, energy_wh, capacity_wh, percentage, charging FROM battery "
@@ -248,10 +297,19 @@ INSERT INTO command_recommendation (robot_id, kind, source, priority, linear_mps
 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)
 RETURNING id
 """
+# the columns _RECOMMEND writes, in its order: the image of the row (CONTRACT.md "Row images")
+RECOMMENDATION_COLUMNS = (
+    *("robot_id", "kind", "source", "priority", "linear_mps", "angular_rps"),
+    *("system_command", "stamp", "expires_stamp", "inputs", "reason"),
+)
 
 
 async def _recommend(db: Database, robot_id: str, *values: Any) -> int:
-    value = await db.write(keys.COMMAND_RECOMMENDATION, robot_id, _RECOMMEND, robot_id, *values)
+    args = (robot_id, *values)
+    # the row as written goes with the notification: the decision keeps the live rows from
+    # these images and reads the table only when one is missing (or at its period)
+    image = dict(zip(RECOMMENDATION_COLUMNS, args, strict=True))
+    value = await db.write(keys.COMMAND_RECOMMENDATION, robot_id, _RECOMMEND, *args, image=image)
     return int(value)
 
 
@@ -268,7 +326,8 @@ async def recommend_velocity(
     reason: str,
     inputs: dict[str, Any] | None = None,
 ) -> int:
-    """Write a robot recommendation valid until ``stamp + ttl_s`` (sim time) and notify."""
+    """Write a robot recommendation valid until ``stamp + ttl_s`` (sim time) and notify,
+    with the row's image."""
     return await _recommend(
         db, robot_id, "robot", source, priority, float(linear), float(angular), None,
         stamp, stamp + ttl_s, inputs or {}, reason,
@@ -287,7 +346,7 @@ async def recommend_system(
     reason: str,
     inputs: dict[str, Any] | None = None,
 ) -> int:
-    """Write a system recommendation (e.g. CMD_BATTSAVE) and notify."""
+    """Write a system recommendation (e.g. CMD_BATTSAVE) and notify, with the row's image."""
     return await _recommend(
         db, robot_id, "system", source, priority, None, None, command,
         stamp, stamp + ttl_s, inputs or {}, reason,

@@ -22,6 +22,9 @@ from common.contract import keys
 Row = dict[str, Any]
 # (table, robot, row id): what a write announces; the monolith's stand-in for Zenoh
 Listener = Callable[[str, str | None, int | None], None]
+# (table, robot, row id, the row's image or None): the same, with the committed row as a
+# notification carries it (CONTRACT.md "Row images")
+RowListener = Callable[[str, str | None, int | None, Row | None], None]
 
 # schema.sql's retention_policy: rows kept per robot in the sensor tables
 RETENTION = {
@@ -98,6 +101,7 @@ class MemoryContract:
             )
         }
         self.listeners: list[Listener] = []
+        self.row_listeners: list[RowListener] = []
         # command_recommendation rows not yet expired, per robot: the decision asks for the
         # live ones 30+ times a sim second; sim time only goes forward within a run, so a row
         # found expired once is dropped from here for good (the table keeps it).
@@ -112,13 +116,22 @@ class MemoryContract:
         if table == keys.COMMAND_RECOMMENDATION:
             self._live.setdefault(row["robot_id"], []).append(row)
         if notify:
-            self.changed(table, row.get("robot_id"), row_id)
+            self.changed(table, row.get("robot_id"), row_id, row)
         return row_id
 
-    def changed(self, table: str, robot: str | None, row_id: int | None) -> None:
-        """What a Zenoh notification does in the stack: tell whoever watches ``table``."""
+    def changed(
+        self, table: str, robot: str | None, row_id: int | None, row: Row | None = None
+    ) -> None:
+        """What a Zenoh notification does in the stack: tell whoever watches ``table``;
+        ``row`` (the row ``row_id`` as committed) goes to the row listeners as its image."""
         for listener in self.listeners:
             listener(table, robot, row_id)
+        if self.row_listeners:
+            # a copy: the table's row changes in place later (treated_by, a goal's status),
+            # an image is the row as it was committed
+            image = dict(row) if row is not None and row_id is not None else None
+            for row_listener in self.row_listeners:
+                row_listener(table, robot, row_id, image)
 
     def live_recommendations(self, robot: str, now: float) -> list[Row]:
         """The robot's command_recommendation rows with ``expires_stamp > now``, id order."""

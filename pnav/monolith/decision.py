@@ -35,6 +35,7 @@ def _recommendation(row: Row) -> Recommendation:
         system_command=row["system_command"],
         reason=row["reason"],
         treated_by=row["treated_by"],
+        expires_stamp=row["expires_stamp"],
     )
 
 
@@ -109,7 +110,7 @@ class MemoryDecisionSource:
             rec = by_id.get(rec_id)
             if rec is not None:  # UPDATE ... WHERE id = ANY(...) skips a missing row too
                 rec["treated_by"] = row_id
-        self.contract.changed(table, row["robot_id"], row_id)
+        self.contract.changed(table, row["robot_id"], row_id, row)
         return row_id
 
 
@@ -129,6 +130,7 @@ def decision_engine(
     replica's leases (one process owns every robot, unless a test says otherwise). Hand the
     store every change notification (``store.note``) as the service does.
     """
-    store = DecisionStore(MemoryDecisionSource(contract), now, owns)
+    # the store's period fallback counts sim time too (a run depends on the sim alone)
+    store = DecisionStore(MemoryDecisionSource(contract), now, owns, clock=lambda: now() or 0.0)
     meta.seed(engine, store)
     return store

@@ -64,6 +64,7 @@ class MonolithStack:
         on_message: Callable[[str, str, dict[str, Any]], None] = lambda _r, _t, _m: None,
     ) -> None:
         self.now = 0.0  # sim time the logic sees: the sim's, after each step
+        self._seqs: dict[tuple[str, str | None], int] = {}  # a notification's seq, per key
         self.contract = MemoryContract()
         self.on_message = on_message
         self._readings: list[tuple[str, str, dict[str, Any], float]] = []
@@ -87,7 +88,7 @@ class MonolithStack:
             (engine, store, frozenset(engine.watched_tables))
             for engine, store in zip(self.engines, stores, strict=True)
         ]
-        self.contract.listeners.append(self._notify)
+        self.contract.row_listeners.append(self._notify)
 
         self.sim = Simulation(world, config, self._sink)
         self.bridge = Bridge(self.contract, self.sim.set_command, on_applied)
@@ -141,14 +142,21 @@ class MonolithStack:
     def _sink(self, robot_id: str, topic: str, message: dict[str, Any]) -> None:
         self._readings.append((robot_id, topic, message, time.perf_counter()))
 
-    def _notify(self, table: str, robot: str | None, row_id: int | None) -> None:
+    def _notify(
+        self, table: str, robot: str | None, row_id: int | None, row: dict[str, Any] | None
+    ) -> None:
         """A change notification: what ``ScenarioService.watch`` does for each service that
-        watches ``table``: tell its store, then wake its engine for ``robot``."""
-        note = Notification(table, robot, row_id)
+        watches ``table``: tell its store, then wake its engine for ``robot``. It carries the
+        row's image (numbered: one publisher, no gap), as a writer's notification does in the
+        stack."""
+        seq = self._seqs[(table, robot)] = self._seqs.get((table, robot), 0) + 1
+        note = Notification(table, robot, row_id, row, "monolith", seq)
         for engine, store, tables in self._watching:
             if table in tables:
                 store.note(note)
                 engine.wake(robot)
+            elif table in getattr(store, "listens", ()):
+                store.note(note)  # ScenarioService.listens: kept, no wake-up
 
     def step(self) -> None:
         self.sim.step()

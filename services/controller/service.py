@@ -25,6 +25,7 @@ logger = logging.getLogger("pnav.controller")
 
 class ControllerService(ScenarioService):
     service = "controller"
+    listens = ControllerStore.listens  # none by default: why in store.py
 
     def __init__(self, runtime: Runtime) -> None:
         super().__init__(runtime)

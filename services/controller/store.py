@@ -8,6 +8,13 @@
   change notifications (:meth:`ControllerStore.note`, on the event loop) when to read again
   (common.freshness): an activation woken by one robot's scan reads that robot's scan only,
   not every robot's, and the robots and strategies only after one of them changed.
+
+Row images (CONTRACT.md "Row images"): a laser_scan notification with its row becomes the
+robot's newest scan without a query; the odometry the scan is decided with is the newest
+odometry image heard, if the service hears odometry (:attr:`ControllerStore.listens`: it
+does not by default), else one query for the odometry alone. Either falls back to the table
+as the contract says: no image, a ``seq`` gap (``common.freshness.Sequences``), or nothing
+heard for ``recheck_s`` (the scan cache's period, as without images).
 """
 
 from __future__ import annotations
@@ -21,7 +28,7 @@ from common.bus import Notification
 from common.contract import keys, records
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
 from common.db import Database
-from common.freshness import FreshCache
+from common.freshness import FreshCache, Sequences
 from services.controller.scenario import Key, Recommendation
 
 logger = logging.getLogger("pnav.controller")
@@ -29,6 +36,7 @@ logger = logging.getLogger("pnav.controller")
 # Notifications are hints: a row is read again after this long (store clock) even if none
 # came, in case one was lost.
 RECHECK_S = 0.25
+ODOMETRY_LISTENS = frozenset((keys.ODOMETRY,))  # see ControllerStore.listens
 
 ScanAndOdometry = tuple[LaserScan | None, Odometry | None]
 Tables = tuple[list[Robot], dict[str, ActiveStrategy]]
@@ -100,6 +108,15 @@ class ControllerStore:
     first clock message; ``clock`` if not given).
     """
 
+    # Tables the service should hear without waking the engine (ScenarioService.listens):
+    # none. Hearing odometry (an image per row, 20-30 Hz per robot) would spare the one
+    # odometry query per scan, and note() keeps those images if they come; measured on the
+    # latency bench (10 robots, with the bridge sending images) it cost the controller about
+    # 10 points of a core more than the query it saves, with no latency gain to see: each
+    # notification crosses from Zenoh's thread to the loop (and takes the GIL) for a row
+    # that only matters at the next scan. ODOMETRY_LISTENS is the set to hear it.
+    listens: frozenset[str] = frozenset()
+
     def __init__(
         self,
         source: ControllerSource,
@@ -108,27 +125,78 @@ class ControllerStore:
         recheck_s: float = RECHECK_S,
     ) -> None:
         self.source = source
+        self._clock = clock
         self._sim_now = sim_now or clock
+        self.recheck_s = recheck_s
         self.tables: FreshCache[str, Tables] = FreshCache(clock, recheck_s)
         # per robot: its newest scan with the odometry read in the same round trip (the
         # avoid scenarios and safety_stop want both, for the same scan)
         self.scans: FreshCache[str, ScanAndOdometry] = FreshCache(clock, recheck_s, _scan_id)
-        # per robot: (scan id, odometry) read for a scan the pair above no longer holds
+        # per robot: (scan id, odometry) for a scan whose odometry the pair above does not
+        # hold (an image's scan, or one the pair no longer holds)
         self._odometry: dict[str, tuple[int, Odometry | None]] = {}
+        # robots whose cached pair came from a scan image: its odometry slot means nothing
+        self._imaged: set[str] = set()
+        # per robot: the newest odometry image and the store clock when it came (None: the
+        # last one is unusable, a gap or no image: read the table)
+        self._odometry_images: dict[str, tuple[Odometry, float] | None] = {}
+        self._seqs = Sequences()
+        # images that stood in for a query (tests, benchmarks)
+        self.images_used = 0
+        self.odometry_images_used = 0
+        self.odometry_reads = 0
         # per (robot, scenario): the newest scan it recommended on, so that a scenario
         # restarted (or named again) never recommends twice on one scan
         self._recommended: dict[Key, int] = {}
 
     # -- what the service tells it ---------------------------------------------------------
     def note(self, note: Notification) -> None:
-        """A change notification (on the event loop, before the engine wakes)."""
+        """A change notification (on the event loop, before the engine wakes, if it does)."""
         if note.table == keys.LASER_SCAN:
             if note.robot is None:
                 self.scans.announce_all()
-            else:
+            elif not self._scan_image(note.robot, note):
                 self.scans.announce(note.robot, note.id)
+        elif note.table == keys.ODOMETRY:
+            if note.robot is not None:
+                self._odometry_image(note.robot, note)
         elif note.table in _META_TABLES or not note.table:
             self.tables.announce(_META)  # which row changed does not matter: read both again
+
+    def _usable(self, note: Notification) -> bool:
+        """Whether ``note``'s image may stand in for the query (CONTRACT.md "Row images");
+        records the seq either way."""
+        gap = self._seqs.gap(f"{note.table}/{note.robot}", note.src, note.seq)
+        return note.row is not None and not gap
+
+    def _odometry_image(self, robot_id: str, note: Notification) -> None:
+        if not self._usable(note) or note.row is None:
+            self._odometry_images[robot_id] = None
+            return
+        try:
+            odometry = records.odometry_of(note.row)
+        except (KeyError, TypeError, ValueError):
+            self._odometry_images[robot_id] = None  # not the contract's image: read the table
+            return
+        held = self._odometry_images.get(robot_id)
+        if held is None or odometry.id > held[0].id:
+            self._odometry_images[robot_id] = (odometry, self._clock())
+
+    def _scan_image(self, robot_id: str, note: Notification) -> bool:
+        """Keep a scan image as the robot's newest scan; False if it cannot stand in."""
+        if not self._usable(note) or note.row is None:
+            return False
+        held = self.scans.peek(robot_id)
+        if held is not None and held[0] is not None and held[0].id >= (note.id or 0):
+            return True  # an older scan than the one held: nothing to do
+        try:
+            scan = records.laser_scan_of(note.row)
+        except (KeyError, TypeError, ValueError):
+            return False
+        self.scans.put(robot_id, (scan, None))
+        self._imaged.add(robot_id)
+        self.images_used += 1
+        return True
 
     def forget(self, robots: Iterable[str]) -> None:
         """Drop what was read and written for ``robots`` (they changed hands: another
@@ -137,6 +205,8 @@ class ControllerStore:
         for robot_id in gone:
             self.scans.forget(robot_id)
             self._odometry.pop(robot_id, None)
+            self._odometry_images.pop(robot_id, None)
+            self._imaged.discard(robot_id)
         for key in [k for k in self._recommended if k[0] in gone]:
             del self._recommended[key]
 
@@ -151,20 +221,36 @@ class ControllerStore:
         return (await self.tables.get(_META, self._read_tables))[1]
 
     async def newest_scan(self, robot_id: str) -> LaserScan | None:
-        pair = await self.scans.get(
-            robot_id, lambda: self.source.newest_scan_and_odometry(robot_id)
-        )
-        return pair[0]
+        async def read() -> ScanAndOdometry:
+            pair = await self.source.newest_scan_and_odometry(robot_id)
+            self._imaged.discard(robot_id)  # the pair's odometry was read with its scan
+            return pair
+
+        return (await self.scans.get(robot_id, read))[0]
 
     async def odometry_at(self, scan: LaserScan) -> Odometry | None:
         robot_id = scan.robot_id
-        pair = self.scans.peek(robot_id)
-        if pair is not None and pair[0] is not None and pair[0].id == scan.id:
-            return pair[1]  # read with the scan: the usual case, no round trip
         cached = self._odometry.get(robot_id)
         if cached is not None and cached[0] == scan.id:
-            return cached[1]
+            return cached[1]  # from an odometry image, or read for this scan before
+        pair = self.scans.peek(robot_id)
+        if (
+            pair is not None
+            and pair[0] is not None
+            and pair[0].id == scan.id
+            and robot_id not in self._imaged
+        ):
+            return pair[1]  # read with the scan: no round trip
+        if pair is not None and pair[0] is not None and pair[0].id == scan.id:
+            # a scan from its image: the newest odometry image, if one came within the
+            # store's period, is what the query would read now (fixed for this scan)
+            image = self._odometry_images.get(robot_id)
+            if image is not None and self._clock() - image[1] < self.recheck_s:
+                self.odometry_images_used += 1
+                self._odometry[robot_id] = (scan.id, image[0])
+                return image[0]
         odometry = await self.source.newest_odometry(robot_id)
+        self.odometry_reads += 1
         self._odometry[robot_id] = (scan.id, odometry)
         return odometry
 

@@ -7,9 +7,10 @@ id). A new scenario family is obeyed the moment it writes a row with a priority.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Final
+from typing import Any, Final
 
 # Re-issue the current winner at least this often (sim s), so the bridge's 0.5 s watchdog
 # never stops a robot that has a live recommendation.
@@ -34,6 +35,8 @@ class Recommendation:
     system_command: str | None
     reason: str
     treated_by: int | None
+    # when it stops being live (sim s): the decision's store drops it then
+    expires_stamp: float = math.inf
 
 
 @dataclass(frozen=True)
@@ -61,6 +64,19 @@ class RobotDecision:
     considered_ids: tuple[int, ...]
     reason: str
 
+    def image(self) -> dict[str, Any]:
+        """The command2robot row's image: its columns as written (CONTRACT.md "Row images")."""
+        return {
+            "robot_id": self.robot_id,
+            "stamp": self.stamp,
+            "linear_mps": self.linear_mps,
+            "angular_rps": self.angular_rps,
+            "recommendation_id": self.recommendation_id,
+            "source": self.source,
+            "considered_ids": list(self.considered_ids),
+            "reason": self.reason,
+        }
+
 
 @dataclass(frozen=True)
 class SystemDecision:
@@ -72,6 +88,18 @@ class SystemDecision:
     recommendation_id: int
     considered_ids: tuple[int, ...]
     reason: str
+
+    def image(self) -> dict[str, Any]:
+        """The system_command row's image: its columns as written, ``pending``."""
+        return {
+            "robot_id": self.robot_id,
+            "command": self.command,
+            "recommendation_id": self.recommendation_id,
+            "considered_ids": list(self.considered_ids),
+            "reason": self.reason,
+            "status": "pending",
+            "stamp": self.stamp,
+        }
 
 
 def winner(recommendations: Sequence[Recommendation]) -> Recommendation:
@@ -101,6 +129,12 @@ def explain(win: Recommendation, considered: Sequence[Recommendation]) -> str:
     if win.reason:
         text += f": {win.reason}"
     return text
+
+
+def reissue_due(last: Issued | None, now: float) -> bool:
+    """Whether :func:`decide_robot` would re-issue ``last``'s winner unchanged at ``now``:
+    REISSUE_PERIOD_S of sim time passed since it (or sim time went back). True with none."""
+    return last is None or not (last.stamp <= now < last.stamp + REISSUE_PERIOD_S - _EPS)
 
 
 def decide_robot(

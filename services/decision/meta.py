@@ -3,12 +3,14 @@
 A continuous rule (it clones itself), woken by every command_recommendation notification
 and, as a fallback, every period F (which also drives the 0.1 s re-issue). Each activation:
 
-1. one read of every live recommendation (``expires_stamp`` > sim now) of every robot this
-   replica owns (:meth:`DecisionView.live`);
+1. the live recommendations (``expires_stamp`` > sim now) of the robots this replica owns
+   that are due a look (:meth:`DecisionView.live`: their recommendations changed, or their
+   re-issue is due; every robot after the store read the table): the store keeps them from
+   the rows' images and reads the table only as its fallback;
 2. per robot, :func:`decide_robot` and :func:`decide_system` say what is due;
 3. a target rule is created per row to write (:class:`IssueRobotCommand`,
-   :class:`IssueSystemCommand`), and the engine is hurried so they run in the very next
-   activation rather than F later.
+   :class:`IssueSystemCommand`), and the engine is hurried for that robot so they run in the
+   very next activation rather than F later.
 
 The target rules sit ahead of this rule's clone in the queue, so the next look at the table
 already sees what they wrote (``treated_by``, the last command issued): nothing is decided
@@ -37,7 +39,7 @@ class MetaDecision(Rule):
     meta = True
     watches = (keys.COMMAND_RECOMMENDATION, keys.ROBOT)
 
-    def __init__(self, store: DecisionView, hurry: Callable[[], None]) -> None:
+    def __init__(self, store: DecisionView, hurry: Callable[[str], None]) -> None:
         self.store = store
         self.hurry = hurry
         self.clock_started = False
@@ -65,14 +67,16 @@ class MetaDecision(Rule):
             robot_recs = [r for r in recs if r.kind == "robot"]
             system_recs = [r for r in recs if r.kind == "system"]
             last = self.store.issued(robot_id)
+            targets: list[Rule] = []
             command = decide_robot(robot_id, robot_recs, last, self.now)
             if command is not None:
-                self.targets.append(IssueRobotCommand(self.store, command))
+                targets.append(IssueRobotCommand(self.store, command))
             system = decide_system(robot_id, system_recs, self.now)
             if system is not None:
-                self.targets.append(IssueSystemCommand(self.store, system))
-        if self.targets:
-            self.hurry()
+                targets.append(IssueSystemCommand(self.store, system))
+            if targets:
+                self.targets += targets
+                self.hurry(robot_id)
 
     def rule_generation(self) -> Iterable[Rule]:
         return [*self.targets, self.clone()]

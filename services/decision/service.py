@@ -9,6 +9,7 @@ changes (replicas) forwarded to the store, which keeps the last command issued p
 from __future__ import annotations
 
 import sys
+import time
 
 from common.bus import Notification
 from common.clock import SimClock
@@ -29,8 +30,14 @@ class DecisionService(ScenarioService):
     def __init__(self, runtime: Runtime) -> None:
         super().__init__(runtime)
         clock = runtime.clock
+        # the store's period fallback counts sim time in lockstep (a run that does not depend
+        # on the machine's speed), wall time otherwise (sim time may stand still)
+        period_clock = clock.now if runtime.ledger is not None else time.monotonic
         self.store = DecisionStore(
-            PgDecisionSource(runtime.database), lambda: sim_reader(clock), self.owns
+            PgDecisionSource(runtime.database),
+            lambda: sim_reader(clock),
+            self.owns,
+            clock=period_clock,
         )
 
     def seed(self) -> None:

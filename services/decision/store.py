@@ -6,16 +6,21 @@
   in-memory one).
 - :class:`DecisionStore`: the one object the service holds. It keeps the last command issued
   per robot (read from the table on the first look and for robots regained from another
-  replica) and implements :class:`~services.decision.view.DecisionView`, all the rules see.
+  replica) and the live recommendations (from the rows' images, CONTRACT.md "Row images";
+  the table read as the fallback), and implements
+  :class:`~services.decision.view.DecisionView`, all the rules see.
 
 Each write is a single statement (a data-modifying CTE): the decision row and the
 ``treated_by`` of the rows it considered commit together, in one round trip, which keeps
-the decision's latency to one query in and one out.
+the decision's latency to one query out (and, with images, none in); each notification
+carries the row's image.
 """
 
 from __future__ import annotations
 
 import logging
+import math
+import time
 from collections import defaultdict
 from collections.abc import Callable
 from typing import Any, Final, Protocol
@@ -24,9 +29,21 @@ from common import log
 from common.bus import Notification
 from common.contract import keys
 from common.db import Database
-from services.decision.arbitration import Issued, Recommendation, RobotDecision, SystemDecision
+from common.freshness import Sequences
+from services.decision.arbitration import (
+    Issued,
+    Recommendation,
+    RobotDecision,
+    SystemDecision,
+    reissue_due,
+)
+from services.decision.live import LiveRecommendations, recommendation_of
 
 logger = logging.getLogger("pnav.decision")
+
+# The period fallback (store clock s): the live recommendations are read from the table at
+# least this often even while every notification carried its image, in case one was lost.
+REREAD_S: Final = 0.25
 
 # Every robot, with each of its live recommendations (none: one row of NULLs). The table is
 # append-only and grows all run long, so each robot must be served by the
@@ -35,11 +52,11 @@ logger = logging.getLogger("pnav.decision")
 # 20 ms for 200k rows against 0.1 ms this way).
 LIVE_SQL: Final = """
 SELECT r.robot_id, c.id, c.kind, c.source, c.priority, c.linear_mps, c.angular_rps,
-       c.system_command, c.reason, c.treated_by
+       c.system_command, c.reason, c.treated_by, c.expires_stamp
 FROM robot r
 LEFT JOIN LATERAL (
     SELECT id, kind, source, priority, linear_mps, angular_rps, system_command, reason,
-           treated_by
+           treated_by, expires_stamp
     FROM command_recommendation c
     WHERE c.robot_id = r.robot_id AND c.kind IN ('robot', 'system') AND c.expires_stamp > $1
     OFFSET 0
@@ -102,6 +119,7 @@ async def live_recommendations(db: Any, now: float) -> dict[str, list[Recommenda
                 system_command=row["system_command"],
                 reason=row["reason"],
                 treated_by=row["treated_by"],
+                expires_stamp=row["expires_stamp"],
             )
         )
     return dict(out)
@@ -123,7 +141,8 @@ async def last_issued(db: Any) -> dict[str, Issued]:
 
 
 async def write_robot_command(db: Database, d: RobotDecision) -> int:
-    """Insert the command2robot row, mark what it considered, then notify command2robot."""
+    """Insert the command2robot row, mark what it considered, then notify command2robot
+    with the row's image (the bridge sends it without reading the table)."""
     value = await db.write(
         keys.COMMAND2ROBOT,
         d.robot_id,
@@ -136,12 +155,14 @@ async def write_robot_command(db: Database, d: RobotDecision) -> int:
         d.source,
         list(d.considered_ids),
         d.reason,
+        image=d.image(),
     )
     return int(value)
 
 
 async def write_system_command(db: Database, d: SystemDecision) -> int:
-    """Insert the pending system_command row, mark what it considered, then notify."""
+    """Insert the pending system_command row, mark what it considered, then notify with
+    the row's image."""
     value = await db.write(
         keys.SYSTEM_COMMAND,
         d.robot_id,
@@ -152,6 +173,7 @@ async def write_system_command(db: Database, d: SystemDecision) -> int:
         list(d.considered_ids),
         d.reason,
         d.stamp,
+        image=d.image(),
     )
     return int(value)
 
@@ -204,6 +226,17 @@ class DecisionStore:
 
     ``sim_now`` reads the sim clock (None until it is heard); ``owns`` says which robots this
     replica decides for (docs/REPLICAS.md; every robot by default). Runs on the event loop.
+
+    The live recommendations are kept in memory from the rows' images
+    (:class:`~services.decision.live.LiveRecommendations`); the table is read (LIVE_SQL) at
+    the first look, after a notification without a usable image (none, a ``seq`` gap, no
+    robot) or about the robot table, after an ownership change, and at least every
+    ``reread_s`` of ``clock`` (the period fallback, on the store's side: the engine's F only
+    says when the meta rule looks, and a look needs no read; wall time in a service, sim
+    time in a lockstep or in-process run, so a run does not depend on the machine's speed;
+    sim time may stand still, the fallback must not). :meth:`live` gives only the
+    robots to decide for: those whose recommendations changed (new, expired, or read
+    again) and those whose re-issue is due.
     """
 
     def __init__(
@@ -211,16 +244,25 @@ class DecisionStore:
         source: DecisionSource,
         sim_now: Callable[[], float | None],
         owns: Callable[[str], bool] = _everyone,
+        reread_s: float = REREAD_S,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.source = source
         self._sim_now = sim_now
+        self._clock = clock
         self._owns = owns
+        self.reread_s = reread_s
         # Robot id -> newest command2robot row; read from the table on the first look.
         self._issued: dict[str, Issued] = {}
         self._bootstrapped = False
         # Robots taken over from another replica: their issued entry is read again.
         self._regained: set[str] = set()
         self._waiting_logged = False
+        self._live = LiveRecommendations()
+        self._stale = True  # read the table at the next look
+        self._read_at = -math.inf  # sim time of the last read of the table
+        self._seqs = Sequences()
+        self.reads = 0  # reads of the live recommendations (tests, benchmarks)
 
     # -- DecisionView ----------------------------------------------------------------------
     def sim_now(self) -> float | None:
@@ -232,13 +274,21 @@ class DecisionStore:
 
     async def live(self, now: float) -> dict[str, list[Recommendation]]:
         await self._catch_up()
-        live = await self.source.live_recommendations(now)
-        owned = {robot_id: recs for robot_id, recs in live.items() if self._owns(robot_id)}
-        # A robot removed from the robot table (or now another replica's) has nothing left
-        # to stop here.
-        for robot_id in [r for r in self._issued if r not in owned]:
-            del self._issued[robot_id]
-        return owned
+        at = self._clock()
+        if self._stale or not (self._read_at <= at < self._read_at + self.reread_s):
+            await self._read(now, at)
+        live = self._live
+        live.expire(now)
+        due = {
+            robot_id: list(recs.values())
+            for robot_id, recs in live.robots.items()
+            if self._owns(robot_id)
+            and (
+                robot_id in live.changed or (recs and reissue_due(self._issued.get(robot_id), now))
+            )
+        }
+        live.changed.clear()
+        return due
 
     def issued(self, robot_id: str) -> Issued | None:
         return self._issued.get(robot_id)
@@ -248,22 +298,59 @@ class DecisionStore:
         self._issued[d.robot_id] = Issued(
             row_id, d.stamp, d.linear_mps, d.angular_rps, d.recommendation_id, d.source
         )
+        self._live.treated(d.robot_id, d.considered_ids, row_id)
         return row_id
 
     async def write_system_command(self, d: SystemDecision) -> int:
-        return await self.source.write_system_command(d)
+        row_id = await self.source.write_system_command(d)
+        self._live.treated(d.robot_id, d.considered_ids, row_id)
+        return row_id
 
     # -- what the service forwards -----------------------------------------------------------
     def note(self, note: Notification) -> None:
-        """A change notification. Nothing to keep: the live rows are read at every look,
-        since which are live moves with sim time; the notification only wakes the engine."""
+        """A change notification: a recommendation's image is kept as live (CONTRACT.md "Row
+        images"); anything else it cannot stand for means reading the table at the next look."""
+        if note.table != keys.COMMAND_RECOMMENDATION:
+            if note.table in (keys.ROBOT, ""):
+                self._stale = True  # a robot came or went (or an unreadable hint)
+            return
+        gap = self._seqs.gap(f"{note.table}/{note.robot}", note.src, note.seq)
+        if note.row is None or gap or note.robot is None:
+            self._stale = True
+            return
+        try:
+            rec = recommendation_of(note.row)
+        except (KeyError, TypeError, ValueError):
+            self._stale = True  # not the contract's image: the table says
+            return
+        self._live.add(rec)
 
     def on_ownership_change(self, gained: frozenset[str], lost: frozenset[str]) -> None:
         """Drop what is kept for the ``lost`` robots; read the ``gained`` ones' again."""
         for robot_id in lost:
             self._issued.pop(robot_id, None)
+        self._live.forget(lost)
         self._regained -= lost
         self._regained |= gained
+        self._stale = self._stale or bool(gained)
+
+    async def _read(self, now: float, at: float) -> None:
+        """Every live recommendation from the table; robots gone from it are dropped."""
+        self._stale = False
+        self._read_at = at
+        self._live.reading()
+        try:
+            read = await self.source.live_recommendations(now)
+        except BaseException:
+            self._live.read_failed()
+            self._stale = True
+            raise
+        self.reads += 1
+        self._live.replace(read)
+        # A robot removed from the robot table (or now another replica's) has nothing left
+        # to stop here.
+        for robot_id in [r for r in self._issued if r not in read or not self._owns(r)]:
+            del self._issued[robot_id]
 
     async def _catch_up(self) -> None:
         if not self._bootstrapped:

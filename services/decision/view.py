@@ -20,7 +20,8 @@ class DecisionView(Protocol):
         ...
 
     async def live(self, now: float) -> dict[str, list[Recommendation]]:
-        """The live recommendations of every robot this replica owns, by robot id."""
+        """The live recommendations of the robots this replica owns that are due a look
+        (their recommendations changed, or their re-issue is due), by robot id."""
         ...
 
     def issued(self, robot_id: str) -> Issued | None:

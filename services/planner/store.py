@@ -12,6 +12,10 @@ REFRESH_S (the world: robots, maps, stations) or FAST_REFRESH_S (strategies, goa
 store's clock in case one was lost. Goal rows change in place (a status), so a goal
 notification always means "read it again", whatever id it names; the planner hears every
 odometry row (30 Hz per robot) and reads neither the world nor the strategies for those.
+
+Row images (CONTRACT.md "Row images"): an odometry notification's image becomes the robot's
+newest odometry without a query; the table is read instead when the newest notification had
+no image or followed a ``seq`` gap, or none came for FAST_REFRESH_S (the period fallback).
 """
 
 from __future__ import annotations
@@ -26,7 +30,7 @@ import numpy as np
 from common.bus import Notification
 from common.contract import keys, records
 from common.db import Database
-from common.freshness import FreshCache
+from common.freshness import FreshCache, Sequences
 from services.planner import chargers, obstacles
 from services.planner.routes import Router, Target
 from services.planner.tracking import Progress
@@ -210,6 +214,11 @@ class PlannerStore:
             clock, math.nextafter(FAST_REFRESH_S, math.inf)
         )
         self._odometry_notes: dict[str, int] = {}
+        # per robot: the newest odometry image and the store clock when it came (None: the
+        # newest notification could not stand in for the table)
+        self._odometry: dict[str, tuple[records.Odometry, float] | None] = {}
+        self._seqs = Sequences()
+        self.odometry_reads = 0  # odometry read from the table (tests, benchmarks)
 
     # -- clocks ------------------------------------------------------------------------------
     def now(self) -> float:
@@ -236,12 +245,29 @@ class PlannerStore:
                 self._goals.announce(note.robot)
         elif note.table == keys.ODOMETRY and note.robot is not None:
             self._odometry_notes[note.robot] = self._odometry_notes.get(note.robot, 0) + 1
+            self._odometry_image(note.robot, note)
+
+    def _odometry_image(self, robot_id: str, note: Notification) -> None:
+        gap = self._seqs.gap(f"{note.table}/{robot_id}", note.src, note.seq)
+        odometry = None
+        if note.row is not None and not gap:
+            try:
+                odometry = records.odometry_of(note.row)
+            except (KeyError, TypeError, ValueError):
+                odometry = None  # not the contract's image: read the table
+        if odometry is None:
+            self._odometry[robot_id] = None
+            return
+        held = self._odometry.get(robot_id)
+        if held is None or odometry.id > held[0].id:
+            self._odometry[robot_id] = (odometry, self._clock())
 
     def forget(self, robot_ids: Iterable[str]) -> None:
         """Drop what is kept in memory about these robots (replicas: ownership changed)."""
         for robot_id in robot_ids:
             self.world.forget(robot_id)
             self._goals.forget(robot_id)
+            self._odometry.pop(robot_id, None)
 
     # -- the meta-planner's view -------------------------------------------------------------
     async def refresh(self) -> None:
@@ -287,6 +313,10 @@ class PlannerStore:
         return await self.source.active_goal(robot_id)
 
     async def newest_odometry(self, robot_id: str) -> records.Odometry | None:
+        image = self._odometry.get(robot_id)
+        if image is not None and self._clock() - image[1] < FAST_REFRESH_S:
+            return image[0]  # the newest row, as its notification carried it
+        self.odometry_reads += 1
         return await self.source.newest_odometry(robot_id)
 
     async def newest_scan(self, robot_id: str) -> records.LaserScan | None:

@@ -28,6 +28,8 @@ class Rig:
         self,
         scenarios: Scenarios | None = None,
         source: Callable[[MemoryContract], MemoryControllerSource] = MemoryControllerSource,
+        *,
+        images: bool = False,
     ) -> None:
         self.contract = MemoryContract()
         self.now: float | None = SIM_NOW  # sim time the rules see (None: no clock yet)
@@ -42,10 +44,20 @@ class Rig:
             installed_scenarios() if scenarios is None else scenarios,
             owns=lambda robot_id: self.owned is None or robot_id in self.owned,
         )
-        self.contract.listeners.append(
-            lambda table, robot, row_id: self.store.note(Notification(table, robot, row_id))
-        )
+        # images: every notification carries its row, numbered per key as a Notifier does
+        self.images = images
+        self.seqs: dict[tuple[str, str | None], int] = {}
+        self.contract.row_listeners.append(self._notify)
         self.add_robot(BURGER)
+
+    def _notify(
+        self, table: str, robot: str | None, row_id: int | None, row: dict[str, Any] | None
+    ) -> None:
+        if not self.images:
+            self.store.note(Notification(table, robot, row_id))
+            return
+        seq = self.seqs[(table, robot)] = self.seqs.get((table, robot), 0) + 1
+        self.store.note(Notification(table, robot, row_id, row, "rig", seq))
 
     # -- rows, as the other services write them -------------------------------------------
     def add_robot(self, robot: Robot) -> None:

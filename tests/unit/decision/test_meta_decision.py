@@ -9,6 +9,7 @@ queued ahead of its clone, which then sees what they wrote).
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -20,8 +21,23 @@ from common.engine import Engine
 from pnav.monolith.contract import MemoryContract
 from pnav.monolith.decision import MemoryDecisionSource, decision_engine
 from services.decision.arbitration import REISSUE_PERIOD_S, RobotDecision
+from services.decision.store import REREAD_S
 
-Command = tuple[Any, ...]  # (stamp, source, linear, angular, recommendation_id, considered)
+Command = tuple[Any, ...]
+
+# Whether a Bench's notifications carry row images unless a test says: every tick-by-tick
+# test runs both ways (the fixture below), with the same expected rows beside each tick.
+_IMAGES = {"on": True}
+
+
+@pytest.fixture(autouse=True, params=["images", "no images"])
+def images(request: pytest.FixtureRequest) -> Iterator[bool]:
+    _IMAGES["on"] = request.param == "images"
+    yield _IMAGES["on"]
+    _IMAGES["on"] = True
+
+
+# (stamp, source, linear, angular, recommendation_id, considered)
 
 
 @dataclass
@@ -39,13 +55,24 @@ class TickEngine(Engine):
     def __init__(self) -> None:
         super().__init__(name="decision")
         self.hurried = False
+        self.hurried_for: list[str | None] = []
 
-    def hurry(self) -> None:
+    def hurry(self, robot: str | None = None) -> None:
         self.hurried = True
+        self.hurried_for.append(robot)
 
 
 class Bench:
-    def __init__(self, robots: tuple[str, ...] = ("r1",), owned: set[str] | None = None) -> None:
+    """``images``: notifications carry the rows' images (numbered, as a Notifier numbers
+    them); without, every one is a bare hint and the store reads the table."""
+
+    def __init__(
+        self,
+        robots: tuple[str, ...] = ("r1",),
+        owned: set[str] | None = None,
+        *,
+        images: bool | None = None,
+    ) -> None:
         self.contract = MemoryContract()
         for robot_id in robots:
             self.contract.insert(keys.ROBOT, {"robot_id": robot_id})
@@ -53,10 +80,17 @@ class Bench:
         self.owned = owned
         self.engine = TickEngine()
         self.store = decision_engine(self.contract, self.engine, lambda: self.clock, self.owns)
-        self.contract.listeners.append(
-            lambda table, robot, row_id: self.store.note(Notification(table, robot, row_id))
-        )
+        self.seqs: dict[tuple[str, str | None], int] = {}
+        self.images = _IMAGES["on"] if images is None else images
+        self.contract.row_listeners.append(self.notify)
         self._seen = {keys.COMMAND2ROBOT: 0, keys.SYSTEM_COMMAND: 0}
+
+    def notify(
+        self, table: str, robot: str | None, row_id: int | None, row: dict[str, Any] | None
+    ) -> None:
+        seq = self.seqs[(table, robot)] = self.seqs.get((table, robot), 0) + 1
+        image = row if self.images else None
+        self.store.note(Notification(table, robot, row_id, image, "bench", seq))
 
     def owns(self, robot_id: str) -> bool:
         return self.owned is None or robot_id in self.owned
@@ -99,6 +133,7 @@ class Bench:
     async def tick(self, now: float | None) -> Seen:
         self.clock = now
         self.engine.hurried = False
+        self.engine.hurried_for = []
         await self.engine.activation()
         commands = self._new(keys.COMMAND2ROBOT)
         system = self._new(keys.SYSTEM_COMMAND)
@@ -234,3 +269,51 @@ async def test_nothing_is_decided_before_the_sim_clock_and_the_wait_is_logged_on
     waits = [r for r in caplog.records if "waiting for the sim clock" in r.getMessage()]
     assert len(waits) == 1
     assert await bench.tick(10.0) == Seen([], [], True)
+
+
+async def test_with_images_the_table_is_read_at_the_first_look_and_at_the_period() -> None:
+    bench = Bench(images=True)
+    assert REREAD_S == 0.25
+    assert await bench.tick(10.0) == Seen()  # first look: the table read
+    assert bench.store.reads == 1
+    rec = bench.recommend("turn_then_move", 10, 0.2, 0.0)
+    assert await bench.tick(10.0) == Seen([], [], True)  # decided from the image
+    assert await bench.tick(10.0) == Seen([(10.0, "turn_then_move", 0.2, 0.0, rec, (rec,))])
+    assert bench.store.reads == 1  # no read for the new row
+    assert await bench.tick(10.1) == Seen([], [], True)  # the re-issue: still no read
+    assert await bench.tick(10.1) == Seen([(10.1, "turn_then_move", 0.2, 0.0, rec, (rec,))])
+    assert bench.store.reads == 1
+    assert await bench.tick(10.25) == Seen([], [], True)  # re-issue due; the period: a read
+    assert bench.store.reads == 2
+
+
+async def test_a_hint_without_image_or_after_a_gap_reads_the_table() -> None:
+    bench = Bench(images=True)
+    assert await bench.tick(10.0) == Seen()
+    assert bench.store.reads == 1
+    bench.images = False
+    rec = bench.recommend("turn_then_move", 10, 0.2, 0.0)
+    assert await bench.tick(10.0) == Seen([], [], True)  # no image: read, then decided
+    assert bench.store.reads == 2
+    assert await bench.tick(10.0) == Seen([(10.0, "turn_then_move", 0.2, 0.0, rec, (rec,))])
+    bench.images = True
+    bench.seqs[(keys.COMMAND_RECOMMENDATION, "r1")] += 1  # one notification lost on the way
+    high = bench.recommend("avoid_left", 50, 0.05, 0.8)
+    assert await bench.tick(10.05) == Seen([], [], True)  # a gap: read, then decided
+    assert bench.store.reads == 3
+    decided = (10.05, "avoid_left", 0.05, 0.8, high, (rec, high))
+    assert await bench.tick(10.05) == Seen([decided])
+
+
+async def test_only_the_robots_that_changed_or_are_due_are_decided_and_hurried() -> None:
+    bench = Bench(("r1", "r2"), images=True)
+    one = bench.recommend("turn_then_move", 10, 0.2, 0.0, robot_id="r1")
+    assert await bench.tick(10.0) == Seen([], [], True)
+    assert bench.engine.hurried_for == ["r1"]
+    assert await bench.tick(10.0) == Seen([(10.0, "turn_then_move", 0.2, 0.0, one, (one,))])
+    two = bench.recommend("turn_then_move", 10, 0.1, 0.0, robot_id="r2")
+    assert await bench.tick(10.05) == Seen([], [], True)
+    assert bench.engine.hurried_for == ["r2"]  # r1 neither changed nor is due
+    assert await bench.tick(10.05) == Seen([(10.05, "turn_then_move", 0.1, 0.0, two, (two,))])
+    assert await bench.tick(10.1) == Seen([], [], True)  # r1's re-issue is due, not r2's
+    assert bench.engine.hurried_for == ["r1"]

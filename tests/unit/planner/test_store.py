@@ -3,7 +3,9 @@ the in-memory contract. A row written with no notification stands for a lost one
 
 from __future__ import annotations
 
+from common.bus import Notification
 from common.contract import keys
+from pnav.monolith.planner import MemoryPlannerSource
 from services.planner.store import FAST_REFRESH_S, REFRESH_S
 from tests.unit.planner.harness import ROBOT, Planner
 
@@ -101,3 +103,34 @@ async def test_odometry_notifications_are_counted_per_robot() -> None:
     p.sense(0.05)
     assert p.store.odometry_notes(ROBOT) == before + 2
     assert p.store.odometry_notes("r9") == 0
+
+
+def image_note(p: Planner, seq: int) -> Notification:
+    """The newest odometry row's notification with its image, numbered ``seq``."""
+    row = p.contract[keys.ODOMETRY].newest(ROBOT)
+    assert row is not None
+    return Notification(keys.ODOMETRY, ROBOT, row["id"], dict(row), "test", seq)
+
+
+async def test_an_odometry_image_stands_in_for_the_query_until_fast_refresh_s() -> None:
+    p = Planner()
+    store = p.store
+    p.sense(0.05)
+    store.note(image_note(p, 1))
+    newest = await store.newest_odometry(ROBOT)
+    assert newest is not None and newest.stamp == p.t
+    assert newest == await MemoryPlannerSource(p.contract).newest_odometry(ROBOT)
+    assert store.odometry_reads == 0  # the image stood in for the query
+    p.sense(0.05)  # a bare hint (the harness's listener): the table is read
+    source = MemoryPlannerSource(p.contract)
+    assert (await store.newest_odometry(ROBOT)) == await source.newest_odometry(ROBOT)
+    assert store.odometry_reads == 1
+    store.note(image_note(p, 3))  # seq 2 never came: a gap, read the table
+    await store.newest_odometry(ROBOT)
+    assert store.odometry_reads == 2
+    store.note(image_note(p, 4))
+    await store.newest_odometry(ROBOT)
+    assert store.odometry_reads == 2
+    p.t += FAST_REFRESH_S  # nothing heard for the period: read the table
+    await store.newest_odometry(ROBOT)
+    assert store.odometry_reads == 3
