@@ -173,6 +173,7 @@ class Bridge:
         self._reload_again = self._reload is not None and not self._reload.done()
 
     def _on_robot_notification(self, key: str, payload: bytes) -> None:
+        self.commands.robots_changed()
         self._reload_robots_soon(force=True)
 
     def _reload_robots_soon(self, *, force: bool = False) -> None:

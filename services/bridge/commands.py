@@ -1,8 +1,12 @@
 """command2robot -> ``pnav/robot/{robot}/cmd_vel``: the newest decision, clamped, watched.
 
-When a command2robot notification arrives (or every ``command_period_s`` of wall time, in
-case one was lost) the relay reads the newest row of the robots concerned, joined with the
-robot's limits, and publishes each row it has not sent yet, clamped to
+A command2robot notification that carries the row's image (CONTRACT.md, "Row images"), with
+no notification lost before it on its key (``common.freshness.Sequences``), is sent at once,
+on the notification's own loop turn, with the robot's limits from :class:`RobotLimits`: no
+query. Otherwise (no image, an image without the columns the relay needs, a gap, limits not
+known fresh), and every ``command_period_s`` of wall time in case a notification was lost,
+the relay reads the newest row of the robots concerned, joined with the robot's limits.
+Either way it publishes each row it has not sent yet, clamped to
 ``max_linear_mps``/``max_angular_rps`` (NaN becomes 0: a NaN reaching the motors is never
 what the decision meant). Every row sent feeds the :class:`Watchdog`; a robot whose command
 stream goes quiet for ``watchdog_s`` of sim time is sent one zero velocity
@@ -20,8 +24,9 @@ import contextlib
 import logging
 import math
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import asyncpg
 import zenoh
@@ -29,8 +34,10 @@ import zenoh
 from common import bus, lockstep, log
 from common.clock import SimClock
 from common.contract import keys
+from common.freshness import Sequences
 from common.tasks import cancel_and_wait
 from services.bridge.counters import Counters, RateLimitedLog
+from services.bridge.limits import Limits, RobotLimits
 from services.bridge.settings import BridgeSettings
 from services.bridge.watchdog import Watchdog
 
@@ -73,6 +80,22 @@ class Command:
     def from_row(cls, row: asyncpg.Record) -> Command:
         return cls(*row)
 
+    @classmethod
+    def from_image(cls, robot: str, image: Mapping[str, Any], limits: Limits) -> Command | None:
+        """The command of a command2robot image, or None if the image lacks a column the
+        relay needs (or has a wrong type in it, or names another robot)."""
+        row_id = image.get("id")
+        if type(row_id) is not int or image.get("robot_id") != robot:
+            return None
+        values: list[float] = []
+        for column in ("stamp", "linear_mps", "angular_rps"):
+            value = image.get(column)
+            if not isinstance(value, float | int) or isinstance(value, bool):
+                return None  # absent, or not a number
+            values.append(float(value))
+        stamp, linear, angular = values
+        return cls(robot, row_id, stamp, linear, angular, *limits)
+
 
 class CommandRelay:
     def __init__(
@@ -104,6 +127,8 @@ class CommandRelay:
         self.ledger = ledger
         self._want_all = False
         self._wanted: set[str] = set()
+        self.limits = RobotLimits()
+        self._sequences = Sequences()
         self._alerts = RateLimitedLog(logger)
         self._subscriber: zenoh.Subscriber[None] | None = None
         self._tasks: list[asyncio.Task[None]] = []
@@ -117,7 +142,9 @@ class CommandRelay:
             ledger=self.ledger,
         )
         async with self.pool.acquire() as conn:
+            await self.limits.read(conn)
             rows = await conn.fetch(_NEWEST)
+        self.counters.command_reads += 1
         for row in rows:
             self._consider(Command.from_row(row), at_start=True)
         self._tasks = [
@@ -144,18 +171,38 @@ class CommandRelay:
         self._publishers.clear()
 
     # -- reading -------------------------------------------------------------------------
+    def robots_changed(self) -> None:
+        """A robot notification: read the robots' limits again before trusting them."""
+        self.limits.changed()
+        self._wake.set()
+
     def _on_notification(self, key: str, payload: bytes) -> None:
         try:
             note = bus.Notification.decode(key, payload)
         except ValueError:
             return  # not ours to judge; the periodic read still covers the table
-        if note.robot is None:
+        robot = note.robot
+        if robot is None:
             self._want_all = True
-        elif note.id is not None and note.id <= self.last_sent.get(note.robot, 0):
+            self._wake.set()
+            return
+        # every notification counts toward the numbering, even one already acted on
+        gap = self._sequences.gap(key, note.src, note.seq)
+        if not gap and note.id is not None and note.id <= self.last_sent.get(robot, 0):
             return  # already sent
-        else:
-            self._wanted.add(note.robot)
-        self._wake.set()
+        command = None if gap else self._from_image(robot, note.row)
+        if command is None:
+            self._wanted.add(robot)
+            self._wake.set()
+            return
+        self.counters.commands_from_images += 1
+        self._consider(command)
+
+    def _from_image(self, robot: str, image: Mapping[str, Any] | None) -> Command | None:
+        if image is None:
+            return None
+        limits = self.limits.of(robot)
+        return None if limits is None else Command.from_image(robot, image, limits)
 
     async def _poller(self) -> None:
         while True:
@@ -166,13 +213,11 @@ class CommandRelay:
             self._wanted.clear()
             self._polling = True
             try:
-                async with self.pool.acquire() as conn:
-                    if wanted is None:
-                        rows = await conn.fetch(_NEWEST)
-                    else:
-                        rows = await conn.fetch(_NEWEST_OF, wanted)
+                rows = await self._read(wanted)
                 for row in rows:
-                    self._consider(Command.from_row(row))
+                    command = Command.from_row(row)
+                    self.limits.check(command.robot_id, (command.max_linear, command.max_angular))
+                    self._consider(command)
             except Exception as exc:  # Postgres away: the watchdog still stops the robots
                 self._alerts.warning("read", "command2robot read failed", error=repr(exc))
                 await asyncio.sleep(0.1)
@@ -180,6 +225,18 @@ class CommandRelay:
                 self._polling = False
             if self.on_idle is not None:
                 self.on_idle()
+
+    async def _read(self, wanted: list[str] | None) -> list[asyncpg.Record]:
+        """The limits if stale, and the newest command of ``wanted`` (None: every robot)."""
+        async with self.pool.acquire() as conn:
+            if self.limits.stale():
+                await self.limits.read(conn)
+            if wanted == []:
+                return []  # woken for the limits alone
+            self.counters.command_reads += 1
+            if wanted is None:
+                return list(await conn.fetch(_NEWEST))
+            return list(await conn.fetch(_NEWEST_OF, wanted))
 
     def idle(self) -> bool:
         """No read of command2robot under way or asked for."""

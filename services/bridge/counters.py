@@ -28,6 +28,8 @@ class Counters:
     dropped: Counter[str] = field(default_factory=Counter)  # rows lost (db down, overflow)
     rows_pruned: int = 0
     commands_out: int = 0
+    commands_from_images: int = 0  # command2robot notifications sent on their image alone
+    command_reads: int = 0  # queries of command2robot (start, notifications, period)
     watchdog_stops: int = 0
     shutdown_stops: int = 0
     worlds_applied: int = 0
@@ -49,6 +51,8 @@ class Counters:
             "dropped": dict(self.dropped),
             "rows_pruned": self.rows_pruned,
             "commands_out": self.commands_out,
+            "commands_from_images": self.commands_from_images,
+            "command_reads": self.command_reads,
             "watchdog_stops": self.watchdog_stops,
             "shutdown_stops": self.shutdown_stops,
             "worlds_applied": self.worlds_applied,

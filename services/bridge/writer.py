@@ -3,15 +3,14 @@
 Latency first: one long-lived task per table waits for rows; the first row after a quiet
 spell is inserted on the next loop turn, alone. Rows that arrive while an INSERT is in
 flight wait for it and then go together in the next one, so the writer keeps up with any
-rate by growing its batches rather than its queue. Every batch is ONE statement per table:
-``INSERT ... SELECT FROM unnest($1::text[], $2::float8[], ...) RETURNING id, robot_id``,
-column arrays in, every new id out, which ``executemany`` could not give us (the
-notifications need the newest id per robot). asyncpg prepares each statement once per
-connection and reuses it. A scan batch sends all ranges as one flat real[] and each row
-takes its slice, since Postgres arrays cannot hold rows of arrays.
+rate by growing its batches rather than its queue. Every batch is ONE statement per table
+for every robot in it (:mod:`services.bridge.rows`), prepared once per connection.
 
 After the INSERT (autocommitted, so already visible) the writer publishes one notification
-per robot in the batch carrying that robot's newest id, as the contract asks.
+per robot in the batch carrying that robot's newest id and that row's image
+(CONTRACT.md, "Row images"; none with ``PNAV_NOTIFY_IMAGES=off``). RETURNING gives the ids
+in the order unnest fed the rows, which pairs each id with its record; the writer checks
+that pairing (same length, same robot at each position) and sends no image if it fails.
 
 The writer has its own small pool whose sessions run with ``synchronous_commit = off``:
 a commit returns, and its rows are visible to every reader, without waiting for the WAL to
@@ -25,129 +24,36 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
 
 import asyncpg
 
 from common.bus import Notifier
-from common.contract import keys
 from common.db import create_pool
 from common.errors import ConnectionFailure
 from common.tasks import cancel_and_wait
 from services.bridge.counters import Counters, RateLimitedLog
-from services.bridge.messages import BatteryState, Collision, LaserScan, Odometry, SensorRecord
+from services.bridge.messages import SensorRecord
+from services.bridge.rows import SENSOR_TABLES, SensorTable, newest_per_robot
 
 logger = logging.getLogger("pnav.bridge.writer")
-
-_ODOMETRY_SQL = f"""
-INSERT INTO {keys.ODOMETRY} (robot_id, stamp, seq, x, y, yaw, linear_mps, angular_rps)
-SELECT * FROM unnest($1::text[], $2::float8[], $3::int8[], $4::float8[], $5::float8[],
-                     $6::float8[], $7::float8[], $8::float8[])
-RETURNING id, robot_id"""
-
-_LASER_SCAN_SQL = f"""
-INSERT INTO {keys.LASER_SCAN} (robot_id, stamp, seq, angle_min, angle_increment,
-                               range_min, range_max, ranges)
-SELECT u.robot_id, u.stamp, u.seq, u.angle_min, u.angle_increment, u.range_min, u.range_max,
-       ($8::real[])[u.first:u.last]
-FROM unnest($1::text[], $2::float8[], $3::int8[], $4::float8[], $5::float8[], $6::float8[],
-            $7::float8[], $9::int4[], $10::int4[])
-     AS u(robot_id, stamp, seq, angle_min, angle_increment, range_min, range_max, first, last)
-RETURNING id, robot_id"""
-
-_BATTERY_SQL = f"""
-INSERT INTO {keys.BATTERY} (robot_id, stamp, energy_wh, capacity_wh, percentage, charging,
-                            power_w)
-SELECT * FROM unnest($1::text[], $2::float8[], $3::float8[], $4::float8[], $5::float8[],
-                     $6::bool[], $7::float8[])
-RETURNING id, robot_id"""
-
-_COLLISION_SQL = f"""
-INSERT INTO {keys.COLLISION_EVENT} (robot_id, stamp, other, x, y)
-SELECT * FROM unnest($1::text[], $2::float8[], $3::text[], $4::float8[], $5::float8[])
-RETURNING id, robot_id"""
-
-
-def _odometry_args(rows: Sequence[Any]) -> list[Any]:
-    r: Sequence[Odometry] = rows
-    return [
-        [o.robot_id for o in r],
-        [o.stamp for o in r],
-        [o.seq for o in r],
-        [o.x for o in r],
-        [o.y for o in r],
-        [o.yaw for o in r],
-        [o.linear for o in r],
-        [o.angular for o in r],
-    ]
-
-
-def _laser_scan_args(rows: Sequence[Any]) -> list[Any]:
-    r: Sequence[LaserScan] = rows
-    flat: list[float] = []
-    first: list[int] = []
-    last: list[int] = []
-    for s in r:
-        first.append(len(flat) + 1)  # Postgres arrays are 1-based, slices inclusive
-        flat.extend(s.ranges)
-        last.append(len(flat))
-    return [
-        [s.robot_id for s in r],
-        [s.stamp for s in r],
-        [s.seq for s in r],
-        [s.angle_min for s in r],
-        [s.angle_increment for s in r],
-        [s.range_min for s in r],
-        [s.range_max for s in r],
-        flat,
-        first,
-        last,
-    ]
-
-
-def _battery_args(rows: Sequence[Any]) -> list[Any]:
-    r: Sequence[BatteryState] = rows
-    return [
-        [b.robot_id for b in r],
-        [b.stamp for b in r],
-        [b.energy_wh for b in r],
-        [b.capacity_wh for b in r],
-        [b.percentage for b in r],
-        [b.charging for b in r],
-        [b.power_w for b in r],
-    ]
-
-
-def _collision_args(rows: Sequence[Any]) -> list[Any]:
-    r: Sequence[Collision] = rows
-    return [
-        [c.robot_id for c in r],
-        [c.stamp for c in r],
-        [c.other for c in r],
-        [c.x for c in r],
-        [c.y for c in r],
-    ]
 
 
 @dataclass
 class _Table:
-    name: str
-    sql: str
-    args: Callable[[Sequence[Any]], list[Any]]
+    spec: SensorTable
     pending: list[SensorRecord] = field(default_factory=list)
     wake: asyncio.Event = field(default_factory=asyncio.Event)
     task: asyncio.Task[None] | None = None
     writing: bool = False  # a batch is being written (its rows not all notified yet)
 
+    @property
+    def name(self) -> str:
+        return self.spec.name
 
-TABLE_OF_RECORD: dict[type, str] = {
-    Odometry: keys.ODOMETRY,
-    LaserScan: keys.LASER_SCAN,
-    BatteryState: keys.BATTERY,
-    Collision: keys.COLLISION_EVENT,
-}
+
+TABLE_OF_RECORD: dict[type, str] = {record: t.name for record, t in SENSOR_TABLES.items()}
 
 # The connection, not the data, failed: retrying row by row would only fail more slowly.
 _CONNECTION_LOST = (
@@ -184,15 +90,7 @@ class SensorWriter:
         self._closing = False
         # called on the loop whenever a table's writing goes idle (lockstep's reporter)
         self.on_idle: Callable[[], None] | None = None
-        self._tables = {
-            t.name: t
-            for t in (
-                _Table(keys.ODOMETRY, _ODOMETRY_SQL, _odometry_args),
-                _Table(keys.LASER_SCAN, _LASER_SCAN_SQL, _laser_scan_args),
-                _Table(keys.BATTERY, _BATTERY_SQL, _battery_args),
-                _Table(keys.COLLISION_EVENT, _COLLISION_SQL, _collision_args),
-            )
-        }
+        self._tables = {spec.name: _Table(spec) for spec in SENSOR_TABLES.values()}
 
     async def start(self) -> None:
         try:
@@ -222,7 +120,7 @@ class SensorWriter:
         try:
             for conn in connections:
                 for table in self._tables.values():
-                    await conn.fetch(table.sql, *table.args([]))
+                    await conn.fetch(table.spec.sql, *table.spec.args([]))
         finally:
             for conn in connections:
                 await pool.release(conn)
@@ -303,15 +201,13 @@ class SensorWriter:
                 ("rejected", table.name), "row refused", table=table.name, error=repr(exc)
             )
             return
-        newest: dict[str, int] = {}
-        for row_id, robot_id in rows:
-            if row_id > newest.get(robot_id, 0):
-                newest[robot_id] = row_id
         self.counters.rows_written[table.name] += len(rows)
         notify = self.notifier.notify
-        for robot_id, row_id in newest.items():
+        for robot_id, row_id, image in newest_per_robot(
+            table.spec, batch, rows, images=self.notifier.images
+        ):
             try:
-                notify(table.name, robot_id, row_id)
+                notify(table.name, robot_id, row_id, image)
             except Exception as exc:  # Zenoh closing: the row is written, the hint is lost
                 self._alerts.warning(("notify", table.name), "notify failed", error=repr(exc))
         self.counters.batches[table.name] += 1
@@ -322,5 +218,5 @@ class SensorWriter:
         if self.pool is None:
             raise ConnectionFailure("the sensor writer is not started")
         async with self.pool.acquire() as conn:
-            records = await conn.fetch(table.sql, *table.args(batch))
+            records = await conn.fetch(table.spec.sql, *table.spec.args(batch))
         return [(r[0], r[1]) for r in records]

@@ -4,62 +4,21 @@ from __future__ import annotations
 
 import asyncio
 import math
-from typing import Any
 
 import asyncpg
 import pytest
 
 from common.contract import keys
-from common.testing import eventually
-from services.bridge import Bridge
 from tests.contract.bridge.conftest import (
     SETTLE_S,
     BridgeFactory,
     FakeSim,
-    Inbox,
-    bridge_with_world,
+    command,
+    ready,
+    vel,
 )
-from tests.unit.bridge import payloads
 
 pytestmark = pytest.mark.timeout(60)
-
-
-async def command(
-    conn: asyncpg.Connection,
-    sim: FakeSim | None,
-    linear: float,
-    angular: float,
-    *,
-    robot: str = "r1",
-    stamp: float = 10.0,
-) -> int:
-    """Insert a decision as the decision service would; notify unless ``sim`` is None."""
-    row_id: int = await conn.fetchval(
-        "INSERT INTO command2robot (robot_id, stamp, linear_mps, angular_rps, source, reason)"
-        " VALUES ($1, $2, $3, $4, 'test', 'a test decision') RETURNING id",
-        robot,
-        stamp,
-        linear,
-        angular,
-    )
-    if sim is not None:
-        sim.notifier.notify(keys.COMMAND2ROBOT, robot, row_id)
-    return row_id
-
-
-async def ready(
-    start_bridge: BridgeFactory, sim: FakeSim, robots: tuple[str, ...] = ("r1",)
-) -> tuple[Bridge, Inbox]:
-    """A bridge with a world, a sim clock at 10.0 s (not running on its own), a cmd_vel inbox."""
-    cmd_vel = sim.listen(keys.robot_watch(keys.CMD_VEL))
-    bridge = await bridge_with_world(start_bridge, sim, payloads.world(robots=robots))
-    sim.clock(10.0)
-    await eventually(lambda: bridge.runtime.clock.now() == 10.0, what="the sim clock")
-    return bridge, cmd_vel
-
-
-def vel(body: dict[str, Any]) -> tuple[float, float, int | None]:
-    return body["linear"], body["angular"], body["command_id"]
 
 
 async def test_a_notified_command_reaches_cmd_vel_clamped_to_the_robot_limits(
