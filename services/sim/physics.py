@@ -315,8 +315,8 @@ class Scene:
     ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.float64]]:
         """Batch ray cast of the scene as it stands: per ray, whether it hit and the hit
         fraction along it (1.0 where it hit nothing)."""
-        hit = np.zeros(len(starts), dtype=bool)
-        fraction = np.ones(len(starts))
+        body = np.empty(len(starts), dtype=np.intp)
+        fraction = np.empty(len(starts))
         for lo in range(0, len(starts), RAY_BATCH):
             results = p.rayTestBatch(
                 starts[lo : lo + RAY_BATCH],
@@ -324,10 +324,10 @@ class Scene:
                 numThreads=RAY_THREADS,
                 physicsClientId=self.client,
             )
-            for j, r in enumerate(results):
-                if r[0] >= 0:
-                    hit[lo + j] = True
-                    fraction[lo + j] = r[2]
+            body[lo : lo + len(results)] = [r[0] for r in results]
+            fraction[lo : lo + len(results)] = [r[2] for r in results]
+        hit = body >= 0
+        fraction[~hit] = 1.0
         return hit, fraction
 
     def cast_from(
@@ -341,7 +341,7 @@ class Scene:
         body: ``parentObjectUniqueId`` only changes the rays' frame, and the collision mask is
         applied after the ray-shape test. Starting rays outside the body instead still tests
         every ray against the body's cylinder: measured ten times the cost of a ray that
-        starts clear of it, and the ranges then differ in the last bits.)
+        starts clear of it, and three quarters of the ranges then differ, by up to 4 mm.)
         """
         self.hide([index])
         try:
