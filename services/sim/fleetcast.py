@@ -73,8 +73,10 @@ def cast_fleet(
         return []
     n = lidar.params.beams
     rays = [lidar.rays(*poses[i]) for i in scanning]
-    starts = np.concatenate([s for s, _ in rays])
-    ends = np.concatenate([e for _, e in rays])
+    starts, ends = rays[0]
+    if len(rays) > 1:
+        starts = np.concatenate([s for s, _ in rays])
+        ends = np.concatenate([e for _, e in rays])
     radius = scene.params.footprint_radius_m + GRAZE_M
     within, pairs = _reach(poses, scanning, lidar.params.range_max + radius, lidar.params)
     try:
@@ -120,8 +122,12 @@ def _flag(
     A beam from the centre meets a disc whose centre lies D away only if its bearing is
     within asin(radius / D) of the disc's; of those, the beams whose line passes within
     ``radius`` of the centre and enters the disc before the static hit."""
+    if len(pairs.k) == 0:
+        return {}  # alone within reach: nothing to cast again
     n, inc = params.beams, params.angle_increment
-    half = np.arcsin(np.minimum(1.0, radius / pairs.dist)) / inc + SLACK_BEAMS
+    # a disc round the beams' origin (robots never overlap so far) would meet them all
+    wide = np.arcsin(np.minimum(1.0, radius / pairs.dist)) / inc
+    half = np.where(pairs.dist > radius, wide, n) + SLACK_BEAMS
     centre = pairs.bearing / inc  # in beams
     lo = np.ceil(centre - half).astype(np.intp)
     count = np.minimum(np.floor(centre + half).astype(np.intp) - lo + 1, n)

@@ -20,7 +20,7 @@ import services.sim.messages as messages
 from common.contract import keys
 from services.sim.battery import Battery, BatteryModel
 from services.sim.clock import Every
-from services.sim.fleetcast import cast_fleet
+from services.sim.fleetcast import Cast, cast_fleet
 from services.sim.lidar import Lidar, LidarParams
 from services.sim.physics import CONTACT_TOLERANCE_M, Scene
 from services.sim.robot import RobotState, clamp_command, integrate
@@ -174,10 +174,12 @@ class Simulation:
         now, step = self.time, self.steps
         # every robot that scans now, cast together (DESIGN.md 7, "Batching across robots")
         scanning = [i for i, due in enumerate(self._schedule) if due[SCAN].due(step)]
-        poses = [(r.x, r.y, r.yaw) for r in self.robots] if scanning else []
-        casts = dict(
-            zip(scanning, cast_fleet(self.scene, self.lidar, poses, scanning), strict=True)
-        )
+        casts: dict[int, Cast] = {}
+        if scanning:
+            poses = [(r.x, r.y, r.yaw) for r in self.robots]
+            casts = dict(
+                zip(scanning, cast_fleet(self.scene, self.lidar, poses, scanning), strict=True)
+            )
         for i, robot in enumerate(self.robots):
             due = self._schedule[i]
             if due[ODOM].due(step):
