@@ -4,7 +4,7 @@ bit, with robots crowded together and against walls, so that many beams meet oth
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -55,7 +55,7 @@ def crowd(rng: np.random.Generator, count: int) -> list[Pose]:
 
 
 @pytest.fixture
-def scene(make_world: MakeWorld) -> Any:
+def scene(make_world: MakeWorld) -> Iterator[Scene]:
     robots = [{"id": f"r{i}", "x": 0.5 + 0.4 * i, "y": 5.5} for i in range(ROBOTS)]
     world = load_world(make_world(6.0, 6.0, WALLS, robots=robots, obstacles=OBSTACLES))
     scene = Scene(world)
