@@ -1,8 +1,9 @@
 """The 2-D lidar: beam geometry for batch ray casting, and ranges with noise from the hits.
 
 Beams start at the robot's centre, where an LDS-01 sits, at the lidar's height, and end at
-``range_max``; they are cast in one ``rayTestBatch`` per robot (physics.Scene.cast_from),
-with that robot's own body out of the way, so a beam never hits its own robot.
+``range_max``. The beams of every robot that scans in a physics step are cast together
+(fleetcast.py), each robot's own body out of the way of its own beams only, so a beam never
+hits its own robot and always sees the others.
 
 Ranges get Gaussian noise; a hit beyond ``range_max`` reads ``inf``, and a hit closer than
 ``range_min`` reads ``range_min`` (an obstacle there is real, and ``inf`` would tell a

@@ -23,6 +23,7 @@ from common.errors import ConfigError
 from common.log import event
 from services.sim.battery import Battery, BatteryModel
 from services.sim.clock import Every
+from services.sim.fleetcast import Cast, cast_fleet
 from services.sim.lidar import Lidar, LidarParams
 from services.sim.physics import CONTACT_TOLERANCE_M, Scene
 from services.sim.robot import RobotState, clamp_command, integrate
@@ -222,22 +223,26 @@ class Simulation:
 
     def _sense(self) -> None:
         now, step = self.time, self.steps
+        # every robot that scans now, cast together (DESIGN.md 7, "Batching across robots")
+        scanning = [i for i, due in enumerate(self._schedule) if due[SCAN].due(step)]
+        casts: dict[int, Cast] = {}
+        if scanning:
+            poses = [(r.x, r.y, r.yaw) for r in self.robots]
+            casts = dict(
+                zip(scanning, cast_fleet(self.scene, self.lidar, poses, scanning), strict=True)
+            )
         for i, robot in enumerate(self.robots):
             due = self._schedule[i]
             if due[ODOM].due(step):
                 self._emit(i, ODOM, messages.odom(now, self._next_seq(i, ODOM), robot))
-            if due[SCAN].due(step):
-                self._scan(i, now)
+            if i in casts:
+                # in robot order, as before batching: the noise stream is drawn in that order
+                ranges = self.lidar.ranges(*casts[i], self.rng)
+                msg = messages.scan(now, self._next_seq(i, SCAN), self.lidar.params, ranges)
+                self._emit(i, SCAN, msg)
             if due[BATTERY].due(step):
                 bat = self.batteries[i]
                 self._emit(i, BATTERY, messages.battery(now, self._next_seq(i, BATTERY), bat))
-
-    def _scan(self, i: int, now: float) -> None:
-        lidar, r = self.lidar, self.robots[i]
-        pose = (r.x, r.y, r.yaw)
-        hit, fraction = self.scene.cast_from(i, pose, *lidar.rays(*pose))
-        ranges = lidar.ranges(hit, fraction, self.rng)
-        self._emit(i, SCAN, messages.scan(now, self._next_seq(i, SCAN), lidar.params, ranges))
 
     def _next_seq(self, i: int, topic: str) -> int:
         seq = self._seq.get((i, topic), 0)
