@@ -48,7 +48,12 @@ class Signals:
         self.hurried = False
         self.stopping = False
         self.asked: list[str | None] = []
-        self._event: asyncio.Event | None = None
+        # A look asked and not yet cleared, and the future a waiting trigger sleeps on.
+        # A plain future rather than ``wait_for(event.wait(), ...)``: that wraps every wait
+        # in a task of its own, and a wake then takes three loop iterations to reach the
+        # activation instead of one (docs/BENCHMARKS.md, "Where a hop's milliseconds go").
+        self._looked = False
+        self._waiter: asyncio.Future[None] | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
 
     @property
@@ -59,37 +64,47 @@ class Signals:
     def attach(self) -> None:
         """Bind to the running loop (``Engine.run`` does it before its first wait)."""
         self._loop = asyncio.get_running_loop()
-        self._event = asyncio.Event()
+        self._looked = False
 
     def look(self) -> None:
         """Make a waiting trigger look again (on the engine's loop)."""
-        if self._event is not None:
-            self._event.set()
+        if self._loop is None:
+            return
+        self._looked = True
+        waiter = self._waiter
+        if waiter is not None and not waiter.done():
+            waiter.set_result(None)
 
     def look_threadsafe(self) -> None:
         """:meth:`look` from any thread (nothing before the loop runs, or once it closed)."""
-        loop, event = self._loop, self._event
-        if loop is not None and event is not None:
+        loop = self._loop
+        if loop is not None:
             try:
-                loop.call_soon_threadsafe(event.set)
+                loop.call_soon_threadsafe(self.look)
             except RuntimeError:
                 pass  # loop closed while shutting down
 
     def clear(self) -> None:
         """Forget the looks asked so far (read the flags after this, not before)."""
-        if self._event is not None:
-            self._event.clear()
+        self._looked = False
 
     async def wait(self, limit_s: float | None = None) -> bool:
         """Until a look is asked (True, and it is cleared) or ``limit_s`` passed (False)."""
-        event = self._event
-        if event is None:
+        loop = self._loop
+        if loop is None:
             raise InternalError("Signals.wait() before attach()")
-        try:
-            await asyncio.wait_for(event.wait(), limit_s)
-        except TimeoutError:
-            return False
-        event.clear()
+        if not self._looked:
+            waiter = self._waiter = loop.create_future()
+            timer = None if limit_s is None else loop.call_later(limit_s, _expire, waiter)
+            try:
+                await waiter
+            finally:
+                self._waiter = None
+                if timer is not None:
+                    timer.cancel()
+            if not self._looked:
+                return False
+        self._looked = False
         return True
 
     def ask(self, robot: str | None) -> None:
@@ -120,6 +135,12 @@ class Signals:
         self.woken = self.hurried = False
         self.clear()
         return reason
+
+
+def _expire(waiter: asyncio.Future[None]) -> None:
+    """A wait's time limit passed (its look, if any, came first)."""
+    if not waiter.done():
+        waiter.set_result(None)
 
 
 class Trigger(Protocol):

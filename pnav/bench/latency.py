@@ -49,6 +49,10 @@ SELECT c.id, c.robot_id, c.recommendation_id,
 COMMANDED_SQL = (
     "SELECT count(DISTINCT robot_id) FROM command2robot WHERE recommendation_id IS NOT NULL"
 )
+RULES_SQL = """
+SELECT service, rule_type, executed, total_time_s, max_time_s FROM engine_stats
+ WHERE executed > 0 ORDER BY service, total_time_s DESC
+"""
 SENSOR_SQL = """
 SELECT id, robot_id, seq, extract(epoch FROM received_at)::float8 AS received
   FROM {table} WHERE id = ANY($1::bigint[])
@@ -138,6 +142,22 @@ async def wait_for_count(
         await asyncio.sleep(0.2)
 
 
+async def rule_times(rt: Runtime) -> list[dict[str, Any]]:
+    """Each rule type's mean and longest run, its awaited queries included, from the
+    services' engine_stats (the whole run, start-up and warm-up included)."""
+    records = await rt.database.pool.fetch(RULES_SQL)
+    return [
+        {
+            "service": r["service"],
+            "rule": r["rule_type"],
+            "executed": r["executed"],
+            "mean_ms": round(r["total_time_s"] / r["executed"] * 1000, 3),
+            "max_ms": round(r["max_time_s"] * 1000, 2),
+        }
+        for r in records
+    ]
+
+
 async def measure(
     robots: int, hz: float, seconds: float, replicas: dict[str, int]
 ) -> dict[str, Any]:
@@ -180,6 +200,7 @@ async def measure(
             t1, sim1, seq1 = time.time(), rt.clock.now(), await sequences(rt)
             await asyncio.sleep(1.0)  # the last commands land and the trace is flushed
             await collect(rt, collected)
+            rules = await rule_times(rt)
         finally:
             with contextlib.suppress(Exception):
                 await rt.close()
@@ -208,5 +229,6 @@ async def measure(
         "samples_raw": samples,
         "rows_per_s": {t: round((seq1.get(t, 0) - seq0.get(t, 0)) / wall, 1) for t in SEQUENCES},
         "processes": usage.report(),
+        "rules": rules,
         "work_dir": str(work),
     }

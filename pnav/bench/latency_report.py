@@ -98,6 +98,14 @@ def table(results: Sequence[dict[str, Any]]) -> list[str]:
             f"{name} {p['cpu_percent']:.0f}%/{p['peak_pss_mb']:.0f}" for name, p in procs.items()
         ]
         lines.append(f"  {r['robots']:>3} robots: " + ", ".join(parts))
+    lines.append("")
+    lines.append("rules: mean / max ms per run of the rule, its queries included (engine_stats)")
+    for r in results:
+        parts = [
+            f"{x['service']}.{x['rule']} {x['mean_ms']:.2f}/{x['max_ms']:.1f} (x{x['executed']})"
+            for x in r.get("rules", [])
+        ]
+        lines.append(f"  {r['robots']:>3} robots: " + ", ".join(parts))
     return lines
 
 
