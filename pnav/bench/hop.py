@@ -51,7 +51,6 @@ CREATE = f"CREATE TABLE IF NOT EXISTS {TABLE} (id bigserial PRIMARY KEY, robot_i
 INSERT = f"INSERT INTO {TABLE} (robot_id, v) VALUES ($1, $2) RETURNING id"
 
 Stamps = dict[int, dict[str, int]]
-SYNC_COMMIT = True  # --async-commit: as the bridge writes sensor rows
 
 
 class HopProbe(Rule):
@@ -94,12 +93,17 @@ class HopProbe(Rule):
 
 
 async def hop(
-    settings: ZenohSettings, sender: ZenohSettings, dsn: str | None, count: int, gap_s: float
+    settings: ZenohSettings,
+    sender: ZenohSettings,
+    dsn: str | None,
+    count: int,
+    gap_s: float,
+    sync_commit: bool = True,
 ) -> Stamps:
     """Run ``count`` notifications from a publisher process (on ``sender``) through the hop."""
     stamps: Stamps = {}
     session = bus.open_session(settings)
-    sync = {"synchronous_commit": "on" if SYNC_COMMIT else "off"}
+    sync = {"synchronous_commit": "on" if sync_commit else "off"}
     pool = await create_pool(dsn, server_settings=sync) if dsn else None
     if pool is not None:
         await pool.execute(CREATE)
@@ -185,8 +189,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--direct", action="store_true", help="peer to peer, no router")
     parser.add_argument("--async-commit", action="store_true", help="synchronous_commit off")
     args = parser.parse_args(argv)
-    global SYNC_COMMIT
-    SYNC_COMMIT = not args.async_commit
+    sync = not args.async_commit  # --async-commit: as the bridge writes sensor rows
     pg = None if args.no_db else EmbeddedPostgres()
     dsn = pg.start() if pg is not None else None
     try:
@@ -194,11 +197,11 @@ def main(argv: list[str] | None = None) -> int:
             endpoint = f"tcp/127.0.0.1:{free_port()}"
             listen = ZenohSettings(mode="peer", connect=(), listen=(endpoint,), multicast=False)
             sender = ZenohSettings(mode="peer", connect=(endpoint,), listen=(), multicast=False)
-            stamps = uvloop.run(hop(listen, sender, dsn, args.count, args.gap_ms / 1000))
+            stamps = uvloop.run(hop(listen, sender, dsn, args.count, args.gap_ms / 1000, sync))
         else:
             with router_process() as settings:
                 gap_s = args.gap_ms / 1000
-                stamps = uvloop.run(hop(settings, settings, dsn, args.count, gap_s))
+                stamps = uvloop.run(hop(settings, settings, dsn, args.count, gap_s, sync))
     finally:
         if pg is not None:
             pg.stop()
