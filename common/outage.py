@@ -35,6 +35,8 @@ logger = logging.getLogger("pnav.db")
 PROBE_FIRST_S = 0.2
 PROBE_MAX_S = 2.0
 WINDOW_S = 5.0
+# never folded: our own lines, and a process's last words (common.runtime's exit message)
+_UNFOLDED = frozenset({"pnav.db", "pnav.runtime"})
 
 
 class DatabaseUnavailable(ConnectionFailure):
@@ -136,7 +138,7 @@ class Outage:
 
     def fold(self, record: logging.LogRecord) -> bool:
         """Whether ``record`` only repeats that the database is down (then it is counted)."""
-        if self.since is None or record.levelno < logging.WARNING or record.name == logger.name:
+        if self.since is None or record.levelno < logging.WARNING or record.name in _UNFOLDED:
             return False
         if not _about_connection(record):
             return False

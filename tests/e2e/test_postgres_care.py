@@ -10,6 +10,7 @@ import signal
 import sys
 import time
 from pathlib import Path
+from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 import asyncpg
@@ -24,7 +25,9 @@ PNAV = [sys.executable, "-m", "pnav"]
 _RECORD = re.compile(r"^\d{4}-\d\d-\d\dT")  # a log record's first line (not a traceback's)
 
 
-async def start_up(tmp_path: Path, *extra: str) -> tuple[asyncio.subprocess.Process, dict]:
+async def start_up(
+    tmp_path: Path, *extra: str
+) -> tuple[asyncio.subprocess.Process, dict[str, Any]]:
     env = {**os.environ, "PNAV_STATE_DIR": str(tmp_path / "state")}
     env.pop("PNAV_DATABASE_URL", None)
     up = await asyncio.create_subprocess_exec(
