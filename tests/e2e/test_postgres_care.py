@@ -137,6 +137,10 @@ async def test_a_killed_postmaster_is_restarted_and_the_services_carry_on(
     finally:
         out = await stop(up)
     assert "embedded Postgres (pid" in out and "embedded Postgres restarted" in out, out
+    # the restarted server is stopped with the stack, and its temporary directory removed
+    new_pid = postmaster_pid(data_dir)
+    assert new_pid is None or not alive(new_pid)
+    assert not data_dir.exists()
 
 
 async def _grew(url: str, than: int) -> bool:
