@@ -65,7 +65,7 @@ def kill_postmaster(data_dir: Path, wait_s: float = 5.0) -> None:
     """Stop the postmaster of ``data_dir`` at once (SIGQUIT: immediate shutdown, then
     SIGKILL), if one runs; wait for it to go."""
     pid = postmaster_pid(data_dir)
-    if pid is None or not alive(pid):
+    if pid is None or not alive(pid) or not _serves(pid, data_dir):
         return
     for sig in (signal.SIGQUIT, signal.SIGKILL):
         with contextlib.suppress(ProcessLookupError):
@@ -75,6 +75,31 @@ def kill_postmaster(data_dir: Path, wait_s: float = 5.0) -> None:
             time.sleep(0.05)
         if not alive(pid):
             return
+
+
+def _serves(pid: int, data_dir: Path) -> bool:
+    """Whether ``pid`` is a postgres of ``data_dir`` (a stale postmaster.pid may name a pid
+    since reused by another process); True where /proc cannot tell."""
+    try:
+        cmdline = Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return True
+    return b"postgres" in cmdline and str(data_dir).encode() in cmdline
+
+
+def clean_up(data_dir: Path, *, remove: bool) -> None:
+    """Stop the postmaster of ``data_dir`` if one runs; remove the directory if ``remove``."""
+    kill_postmaster(data_dir)
+    if not remove:
+        return
+    for _ in range(20):  # the postmaster's children may hold files a moment longer
+        try:
+            shutil.rmtree(data_dir)
+            return
+        except FileNotFoundError:
+            return
+        except OSError:
+            time.sleep(0.1)
 
 
 class Restartable(Protocol):
@@ -185,16 +210,7 @@ def watch(data_dir: Path, remove: bool) -> None:
     signal.signal(signal.SIGTERM, signal.SIG_IGN)  # the pipe decides, not a stray signal
     while sys.stdin.buffer.read(4096):
         pass
-    kill_postmaster(data_dir)
-    if remove:
-        for _ in range(20):  # the postmaster's children may hold files a moment longer
-            try:
-                shutil.rmtree(data_dir)
-                return
-            except FileNotFoundError:
-                return
-            except OSError:
-                time.sleep(0.1)
+    clean_up(data_dir, remove=remove)
 
 
 if __name__ == "__main__":

@@ -14,9 +14,10 @@ from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 import asyncpg
+import psutil
 import pytest
 
-from common.postmaster import alive, postmaster_pid
+from common.postmaster import alive, clean_up, postmaster_pid
 from common.testing import free_port
 
 pytestmark = pytest.mark.timeout(120)
@@ -26,9 +27,11 @@ _RECORD = re.compile(r"^\d{4}-\d\d-\d\dT")  # a log record's first line (not a t
 
 
 async def start_up(
-    tmp_path: Path, *extra: str
+    tmp_path: Path, *extra: str, state: Path | None = None
 ) -> tuple[asyncio.subprocess.Process, dict[str, Any]]:
-    env = {**os.environ, "PNAV_STATE_DIR": str(tmp_path / "state")}
+    state = state or tmp_path / "state"
+    stack = state / "stack.json"
+    env = {**os.environ, "PNAV_STATE_DIR": str(state)}
     env.pop("PNAV_DATABASE_URL", None)
     up = await asyncio.create_subprocess_exec(
         *PNAV,
@@ -47,9 +50,8 @@ async def start_up(
         stdout=asyncio.subprocess.PIPE,
         stderr=asyncio.subprocess.STDOUT,
     )
-    stack = tmp_path / "state" / "stack.json"
     deadline = time.monotonic() + 60
-    while not stack.exists():
+    while not (stack.exists() and json.loads(stack.read_text() or "{}").get("pid") == up.pid):
         assert up.returncode is None, "pnav up exited during start-up"
         assert time.monotonic() < deadline, "pnav up never wrote its stack file"
         await asyncio.sleep(0.2)
@@ -172,3 +174,30 @@ async def test_a_kept_data_dir_survives_a_killed_launcher(tmp_path: Path) -> Non
         assert (kept / "PG_VERSION").exists()
     finally:
         await stop(up)
+
+
+async def test_the_next_up_cleans_what_a_stack_without_its_watcher_left(tmp_path: Path) -> None:
+    up, info = await start_up(tmp_path)
+    data_dir = data_dir_of(info["database_url"])
+    try:
+        pid = await wait_for(lambda: postmaster_pid(data_dir), 30, "the postmaster")
+        watcher = next(
+            p
+            for p in psutil.Process(up.pid).children()
+            if "common.postmaster" in " ".join(p.cmdline())
+        )
+        watcher.kill()  # no lifeline any more: killing the launcher now leaves Postgres
+        await wait_for(lambda: not alive(watcher.pid), 10, "the watcher to die")
+        up.kill()
+        await up.wait()
+        assert alive(pid) and data_dir.exists()
+    finally:
+        await stop(up)
+    again, _ = await start_up(tmp_path / "again", state=tmp_path / "state")
+    try:
+        await wait_for(lambda: not alive(pid), 15, "the left postmaster to stop")
+        await wait_for(lambda: not data_dir.exists(), 15, "the left data directory to go")
+    finally:
+        out = await stop(again)
+        clean_up(data_dir, remove=True)  # whatever happened, leave nothing behind
+    assert "cleaned up after a stack that died" in out, out
