@@ -15,6 +15,8 @@ pace and log its own traceback. Instead, one :data:`OUTAGE` per process:
 - :class:`FoldingFilter` (installed on the process's log handlers by common.runtime) folds,
   while the database is down, every WARNING or ERROR whose exception is a lost or refused
   connection into the outage's count: they would only repeat that the database is down.
+  Such a line logged while the database is up (the first query to find its connection
+  gone) keeps its message and the exception's one line, not asyncpg's traceback.
 
 Nothing else changes: the callers' own retries (the engine re-running its rules, the lease
 manager reconnecting) carry on and succeed once Postgres is back.
@@ -173,7 +175,15 @@ class FoldingFilter(logging.Filter):
         self.outage = outage
 
     def filter(self, record: logging.LogRecord) -> bool:
-        return not self.outage.fold(record)
+        if self.outage.fold(record):
+            return False
+        if record.exc_info and is_connection_error(record.exc_info[1]):
+            # a lost or refused connection: its traceback is asyncpg's socket code, 30
+            # lines that say nothing the exception's one line does not
+            exc = record.exc_info[1]
+            record.exc_info, record.exc_text = None, None
+            record.__dict__.setdefault("error", repr(exc))
+        return True
 
 
 OUTAGE = Outage()

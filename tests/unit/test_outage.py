@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import sys
 
 import asyncpg
 import pytest
@@ -94,3 +95,19 @@ async def test_the_pool_backs_off_while_the_server_is_gone_and_comes_back(db_url
     finally:
         OUTAGE.recovered()
         await pool.close()
+
+
+def test_a_lost_connection_is_one_line_not_a_traceback() -> None:
+    folding = FoldingFilter(Outage(clock=Clock()))
+    other = logging.getLogger("some.service")
+    try:
+        raise asyncpg.ConnectionDoesNotExistError("connection was closed")
+    except asyncpg.ConnectionDoesNotExistError:
+        lost = other.makeRecord(other.name, logging.ERROR, __file__, 1, "x", (), sys.exc_info())
+    assert folding.filter(lost) and lost.exc_info is None
+    assert "connection was closed" in lost.__dict__["error"]
+    try:
+        raise ValueError("a bug")
+    except ValueError:
+        bug = other.makeRecord(other.name, logging.ERROR, __file__, 1, "x", (), sys.exc_info())
+    assert folding.filter(bug) and bug.exc_info is not None  # a bug keeps its traceback
