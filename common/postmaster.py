@@ -128,7 +128,7 @@ class Keeper:
             pid = self.postgres.pid()
             if pid is not None and alive(pid):
                 continue
-            await self._restart(pid, stop)
+            await self._restart(postmaster_pid(self.postgres.data_dir) or pid, stop)
 
     async def _restart(self, pid: int | None, stop: asyncio.Event) -> None:
         ran_for = time.monotonic() - self._started
@@ -150,13 +150,22 @@ class Keeper:
             return
         self._backoff = min(self._backoff * 2, _BACKOFF_MAX_S)
         started = time.monotonic()
+        quiet = logging.getLogger("pgserver")
+        level = quiet.level
+        quiet.setLevel(logging.CRITICAL)  # it prints the whole server log on each failure
         try:
             await asyncio.to_thread(self.postgres.restart)
         except Exception as exc:
             # counted as a death: the next poll tries again, later
-            logger.warning("embedded Postgres did not restart: %r", exc)
+            logger.warning(
+                "embedded Postgres did not restart: %s; its log ends: %s",
+                type(exc).__name__,
+                _log_tail(self.postgres.data_dir),
+            )
             self._started = time.monotonic()
             return
+        finally:
+            quiet.setLevel(level)
         self._started = time.monotonic()
         logger.info(
             "embedded Postgres restarted (pid %s) in %.1f s (restart %d)",
@@ -164,6 +173,14 @@ class Keeper:
             self._started - started,
             self.restarts,
         )
+
+
+def _log_tail(data_dir: Path, lines: int = 2) -> str:
+    try:
+        tail = (data_dir / "log").read_text(errors="replace").splitlines()[-lines:]
+    except OSError:
+        return "-"
+    return " | ".join(line.strip() for line in tail)
 
 
 # -- the lifeline ---------------------------------------------------------------------------
