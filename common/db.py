@@ -8,6 +8,7 @@ statement; :meth:`Database.transaction` for several, publishing nothing if it ro
 from __future__ import annotations
 
 import asyncio
+import functools
 import json
 import logging
 import time
@@ -19,7 +20,7 @@ import asyncpg
 
 from common.bus import Notifier
 from common.errors import ConnectionFailure
-from common.outage import OUTAGE, DatabaseUnavailable, is_connection_error
+from common.outage import DatabaseUnavailable, Outage, is_connection_error, outage_for
 
 log = logging.getLogger(__name__)
 
@@ -42,18 +43,18 @@ async def _keep_session(conn: asyncpg.Connection) -> None:
     """
 
 
-async def _connect(*args: Any, **kwargs: Any) -> asyncpg.Connection:
+async def _connect(outage: Outage, *args: Any, **kwargs: Any) -> asyncpg.Connection:
     """Every pool's connect: through the process's outage state (common.outage), so that
     while Postgres is down the pools back off together and say so once."""
-    if not OUTAGE.may_try():
+    if not outage.may_try():
         raise DatabaseUnavailable("the database is unreachable (backing off)")
     try:
         conn: asyncpg.Connection = await asyncpg.connect(*args, **kwargs)
     except Exception as exc:
         if is_connection_error(exc):
-            OUTAGE.failed(exc)
+            outage.failed(exc)
         raise
-    OUTAGE.recovered()
+    outage.recovered()
     return conn
 
 
@@ -86,7 +87,7 @@ async def create_pool(
                 reset=_keep_session,
                 server_settings=server_settings,
                 max_inactive_connection_lifetime=max_inactive_connection_lifetime,
-                connect=_connect,
+                connect=functools.partial(_connect, outage_for(url)),
             )
             return pool
         except (

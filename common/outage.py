@@ -3,7 +3,8 @@
 When Postgres goes away (the embedded one killed, restarting), every part of a service fails
 on its next query: the engine's rules on every wake, the statistics loop, the lease
 connection, the pool refilling its floor, the bridge's writers. Each would retry at its own
-pace and log its own traceback. Instead, one :data:`OUTAGE` per process:
+pace and log its own traceback. Instead, one :class:`Outage` per server in each process
+(:func:`outage_for`, shared by all its pools):
 
 - Connecting goes through :meth:`Outage.may_try` (common.db's pools use it as their connect
   function): while the database is down, one connection attempt is let through now and then
@@ -26,7 +27,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 
 import asyncpg
 
@@ -168,14 +169,16 @@ def _about_connection(record: logging.LogRecord) -> bool:
 
 
 class FoldingFilter(logging.Filter):
-    """A handler filter: drop what :meth:`Outage.fold` folds."""
+    """A handler filter: drop what an outage (:meth:`Outage.fold`) folds; ``outages``: a
+    fixed set (tests), else every server this process connects to (:func:`outage_for`)."""
 
-    def __init__(self, outage: Outage) -> None:
+    def __init__(self, outages: Iterable[Outage] | None = None) -> None:
         super().__init__()
-        self.outage = outage
+        self._outages = list(outages) if outages is not None else None
 
     def filter(self, record: logging.LogRecord) -> bool:
-        if self.outage.fold(record):
+        outages = self._outages if self._outages is not None else _OUTAGES.values()
+        if any(outage.fold(record) for outage in outages):
             return False
         if record.exc_info and is_connection_error(record.exc_info[1]):
             # a lost or refused connection: its traceback is asyncpg's socket code, 30
@@ -186,11 +189,20 @@ class FoldingFilter(logging.Filter):
         return True
 
 
-OUTAGE = Outage()
+# one per server (DSN): a process may talk to more than one (tests, tools)
+_OUTAGES: dict[str, Outage] = {}
 
 
-def fold_outage_logs(outage: Outage = OUTAGE) -> None:
+def outage_for(dsn: str) -> Outage:
+    """The outage state of the server ``dsn`` names, shared by every pool of this process."""
+    outage = _OUTAGES.get(dsn)
+    if outage is None:
+        outage = _OUTAGES[dsn] = Outage()
+    return outage
+
+
+def fold_outage_logs() -> None:
     """Install :class:`FoldingFilter` on the root logger's handlers (once each)."""
     for handler in logging.getLogger().handlers:
         if not any(isinstance(f, FoldingFilter) for f in handler.filters):
-            handler.addFilter(FoldingFilter(outage))
+            handler.addFilter(FoldingFilter())

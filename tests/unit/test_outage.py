@@ -10,7 +10,7 @@ import pytest
 
 from common.db import create_pool
 from common.errors import ConnectionFailure
-from common.outage import OUTAGE, FoldingFilter, Outage, is_connection_error
+from common.outage import FoldingFilter, Outage, is_connection_error, outage_for
 
 
 class Clock:
@@ -64,7 +64,7 @@ def test_one_warning_a_summary_per_window_and_one_info(caplog: pytest.LogCapture
 def test_the_filter_folds_connection_errors_only_while_down() -> None:
     clock = Clock()
     outage = Outage(clock=clock)
-    folding = FoldingFilter(outage)
+    folding = FoldingFilter([outage])
     other = logging.getLogger("some.service")
 
     def record(exc: BaseException, level: int = logging.WARNING) -> logging.LogRecord:
@@ -81,24 +81,25 @@ def test_the_filter_folds_connection_errors_only_while_down() -> None:
 
 async def test_the_pool_backs_off_while_the_server_is_gone_and_comes_back(db_url: str) -> None:
     pool = await create_pool(db_url, min_size=0, max_size=2)
+    outage = outage_for(db_url)
     try:
         assert await pool.fetchval("SELECT 1") == 1
         # the server "goes away": this process cannot connect (as when it is down)
-        OUTAGE.failed(ConnectionRefusedError(111, "refused"))
+        outage.failed(ConnectionRefusedError(111, "refused"))
         await pool.expire_connections()
         with pytest.raises(ConnectionFailure):
             await pool.fetchval("SELECT 1")  # refused at once: no probe due yet
         # a probe is let through after the back-off, connects, and the outage is over
-        OUTAGE._next_probe = 0.0
+        outage._next_probe = 0.0
         assert await pool.fetchval("SELECT 1") == 1
-        assert not OUTAGE.down
+        assert not outage.down
     finally:
-        OUTAGE.recovered()
+        outage.recovered()
         await pool.close()
 
 
 def test_a_lost_connection_is_one_line_not_a_traceback() -> None:
-    folding = FoldingFilter(Outage(clock=Clock()))
+    folding = FoldingFilter([Outage(clock=Clock())])
     other = logging.getLogger("some.service")
     try:
         raise asyncpg.ConnectionDoesNotExistError("connection was closed")
