@@ -8,6 +8,7 @@ statement; :meth:`Database.transaction` for several, publishing nothing if it ro
 from __future__ import annotations
 
 import asyncio
+import functools
 import json
 import logging
 import time
@@ -19,6 +20,7 @@ import asyncpg
 
 from common.bus import Notifier
 from common.errors import ConnectionFailure
+from common.outage import DatabaseUnavailable, Outage, is_connection_error, outage_for
 
 log = logging.getLogger(__name__)
 
@@ -41,6 +43,21 @@ async def _keep_session(conn: asyncpg.Connection) -> None:
     """
 
 
+async def _connect(outage: Outage, *args: Any, **kwargs: Any) -> asyncpg.Connection:
+    """Every pool's connect: through the process's outage state (common.outage), so that
+    while Postgres is down the pools back off together and say so once."""
+    if not outage.may_try():
+        raise DatabaseUnavailable("the database is unreachable (backing off)")
+    try:
+        conn: asyncpg.Connection = await asyncpg.connect(*args, **kwargs)
+    except Exception as exc:
+        if is_connection_error(exc):
+            outage.failed(exc)
+        raise
+    outage.recovered()
+    return conn
+
+
 async def create_pool(
     url: str,
     *,
@@ -55,6 +72,9 @@ async def create_pool(
     ``server_settings`` are session settings for every connection (e.g.
     ``{"synchronous_commit": "off"}`` for a writer of sensor rows that may lose the last
     few hundred milliseconds if Postgres itself crashes).
+
+    The pool reconnects by itself when Postgres comes back (after a restart, say); while it
+    is down, connecting backs off (common.outage).
     """
     deadline = time.monotonic() + wait_s
     while True:
@@ -67,9 +87,15 @@ async def create_pool(
                 reset=_keep_session,
                 server_settings=server_settings,
                 max_inactive_connection_lifetime=max_inactive_connection_lifetime,
+                connect=functools.partial(_connect, outage_for(url)),
             )
             return pool
-        except (OSError, asyncpg.CannotConnectNowError, asyncpg.ConnectionDoesNotExistError) as exc:
+        except (
+            OSError,
+            asyncpg.CannotConnectNowError,
+            asyncpg.ConnectionDoesNotExistError,
+            DatabaseUnavailable,
+        ) as exc:
             if time.monotonic() >= deadline:
                 raise ConnectionFailure(f"cannot reach Postgres at {_redact(url)}: {exc}") from exc
             await asyncio.sleep(0.2)

@@ -26,6 +26,7 @@ from common.contract import keys
 from common.db import Database, create_pool
 from common.errors import ConnectionFailure, UsageError
 from common.lifeline import die_with_parent
+from common.outage import fold_outage_logs
 
 logger = logging.getLogger("pnav.runtime")
 
@@ -144,6 +145,8 @@ def run_service(service: str, main: ServiceMain, argv: list[str] | None = None) 
         print(f"{service}: {exc}", file=sys.stderr)
         return 2
     log.setup(service, config.log_level)
+    # while Postgres is down, lines that only repeat so are counted, not printed
+    fold_outage_logs()
 
     async def runner() -> None:
         stop = asyncio.Event()

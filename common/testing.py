@@ -75,6 +75,37 @@ class EmbeddedPostgres:
         uri: str = self._server.get_uri()
         return uri
 
+    @property
+    def temporary(self) -> bool:
+        """Whether :meth:`stop` removes the data directory (it was made for this server)."""
+        return self._owns_dir and not self.persistent
+
+    def pid(self) -> int | None:
+        """The postmaster's pid (None before :meth:`start`)."""
+        if self._server is None:
+            return None
+        pid: int | None = self._server.get_pid()
+        return pid
+
+    def restart(self) -> None:
+        """Start the postmaster again on the same data directory (so the same socket and DSN)
+        after it died. Blocking: pg_ctl waits for the server to accept connections."""
+        from common.postmaster import alive, postmaster_pid
+
+        if self._server is None:
+            raise RuntimeError("restart() before start()")
+        stale = postmaster_pid(self.data_dir)
+        if stale is not None and not alive(stale):
+            # postgres takes a not yet reaped (zombie) pid for a live postmaster and refuses
+            # to start: its lock files go (the socket's lives where the socket does)
+            socket_dir = self._server.get_postmaster_info().socket_dir or self.data_dir
+            locks = [self.data_dir / "postmaster.pid", *Path(socket_dir).glob(".s.PGSQL.*.lock")]
+            for lock in locks:
+                with contextlib.suppress(FileNotFoundError):
+                    lock.unlink()
+        with self._server._lock:
+            self._server.ensure_postgres_running()
+
     def dsn(self, database: str = "postgres") -> str:
         uri: str = self._server.get_uri(database)
         return uri
@@ -91,7 +122,7 @@ class EmbeddedPostgres:
             with contextlib.suppress(Exception):
                 self._server.cleanup()
             self._server = None
-        if self._owns_dir and not self.persistent:
+        if self.temporary:
             # the postmaster may take a moment to release its files
             for _ in range(10):
                 try:

@@ -183,6 +183,8 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
                 world=str(world),
                 rate=options.rate,
                 log_dir=str(log_dir),
+                postgres_dir=str(local.postgres.data_dir) if local.postgres else "",
+                postgres_temporary=local.postgres is not None and local.postgres.temporary,
             )
         )
         # Supervision runs for as long as the stack does: a crashed service is restarted

@@ -37,6 +37,10 @@ class StackInfo:
     world: str
     rate: str
     log_dir: str
+    # the embedded Postgres's data directory ("" for a server of PNAV_DATABASE_URL), and
+    # whether it is a temporary one: what a later `pnav up` cleans if this stack died
+    postgres_dir: str = ""
+    postgres_temporary: bool = False
 
     def zenoh(self) -> ZenohSettings:
         return ZenohSettings(mode="client", connect=(self.zenoh_connect,))
@@ -68,14 +72,32 @@ def _alive(pid: int) -> bool:
     return True
 
 
-def read() -> StackInfo | None:
-    """The running stack, or None (no file, or its launcher is gone)."""
+def _load() -> StackInfo | None:
     try:
         data = json.loads(stack_file().read_text())
-        info = StackInfo(**data)
+        return StackInfo(**data)
     except (FileNotFoundError, json.JSONDecodeError, TypeError):
         return None
-    return info if _alive(info.pid) else None
+
+
+def read() -> StackInfo | None:
+    """The running stack, or None (no file, or its launcher is gone)."""
+    info = _load()
+    return info if info is not None and _alive(info.pid) else None
+
+
+def leftover() -> StackInfo | None:
+    """The file of a stack whose launcher died without removing it, or None."""
+    info = _load()
+    return info if info is not None and not _alive(info.pid) else None
+
+
+def forget(info: StackInfo) -> None:
+    """Remove the file of a dead stack (after cleaning what it left)."""
+    current = _load()
+    if current is not None and current.pid == info.pid:
+        with contextlib.suppress(FileNotFoundError):
+            stack_file().unlink()
 
 
 def connection() -> tuple[str, ZenohSettings]:

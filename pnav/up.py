@@ -5,13 +5,36 @@ from __future__ import annotations
 import asyncio
 import logging
 import signal
+from pathlib import Path
 
 from common import log
 from common.errors import UsageError
+from common.postmaster import clean_up
 from pnav import stackfile
 from pnav.launcher import StackOptions, launched
 
 logger = logging.getLogger("pnav.up")
+
+
+def clean_leftover() -> None:
+    """A stack that died without cleaning up (its watcher killed too) may have left its
+    embedded Postgres running and its temporary data directory: stop and remove them (a
+    kept ``--data-dir`` is only stopped)."""
+    dead = stackfile.leftover()
+    if dead is None:
+        return
+    if dead.postgres_dir:
+        data_dir = Path(dead.postgres_dir)
+        clean_up(data_dir, remove=dead.postgres_temporary)
+        log.event(
+            logger,
+            logging.INFO,
+            "cleaned up after a stack that died",
+            pid=dead.pid,
+            postgres=str(data_dir),
+            removed=dead.postgres_temporary,
+        )
+    stackfile.forget(dead)
 
 
 async def up(options: StackOptions) -> int:
@@ -22,6 +45,7 @@ async def up(options: StackOptions) -> int:
             "stop it with `pnav down` first"
         )
     log.setup("pnav-up")
+    clean_leftover()
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
