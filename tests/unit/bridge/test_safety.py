@@ -6,6 +6,7 @@ import math
 
 import pytest
 
+from common.errors import ConfigError
 from services.bridge.messages import LaserScan
 from services.bridge.safety import (
     CLEAR,
@@ -17,6 +18,7 @@ from services.bridge.safety import (
     max_speed,
     stopping_m,
 )
+from services.bridge.settings import BridgeSettings
 
 R = 0.105  # the burger's footprint radius
 FULL = 0.22
@@ -158,3 +160,26 @@ def test_max_speed_inverts_the_stopping_distance() -> None:
         assert stopping_m(v, 0.1, 2.5) == pytest.approx(budget)
     assert max_speed(0.0, 0.1, 2.5) == 0.0
     assert max_speed(-1.0, 0.1, 2.5) == 0.0
+
+
+def test_the_settings_come_from_pnav_bridge_safety_variables() -> None:
+    assert BridgeSettings.from_env({}).safety == SafetyParams()
+    settings = BridgeSettings.from_env(
+        {
+            "PNAV_BRIDGE_SAFETY": "off",
+            "PNAV_BRIDGE_SAFETY_DECEL_MPS2": "1.5",
+            "PNAV_BRIDGE_SAFETY_LATENCY_S": "0.2",
+            "PNAV_BRIDGE_SAFETY_MARGIN_M": "0",
+            "PNAV_BRIDGE_SAFETY_SCAN_AGE_S": "1",
+            "PNAV_BRIDGE_SAFETY_BLIND_MPS": "0",
+        }
+    )
+    assert settings.safety == SafetyParams(False, 1.5, 0.2, 0.0, 1.0, 0.0)
+    for name, raw in (
+        ("PNAV_BRIDGE_SAFETY", "maybe"),
+        ("PNAV_BRIDGE_SAFETY_DECEL_MPS2", "0"),
+        ("PNAV_BRIDGE_SAFETY_MARGIN_M", "-0.1"),
+        ("PNAV_BRIDGE_SAFETY_BLIND_MPS", "nan"),
+    ):
+        with pytest.raises(ConfigError, match=name):
+            BridgeSettings.from_env({name: raw})
