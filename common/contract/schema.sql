@@ -448,3 +448,15 @@ ALTER TABLE map
 ALTER TABLE charging_station
     ADD CONSTRAINT charging_station_finite CHECK (is_finite(x) AND is_finite(y)
         AND is_finite(radius_m) AND is_finite(charge_power_w)) NOT VALID;
+
+-- migration 4: the bridge's safety layer writes what it did with a command
+--
+-- The bridge checks every command2robot row against the robot's newest laser scan before it
+-- becomes a cmd_vel, whatever priority chose it (docs/BRIDGE.md, "Safety layer"). When the
+-- layer limited or stopped the command, or had no fresh scan to check it against, it says so
+-- here with one UPDATE after the cmd_vel went out. These three columns are the only ones of
+-- command2robot the bridge writes; NULL: sent as decided (clamped to the robot's limits).
+ALTER TABLE command2robot
+    ADD COLUMN safety text,
+    ADD COLUMN sent_linear_mps double precision,
+    ADD COLUMN sent_angular_rps double precision;

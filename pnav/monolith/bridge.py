@@ -2,10 +2,12 @@
 
 Shared with services/bridge: the validation of every sensor message into a record
 (``messages.PARSERS``, the same wrap of yaw, the same checks), the clamp of a command to the
-robot's limits (``commands.clamp``, NaN to 0) and the watchdog (``watchdog.Watchdog``, 0.5 s
+robot's limits (``commands.clamp``, NaN to 0), the safety layer (``safety.SafetyLayer``: the
+command checked against the robot's newest scan, limited or stopped if it would hit what the
+scan shows, the reason written on the row) and the watchdog (``watchdog.Watchdog``, 0.5 s
 of sim time with no fresh command2robot row: one stop). Adapted: rows go into the in-memory
 contract instead of a batched INSERT, and a command2robot row goes to ``Simulation.
-set_command`` instead of a Zenoh ``cmd_vel``.
+set_command`` instead of a Zenoh ``cmd_vel``; the safety note is set on the in-memory row.
 
 It also takes the sense-to-act samples, with the rule ``pnav bench latency`` uses
 (pnav/bench/provenance.py): a command obeys a recommendation, whose ``inputs`` name the
@@ -37,6 +39,7 @@ from services.bridge.messages import (
     Odometry,
     SensorRecord,
 )
+from services.bridge.safety import LIMITED, STOPPED, UNCHECKED, SafetyLayer
 from services.bridge.settings import BridgeSettings
 from services.bridge.watchdog import Watchdog
 
@@ -58,6 +61,9 @@ class Applied:
 class BridgeCounters:
     commands_out: int = 0
     watchdog_stops: int = 0
+    safety_stopped: int = 0
+    safety_limited: int = 0
+    safety_unchecked: int = 0
     latency_ms: list[float] = field(default_factory=list)
 
 
@@ -72,7 +78,9 @@ class Bridge:
         self.contract = contract
         self.set_command = set_command
         self.on_applied = on_applied
-        self.watchdog = Watchdog((settings or BridgeSettings()).watchdog_s)
+        settings = settings or BridgeSettings()
+        self.watchdog = Watchdog(settings.watchdog_s)
+        self.safety = SafetyLayer(settings.safety)
         self.counters = BridgeCounters()
         self.last_sent: dict[str, int] = {}  # newest command2robot id sent, per robot
         self.wanted: set[str] = set()  # robots whose command2robot changed (notifications)
@@ -83,6 +91,8 @@ class Bridge:
     def ingest(self, robot_id: str, topic: str, message: dict[str, Any], produced: float) -> None:
         """One sim message (``produced``: perf_counter when the sim emitted it) -> a row."""
         record = PARSERS[topic](robot_id, message)
+        if isinstance(record, LaserScan):
+            self.safety.scan(record)
         row = _row(record)
         row["produced"] = produced  # not a contract column: the start of a latency sample
         self.contract.insert(TABLE_OF_TOPIC[topic], row)
@@ -105,9 +115,15 @@ class Bridge:
             robot = next(self.contract[keys.ROBOT].rows(robot_id), None)
             if robot is None:
                 continue
-            linear = clamp(row["linear_mps"], robot["max_linear_mps"])
             angular = clamp(row["angular_rps"], robot["max_angular_rps"])
+            linear = clamp(row["linear_mps"], robot["max_linear_mps"])
+            verdict = self.safety.judge(robot_id, linear, robot["footprint_radius_m"], now)
+            linear = verdict.linear
             self.set_command(robot_id, linear, angular)
+            if verdict.noted:  # the bridge's one UPDATE of the row, after the send
+                row |= {"safety": verdict.reason, "sent_linear_mps": linear}
+                row["sent_angular_rps"] = angular
+                self._count(verdict.outcome)
             self._sample(row)
             self.counters.commands_out += 1
             self.watchdog.feed(robot_id, now)
@@ -119,8 +135,17 @@ class Bridge:
         """The watchdog: a robot with no fresh command for 0.5 s of sim time is stopped."""
         for robot_id, _age in self.watchdog.expired(now):
             self.set_command(robot_id, 0.0, 0.0)
+            self.safety.sent_stop(robot_id)
             self.counters.watchdog_stops += 1
             self.on_applied(Applied(robot_id, 0.0, 0.0, None))
+
+    def _count(self, outcome: str) -> None:
+        if outcome == STOPPED:
+            self.counters.safety_stopped += 1
+        elif outcome == LIMITED:
+            self.counters.safety_limited += 1
+        elif outcome == UNCHECKED:
+            self.counters.safety_unchecked += 1
 
     def _sample(self, command: Row) -> None:
         rec_id = command["recommendation_id"]

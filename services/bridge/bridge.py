@@ -31,7 +31,7 @@ from common.runtime import Runtime, run_service
 from common.tasks import cancel_and_wait
 from services.bridge.commands import CommandRelay
 from services.bridge.counters import Counters, RateLimitedLog
-from services.bridge.messages import UNKNOWN_ROBOT, MalformedMessage, parse_sensor
+from services.bridge.messages import UNKNOWN_ROBOT, LaserScan, MalformedMessage, parse_sensor
 from services.bridge.settings import BridgeSettings
 from services.bridge.world import World
 from services.bridge.world_sync import WorldSync
@@ -114,6 +114,7 @@ class Bridge:
             "bridge started",
             robots=",".join(sorted(self.robots)),
             watchdog_s=self.settings.watchdog_s,
+            safety="on" if self.settings.safety.enabled else "off",
         )
 
     async def stop(self) -> None:
@@ -153,6 +154,8 @@ class Bridge:
         except Exception as exc:  # a bug in validation: still never let it through
             self._malformed(topic, "internal_error", repr(exc), key)
             return
+        if isinstance(record, LaserScan):
+            self.commands.safety.scan(record)  # before any command decided from it comes
         self.writer.add(record)
 
     def _malformed(self, topic: str, reason: str, detail: str, key: str) -> None:

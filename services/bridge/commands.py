@@ -38,6 +38,8 @@ from common.freshness import Sequences
 from common.tasks import cancel_and_wait
 from services.bridge.counters import Counters, RateLimitedLog
 from services.bridge.limits import Limits, RobotLimits
+from services.bridge.notes import SafetyNotes
+from services.bridge.safety import LIMITED, STOPPED, UNCHECKED, SafetyLayer, Verdict
 from services.bridge.settings import BridgeSettings
 from services.bridge.watchdog import Watchdog
 
@@ -47,7 +49,7 @@ logger = logging.getLogger("pnav.bridge.commands")
 # however long command2robot grows (it is not a pruned sensor table).
 _NEWEST = f"""
 SELECT r.robot_id, c.id, c.stamp, c.linear_mps, c.angular_rps,
-       r.max_linear_mps, r.max_angular_rps
+       r.max_linear_mps, r.max_angular_rps, r.footprint_radius_m
 FROM {keys.ROBOT} r
 CROSS JOIN LATERAL (
     SELECT id, stamp, linear_mps, angular_rps FROM {keys.COMMAND2ROBOT} c
@@ -75,6 +77,7 @@ class Command:
     angular: float
     max_linear: float
     max_angular: float
+    footprint: float
 
     @classmethod
     def from_row(cls, row: asyncpg.Record) -> Command:
@@ -128,6 +131,9 @@ class CommandRelay:
         self._want_all = False
         self._wanted: set[str] = set()
         self.limits = RobotLimits()
+        # the newest scan per robot (the bridge hands them over) and what the layer did
+        self.safety = SafetyLayer(settings.safety)
+        self.notes = SafetyNotes(pool)
         self._sequences = Sequences()
         self._alerts = RateLimitedLog(logger)
         self._subscriber: zenoh.Subscriber[None] | None = None
@@ -145,6 +151,7 @@ class CommandRelay:
             await self.limits.read(conn)
             rows = await conn.fetch(_NEWEST)
         self.counters.command_reads += 1
+        self.notes.start()
         for row in rows:
             self._consider(Command.from_row(row), at_start=True)
         self._tasks = [
@@ -162,6 +169,7 @@ class CommandRelay:
         targets = sorted(set(robots) | set(self.last_sent))
         for robot in targets:
             self._send(robot, 0.0, 0.0, None, reliable=True)
+            self.safety.sent_stop(robot)
             self.counters.shutdown_stops += 1
         if targets:
             log.event(logger, logging.INFO, "stop sent on shutdown", robots=",".join(targets))
@@ -169,6 +177,7 @@ class CommandRelay:
             with contextlib.suppress(Exception):
                 publisher.undeclare()
         self._publishers.clear()
+        await self.notes.close()
 
     # -- reading -------------------------------------------------------------------------
     def robots_changed(self) -> None:
@@ -216,7 +225,8 @@ class CommandRelay:
                 rows = await self._read(wanted)
                 for row in rows:
                     command = Command.from_row(row)
-                    self.limits.check(command.robot_id, (command.max_linear, command.max_angular))
+                    limits = (command.max_linear, command.max_angular, command.footprint)
+                    self.limits.check(command.robot_id, limits)
                     self._consider(command)
             except Exception as exc:  # Postgres away: the watchdog still stops the robots
                 self._alerts.warning("read", "command2robot read failed", error=repr(exc))
@@ -279,18 +289,42 @@ class CommandRelay:
                 sim_now=self.clock.now(),
             )
             return
-        linear = clamp(cmd.linear, cmd.max_linear)
         angular = clamp(cmd.angular, cmd.max_angular)
+        now = self.clock.now() if self.clock.started else None
+        verdict = self.safety.judge(robot, clamp(cmd.linear, cmd.max_linear), cmd.footprint, now)
         try:
-            self._send(robot, linear, angular, cmd.id, decided_stamp=cmd.stamp)
+            self._send(robot, verdict.linear, angular, cmd.id, decided_stamp=cmd.stamp)
         except Exception as exc:  # Zenoh closing
             self._alerts.warning("send", "cmd_vel publish failed", error=repr(exc))
             return
         self.counters.commands_out += 1
+        if verdict.noted:  # after the send: the note never delays the cmd_vel
+            self._noted(cmd, verdict, angular)
         self.watchdog.feed(robot, self.clock.now() if self.clock.started else None)
         if robot in self._stopped:
             self._stopped.discard(robot)
             log.event(logger, logging.INFO, "commands resumed", robot=robot, command_id=cmd.id)
+
+    def _noted(self, cmd: Command, verdict: Verdict, angular: float) -> None:
+        self.notes.add(cmd.id, verdict.reason, verdict.linear, angular)
+        if verdict.outcome == STOPPED:
+            self.counters.safety_stopped += 1
+        elif verdict.outcome == LIMITED:
+            self.counters.safety_limited += 1
+        elif verdict.outcome == UNCHECKED:
+            self.counters.safety_unchecked += 1
+        level = logging.INFO if verdict.outcome == UNCHECKED else logging.WARNING
+        # keyed by outcome alone: a small set, whatever the robot ids
+        self._alerts.log(
+            level,
+            ("safety", verdict.outcome),
+            "safety layer: command " + verdict.outcome,
+            robot=cmd.robot_id,
+            command_id=cmd.id,
+            decided_mps=cmd.linear,
+            sent_mps=round(verdict.linear, 4),
+            why=verdict.reason,
+        )
 
     def _current(self, cmd: Command) -> bool:
         return self.clock.started and abs(self.clock.now() - cmd.stamp) <= self.watchdog.timeout_s
@@ -302,6 +336,7 @@ class CommandRelay:
             self._alerts.warning("send", "cmd_vel publish failed", error=repr(exc))
             return
         self._stopped.add(robot)
+        self.safety.sent_stop(robot)
         self.counters.watchdog_stops += 1
         log.event(
             logger,

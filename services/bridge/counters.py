@@ -32,6 +32,10 @@ class Counters:
     command_reads: int = 0  # queries of command2robot (start, notifications, period)
     watchdog_stops: int = 0
     shutdown_stops: int = 0
+    # the safety layer: commands it stopped, slowed, or could not check (no fresh scan)
+    safety_stopped: int = 0
+    safety_limited: int = 0
+    safety_unchecked: int = 0
     worlds_applied: int = 0
     worlds_unchanged: int = 0
     worlds_malformed: int = 0
@@ -55,6 +59,9 @@ class Counters:
             "command_reads": self.command_reads,
             "watchdog_stops": self.watchdog_stops,
             "shutdown_stops": self.shutdown_stops,
+            "safety_stopped": self.safety_stopped,
+            "safety_limited": self.safety_limited,
+            "safety_unchecked": self.safety_unchecked,
             "worlds_applied": self.worlds_applied,
             "worlds_unchanged": self.worlds_unchanged,
             "worlds_malformed": self.worlds_malformed,

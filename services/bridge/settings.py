@@ -12,16 +12,27 @@ PNAV_BRIDGE_COMMAND_PERIOD_MS   wall period of the command2robot re-read that  5
                                 covers lost notifications
 PNAV_BRIDGE_PRUNE_PERIOD_S      wall period of ``prune_sensor_rows()``         5
 PNAV_BRIDGE_STATS_PERIOD_S      wall period of the counters log line           10
+PNAV_BRIDGE_SAFETY              the safety layer under the decisions (on/off)  on
+PNAV_BRIDGE_SAFETY_DECEL_MPS2   deceleration the stopping distance assumes     2.5
+PNAV_BRIDGE_SAFETY_LATENCY_S    sim seconds a command acts before the next     0.1
+PNAV_BRIDGE_SAFETY_MARGIN_M     gap kept between footprint and obstacle, m     0.05
+PNAV_BRIDGE_SAFETY_SCAN_AGE_S   sim age beyond which a scan is not evidence    0.5
+PNAV_BRIDGE_SAFETY_BLIND_MPS    speed cap with no fresh scan (empty: none)     (none)
 ==============================  =============================================  =======
+
+The safety layer (:mod:`services.bridge.safety`, docs/BRIDGE.md "Safety layer") checks every
+command against the robot's newest scan before it goes out.
 """
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from common.errors import ConfigError
+from services.bridge.safety import SafetyParams
 
 
 def _positive(env: Mapping[str, str], name: str, default: float, scale: float = 1.0) -> float:
@@ -37,6 +48,42 @@ def _positive(env: Mapping[str, str], name: str, default: float, scale: float = 
     return value
 
 
+def _non_negative(env: Mapping[str, str], name: str, default: float) -> float:
+    raw = env.get(name, "").strip()
+    if not raw:
+        return default
+    try:
+        value = float(raw)
+    except ValueError:
+        raise ConfigError(f"{name}={raw!r} is not a number") from None
+    if not 0 <= value < math.inf:  # also refuses NaN
+        raise ConfigError(f"{name}={raw!r} must be a finite number >= 0")
+    return value
+
+
+def _switch(env: Mapping[str, str], name: str, default: bool) -> bool:
+    raw = env.get(name, "").strip().lower()
+    if not raw:
+        return default
+    if raw in ("1", "true", "yes", "on"):
+        return True
+    if raw in ("0", "false", "no", "off"):
+        return False
+    raise ConfigError(f"{name}={raw!r} is not on/off")
+
+
+def _safety(env: Mapping[str, str]) -> SafetyParams:
+    d = SafetyParams()
+    return SafetyParams(
+        enabled=_switch(env, "PNAV_BRIDGE_SAFETY", d.enabled),
+        decel_mps2=_positive(env, "PNAV_BRIDGE_SAFETY_DECEL_MPS2", d.decel_mps2),
+        latency_s=_non_negative(env, "PNAV_BRIDGE_SAFETY_LATENCY_S", d.latency_s),
+        margin_m=_non_negative(env, "PNAV_BRIDGE_SAFETY_MARGIN_M", d.margin_m),
+        scan_max_age_s=_positive(env, "PNAV_BRIDGE_SAFETY_SCAN_AGE_S", d.scan_max_age_s),
+        blind_mps=_non_negative(env, "PNAV_BRIDGE_SAFETY_BLIND_MPS", d.blind_mps),
+    )
+
+
 @dataclass(frozen=True)
 class BridgeSettings:
     # The TurtleBot3 firmware's heartbeat and ROS diff_drive_controller both time out at 0.5 s.
@@ -50,6 +97,7 @@ class BridgeSettings:
     world_retry_s: float = 2.0
     # rows waiting per table while Postgres is slow; beyond it the oldest are dropped
     max_pending_rows: int = 10_000
+    safety: SafetyParams = field(default_factory=SafetyParams)
 
     def __post_init__(self) -> None:
         for name in ("watchdog_s", "command_period_s", "watchdog_tick_s", "prune_period_s"):
@@ -68,4 +116,5 @@ class BridgeSettings:
             ),
             prune_period_s=_positive(env, "PNAV_BRIDGE_PRUNE_PERIOD_S", cls.prune_period_s),
             stats_period_s=_positive(env, "PNAV_BRIDGE_STATS_PERIOD_S", cls.stats_period_s),
+            safety=_safety(env),
         )

@@ -1,0 +1,195 @@
+"""The safety layer under the decisions: no command drives the robot into what its scan shows.
+
+Whatever priority chose a command2robot row, the bridge checks it against the robot's newest
+laser scan before it becomes a cmd_vel, as Nav2's collision monitor sits between controller
+and base (its "stop"/"slowdown" polygons, sized from the speed as its "approach" model is).
+Pure geometry and bookkeeping here, no I/O; :mod:`.commands` and the reference's bridge
+(``pnav/monolith/bridge.py``) both call :meth:`SafetyLayer.judge`.
+
+The geometry, for a commanded linear speed ``v`` (the angular speed is always kept: turning in
+place sweeps nothing new for a round robot, and is how it gets out):
+
+- the swept corridor: straight ahead for ``v > 0`` (behind for ``v < 0``), as wide as the
+  footprint disc (radius ``R``). A return at (x, y) in the robot's frame (the lidar sits at the
+  centre, CONTRACT.md) with ``x`` in the direction of travel and ``|y| < R`` is touched after
+  ``|x| - sqrt(R^2 - y^2)`` of travel: the nearest such is the free travel ``d``;
+- the distance needed: ``|v| * latency + v^2 / (2 * decel) + margin``, plus what the robot
+  may have travelled since the scan (``age * |last speed sent|``, when that speed was in the
+  same direction): the scan is a picture of where the robot was;
+- if ``d`` covers it the command passes unchanged; otherwise the speed is reduced to the
+  largest one that stops in time (``v_max = a * (sqrt(T^2 + 2 b / a) - T)`` for the budget
+  ``b`` left), or to 0 when that is below ``MIN_MPS``.
+
+No fresh scan (none yet, or older than ``scan_max_age_s`` of sim time): the layer has no
+evidence either way. By default the command passes (and says so, ``unchecked``), since
+stopping would turn a lidar fault, or a robot driven without one (a foreign sim, a test
+stand), into a fleet that cannot move; ``blind_mps`` caps the speed instead (0: stop, as
+Nav2's collision monitor does when a source times out).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from services.bridge.messages import LaserScan
+
+FloatArray = npt.NDArray[np.float64]
+
+# Below this a reduced speed is a stop: creeping at 1 cm/s reaches nothing and only wears the
+# wheels (the controllers use the same threshold for "not translating").
+MIN_MPS = 0.01
+# ranges travel as float32: 0.12 m (range_min, where the sim reports anything closer) reads
+# back as 0.1199999..., a real obstacle, not an invalid beam
+_RANGE_TOLERANCE_M = 1e-4
+
+CLEAR = "clear"
+LIMITED = "limited"
+STOPPED = "stopped"
+UNCHECKED = "unchecked"
+
+
+@dataclass(frozen=True, slots=True)
+class SafetyParams:
+    """The layer's tunables (``BridgeSettings`` reads them from ``PNAV_BRIDGE_SAFETY_*``)."""
+
+    enabled: bool = True
+    # TurtleBot3's Nav2 configuration brakes at 2.5 m/s^2 (velocity_smoother max_decel)
+    decel_mps2: float = 2.5
+    # how long a command acts before the next one is checked: the decision re-issues at
+    # least every 0.1 s of sim time
+    latency_s: float = 0.1
+    # distance kept between the footprint and the nearest return once stopped
+    margin_m: float = 0.05
+    scan_max_age_s: float = 0.5
+    # speed cap with no fresh scan; inf: unchecked, unchanged
+    blind_mps: float = math.inf
+
+
+@dataclass(frozen=True, slots=True)
+class Scan:
+    """A robot's newest scan as the layer needs it: the returns in the robot's frame."""
+
+    stamp: float
+    x: FloatArray
+    y: FloatArray
+
+    @classmethod
+    def of(cls, record: LaserScan) -> Scan:
+        ranges = np.asarray(record.ranges, dtype=np.float64)
+        angles = record.angle_min + record.angle_increment * np.arange(len(ranges))
+        # inf is "nothing in range"; below range_min a beam carries no information (ROS)
+        valid = np.isfinite(ranges) & (ranges >= record.range_min - _RANGE_TOLERANCE_M)
+        r, a = ranges[valid], angles[valid]
+        return cls(record.stamp, r * np.cos(a), r * np.sin(a))
+
+    def free_travel(self, direction: int, radius: float) -> tuple[float, float, float]:
+        """(free travel, range, bearing) of the nearest return a disc of ``radius`` would
+        touch moving straight ahead (``direction`` 1) or back (-1): (inf, inf, 0) if none."""
+        along = self.x * direction
+        ahead = (along > 0.0) & (np.abs(self.y) < radius)
+        if not ahead.any():
+            return math.inf, math.inf, 0.0
+        index = np.flatnonzero(ahead)
+        y = self.y[index]
+        travel = along[index] - np.sqrt(radius * radius - y * y)
+        best = int(np.argmin(travel))
+        i = int(index[best])
+        bearing = math.degrees(math.atan2(float(self.y[i]), float(self.x[i])))
+        return float(travel[best]), math.hypot(float(self.x[i]), float(self.y[i])), bearing
+
+
+@dataclass(frozen=True, slots=True)
+class Verdict:
+    """What the layer made of a command: the linear speed to send, and why."""
+
+    linear: float
+    outcome: str  # CLEAR, LIMITED, STOPPED or UNCHECKED
+    reason: str = ""
+
+    @property
+    def noted(self) -> bool:
+        """Whether the row gets the reason written on it (everything but a plain pass)."""
+        return self.outcome != CLEAR
+
+
+def max_speed(budget_m: float, latency_s: float, decel_mps2: float) -> float:
+    """The largest speed v with ``v * latency + v^2 / (2 decel) <= budget`` (0 if none)."""
+    if not budget_m > 0.0:
+        return 0.0
+    t, a = latency_s, decel_mps2
+    return a * (math.sqrt(t * t + 2.0 * budget_m / a) - t)
+
+
+def stopping_m(speed: float, latency_s: float, decel_mps2: float) -> float:
+    return speed * latency_s + speed * speed / (2.0 * decel_mps2)
+
+
+class SafetyLayer:
+    """Per robot, the newest scan and the last speed sent; judges each command."""
+
+    def __init__(self, params: SafetyParams) -> None:
+        self.params = params
+        self.scans: dict[str, Scan] = {}
+        self.sent: dict[str, float] = {}  # the last linear speed sent, per robot
+
+    def scan(self, record: LaserScan) -> None:
+        """A valid scan came in: the newest (by stamp) is kept."""
+        if not self.params.enabled:
+            return
+        held = self.scans.get(record.robot_id)
+        if held is None or record.stamp >= held.stamp:
+            self.scans[record.robot_id] = Scan.of(record)
+
+    def judge(self, robot: str, linear: float, radius: float, now: float | None) -> Verdict:
+        """The verdict on sending ``linear`` (already clamped) to ``robot`` of footprint
+        ``radius`` at sim time ``now`` (None: no clock yet, the newest scan counts as
+        fresh). Records the speed the verdict sends as the robot's last."""
+        verdict = self._judge(robot, linear, radius, now)
+        self.sent[robot] = verdict.linear
+        return verdict
+
+    def sent_stop(self, robot: str) -> None:
+        """A stop went out without a verdict (watchdog, shutdown)."""
+        self.sent[robot] = 0.0
+
+    def _judge(self, robot: str, linear: float, radius: float, now: float | None) -> Verdict:
+        p = self.params
+        if not p.enabled or linear == 0.0:
+            return Verdict(linear, CLEAR)
+        scan = self.scans.get(robot)
+        age = 0.0 if scan is None or now is None else max(0.0, now - scan.stamp)
+        if scan is None or age > p.scan_max_age_s:
+            return self._blind(linear, None if scan is None else age)
+        direction = 1 if linear > 0 else -1
+        travel, range_m, bearing = scan.free_travel(direction, radius)
+        last = self.sent.get(robot, 0.0)
+        moved = age * abs(last) if last * direction > 0 else 0.0
+        budget = travel - p.margin_m - moved
+        speed = abs(linear)
+        if budget >= stopping_m(speed, p.latency_s, p.decel_mps2):
+            return Verdict(linear, CLEAR)
+        allowed = max_speed(budget, p.latency_s, p.decel_mps2)
+        way = "ahead" if direction > 0 else "behind"
+        why = (
+            f"obstacle {range_m:.2f} m {way} at {bearing:+.0f} deg in the scan of "
+            f"{age:.2f} s ago leaves {max(budget, 0.0):.3f} m of travel (footprint "
+            f"{radius:.3f} m, margin {p.margin_m:.2f} m, {moved:.3f} m moved since); "
+            f"{speed:.2f} m/s needs {stopping_m(speed, p.latency_s, p.decel_mps2):.3f} m"
+        )
+        if allowed < MIN_MPS:
+            return Verdict(0.0, STOPPED, f"stopped: {why}")
+        return Verdict(direction * allowed, LIMITED, f"limited to {allowed:.3f} m/s: {why}")
+
+    def _blind(self, linear: float, age: float | None) -> Verdict:
+        cap = self.params.blind_mps
+        seen = "no scan yet" if age is None else f"newest scan {age:.2f} s old"
+        window = f"no scan within {self.params.scan_max_age_s:g} s ({seen})"
+        if abs(linear) <= cap:
+            return Verdict(linear, UNCHECKED, f"unchecked: {window}")
+        if cap < MIN_MPS:
+            return Verdict(0.0, STOPPED, f"stopped: {window}, blind speed cap {cap:g} m/s")
+        return Verdict(math.copysign(cap, linear), LIMITED, f"limited to {cap:g} m/s: {window}")

@@ -1,0 +1,185 @@
+"""The safety layer's geometry, tick by tick: what the newest scan lets a command do."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from common.errors import ConfigError
+from services.bridge.messages import LaserScan
+from services.bridge.safety import (
+    CLEAR,
+    LIMITED,
+    STOPPED,
+    UNCHECKED,
+    SafetyLayer,
+    SafetyParams,
+    max_speed,
+    stopping_m,
+)
+from services.bridge.settings import BridgeSettings
+
+R = 0.105  # the burger's footprint radius
+FULL = 0.22
+
+
+def scan(stamp: float, *obstacles: tuple[float, float], robot: str = "r1") -> LaserScan:
+    """A 360-beam scan (beam 0 ahead, counter-clockwise) with returns at (range, degrees)."""
+    ranges = [math.inf] * 360
+    for range_m, degrees in obstacles:
+        ranges[round(degrees) % 360] = range_m
+    return LaserScan(robot, stamp, 0, 0.0, 2 * math.pi / 360, 0.12, 3.5, ranges)
+
+
+def layer(**params: float) -> SafetyLayer:
+    return SafetyLayer(SafetyParams(**params))  # type: ignore[arg-type]
+
+
+def test_an_obstacle_ahead_within_stopping_distance_stops_the_robot_and_says_why() -> None:
+    safety = layer()
+    safety.scan(scan(10.0, (0.14, 0.0)))
+    verdict = safety.judge("r1", FULL, R, 10.05)
+    assert verdict.outcome == STOPPED and verdict.linear == 0.0
+    assert verdict.reason.startswith("stopped: obstacle 0.14 m ahead at +0 deg")
+    assert verdict.noted
+
+
+def test_closer_than_the_full_stopping_distance_limits_to_a_speed_that_stops_in_time() -> None:
+    p = SafetyParams()
+    safety = SafetyLayer(p)
+    safety.scan(scan(10.0, (0.18, 0.0)))
+    verdict = safety.judge("r1", FULL, R, 10.0)
+    assert verdict.outcome == LIMITED and 0.0 < verdict.linear < FULL
+    budget = 0.18 - R - p.margin_m
+    assert stopping_m(verdict.linear, p.latency_s, p.decel_mps2) == pytest.approx(budget)
+    assert verdict.reason.startswith(f"limited to {verdict.linear:.3f} m/s")
+    # a speed already within what stops in time passes unchanged
+    assert safety.judge("r1", verdict.linear * 0.99, R, 10.0).outcome == CLEAR
+
+
+def test_an_obstacle_farther_than_the_stopping_distance_leaves_the_command_unchanged() -> None:
+    safety = layer()
+    safety.scan(scan(10.0, (0.5, 0.0)))
+    verdict = safety.judge("r1", FULL, R, 10.0)
+    assert (verdict.outcome, verdict.linear, verdict.noted) == (CLEAR, FULL, False)
+
+
+def test_an_obstacle_behind_does_not_stop_a_robot_going_forward() -> None:
+    safety = layer()
+    safety.scan(scan(10.0, (0.13, 180.0)))
+    assert safety.judge("r1", FULL, R, 10.0).outcome == CLEAR
+
+
+def test_reversing_toward_an_obstacle_behind_stops() -> None:
+    safety = layer()
+    safety.scan(scan(10.0, (0.13, 180.0)))
+    verdict = safety.judge("r1", -FULL, R, 10.0)
+    assert verdict.outcome == STOPPED and verdict.linear == 0.0
+    assert "behind" in verdict.reason
+
+
+def test_an_obstacle_beside_the_swept_corridor_does_not_count() -> None:
+    safety = layer()
+    # 0.13 m away at 60 degrees: 0.113 m to the side, outside the 0.105 m footprint
+    safety.scan(scan(10.0, (0.13, 60.0), (0.13, -60.0)))
+    assert safety.judge("r1", FULL, R, 10.0).outcome == CLEAR
+    # at 40 degrees (0.084 m to the side) the body would touch it
+    safety.scan(scan(10.1, (0.13, 40.0)))
+    assert safety.judge("r1", FULL, R, 10.1).outcome == STOPPED
+
+
+def test_turning_in_place_always_passes() -> None:
+    safety = layer()
+    safety.scan(scan(10.0, *[(0.121, float(d)) for d in range(360)]))  # boxed in
+    verdict = safety.judge("r1", 0.0, R, 10.0)
+    assert (verdict.outcome, verdict.linear) == (CLEAR, 0.0)
+
+
+def test_the_distance_moved_since_the_scan_is_counted() -> None:
+    """At 0.22 m/s the robot covers 4.4 cm between two 5 Hz scans: an obstacle that was
+    clear of the stopping distance in the scan may no longer be."""
+    safety = layer()
+    safety.scan(scan(10.0, (0.215, 0.0)))
+    assert safety.judge("r1", FULL, R, 10.0).outcome == CLEAR  # fresh: 0.06 m to spare
+    assert safety.judge("r1", FULL, R, 10.19).outcome == LIMITED  # 4.2 cm later
+
+
+def test_a_stale_scan_leaves_the_command_unchecked_by_default_and_says_so() -> None:
+    safety = layer()
+    assert (
+        safety.judge("r1", FULL, R, 3.0).reason == "unchecked: no scan within 0.5 s (no scan yet)"
+    )
+    safety.scan(scan(10.0, (0.13, 0.0)))
+    verdict = safety.judge("r1", FULL, R, 10.6)
+    assert (verdict.outcome, verdict.linear) == (UNCHECKED, FULL)
+    assert verdict.reason == "unchecked: no scan within 0.5 s (newest scan 0.60 s old)"
+    assert verdict.noted
+
+
+def test_a_blind_speed_cap_limits_or_stops_without_a_fresh_scan() -> None:
+    capped = layer(blind_mps=0.05)
+    verdict = capped.judge("r1", -FULL, R, 3.0)
+    assert (verdict.outcome, verdict.linear) == (LIMITED, -0.05)
+    assert capped.judge("r1", 0.04, R, 3.0).outcome == UNCHECKED
+    stopped = layer(blind_mps=0.0)
+    assert stopped.judge("r1", FULL, R, 3.0).outcome == STOPPED
+
+
+def test_no_clock_yet_takes_the_newest_scan_as_fresh() -> None:
+    safety = layer()
+    safety.scan(scan(10.0, (0.13, 0.0)))
+    assert safety.judge("r1", FULL, R, None).outcome == STOPPED
+
+
+def test_an_older_scan_arriving_late_does_not_replace_the_newer() -> None:
+    safety = layer()
+    safety.scan(scan(10.2, (0.13, 0.0)))
+    safety.scan(scan(10.0))  # reordered: clear, but older
+    assert safety.judge("r1", FULL, R, 10.2).outcome == STOPPED
+
+
+def test_the_layer_turned_off_passes_everything() -> None:
+    safety = layer(enabled=False)
+    safety.scan(scan(10.0, (0.13, 0.0)))
+    verdict = safety.judge("r1", FULL, R, 10.0)
+    assert (verdict.outcome, verdict.linear) == (CLEAR, FULL)
+
+
+def test_robots_are_judged_on_their_own_scans() -> None:
+    safety = layer()
+    safety.scan(scan(10.0, (0.13, 0.0), robot="r1"))
+    safety.scan(scan(10.0, robot="r2"))
+    assert safety.judge("r1", FULL, R, 10.0).outcome == STOPPED
+    assert safety.judge("r2", FULL, R, 10.0).outcome == CLEAR
+
+
+def test_max_speed_inverts_the_stopping_distance() -> None:
+    for budget in (0.001, 0.03, 0.2):
+        v = max_speed(budget, 0.1, 2.5)
+        assert stopping_m(v, 0.1, 2.5) == pytest.approx(budget)
+    assert max_speed(0.0, 0.1, 2.5) == 0.0
+    assert max_speed(-1.0, 0.1, 2.5) == 0.0
+
+
+def test_the_settings_come_from_pnav_bridge_safety_variables() -> None:
+    assert BridgeSettings.from_env({}).safety == SafetyParams()
+    settings = BridgeSettings.from_env(
+        {
+            "PNAV_BRIDGE_SAFETY": "off",
+            "PNAV_BRIDGE_SAFETY_DECEL_MPS2": "1.5",
+            "PNAV_BRIDGE_SAFETY_LATENCY_S": "0.2",
+            "PNAV_BRIDGE_SAFETY_MARGIN_M": "0",
+            "PNAV_BRIDGE_SAFETY_SCAN_AGE_S": "1",
+            "PNAV_BRIDGE_SAFETY_BLIND_MPS": "0",
+        }
+    )
+    assert settings.safety == SafetyParams(False, 1.5, 0.2, 0.0, 1.0, 0.0)
+    for name, raw in (
+        ("PNAV_BRIDGE_SAFETY", "maybe"),
+        ("PNAV_BRIDGE_SAFETY_DECEL_MPS2", "0"),
+        ("PNAV_BRIDGE_SAFETY_MARGIN_M", "-0.1"),
+        ("PNAV_BRIDGE_SAFETY_BLIND_MPS", "nan"),
+    ):
+        with pytest.raises(ConfigError, match=name):
+            BridgeSettings.from_env({name: raw})
