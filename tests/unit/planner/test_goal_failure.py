@@ -93,7 +93,6 @@ async def test_a_goal_boxed_in_only_by_what_the_lidar_sees_stays_active() -> Non
     p.scan(np.full(360, 0.3))
     for _ in range(12):
         await p.tick(0.1)
-    assert p.live_rule("move").robot is not None
     robot = p.store.robot("r1")
     assert robot is not None and robot.seen is not None and len(robot.seen.points) > 100
     assert p.goal_row(goal_id)["status"] == "active"
