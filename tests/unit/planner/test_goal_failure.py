@@ -118,3 +118,15 @@ async def test_a_reachable_goal_stays_active_until_reached_as_before() -> None:
     row = p.goal_row(goal_id)
     assert row["status"] == "reached" and row.get("reason") is None
     assert "reached" in p.recommendations()[-1]["reason"]
+
+
+def test_the_flood_starts_from_the_free_cell_nearest_a_robot_in_the_inflation() -> None:
+    data = MapData("test", "1", room(), RES, (*ORIGIN, 0.0))
+    grid = data.grid(0.105)
+    by_the_wall = (-0.87, 0.0)  # 0.105 m from the west wall's cell centres: in the inflation
+    assert not grid.free(grid.cell_of(*by_the_wall))
+    assert not reachability.cut_off(grid, by_the_wall, (0.5, 0.5), 0.15)
+    assert reachability.cut_off(grid, by_the_wall, (2.5, -0.5), 0.15)  # the closed room
+    assert not reachability.cut_off(grid, (2.5, -0.6), (2.5, -0.5), 0.15)  # from inside it
+    # nothing proved from where no free cell is within 0.6 m (here: off the map)
+    assert not reachability.cut_off(grid, (10.0, 0.5), (2.5, -0.5), 0.15)
