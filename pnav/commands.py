@@ -139,7 +139,7 @@ async def send_user_command(
 STATUS_SQL = """
 SELECT r.robot_id,
        o.stamp, o.x, o.y, o.yaw, o.linear_mps, o.angular_rps,
-       g.id AS goal_id, g.x AS gx, g.y AS gy,
+       g.id AS goal_id, g.x AS gx, g.y AS gy, g.status AS goal_status, g.reason AS goal_reason,
        a.strategy_code, a.resume_code,
        b.percentage, b.charging,
        c.linear_mps AS cmd_v, c.angular_rps AS cmd_w, c.source AS cmd_source, c.reason,
@@ -147,7 +147,9 @@ SELECT r.robot_id,
 FROM robot r
 LEFT JOIN LATERAL (SELECT * FROM odometry WHERE robot_id = r.robot_id
                    ORDER BY id DESC LIMIT 1) o ON true
-LEFT JOIN goal g ON g.robot_id = r.robot_id AND g.status = 'active'
+LEFT JOIN LATERAL (SELECT * FROM goal WHERE robot_id = r.robot_id
+                   ORDER BY status = 'active' DESC, id DESC LIMIT 1) g
+       ON g.status IN ('active', 'failed')
 LEFT JOIN active_strategy a ON a.robot_id = r.robot_id
 LEFT JOIN LATERAL (SELECT * FROM battery WHERE robot_id = r.robot_id
                    ORDER BY id DESC LIMIT 1) b ON true
@@ -189,9 +191,12 @@ def status_lines(
     )
     lines = [header]
     for r in rows:
+        # the active goal; else the newest goal if it failed (until another is set)
+        failed = r["goal_id"] is not None and r.get("goal_status") == "failed"
         goal = "-" if r["goal_id"] is None else f"({r['gx']:.1f},{r['gy']:.1f})"
+        goal = "failed" if failed else goal
         left = None
-        if r["goal_id"] is not None and r["x"] is not None:
+        if r["goal_id"] is not None and r["x"] is not None and not failed:
             left = math.hypot(r["gx"] - r["x"], r["gy"] - r["y"])
         strategy = r["strategy_code"] or "-"
         if r["resume_code"]:
@@ -213,6 +218,9 @@ def status_lines(
             + decision
         )
         lines.append(line[:width])
+        if failed:
+            why = f"       goal {r['goal_id']} failed: {r.get('goal_reason') or 'no reason given'}"
+            lines.append(why[:width])
     return lines
 
 

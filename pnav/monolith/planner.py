@@ -127,6 +127,14 @@ class MemoryPlannerSource:
         self.contract.changed(keys.GOAL, robot_id, goal_id if updated else None)
         return updated
 
+    async def mark_failed(self, goal_id: int, robot_id: str, reason: str, stamp: float) -> bool:
+        goal = self.contract[keys.GOAL].by_id.get(goal_id)
+        updated = goal is not None and goal["status"] == "active"
+        if goal is not None and updated:
+            goal.update(status="failed", reason=reason, finished_stamp=stamp)
+        self.contract.changed(keys.GOAL, robot_id, goal_id if updated else None)
+        return updated
+
     async def live_system(self, robot_id: str, command: str, now: float) -> float | None:
         expiries = [
             float(r["expires_stamp"])

@@ -20,10 +20,11 @@ import numpy as np
 
 from common import log
 from common.contract import records
+from services.planner import reachability
 from services.planner.obstacles import Points, Seen, buckets, known, recent
 from services.planner.path import path_length, plan_path, with_obstacles
 from services.planner.tracking import Progress, Route, follow
-from services.planner.world import RobotState, Station, World
+from services.planner.world import RobotState, Station, World, inflation_m
 
 logger = logging.getLogger("pnav.planner")
 
@@ -121,13 +122,17 @@ class Router:
             ):
                 return progress
         obstacles = recent(state.seen, now)
-        points = self.plan(state, (x, y), (target.x, target.y), target.label, obstacles)
-        if points is None and len(obstacles):
+        unreachable = self.spot_problem(state, target)
+        points = None
+        if unreachable is None:
+            points = self.plan(state, (x, y), (target.x, target.y), target.label, obstacles)
+        if points is None and len(obstacles) and unreachable is None:
             # They close every way (or cover the goal): the map alone, and these obstacles
             # count as considered, so the next scans do not call for the same failed plan.
             points = self.plan(state, (x, y), (target.x, target.y), target.label)
         planned = points is not None
-        if not planned and data is not None:
+        if not planned and data is not None and unreachable is None:
+            unreachable = self.cut_off(state, x, y, target)
             self.world.warn_once(
                 f"nopath-{state.info.robot_id}-{target.key}",
                 "no path on the map; heading straight (retried every few seconds)",
@@ -137,11 +142,36 @@ class Router:
         state.route = Route.of(
             target.key, version, points or [(x, y), (target.x, target.y)], planned
         )
+        state.route.unreachable = unreachable
         state.route.made_at = self.clock()
         state.route.made_stamp = now if now is not None else 0.0
         state.route.avoided = buckets(obstacles)
         state.route.checked_scan = state.seen.scan_id if state.seen is not None else None
         return follow(state.route, x, y)
+
+    def spot_problem(self, state: RobotState, target: Target) -> str | None:
+        """Why the map proves a goal's spot unreachable (outside the map, in an obstacle);
+        judged once per goal and map version. Only goals: a charger is the world's own."""
+        data = self.world.map_for(state.info)
+        if target.kind != "goal" or data is None:
+            return None
+        key = (target.key, data.version, state.info.footprint_radius_m)
+        if state.spot is None or state.spot[0] != key:
+            inflation = inflation_m(state.info.footprint_radius_m)
+            why = reachability.spot_problem(data, inflation, target.x, target.y, target.reach_m)
+            state.spot = (key, why)
+        return state.spot[1]
+
+    def cut_off(self, state: RobotState, x: float, y: float, target: Target) -> str | None:
+        """Why the map proves no way leads from (x, y) to a goal (None: it may, or nothing
+        is proved), once A* on the map alone found none."""
+        data = self.world.map_for(state.info)
+        if target.kind != "goal" or data is None:
+            return None
+        grid = data.grid(state.info.footprint_radius_m)
+        if not reachability.cut_off(grid, (x, y), (target.x, target.y), target.reach_m):
+            return None
+        return f"no path on the map from ({x:.2f}, {y:.2f}) to the goal"
 
     def plan(
         self,

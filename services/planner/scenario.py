@@ -132,6 +132,7 @@ class MoveScenario(TargetRule):
         self.odometry_mark = -1  # the robot's odometry notifications already looked at
         self.odometry_read_at = -math.inf  # the store's clock at the last read
         self.held: set[tuple[Any, ...]] = set()  # targets reached and stopped at
+        self.dropped: set[tuple[Any, ...]] = set()  # goals failed and stopped for
         self.robot: RobotState | None = None
         self.odom: records.Odometry | None = None
         self.target: Target | None = None
@@ -141,6 +142,7 @@ class MoveScenario(TargetRule):
         self.news = False  # a new odometry row or a new target
         self.worth_saying = False  # reached and not stopped there yet, or the velocity is due
         self.arrived: float | None = None  # the distance to the target when it is reached
+        self.failed: str | None = None  # why the map proves the goal unreachable
         self.move: Movement | None = None
         self.why = ""
 
@@ -214,7 +216,7 @@ class MoveScenario(TargetRule):
         if not self.news:
             return
         self.last_said = (odom.id, target.key)
-        self.arrived, self.move = None, None
+        self.arrived, self.move, self.failed = None, None, None
         distance = math.hypot(target.x - odom.x, target.y - odom.y)
         if distance <= target.reach_m or (target.key in self.held and distance <= target.hold_m):
             self.arrived = distance
@@ -222,6 +224,10 @@ class MoveScenario(TargetRule):
             return
         self.held.discard(target.key)
         progress = self.view.route_for(robot, odom.x, odom.y, target, odom.stamp)
+        if progress.unreachable is not None and target.goal_id is not None:
+            self.failed = progress.unreachable
+            self.worth_saying = target.key not in self.dropped  # stopped for it already: no
+            return
         error = heading_error(odom.x, odom.y, odom.yaw, progress.lookahead)
         move = self.select(error, progress.remaining_m, robot.info, odom.angular_rps)
         self.move = move
@@ -237,6 +243,9 @@ class MoveScenario(TargetRule):
         assert odom is not None and target is not None
         if self.arrived is not None:
             await self._arrived(odom, target, self.arrived)
+            return
+        if self.failed is not None:
+            await self._failed(odom, target, self.failed)
             return
         move = self.move
         assert move is not None
@@ -259,6 +268,23 @@ class MoveScenario(TargetRule):
             reason = f"at {target.label} ({distance:.2f} m from its centre): stop and charge"
         self.said = Said(odom.stamp, target.key, Movement(0.0, 0.0, False))
         await self._recommend(odom, target, 0.0, 0.0, reason)
+
+    async def _failed(self, odom: records.Odometry, target: Target, why: str) -> None:
+        """The map proves the goal unreachable: mark it failed, recommend one stop."""
+        self.dropped.add(target.key)
+        assert target.goal_id is not None  # only goals fail
+        if not await self.view.mark_failed(target.goal_id, self.robot_id, why, self.sim_now):
+            return  # superseded or cancelled meanwhile: not ours to close
+        log.event(
+            logger,
+            logging.WARNING,
+            "goal failed",
+            robot=self.robot_id,
+            goal=target.goal_id,
+            why=why,
+        )
+        self.said = Said(odom.stamp, target.key, Movement(0.0, 0.0, False))
+        await self._recommend(odom, target, 0.0, 0.0, f"{target.label} failed: {why}: stop")
 
     async def _recommend(
         self, odom: records.Odometry, target: Target, linear: float, angular: float, reason: str

@@ -54,6 +54,10 @@ MARK_REACHED_SQL = (
     "UPDATE goal SET status = 'reached', finished_stamp = $2 "
     "WHERE id = $1 AND status = 'active' RETURNING id"
 )
+MARK_FAILED_SQL = (
+    "UPDATE goal SET status = 'failed', reason = $3, finished_stamp = $2 "
+    "WHERE id = $1 AND status = 'active' RETURNING id"
+)
 LIVE_SYSTEM_SQL = (
     "SELECT max(expires_stamp) FROM command_recommendation WHERE robot_id = $1 "
     "AND kind = 'system' AND system_command = $2 AND expires_stamp > $3"
@@ -107,6 +111,9 @@ class PlannerSource(Protocol):
     async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
         """Set the goal 'reached' if it is still active, and notify; whether it was."""
 
+    async def mark_failed(self, goal_id: int, robot_id: str, reason: str, stamp: float) -> bool:
+        """Set the goal 'failed' with ``reason`` if it is still active, and notify."""
+
     async def live_system(self, robot_id: str, command: str, now: float) -> float | None:
         """The newest expiry after ``now`` of the robot's ``command`` recommendations."""
 
@@ -157,35 +164,28 @@ class PgPlannerSource:
         updated = await self.db.write(keys.GOAL, robot_id, MARK_REACHED_SQL, goal_id, stamp)
         return updated is not None
 
+    async def mark_failed(self, goal_id: int, robot_id: str, reason: str, stamp: float) -> bool:
+        sql, args = MARK_FAILED_SQL, (goal_id, stamp, reason)
+        return await self.db.write(keys.GOAL, robot_id, sql, *args) is not None
+
     async def live_system(self, robot_id: str, command: str, now: float) -> float | None:
         value = await self.db.pool.fetchval(LIVE_SYSTEM_SQL, robot_id, command, now)
         return float(value) if value is not None else None
 
     async def recommend(self, rec: Recommendation) -> int:
+        fields: dict[str, Any] = {
+            "source": rec.source,
+            "priority": rec.priority,
+            "stamp": rec.stamp,
+            "ttl_s": rec.ttl_s,
+            "reason": rec.reason,
+            "inputs": rec.inputs,
+        }
         if rec.command is None:
             return await records.recommend_velocity(
-                self.db,
-                rec.robot_id,
-                source=rec.source,
-                priority=rec.priority,
-                linear=rec.linear,
-                angular=rec.angular,
-                stamp=rec.stamp,
-                ttl_s=rec.ttl_s,
-                reason=rec.reason,
-                inputs=rec.inputs,
+                self.db, rec.robot_id, linear=rec.linear, angular=rec.angular, **fields
             )
-        return await records.recommend_system(
-            self.db,
-            rec.robot_id,
-            source=rec.source,
-            priority=rec.priority,
-            command=rec.command,
-            stamp=rec.stamp,
-            ttl_s=rec.ttl_s,
-            reason=rec.reason,
-            inputs=rec.inputs,
-        )
+        return await records.recommend_system(self.db, rec.robot_id, command=rec.command, **fields)
 
 
 class PlannerStore:
@@ -328,6 +328,9 @@ class PlannerStore:
     # -- writes ------------------------------------------------------------------------------
     async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
         return await self.source.mark_reached(goal_id, robot_id, stamp)
+
+    async def mark_failed(self, goal_id: int, robot_id: str, reason: str, stamp: float) -> bool:
+        return await self.source.mark_failed(goal_id, robot_id, reason, stamp)
 
     async def live_system(self, robot_id: str, command: str) -> float | None:
         return await self.source.live_system(robot_id, command, self.now())

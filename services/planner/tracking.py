@@ -53,6 +53,8 @@ class Route:
     # and the newest scan checked against it: only new obstacles near it call for a new plan.
     avoided: set[tuple[int, int]] = field(default_factory=set)
     checked_scan: int | None = None
+    # Why the map proves the target cannot be reached (reachability.py); None: it may be.
+    unreachable: str | None = None
 
     @classmethod
     def of(
@@ -89,6 +91,7 @@ class Progress:
     waypoints: int  # how many vertices there are after the start
     remaining_m: float  # from the robot, back onto the path, along it to the target
     deviation_m: float  # distance from the robot to the path
+    unreachable: str | None = None  # the route's: why the map proves the target unreachable
 
 
 def _project(a: XY, b: XY, x: float, y: float) -> tuple[float, float, float]:
@@ -140,4 +143,5 @@ def follow(
         waypoints=route.waypoints,
         remaining_m=deviation + to_end + along,
         deviation_m=deviation,
+        unreachable=route.unreachable,
     )

@@ -53,6 +53,9 @@ class Contract(Clocks, Protocol):
     async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
         """Set the goal 'reached' and notify; False if it was no longer active."""
 
+    async def mark_failed(self, goal_id: int, robot_id: str, reason: str, stamp: float) -> bool:
+        """Set the goal 'failed' with ``reason`` and notify; False if it was no longer active."""
+
     async def live_system(self, robot_id: str, command: str) -> float | None:
         """Expiry of this robot's newest unexpired ``command`` recommendation, if any."""
 

@@ -27,6 +27,11 @@ logger = logging.getLogger("pnav.planner")
 INFLATION_MARGIN_M = 0.05  # clearance kept beyond the footprint radius when planning
 
 
+def inflation_m(footprint_m: float) -> float:
+    """The planning grid's blocked radius around obstacles for a robot's footprint."""
+    return round(footprint_m + INFLATION_MARGIN_M, 3)
+
+
 @dataclass(frozen=True)
 class RobotInfo:
     robot_id: str
@@ -81,7 +86,7 @@ class MapData:
         return cls(row.map_id, row.version, row.cells >= OCCUPIED_AT, row.resolution, row.origin)
 
     def grid(self, footprint_m: float) -> PlanGrid:
-        radius = round(footprint_m + INFLATION_MARGIN_M, 3)
+        radius = inflation_m(footprint_m)
         grid = self._grids.get(radius)
         if grid is None:
             grid = self._grids[radius] = plan_grid(
@@ -99,6 +104,8 @@ class RobotState:
     poses: PoseTrail = field(default_factory=PoseTrail)
     seen: Seen | None = None
     scan_read_at: float = -math.inf  # sim time the newest scan was last read
+    # the goal spot last judged (target key, map version) and why it cannot be reached
+    spot: tuple[tuple[Any, ...], str | None] | None = None
 
     def note_pose(self, odom: records.Odometry) -> None:
         self.poses.note(odom)

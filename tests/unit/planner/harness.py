@@ -6,6 +6,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
+
 from common.bus import Notification
 from common.config import EngineSettings
 from common.contract import keys
@@ -30,6 +32,7 @@ class Planner:
         extra_strategies: tuple[dict[str, Any], ...] = (),
     ) -> None:
         self.t = 100.0
+        self.pose = (0.0, 0.0)  # where sense() says the robot is
         self.contract = MemoryContract()
         self.store = PlannerStore(MemoryPlannerSource(self.contract), self.now, self.now)
         self.contract.listeners.append(
@@ -85,10 +88,28 @@ class Planner:
     def sense(self, dt: float) -> None:
         """Sim time moves on; the robot's odometry and battery rows come."""
         self.t += dt
-        odometry = {"robot_id": ROBOT, "stamp": self.t, "x": 0.0, "y": 0.0, "yaw": 0.0}
+        x, y = self.pose
+        odometry = {"robot_id": ROBOT, "stamp": self.t, "x": x, "y": y, "yaw": 0.0}
         self.contract.insert(keys.ODOMETRY, odometry | {"linear_mps": 0.0, "angular_rps": 0.0})
         battery = {"robot_id": ROBOT, "stamp": self.t, "energy_wh": 15.0, "capacity_wh": 19.98}
         self.contract.insert(keys.BATTERY, battery | {"percentage": 75.0, "charging": False})
+
+    def map(self, occupied: np.ndarray, resolution: float, origin: tuple[float, float]) -> None:
+        """The robot's map (the only one): ``occupied`` rows from the bottom, as the table."""
+        h, w = occupied.shape
+        row = {"map_id": "test", "resolution_m": resolution, "origin_yaw": 0.0}
+        row |= {"origin_x": origin[0], "origin_y": origin[1], "width": w, "height": h}
+        grid = np.where(occupied, 100, 0).astype(np.uint8).tobytes()
+        self.contract.insert(keys.MAP, row | {"grid": grid, "source": "test", "loaded_at": "1"})
+
+    def scan(self, ranges: np.ndarray) -> None:
+        """A laser scan now, beams from -pi at 2 pi / len(ranges) apart."""
+        row = {"robot_id": ROBOT, "stamp": self.t, "angle_min": -np.pi, "range_min": 0.12}
+        row |= {"angle_increment": 2 * np.pi / len(ranges), "range_max": 3.5}
+        self.contract.insert(keys.LASER_SCAN, row | {"ranges": ranges.tolist()})
+
+    def goal_row(self, goal_id: int) -> dict[str, Any]:
+        return dict(self.contract[keys.GOAL].by_id[goal_id])
 
     # -- what the test looks at --------------------------------------------------------------
     def running(self) -> dict[str, tuple[str, str]]:
