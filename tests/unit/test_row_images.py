@@ -4,6 +4,7 @@ sends them, numbering per publisher and key, and the gap a reader sees."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 
 from common import bus
 from common.bus import Notification
@@ -11,6 +12,7 @@ from common.config import ZenohSettings
 from common.contract import keys
 from common.db import Database, create_pool
 from common.freshness import Sequences
+from common.testing import eventually
 
 GOAL_KEY = keys.notify_key(keys.GOAL, "r1")
 
@@ -65,3 +67,30 @@ async def test_a_write_with_an_image_notifies_it_with_the_committed_id(
         sub.undeclare()
         await pool.close()
         session.close()
+
+
+async def test_the_first_notification_on_a_fresh_key_is_not_lost(
+    zenoh_settings: ZenohSettings,
+) -> None:
+    # A fresh publisher's first put used to be dropped about half the time (writer-side
+    # filtering until the router answers its interest): every robot's first row unannounced.
+    got: set[str] = set()
+    listener = bus.open_session(zenoh_settings)
+    sub = bus.subscribe_threaded(
+        listener, keys.notify_watch(keys.ODOMETRY), lambda key, _payload: got.add(key)
+    )
+    writer = bus.open_session(zenoh_settings)
+    try:
+        await asyncio.sleep(1.0)  # the subscription reaches the router
+        notifier = bus.Notifier(writer)
+        robots = [f"r{i}" for i in range(60)]
+        for robot in robots:
+            notifier.notify(keys.ODOMETRY, robot, 1, {"robot_id": robot, "id": 1})
+        with contextlib.suppress(AssertionError):  # the assertion below names what is missing
+            await eventually(lambda: len(got) >= len(robots), within=10, what="notes")
+        assert sorted(got) == sorted(keys.notify_key(keys.ODOMETRY, r) for r in robots)
+        notifier.close()
+    finally:
+        sub.undeclare()
+        listener.close()
+        writer.close()
