@@ -20,7 +20,6 @@ surprise. Only a row whose ``stamp`` is within ``watchdog_s`` of the current sim
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import math
 import time
@@ -122,7 +121,6 @@ class CommandRelay:
         self.watchdog = Watchdog(settings.watchdog_s)
         self.last_sent: dict[str, int] = {}  # newest command2robot id handled, per robot
         self._stopped: set[str] = set()  # robots the watchdog stopped
-        self._publishers: dict[str, zenoh.Publisher] = {}
         self._wake = asyncio.Event()
         self._polling = False
         # called on the loop when a read of command2robot ended (lockstep's reporter)
@@ -173,10 +171,6 @@ class CommandRelay:
             self.counters.shutdown_stops += 1
         if targets:
             log.event(logger, logging.INFO, "stop sent on shutdown", robots=",".join(targets))
-        for publisher in self._publishers.values():
-            with contextlib.suppress(Exception):
-                publisher.undeclare()
-        self._publishers.clear()
         await self.notes.close()
 
     # -- reading -------------------------------------------------------------------------
@@ -368,23 +362,17 @@ class CommandRelay:
                 "decided_stamp": decided_stamp,
             }
         )
-        if reliable:
-            # A stop is sent once: let it wait for a full queue rather than be dropped.
-            self.session.put(
-                keys.robot_key(robot, keys.CMD_VEL),
-                payload,
-                congestion_control=zenoh.CongestionControl.BLOCK,
-                priority=zenoh.Priority.REAL_TIME,
-                express=True,
-            )
-            return
-        publisher = self._publishers.get(robot)
-        if publisher is None:
-            # Drop under congestion: the next decision supersedes this one 50 ms later.
-            publisher = self.session.declare_publisher(
-                keys.robot_key(robot, keys.CMD_VEL),
-                priority=zenoh.Priority.REAL_TIME,
-                express=True,
-            )
-            self._publishers[robot] = publisher
-        publisher.put(payload)
+        # Session puts, not a declared publisher per robot: a client's freshly declared
+        # publisher drops its first puts until the router has answered its interest in
+        # subscribers, which would lose a robot's first command (common/bus.py, Notifier).
+        # A stop is sent once: it waits for a full queue rather than be dropped; a moving
+        # command is superseded 50 ms later, so it is dropped under congestion.
+        self.session.put(
+            keys.robot_key(robot, keys.CMD_VEL),
+            payload,
+            congestion_control=(
+                zenoh.CongestionControl.BLOCK if reliable else zenoh.CongestionControl.DROP
+            ),
+            priority=zenoh.Priority.REAL_TIME,
+            express=True,
+        )
