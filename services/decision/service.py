@@ -11,11 +11,11 @@ from __future__ import annotations
 import sys
 import time
 
+import services.decision.meta as meta
 from common.bus import Notification
 from common.clock import SimClock
 from common.runtime import Runtime
 from common.service import ScenarioService
-from services.decision import meta
 from services.decision.store import DecisionStore, PgDecisionSource
 
 

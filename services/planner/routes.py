@@ -18,9 +18,9 @@ from typing import Any
 
 import numpy as np
 
+import services.planner.reachability as reachability
 from common import log
 from common.contract import records
-from services.planner import reachability
 from services.planner.obstacles import Points, Seen, buckets, known, recent
 from services.planner.path import path_length, plan_path, with_obstacles
 from services.planner.tracking import Progress, Route, follow

@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import time
 
+import services.planner.meta as meta
 from common.bus import Notification
 from common.runtime import Runtime
 from common.service import ScenarioService
-from services.planner import meta
 from services.planner.meta import PlannerRules
 from services.planner.store import PgPlannerSource, PlannerStore
 

@@ -27,11 +27,12 @@ from typing import Any, Protocol
 
 import numpy as np
 
+import services.planner.chargers as chargers
+import services.planner.obstacles as obstacles
 from common.bus import Notification
 from common.contract import keys, records
 from common.db import Database
 from common.freshness import FreshCache, Sequences
-from services.planner import chargers, obstacles
 from services.planner.routes import Router, Target
 from services.planner.tracking import Progress
 from services.planner.world import MapData, MapRow, RobotInfo, RobotState, Station, World

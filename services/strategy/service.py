@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import sys
 
+import services.strategy.meta as meta
 from common.bus import Notification
 from common.clock import SimClock
 from common.runtime import Runtime
 from common.service import ScenarioService
-from services.strategy import meta
 from services.strategy.store import PgStrategySource, StrategyStore
 
 
