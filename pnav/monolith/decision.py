@@ -23,22 +23,6 @@ from services.decision.store import DecisionStore
 _KINDS = ("robot", "system")
 
 
-def _recommendation(row: Row) -> Recommendation:
-    return Recommendation(
-        id=row["id"],
-        robot_id=row["robot_id"],
-        kind=row["kind"],
-        source=row["source"],
-        priority=row["priority"],
-        linear_mps=row["linear_mps"],
-        angular_rps=row["angular_rps"],
-        system_command=row["system_command"],
-        reason=row["reason"],
-        treated_by=row["treated_by"],
-        expires_stamp=row["expires_stamp"],
-    )
-
-
 class MemoryDecisionSource:
     """The decision's reads and writes on a :class:`MemoryContract`."""
 
@@ -49,7 +33,7 @@ class MemoryDecisionSource:
         """As LIVE_SQL: every robot, with its robot and system rows whose expiry is ahead."""
         return {
             robot["robot_id"]: [
-                _recommendation(r)
+                Recommendation.of_row(r)
                 for r in self.contract.live_recommendations(robot["robot_id"], now)
                 if r["kind"] in _KINDS
             ]

@@ -8,7 +8,7 @@ id). A new scenario family is obeyed the moment it writes a row with a priority.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Final
 
@@ -37,6 +37,23 @@ class Recommendation:
     treated_by: int | None
     # when it stops being live (sim s): the decision's store drops it then
     expires_stamp: float = math.inf
+
+    @classmethod
+    def of_row(cls, row: Mapping[str, Any]) -> Recommendation:
+        """From a command_recommendation row (a query's record, or an in-memory row)."""
+        return cls(
+            id=row["id"],
+            robot_id=row["robot_id"],
+            kind=row["kind"],
+            source=row["source"],
+            priority=row["priority"],
+            linear_mps=row["linear_mps"],
+            angular_rps=row["angular_rps"],
+            system_command=row["system_command"],
+            reason=row["reason"],
+            treated_by=row["treated_by"],
+            expires_stamp=row["expires_stamp"],
+        )
 
 
 @dataclass(frozen=True)

@@ -107,21 +107,7 @@ async def live_recommendations(db: Any, now: float) -> dict[str, list[Recommenda
         if row["id"] is None:
             out[robot_id] = []
             continue
-        out[robot_id].append(
-            Recommendation(
-                id=row["id"],
-                robot_id=robot_id,
-                kind=row["kind"],
-                source=row["source"],
-                priority=row["priority"],
-                linear_mps=row["linear_mps"],
-                angular_rps=row["angular_rps"],
-                system_command=row["system_command"],
-                reason=row["reason"],
-                treated_by=row["treated_by"],
-                expires_stamp=row["expires_stamp"],
-            )
-        )
+        out[robot_id].append(Recommendation.of_row(row))
     return dict(out)
 
 
