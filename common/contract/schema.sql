@@ -460,3 +460,33 @@ ALTER TABLE command2robot
     ADD COLUMN safety text,
     ADD COLUMN sent_linear_mps double precision,
     ADD COLUMN sent_angular_rps double precision;
+
+-- migration 5: the robot row describes the whole robot model
+--
+-- Until now every robot was a TurtleBot3 Burger and the scenarios knew its acceleration and
+-- its lidar as constants. A robot model (models/*.yaml, docs/SIM.md) now names them, the
+-- bridge writes them here from the sim's world message, and every scenario reads the
+-- robot's footprint, limits and sensor from this row. The defaults are the Burger's (its
+-- LDS-01 lidar; the acceleration limits of Nav2's TurtleBot3 parameters), so rows written
+-- before this migration, and writers that do not know the columns, describe the Burger.
+ALTER TABLE robot
+    ADD COLUMN max_linear_accel_mps2  double precision NOT NULL DEFAULT 2.5,
+    ADD COLUMN max_angular_accel_rps2 double precision NOT NULL DEFAULT 3.2,
+    ADD COLUMN lidar_beams            integer NOT NULL DEFAULT 360,
+    ADD COLUMN lidar_angle_min_rad    double precision NOT NULL DEFAULT 0.0,
+    ADD COLUMN lidar_fov_rad          double precision NOT NULL DEFAULT 6.283185307179586,
+    ADD COLUMN lidar_range_min_m      double precision NOT NULL DEFAULT 0.12,
+    ADD COLUMN lidar_range_max_m      double precision NOT NULL DEFAULT 3.5,
+    ADD COLUMN lidar_noise_m          double precision NOT NULL DEFAULT 0.01,
+    ADD COLUMN lidar_rate_hz          double precision NOT NULL DEFAULT 5.0,
+    ADD CONSTRAINT robot_accel_bounded CHECK (
+        max_linear_accel_mps2 > 0 AND max_linear_accel_mps2 <= 100
+        AND max_angular_accel_rps2 > 0 AND max_angular_accel_rps2 <= 100),
+    ADD CONSTRAINT robot_lidar_sane CHECK (
+        lidar_beams BETWEEN 1 AND 100000
+        AND abs(lidar_angle_min_rad) <= 6.283185307179586
+        AND lidar_fov_rad > 0 AND lidar_fov_rad <= 6.283185307179586
+        AND lidar_range_min_m >= 0 AND lidar_range_max_m > lidar_range_min_m
+        AND lidar_range_max_m <= 1000
+        AND lidar_noise_m >= 0 AND lidar_noise_m <= 10
+        AND lidar_rate_hz > 0 AND lidar_rate_hz <= 1000);
