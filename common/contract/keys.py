@@ -44,6 +44,7 @@ SYSTEM_COMMAND: Final = "system_command"
 ENGINE_STATS: Final = "engine_stats"
 RETENTION_POLICY: Final = "retention_policy"
 ROBOT_LEASE: Final = "robot_lease"
+PLANNED_PATH: Final = "planned_path"
 
 TABLES: Final = (
     SCHEMA_VERSION,
@@ -64,6 +65,7 @@ TABLES: Final = (
     ENGINE_STATS,
     RETENTION_POLICY,
     ROBOT_LEASE,
+    PLANNED_PATH,
 )
 
 # Tables written at sensor rate; the retention policy keeps them bounded.

@@ -490,3 +490,32 @@ ALTER TABLE robot
         AND lidar_range_max_m <= 1000
         AND lidar_noise_m >= 0 AND lidar_noise_m <= 10
         AND lidar_rate_hz > 0 AND lidar_rate_hz <= 1000);
+
+-- migration 6: the planner publishes the path it follows
+--
+-- The path was the planner's private state. People (the dashboard, recordings) want to see
+-- it and local controllers that score trajectories against it need it, so the planner now
+-- writes one row each time it plans or re-plans a robot's route, and the newest row per robot
+-- is the path in force (an empty path: the planner has none, e.g. the target was reached or
+-- is unreachable). Bounded like the sensor tables.
+CREATE TABLE planned_path (
+    id          bigserial PRIMARY KEY,
+    robot_id    text NOT NULL REFERENCES robot ON DELETE CASCADE,
+    stamp       double precision NOT NULL CHECK (is_finite(stamp)),
+    goal_id     bigint REFERENCES goal ON DELETE SET NULL,
+    target      text NOT NULL CHECK (target IN ('goal', 'charger', 'none')),
+    target_x    double precision CHECK (abs(target_x) <= 1e5),
+    target_y    double precision CHECK (abs(target_y) <= 1e5),
+    xs          double precision[] NOT NULL,
+    ys          double precision[] NOT NULL,
+    length_m    double precision NOT NULL CHECK (length_m >= 0 AND is_finite(length_m)),
+    created_at  timestamptz NOT NULL DEFAULT now(),
+    CONSTRAINT planned_path_points CHECK (
+        cardinality(xs) = cardinality(ys) AND cardinality(xs) <= 100000)
+);
+CREATE INDEX planned_path_newest ON planned_path (robot_id, id DESC);
+
+ALTER TABLE retention_policy DROP CONSTRAINT retention_policy_table_name_check;
+ALTER TABLE retention_policy ADD CONSTRAINT retention_policy_table_name_check
+    CHECK (table_name IN ('odometry', 'laser_scan', 'battery', 'collision_event', 'planned_path'));
+INSERT INTO retention_policy (table_name, keep_rows_per_robot) VALUES ('planned_path', 200);
