@@ -20,6 +20,7 @@ from common.errors import UsageError
 from common.stack import LocalStack, local_stack
 from pnav import stackfile
 from pnav.supervisor import ProcessSpec, Supervisor
+from pnav.supervisor_report import SupervisorReport
 
 ROOT = Path(__file__).resolve().parents[1]
 WORLDS = ROOT / "worlds"
@@ -191,11 +192,14 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
         # whether the stack serves `pnav up`, the demo or a test.
         stop_watching = asyncio.Event()
         watcher: asyncio.Task[None] | None = None
+        report = SupervisorReport(supervisor, local.router)  # restarts, for /metrics
         try:
             await supervisor.start()
+            report.start()
             watcher = asyncio.create_task(supervisor.watch(stop_watching), name="supervise")
             yield running
         finally:
+            await report.close()
             stop_watching.set()
             if watcher is not None:
                 try:
