@@ -137,7 +137,7 @@ async def test_sense_to_act_is_sampled_once_per_recommendation(
             "INSERT INTO command_recommendation (robot_id, kind, source, priority, linear_mps, "
             "angular_rps, stamp, expires_stamp, inputs) VALUES ('r1', 'robot', 'avoid_left', "
             "50, 0.1, 0.5, 1.0, 1.5, $1::jsonb) RETURNING id",
-            f'{{"laser_scan": {scan}, "scan_stamp": 1.0}}',
+            {"laser_scan": scan, "scan_stamp": 1.0},  # the pool encodes jsonb (common.db)
         )
         for _ in range(3):  # the decision and two re-issues of it
             await conn.execute(
