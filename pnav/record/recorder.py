@@ -30,6 +30,7 @@ log = logging.getLogger("pnav.record")
 
 # tables whose rows change in place: new rows and those notified are read again
 CHANGING = (keys.GOAL, keys.USER_COMMAND, keys.SYSTEM_COMMAND)
+OPEN = ("active", "pending")  # statuses a row leaves later, in place
 WATCHED = (*APPENDED, *CHANGING, keys.ACTIVE_STRATEGY, keys.MAP, keys.CHARGING_STATION)
 
 
@@ -143,8 +144,11 @@ class Recorder:
             self.event(robot, stamp, text, "collision", LogLevel.Warning)
 
     async def _changing(self, table: str) -> None:
-        notified, self._notified[table] = sorted(self._notified[table]), set()
-        for record in await self.source.changed(table, self._last.get(table, 0), notified):
+        notified, self._notified[table] = self._notified[table], set()
+        # and every row still open: a change may come with another row's notification (a new
+        # goal supersedes the old one in the same transaction, notified once)
+        notified |= {i for (t, i), status in self._status.items() if t == table and status in OPEN}
+        for record in await self.source.changed(table, self._last.get(table, 0), sorted(notified)):
             row = as_dict(record)
             self._last[table] = max(self._last.get(table, 0), row["id"])
             before = self._status.get((table, row["id"]))

@@ -149,9 +149,24 @@ async def write_mission(rt: Runtime) -> dict[str, list[float]]:
         )
         notify(keys.ACTIVE_STRATEGY, ROBOT, None)
         await conn.execute(
-            "UPDATE goal SET status = 'reached', finished_stamp = 10.3 WHERE id = $1", goal
+            "UPDATE goal SET status = 'reached', finished_stamp = 10.25 WHERE id = $1", goal
         )
         notify(keys.GOAL, ROBOT, goal)
+        second = await conn.fetchval(
+            "INSERT INTO goal (robot_id, x, y, stamp) VALUES ($1, 1.0, 1.0, 10.25) RETURNING id",
+            ROBOT,
+        )
+        notify(keys.GOAL, ROBOT, second)
+        async with conn.transaction():  # as `pnav goal` replaces a goal: one notification
+            await conn.execute(
+                "UPDATE goal SET status = 'superseded', finished_stamp = 10.3 WHERE id = $1",
+                second,
+            )
+            third = await conn.fetchval(
+                "INSERT INTO goal (robot_id, x, y, stamp) VALUES ($1, 2.0, 2.0, 10.3) RETURNING id",
+                ROBOT,
+            )
+        notify(keys.GOAL, ROBOT, third)
     stamps["all"] = [10.0, 10.3]
     return stamps
 
@@ -240,6 +255,8 @@ async def test_a_recorded_mission_reads_back_with_the_documented_schemas_in_sim_
     assert "avoid_left" in decision.message and decision.timestamp.nanos == 210_000_000
     events = [e.message for _, e in messages[f"/{ROBOT}/events"]]
     assert any(e.startswith("goal") and "reached" in e for e in events), events
+    assert any(e.startswith("goal") and "superseded" in e for e in events), events
+    assert len(messages[f"/{ROBOT}/goal"]) == 3
     assert any("collision with pallet1" in e for e in events), events
     assert any("strategy GOTO_AVOID" in e for e in events), events
 
