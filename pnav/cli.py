@@ -13,6 +13,7 @@ import uvloop
 
 from common.contract import limits
 from common.errors import PnavError, UsageError
+from pnav.dashboard_cli import add_dashboard_options, dashboard_options
 from pnav.navbench.worlds_cli import add_worlds_parser
 
 if TYPE_CHECKING:
@@ -110,6 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="run COMMAND instead of a scenario service, with the same environment, e.g. "
         "controller='python -m examples.sql_controller' (docs/SWAP.md; repeatable)",
     )
+    add_dashboard_options(up, 8080)
 
     goal = commands.add_parser("goal", help="send a robot to X Y (replaces its goal)")
     goal.add_argument("x", type=_coordinate, help=f"metres, within +-{_GOAL_M:.0f}")
@@ -141,6 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo = commands.add_parser("demo", help="the demo mission (see README)")
     demo.add_argument("--json", metavar="FILE", help="also write the summary as JSON")
     demo.add_argument("--rate", default=None, help="sim rate (default: the demo's own)")
+    add_dashboard_options(demo, None)
 
     bench = commands.add_parser("bench", help="benchmarks: print figures and JSON")
     benches = bench.add_subparsers(dest="bench", metavar="BENCH", required=True)
@@ -264,7 +267,7 @@ def dispatch(args: argparse.Namespace) -> int:
     if args.command == "demo":
         from pnav import demo
 
-        return demo.run(args.json, args.rate)
+        return demo.run(args.json, args.rate, dashboard_options(args))
     if args.command == "bench":
         return _bench(args)
     if args.command == "worlds":
@@ -290,6 +293,7 @@ def _up(args: argparse.Namespace) -> int:
         echo=not args.quiet,
         replicas=parse_replicas(args.replicas),
         replace=parse_replace(args.replace),
+        dashboard=dashboard_options(args),
     )
     if args.lockstep:
         options.extra_env.update(lockstep_env(options))
