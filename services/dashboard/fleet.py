@@ -37,6 +37,15 @@ class RobotState:
     decision: dict[str, Any] | None = None
     undecided: Row | None = None  # a decision row whose recommendations are not read yet
     recommendations: OrderedDict[int, Row] = field(default_factory=OrderedDict)
+    # the newest scan's points, by (scan id, pose id): a robot is sent at 10 Hz, its scan
+    # changes at 5
+    points: tuple[tuple[Any, Any], list[float]] | None = None
+
+    def scan_points(self, scan: Row, pose: Row) -> list[float]:
+        key = (scan.get("id"), pose.get("id"))
+        if self.points is None or self.points[0] != key:
+            self.points = (key, scene.lidar_points(scan, pose))
+        return self.points[1]
 
 
 class Fleet:
@@ -142,7 +151,7 @@ def robot_json(name: str, state: RobotState) -> dict[str, Any]:
         else {
             "id": scan["id"],
             "stamp": scene.jsonable(scan["stamp"]),
-            "points": scene.lidar_points(scan, scan_pose),
+            "points": state.scan_points(scan, scan_pose),
         },
         "battery": None if batt is None else scene.battery(batt),
         "strategy": None if strategy is None else scene.strategy_state(strategy),

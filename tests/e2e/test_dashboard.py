@@ -152,11 +152,12 @@ async def test_the_page_draws_the_robot_sends_a_goal_switches_strategy_and_expla
             )
 
             async def page_up() -> bool:
+                # before the dashboard listens Chromium shows its own error page: load again
                 try:
                     await asyncio.to_thread(browser.get, url)
+                    return bool(browser.execute_script("return !!window.pnavDashboard"))
                 except Exception:
                     return False
-                return True
 
             await until(page_up, "the dashboard to answer", within=60)
 
