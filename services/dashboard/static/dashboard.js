@@ -236,6 +236,15 @@ function renderTimeline() {
     const li = el("li", { "data-kind": e.kind });
     const when = new Date(e.t * 1000).toLocaleTimeString();
     li.append(el("span", { class: `kind ${e.kind}` }, e.kind), `${when} ${e.robot} · ${e.text}`);
+    if (e.ref && e.ref.table === "system_command") {
+      // a system command is a decision too: its provenance leads to the battery row
+      li.classList.add("clickable");
+      li.title = "click for its provenance";
+      li.onclick = async () => {
+        try { showProvenance(await call("GET", `/api/system-commands/${e.ref.id}`)); }
+        catch (err) { say(`provenance: ${err.message}`, false); }
+      };
+    }
     list.append(li);
   }
 }
@@ -359,9 +368,11 @@ function showProvenance(p) {
   const body = $("provenance-body");
   body.replaceChildren();
   const d = p.decision;
-  body.append(el("p", {}, `${p.table} ${d.id} at sim ${fmt(d.stamp, 2)} s: ${d.source || "stop"}, ` +
-    `v ${fmt(d.linear_mps)} w ${fmt(d.angular_rps)}. ${d.reason || ""}` +
-    (d.safety ? ` Safety layer: ${d.safety}` : "")));
+  const what = p.table === "system_command"
+    ? `${d.command}, ${d.status}${d.status_reason ? " (" + d.status_reason + ")" : ""}`
+    : `${d.source || "stop"}, v ${fmt(d.linear_mps)} w ${fmt(d.angular_rps)}`;
+  body.append(el("p", {}, `${p.table} ${d.id} at sim ${fmt(d.stamp, 2)} s: ${what}. ` +
+    `${d.reason || ""}` + (d.safety ? ` Safety layer: ${d.safety}` : "")));
   for (const rec of p.recommendations) {
     body.append(el("h3", {}, `${rec.won ? "★ won: " : ""}recommendation ${rec.id} from ${rec.source} ` +
       `(priority ${rec.priority})`));
