@@ -180,8 +180,11 @@ async def test_the_page_draws_the_robot_sends_a_goal_switches_strategy_and_expla
                 within=30,
             )
             assert math.hypot(goal["x"] - GOAL[0], goal["y"] - GOAL[1]) < 0.05, dict(goal)
-            message = browser.find_element(By.ID, "message").text
-            assert f"goal {goal['id']} set" in message, message
+            await until(
+                lambda: f"goal {goal['id']} set" in browser.find_element(By.ID, "message").text,
+                "the page to say the goal was set",
+                within=30,
+            )
 
             def moved() -> dict[str, Any] | None:
                 now = drawn(browser)
