@@ -21,8 +21,23 @@ from services.dashboard import scene
 Row = Mapping[str, Any]
 FetchRecommendations = Callable[[Sequence[int]], Awaitable[list[Row]]]
 
-# tables whose image the page uses as it comes (CONTRACT.md, "Row images")
-IMAGE_TABLES: Final = (keys.ODOMETRY, keys.LASER_SCAN, keys.BATTERY, keys.COMMAND2ROBOT)
+# tables whose image the page uses as it comes (CONTRACT.md, "Row images"), with the columns
+# it needs: an image without them (a writer that sends fewer) is not used, the table is read
+IMAGE_COLUMNS: Final[dict[str, frozenset[str]]] = {
+    keys.ODOMETRY: frozenset({"id", "stamp", "x", "y", "yaw", "linear_mps", "angular_rps"}),
+    keys.LASER_SCAN: frozenset(
+        {"id", "stamp", "angle_min", "angle_increment", "range_min", "range_max", "ranges"}
+    ),
+    keys.BATTERY: frozenset({"id", "stamp", "percentage", "energy_wh", "charging", "power_w"}),
+    keys.COMMAND2ROBOT: frozenset(
+        {"id", "stamp", "linear_mps", "angular_rps", "recommendation_id", "source"}
+        | {"considered_ids", "reason"}
+    ),
+    keys.PLANNED_PATH: frozenset({"id", "stamp", "target", "xs", "ys", "length_m"}),
+    keys.COMMAND_RECOMMENDATION: frozenset(
+        {"id", "kind", "source", "priority", "stamp", "expires_stamp", "reason"}
+    ),
+}
 # recommendation images kept per robot to explain its decisions (a decision weighs the live
 # ones: a few per scenario, renewed at 5-30 Hz)
 KEEP_RECOMMENDATIONS: Final = 256
@@ -75,7 +90,10 @@ class Fleet:
 
     def apply(self, note: Notification) -> bool:
         """Use ``note``'s image; False when it has none the page can use (read the table)."""
-        if note.robot is None or note.row is None:
+        needed = IMAGE_COLUMNS.get(note.table)
+        if note.robot is None or note.row is None or needed is None:
+            return False
+        if not needed <= note.row.keys():
             return False
         if note.table == keys.COMMAND_RECOMMENDATION:
             recs = self._state(note.robot).recommendations
@@ -83,8 +101,6 @@ class Fleet:
             while len(recs) > KEEP_RECOMMENDATIONS:
                 recs.popitem(last=False)
             return True
-        if note.table not in IMAGE_TABLES:
-            return False
         self.set_row(note.table, {**note.row, "robot_id": note.robot})
         return True
 

@@ -259,12 +259,20 @@ class DashboardStore:
     async def flush(self) -> None:
         """Read what notifications marked (without an image), and the rows decisions name."""
         dirty, self._dirty = self._dirty, {}
-        globals_dirty = any(robot is None for _table, robot in dirty)
-        if globals_dirty:
+        if any(robot is None for _table, robot in dirty):
             await self._read_globals()
+        newest: dict[str, set[str]] = {}  # one query per table serves every robot
         for (table, robot), ids in dirty.items():
-            if robot is not None:
+            if robot is None:
+                continue
+            if table in NEWEST_TABLES and table != keys.GOAL:
+                newest.setdefault(table, set()).add(robot)
+            else:
                 await self._read(table, robot, ids)
+        for table, robots in newest.items():
+            for row in await self.source.newest(table):
+                if row["robot_id"] in robots:
+                    self.fleet.set_row(table, row)
         await self.fleet.resolve(self.source.recommendations)
 
     async def _read(self, table: str, robot: str, ids: set[int | None]) -> None:
@@ -289,10 +297,6 @@ class DashboardStore:
                 self.timeline.add(event)
                 if table == keys.GOAL:
                     self.fleet.set_row(table, found)
-            return
-        for row in await source.newest(table):
-            if row["robot_id"] == robot:
-                self.fleet.set_row(table, row)
 
     # -- what goes to the page -----------------------------------------------------------
     def snapshot(self) -> dict[str, Any]:

@@ -162,3 +162,33 @@ async def test_goal_and_strategy_changes_reach_the_timeline(
         assert cancelled.json() == {"robot": ROBOT, "cancelled": goal_id}
         event = await next_message(ws, lambda m: m["type"] == "timeline")
         assert event["events"][0]["text"].endswith("cancelled: cancelled by user")
+
+
+async def test_a_planned_path_is_drawn_from_its_image_or_from_the_table(
+    running: Running, fleet: Fleet, foreign: Runtime
+) -> None:
+    await fleet.robot()
+    insert = (
+        "INSERT INTO planned_path (robot_id, stamp, target, target_x, target_y, xs, ys, "
+        "length_m) VALUES ($1, 2, 'charger', 0.5, 0.5, $2, $3, 1.4) RETURNING id"
+    )
+    async with connect(running.ws_url) as ws:
+        await next_message(ws, lambda m: m["type"] == "snapshot")
+        xs, ys = [1.5, 1.0, 0.5], [1.5, 1.0, 0.5]
+        image = {"robot_id": ROBOT, "stamp": 2.0, "target": "charger", "target_x": 0.5}
+        image |= {"target_y": 0.5, "xs": xs, "ys": ys, "length_m": 1.4, "goal_id": None}
+        first = await fleet.write(keys.PLANNED_PATH, ROBOT, insert, ROBOT, xs, ys, image=image)
+        seen = await next_message(ws, robot_update(ROBOT, lambda r: r["path"] is not None))
+        assert seen["robots"][ROBOT]["path"]["id"] == first
+        assert seen["robots"][ROBOT]["path"]["ys"] == ys
+        # an image without the points is not used: the row is read instead
+        partial = {"robot_id": ROBOT, "stamp": 3.0, "target": "none"}
+        second = await fleet.write(
+            keys.PLANNED_PATH, ROBOT, insert, ROBOT, [2.0], [2.5], image=partial
+        )
+        seen = await next_message(
+            ws, robot_update(ROBOT, lambda r: (r["path"] or {}).get("id") == second)
+        )
+        assert seen["robots"][ROBOT]["path"]["xs"] == [2.0]
+        assert seen["robots"][ROBOT]["path"]["target"] == "charger"  # as the row says
+    assert await foreign.database.pool.fetchval("SELECT count(*) FROM planned_path") == 2
