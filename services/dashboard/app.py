@@ -35,6 +35,7 @@ from services.dashboard.requests import (
     StrategyChoice,
     check_scenarios,
     json_object,
+    same_origin,
 )
 from services.dashboard.store import DashboardStore
 
@@ -65,6 +66,11 @@ class Endpoints:
         self.store, self.hub = store, hub
 
     @staticmethod
+    async def body(request: Request) -> dict[str, Any]:
+        same_origin(request.headers)
+        return json_object(await request.body(), request.headers.get("content-type"))
+
+    @staticmethod
     def robot_of(request: Request) -> str:
         robot = str(request.path_params["robot"])
         if not keys.valid_id(robot):
@@ -84,24 +90,25 @@ class Endpoints:
 
     async def set_goal(self, request: Request) -> Response:
         robot = self.robot_of(request)
-        goal = GoalRequest.parse(json_object(await request.body()))
+        goal = GoalRequest.parse(await self.body(request))
         goal_id = await self.store.set_goal(robot, goal.x, goal.y, goal.tolerance_m)
         body = {"robot": robot, "goal_id": goal_id, "x": goal.x, "y": goal.y}
         return JSONResponse(body, status_code=201)
 
     async def cancel_goal(self, request: Request) -> Response:
+        same_origin(request.headers)
         robot = self.robot_of(request)
         return JSONResponse({"robot": robot, "cancelled": await self.store.cancel_goal(robot)})
 
     async def set_strategy(self, request: Request) -> Response:
         robot = self.robot_of(request)
-        choice = StrategyChoice.parse(json_object(await request.body()))
+        choice = StrategyChoice.parse(await self.body(request))
         verdict = await self.store.set_strategy(robot, choice.code, VERDICT_WAIT_S)
         status = 202 if verdict["status"] == "pending" else 200
         return JSONResponse({"robot": robot, "code": choice.code, **verdict}, status_code=status)
 
     async def add_strategy(self, request: Request) -> Response:
-        new = NewStrategy.parse(json_object(await request.body()))
+        new = NewStrategy.parse(await self.body(request))
         names = scenario_names()
         check_scenarios(new, set(names["planner"]), set(names["controller"]))
         await self.store.add_strategy(new)
@@ -114,6 +121,12 @@ class Endpoints:
         return JSONResponse(await provenance.provenance(self.store.source, table[kind], row_id))
 
     async def websocket(self, websocket: WebSocket) -> None:
+        try:
+            same_origin(websocket.headers)
+        except Refused as refused:
+            logger.warning("%s", refused.reason)
+            await websocket.close(code=1008)  # policy violation
+            return
         await websocket.accept()
         browser = self.hub.join(self.store.snapshot())
         reader = asyncio.create_task(_drain(websocket), name="ws-reader")

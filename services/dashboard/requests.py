@@ -11,8 +11,10 @@ from __future__ import annotations
 import json
 import math
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
+from urllib.parse import urlsplit
 
 from common.contract import limits
 from common.errors import ContractError, UsageError
@@ -35,9 +37,25 @@ def _no_constant(name: str) -> Any:
     raise ValueError(f"{name} is not a JSON number")
 
 
-def json_object(body: bytes) -> dict[str, Any]:
-    """The body as a JSON object; 400 for anything else (NaN and Infinity included: they
-    are not JSON, though Python's parser accepts them)."""
+def same_origin(headers: Mapping[str, str]) -> None:
+    """403 for a request a page of another site made: a browser names that page's origin,
+    and the dashboard's own page has the dashboard's host. (Another site's page may send a
+    form to 127.0.0.1 and send a robot; a client that is not a browser sends no Origin.)"""
+    origin = headers.get("origin")
+    if origin is None:
+        return
+    host = headers.get("host", "")
+    if urlsplit(origin).netloc != host:
+        raise Refused(403, f"cross-origin request from {origin} refused: use the dashboard's page")
+
+
+def json_object(body: bytes, content_type: str | None = "application/json") -> dict[str, Any]:
+    """The body as a JSON object; 415 unless it is sent as application/json (what a form of
+    another site cannot send without asking first), 400 for anything but a JSON object (NaN
+    and Infinity included: they are not JSON, though Python's parser accepts them)."""
+    media = (content_type or "").split(";")[0].strip().lower()
+    if media != "application/json":
+        raise Refused(415, f"send the body as application/json, not {media or 'nothing'}")
     if len(body) > MAX_BODY_BYTES:
         raise Refused(413, f"the body is over {MAX_BODY_BYTES} bytes")
     try:

@@ -148,6 +148,39 @@ BAD_REQUESTS: list[tuple[str, str, str | dict[str, Any] | None, int, str]] = [
 ]
 
 
+@pytest.mark.parametrize(
+    ("headers", "status", "reason"),
+    [
+        # what a form on another site can send without asking the dashboard first
+        ({"content-type": "text/plain"}, 415, "send the body as application/json, not text/plain"),
+        (
+            {"content-type": "application/json", "origin": "http://evil.example"},
+            403,
+            "cross-origin request from http://evil.example refused",
+        ),
+    ],
+)
+async def test_a_request_from_another_sites_page_is_refused(
+    running: Running,
+    fleet: Fleet,
+    foreign: Runtime,
+    http: httpx.AsyncClient,
+    headers: dict[str, str],
+    status: int,
+    reason: str,
+) -> None:
+    await known_robot(running, fleet)
+    response = await http.post(ROBOT_GOAL, content=b'{"x": 1, "y": 1}', headers=headers)
+    assert response.status_code == status and reason in response.json()["error"]
+    cancel = await http.delete(ROBOT_GOAL, headers={"origin": "http://evil.example"})
+    assert cancel.status_code == 403
+    assert await foreign.database.pool.fetchval("SELECT count(*) FROM goal") == 0
+    # the page's own origin is the dashboard's
+    own = {"content-type": "application/json", "origin": running.url}
+    response = await http.post(ROBOT_GOAL, content=b'{"x": 1, "y": 1}', headers=own)
+    assert response.status_code == 201, response.text
+
+
 @pytest.mark.parametrize(("method", "path", "payload", "status", "reason"), BAD_REQUESTS)
 async def test_a_bad_request_gets_a_4xx_with_its_reason_and_writes_nothing(
     running: Running,
@@ -164,7 +197,8 @@ async def test_a_bad_request_gets_a_4xx_with_its_reason_and_writes_nothing(
     pool = foreign.database.pool
     before = tuple(await pool.fetchrow(COUNTS))
     if isinstance(payload, str):
-        response = await http.request(method, path, content=payload.encode())
+        json_type = {"content-type": "application/json"}
+        response = await http.request(method, path, content=payload.encode(), headers=json_type)
     else:
         response = await http.request(method, path, json=payload)
     assert response.status_code == status, response.text

@@ -11,6 +11,7 @@ from typing import Any
 import httpx
 import pytest
 from websockets.asyncio.client import ClientConnection, connect
+from websockets.exceptions import InvalidStatus
 
 from common.contract import keys
 from common.runtime import Runtime
@@ -192,3 +193,10 @@ async def test_a_planned_path_is_drawn_from_its_image_or_from_the_table(
         assert seen["robots"][ROBOT]["path"]["xs"] == [2.0]
         assert seen["robots"][ROBOT]["path"]["target"] == "charger"  # as the row says
     assert await foreign.database.pool.fetchval("SELECT count(*) FROM planned_path") == 2
+
+
+async def test_a_page_of_another_site_cannot_watch(running: Running) -> None:
+    with pytest.raises(InvalidStatus) as refused:
+        async with connect(running.ws_url, origin="http://evil.example"):  # type: ignore[arg-type]
+            pass
+    assert refused.value.response.status_code == 403
