@@ -28,6 +28,7 @@ from common.contract import keys
 from common.errors import ConnectionFailure
 from services.dashboard import provenance
 from services.dashboard.hub import Hub
+from services.dashboard.orders import Orders
 from services.dashboard.requests import (
     GoalRequest,
     NewStrategy,
@@ -64,6 +65,7 @@ class Endpoints:
 
     def __init__(self, store: DashboardStore, hub: Hub) -> None:
         self.store, self.hub = store, hub
+        self.orders = Orders(store)
 
     @staticmethod
     async def body(request: Request) -> dict[str, Any]:
@@ -91,19 +93,19 @@ class Endpoints:
     async def set_goal(self, request: Request) -> Response:
         robot = self.robot_of(request)
         goal = GoalRequest.parse(await self.body(request))
-        goal_id = await self.store.set_goal(robot, goal.x, goal.y, goal.tolerance_m)
+        goal_id = await self.orders.set_goal(robot, goal.x, goal.y, goal.tolerance_m)
         body = {"robot": robot, "goal_id": goal_id, "x": goal.x, "y": goal.y}
         return JSONResponse(body, status_code=201)
 
     async def cancel_goal(self, request: Request) -> Response:
         same_origin(request.headers)
         robot = self.robot_of(request)
-        return JSONResponse({"robot": robot, "cancelled": await self.store.cancel_goal(robot)})
+        return JSONResponse({"robot": robot, "cancelled": await self.orders.cancel_goal(robot)})
 
     async def set_strategy(self, request: Request) -> Response:
         robot = self.robot_of(request)
         choice = StrategyChoice.parse(await self.body(request))
-        verdict = await self.store.set_strategy(robot, choice.code, VERDICT_WAIT_S)
+        verdict = await self.orders.set_strategy(robot, choice.code, VERDICT_WAIT_S)
         status = 202 if verdict["status"] == "pending" else 200
         return JSONResponse({"robot": robot, "code": choice.code, **verdict}, status_code=status)
 
@@ -111,7 +113,7 @@ class Endpoints:
         new = NewStrategy.parse(await self.body(request))
         names = scenario_names()
         check_scenarios(new, set(names["planner"]), set(names["controller"]))
-        await self.store.add_strategy(new)
+        await self.orders.add_strategy(new)
         return JSONResponse({"code": new.code}, status_code=201)
 
     async def decision(self, request: Request) -> Response:

@@ -14,8 +14,7 @@ from __future__ import annotations
 
 import asyncio
 import time
-from collections.abc import AsyncIterator, Mapping, Sequence
-from contextlib import asynccontextmanager
+from collections.abc import Mapping, Sequence
 from typing import Any, Final, Protocol
 
 import asyncpg
@@ -219,7 +218,7 @@ class DashboardStore:
     async def refresh(self) -> None:
         """Read every table the page shows (at start, and every refresh period)."""
         source = self.source
-        await self._read_globals()
+        await self.read_globals()
         for table in NEWEST_TABLES:
             for row in await source.newest(table):
                 self.fleet.set_row(table, row)
@@ -234,7 +233,7 @@ class DashboardStore:
         self.refreshed_at = time.monotonic()
         self.loaded.set()
 
-    async def _read_globals(self) -> None:
+    async def read_globals(self) -> None:
         source = self.source
         self.fleet.set_robots(await source.robots())
         grid, chargers = await source.world()
@@ -260,7 +259,7 @@ class DashboardStore:
         """Read what notifications marked (without an image), and the rows decisions name."""
         dirty, self._dirty = self._dirty, {}
         if any(robot is None for _table, robot in dirty):
-            await self._read_globals()
+            await self.read_globals()
         newest: dict[str, set[str]] = {}  # one query per table serves every robot
         for (table, robot), ids in dirty.items():
             if robot is None:
@@ -330,60 +329,3 @@ class DashboardStore:
         self.world_changed = self.strategies_changed = False
         self.fleet.take_changed()
         self.timeline.take_fresh()
-
-    # -- what people ask for (writes) ----------------------------------------------------
-    async def require_robot(self, robot: str) -> None:
-        """404 unless ``robot`` is a row of the robot table (read again if not known yet)."""
-        if not self.fleet.known(robot):
-            self.fleet.set_robots(await self.source.robots())
-        if not self.fleet.known(robot):
-            known = ", ".join(r for r in sorted(self.fleet.robots) if self.fleet.known(r))
-            raise Refused(404, f"no robot {robot!r}; known robots: {known or 'none'}")
-
-    async def require_strategy(self, code: str) -> None:
-        if not any(s["code"] == code for s in self.strategies):
-            await self._read_globals()
-        codes = [s["code"] for s in self.strategies]
-        if code not in codes:
-            raise Refused(422, f"unknown strategy {code!r}; known strategies: {', '.join(codes)}")
-
-    async def set_goal(self, robot: str, x: float, y: float, tolerance: float | None) -> int:
-        await self.require_robot(robot)
-        async with refusal_as_4xx():
-            return await self.source.set_goal(robot, x, y, tolerance)
-
-    async def cancel_goal(self, robot: str) -> int | None:
-        await self.require_robot(robot)
-        return await self.source.cancel_goal(robot)
-
-    async def set_strategy(self, robot: str, code: str, wait_s: float) -> dict[str, Any]:
-        """SET_STRATEGY as a user_command; waits up to ``wait_s`` for the strategy service's
-        verdict (``pending`` if none came: the page shows it when it does)."""
-        await self.require_robot(robot)
-        await self.require_strategy(code)
-        async with refusal_as_4xx():
-            command_id = await self.source.user_command(robot, "SET_STRATEGY", code)
-        deadline = time.monotonic() + wait_s
-        row = await self.source.row(keys.USER_COMMAND, command_id)
-        while row is not None and row["status"] == "pending" and time.monotonic() < deadline:
-            await asyncio.sleep(0.05)
-            row = await self.source.row(keys.USER_COMMAND, command_id)
-        status = "pending" if row is None else row["status"]
-        reason = "" if row is None else row["reason"] or ""
-        return {"command_id": command_id, "status": status, "reason": reason}
-
-    async def add_strategy(self, request: NewStrategy) -> None:
-        async with refusal_as_4xx():
-            await self.source.add_strategy(request)
-        await self._read_globals()
-
-
-@asynccontextmanager
-async def refusal_as_4xx() -> AsyncIterator[None]:
-    """The database refusing a row the page sent (a CHECK, a foreign key, a value it cannot
-    store) is the request's fault: 422 with the database's one-line reason, never a 500."""
-    try:
-        yield
-    except (asyncpg.IntegrityConstraintViolationError, asyncpg.DataError) as exc:
-        detail = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-        raise Refused(422, f"the database refused the row: {detail}") from None

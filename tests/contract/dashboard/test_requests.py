@@ -13,6 +13,7 @@ import pytest
 from common.contract import keys
 from common.runtime import Runtime
 from common.testing import eventually
+from services.dashboard.orders import Orders
 from services.dashboard.requests import Refused
 from tests.contract.dashboard.conftest import ROBOT, Fleet, Running
 
@@ -214,7 +215,7 @@ async def test_a_row_the_database_refuses_is_a_422_naming_the_constraint(
     constraint still refuses the row, and the refusal is a 422, not a 500."""
     await known_robot(running, fleet)
     with pytest.raises(Refused) as refused:
-        await running.dashboard.store.set_goal(ROBOT, math.nan, 1.0, None)
+        await Orders(running.dashboard.store).set_goal(ROBOT, math.nan, 1.0, None)
     assert refused.value.status == 422
     assert "goal_xy_bounded" in refused.value.reason
     assert await foreign.database.pool.fetchval("SELECT count(*) FROM goal") == 0
