@@ -142,11 +142,17 @@ def summary_text(summary: dict[str, Any]) -> str:
     )
 
 
-async def demo(rate: str) -> dict[str, Any]:
+async def demo(rate: str, model: str | None = None) -> dict[str, Any]:
     wall_start = time.monotonic()
-    print(f"proactive-nav demo: {WORLD} world, sim rate {rate}, robot {ROBOT}")
+    what = f"robot {ROBOT}" if model is None else f"robot {ROBOT} ({model})"
+    print(f"proactive-nav demo: {WORLD} world, sim rate {rate}, {what}")
     options = StackOptions(
-        world=WORLD, rate=rate, robots=1, battery=START_BATTERY_PCT, zenoh_port=None
+        world=WORLD,
+        rate=rate,
+        robots=1,
+        battery=START_BATTERY_PCT,
+        zenoh_port=None,
+        model=model,
     )
     async with launched(options) as stack:
         print(f"  stack up in {time.monotonic() - wall_start:.1f} s; logs in {stack.log_dir}")
@@ -184,8 +190,8 @@ async def demo(rate: str) -> dict[str, Any]:
     return summary
 
 
-def run(json_path: str | None = None, rate: str | None = None) -> int:
-    summary = uvloop.run(demo(rate or RATE))
+def run(json_path: str | None = None, rate: str | None = None, model: str | None = None) -> int:
+    summary = uvloop.run(demo(rate or RATE, model))
     if json_path:
         Path(json_path).write_text(json.dumps(summary, indent=2, default=str) + "\n")
     return 0 if summary["outcome"] == "success" else 1

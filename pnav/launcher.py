@@ -44,6 +44,8 @@ class StackOptions:
     gui: bool = False
     robots: int | None = None
     battery: float | None = None
+    # robot model of every robot the world does not give one (None: the Burger)
+    model: str | None = None
     data_dir: Path | None = None
     zenoh_port: int | None = DEFAULT_ZENOH_PORT  # None: any free port
     log_dir: Path | None = None
@@ -156,6 +158,8 @@ def service_specs(local: LocalStack, options: StackOptions, world: Path) -> list
                 argv += ["--robots", str(options.robots)]
             if options.battery is not None:
                 argv += ["--battery", str(options.battery)]
+            if options.model is not None:
+                argv += ["--model", options.model]
         replicas = options.replicas.get(name, 1)
         if replicas > 1 and name not in SCENARIO_SERVICES:
             raise UsageError(f"{name} cannot be replicated: only {', '.join(SCENARIO_SERVICES)}")
