@@ -26,6 +26,7 @@ from typing import Any
 import uvloop
 
 from common.config import ServiceConfig
+from common.robotmodel import DEFAULT_MODEL, load_model
 from common.runtime import Runtime
 from pnav import commands
 from pnav.launcher import StackOptions, launched
@@ -34,7 +35,8 @@ from pnav.mission import MissionLog, MissionMonitor
 ROBOT = "r1"
 WORLD = "warehouse"
 RATE = "5"
-# 0.45 % of 19.98 Wh = 0.09 Wh: enough for the first goal, not for the far one.
+# 0.45 % of the Burger's 19.98 Wh = 0.09 Wh: enough for the first goal, not for the far one
+# (another model starts with the same energy: the sim's load model is the same for all)
 START_BATTERY_PCT = 0.45
 GOAL_NEAR = (3.7, 2.5)
 GOAL_FAR = (8.8, 6.6)
@@ -142,6 +144,14 @@ def summary_text(summary: dict[str, Any]) -> str:
     )
 
 
+def start_battery_pct(model: str | None) -> float:
+    """The start charge giving the demo's robot the Burger's 0.09 Wh, whatever its model."""
+    if model is None:
+        return START_BATTERY_PCT
+    burger = load_model(DEFAULT_MODEL).battery_capacity_wh
+    return START_BATTERY_PCT * burger / load_model(model).battery_capacity_wh
+
+
 async def demo(rate: str, model: str | None = None) -> dict[str, Any]:
     wall_start = time.monotonic()
     what = f"robot {ROBOT}" if model is None else f"robot {ROBOT} ({model})"
@@ -150,7 +160,7 @@ async def demo(rate: str, model: str | None = None) -> dict[str, Any]:
         world=WORLD,
         rate=rate,
         robots=1,
-        battery=START_BATTERY_PCT,
+        battery=start_battery_pct(model),
         zenoh_port=None,
         model=model,
     )
