@@ -37,6 +37,14 @@ def resolve_world(world: str) -> Path:
     raise UsageError(f"no world {world!r}: give a world file, or one of: {names}")
 
 
+def check_world(world: Path, model: str | None) -> None:
+    """Load the world as the sim will, with its robots' models: a bad world or model is a
+    one-line UsageError now, not a sim that exits and is restarted over and over."""
+    from services.sim.world import load_world
+
+    load_world(world, model)
+
+
 @dataclass
 class StackOptions:
     world: str = "warehouse"
@@ -175,6 +183,8 @@ def service_specs(local: LocalStack, options: StackOptions, world: Path) -> list
 @contextlib.asynccontextmanager
 async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
     world = resolve_world(options.world)
+    if "sim" in options.services and "sim" not in options.replace:
+        check_world(world, options.model)
     log_dir = options.log_dir or Path(tempfile.mkdtemp(prefix="pnav-logs-"))
     async with local_stack(options.data_dir, options.zenoh_port) as local:
         supervisor = Supervisor(service_specs(local, options, world), log_dir, echo=options.echo)

@@ -173,3 +173,19 @@ def test_a_bad_model_file_names_the_file_and_the_field(
     bad.write_text(yaml.safe_dump(doc))
     code, _, err = run_cli(["up", "--model", str(bad)], capsys)
     assert_one_line_refusal(code, err, f"{bad}: footprint_radius_m: must be positive")
+
+
+def test_a_world_with_a_bad_model_is_refused_before_anything_starts(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    world = tmp_path / "bad.yaml"
+    robot = {"id": "r1", "x": 1.0, "y": 1.0, "model": {"name": "jackal", "lidar": {"beams": 0}}}
+    world.write_text(
+        yaml.safe_dump(
+            {"map": str(MODELS.parent / "worlds/maps/open_room.yaml"), "robots": [robot]}
+        )
+    )
+    code, _, err = run_cli(["up", "--world", str(world)], capsys)  # refused before any port
+    assert_one_line_refusal(
+        code, err, f"{world}: robots[0]: model: models/jackal.yaml (overridden): lidar.beams: "
+    )
