@@ -1,0 +1,126 @@
+"""The ``pnav`` command line's argument types and shared options: each refuses a bad value in
+one line (what is wrong, and where help is), exit 2, before anything starts."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import NoReturn
+
+from common.contract import limits
+from common.errors import UsageError
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line (what is wrong, and where help is), exit 2:
+    the usage block argparse prints first buries the reason under every option."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: {message} (see `{self.prog} --help`)\n")
+
+
+def number(
+    meaning: str, accepts: Callable[[float], bool], convert: Callable[[str], float] = float
+) -> Callable[[str], float]:
+    """An argparse ``type``: a number ``accepts`` holds for, else an error saying
+    ``meaning`` (e.g. "a finite number of metres within +-100000")."""
+
+    def parse(text: str) -> float:
+        try:
+            value = convert(text)
+        except (ValueError, OverflowError):
+            value = math.nan
+        if not (math.isfinite(value) and accepts(value)):
+            raise argparse.ArgumentTypeError(f"must be {meaning}, got {text!r}")
+        return value
+
+    return parse
+
+
+GOAL_M = limits.GOAL_MAX_ABS_M
+MAX_TOL_M = limits.GOAL_MAX_TOLERANCE_M
+coordinate = number(f"a finite number of metres within +-{GOAL_M:.0f}", lambda v: abs(v) <= GOAL_M)
+tolerance = number(
+    f"a finite number of metres in (0, {MAX_TOL_M:.0f}]", lambda v: 0 < v <= MAX_TOL_M
+)
+positive = number("a finite number above 0", lambda v: v > 0)
+not_negative = number("a finite number, 0 or more", lambda v: v >= 0)
+percent = number("a percentage from 0 to 100", lambda v: 0 <= v <= 100)
+count = number("a whole number, 1 or more", lambda v: v >= 1, int)
+port = number("a port number from 1 to 65535", lambda v: 1 <= v <= 65535, int)
+
+
+def strategy_code(text: str) -> str:
+    """A strategy code as the strategy table spells them (upper case, ``[A-Z0-9_]+``)."""
+    code = text.strip().upper()
+    if not code or not all(c.isascii() and (c.isalnum() or c == "_") for c in code):
+        raise argparse.ArgumentTypeError(
+            f"must be a strategy code of letters, digits and _ (e.g. GOTO_AVOID), got {text!r}"
+        )
+    return code
+
+
+def robot_model(text: str) -> str:
+    """An argparse ``type``: a robot model name (models/) or model file, checked now so a bad
+    one is a one-line error, not a sim that exits later. A file becomes an absolute path (the
+    sim may start elsewhere)."""
+    from common.errors import ModelError
+    from common.robotmodel import load_model, model_path
+
+    try:
+        load_model(text)
+        path = model_path(text)
+    except ModelError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text if path.stem == text and not Path(text).suffix else str(path.resolve())
+
+
+def model_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--model",
+        type=robot_model,
+        metavar="NAME|FILE",
+        help="robot model of every robot the world does not give one (models/*.yaml; "
+        "default turtlebot3_burger)",
+    )
+
+
+def stack_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--world", default="warehouse", help="world name or file (warehouse)")
+    parser.add_argument(
+        "--rate", default="1", help="sim seconds per wall second, or 'max' (default 1)"
+    )
+    parser.add_argument("--gui", action="store_true", help="open the pybullet window")
+    parser.add_argument("--robots", type=count, help="run exactly N robots")
+    parser.add_argument("--battery", type=percent, help="start charge of every robot, percent")
+    model_option(parser)
+
+
+def record_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--record",
+        type=Path,
+        metavar="FILE",
+        help="record the mission into FILE as MCAP, Foxglove's schemas (docs/RECORDING.md)",
+    )
+
+
+def record_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    record = commands.add_parser("record", help="MCAP recordings: `pnav record info FILE`")
+    verbs = record.add_subparsers(dest="record", metavar="VERB", required=True)
+    info = verbs.add_parser("info", help="channels, schemas, messages, sim time, robots")
+    info.add_argument("file", type=Path, help="an MCAP file (pnav up/demo --record)")
+    info.add_argument("--json", metavar="FILE", help="also write it as JSON ('-': stdout only)")
+
+
+def parse_counts(text: str, option: str) -> list[int]:
+    """``"1,10,50"`` -> ``[1, 10, 50]``; UsageError naming ``option`` otherwise."""
+    try:
+        counts = [int(part) for part in text.split(",") if part.strip()]
+    except ValueError:
+        raise UsageError(f"{option} {text!r}: write whole numbers, e.g. 1,10,50") from None
+    if not counts or min(counts) < 1:
+        raise UsageError(f"{option} {text!r}: at least one count, each 1 or more")
+    return counts
