@@ -39,6 +39,7 @@ class Counters:
     worlds_applied: int = 0
     worlds_unchanged: int = 0
     worlds_malformed: int = 0
+    collision_acks: int = 0  # collision events acknowledged to the robot (acks.py)
 
     def malformed_total(self, topic: str | None = None) -> int:
         return sum(n for (t, _), n in self.malformed.items() if topic is None or t == topic)
@@ -65,6 +66,7 @@ class Counters:
             "worlds_applied": self.worlds_applied,
             "worlds_unchanged": self.worlds_unchanged,
             "worlds_malformed": self.worlds_malformed,
+            "collision_acks": self.collision_acks,
         }
 
 

@@ -51,9 +51,13 @@ SELECT * FROM unnest($1::text[], $2::float8[], $3::float8[], $4::float8[], $5::f
                      $6::bool[], $7::float8[])
 RETURNING id, robot_id"""
 
+# A resent event (CONTRACT.md, "Robot and sim") finds its row there and adds none; RETURNING
+# then gives fewer rows than the batch, and the writer sends no image (a plain hint).
 _COLLISION_SQL = f"""
-INSERT INTO {keys.COLLISION_EVENT} (robot_id, stamp, other, x, y)
-SELECT * FROM unnest($1::text[], $2::float8[], $3::text[], $4::float8[], $5::float8[])
+INSERT INTO {keys.COLLISION_EVENT} (robot_id, stamp, other, x, y, seq, run)
+SELECT * FROM unnest($1::text[], $2::float8[], $3::text[], $4::float8[], $5::float8[],
+                     $6::int8[], $7::text[])
+ON CONFLICT (robot_id, run, seq) DO NOTHING
 RETURNING id, robot_id"""
 
 
@@ -158,12 +162,22 @@ def _collision_args(rows: Sequence[Any]) -> list[Any]:
         [c.other for c in r],
         [c.x for c in r],
         [c.y for c in r],
+        [c.seq for c in r],
+        [c.run for c in r],
     ]
 
 
 def _collision_image(record: Any) -> Image:
     c: Collision = record
-    return {"robot_id": c.robot_id, "stamp": c.stamp, "other": c.other, "x": c.x, "y": c.y}
+    return {
+        "robot_id": c.robot_id,
+        "stamp": c.stamp,
+        "other": c.other,
+        "x": c.x,
+        "y": c.y,
+        "seq": c.seq,
+        "run": c.run,
+    }
 
 
 @dataclass(frozen=True)

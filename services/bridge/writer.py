@@ -90,6 +90,9 @@ class SensorWriter:
         self._closing = False
         # called on the loop whenever a table's writing goes idle (lockstep's reporter)
         self.on_idle: Callable[[], None] | None = None
+        # called with each batch once its rows are committed (or were already there), and
+        # with a row the database refused for its values: the collision acks (acks.py)
+        self.on_committed: Callable[[list[SensorRecord]], None] | None = None
         self._tables = {spec.name: _Table(spec) for spec in SENSOR_TABLES.values()}
 
     async def start(self) -> None:
@@ -200,6 +203,7 @@ class SensorWriter:
             self._alerts.warning(
                 ("rejected", table.name), "row refused", table=table.name, error=repr(exc)
             )
+            self._committed(batch)
             return
         self.counters.rows_written[table.name] += len(rows)
         notify = self.notifier.notify
@@ -213,6 +217,15 @@ class SensorWriter:
         self.counters.batches[table.name] += 1
         if len(batch) > self.counters.largest_batch[table.name]:
             self.counters.largest_batch[table.name] = len(batch)
+        self._committed(batch)
+
+    def _committed(self, batch: list[SensorRecord]) -> None:
+        if self.on_committed is None:
+            return
+        try:
+            self.on_committed(batch)
+        except Exception as exc:  # the rows are written; the robot resends, nothing doubles
+            self._alerts.warning(("committed", "hook"), "after-commit hook failed", error=repr(exc))
 
     async def _insert(self, table: _Table, batch: list[SensorRecord]) -> list[tuple[int, str]]:
         if self.pool is None:
