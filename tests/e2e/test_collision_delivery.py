@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import signal
+import subprocess
 import threading
 from collections.abc import Iterator
 from pathlib import Path
@@ -29,7 +30,7 @@ OPEN_ROOM = ROOT / "worlds" / "open_room.yaml"  # r1 at (1, 1) facing +x: a wall
 
 
 @pytest.fixture
-def router() -> Iterator[tuple[object, ZenohSettings]]:
+def router() -> Iterator[tuple[subprocess.Popen[str], ZenohSettings]]:
     with router_process() as (proc, settings):
         yield proc, settings
 
@@ -37,16 +38,18 @@ def router() -> Iterator[tuple[object, ZenohSettings]]:
 async def rows(url: str) -> list[asyncpg.Record]:
     conn = await asyncpg.connect(url)
     try:
-        return await conn.fetch("SELECT robot_id, other, seq, run FROM collision_event")
+        found: list[asyncpg.Record] = await conn.fetch(
+            "SELECT robot_id, other, seq, run FROM collision_event"
+        )
+        return found
     finally:
         await conn.close()
 
 
 async def test_a_collision_during_a_router_freeze_is_one_row_after_it(
-    router: tuple[object, ZenohSettings], db_url: str
+    router: tuple[subprocess.Popen[str], ZenohSettings], db_url: str
 ) -> None:
     proc, settings = router
-    assert hasattr(proc, "send_signal")
     sim_session = await asyncio.to_thread(bus.open_session, settings)
     # no command timeout: the test drives the sim directly while the router is frozen
     node = SimNode(load_world(OPEN_ROOM), SimConfig(cmd_timeout_s=0), sim_session, rate=4.0)
@@ -63,7 +66,7 @@ async def test_a_collision_during_a_router_freeze_is_one_row_after_it(
         await eventually(lambda: "r1" in bridge.robots, 30, what="the world")
         await eventually(lambda: bridge.counters.rows_written[keys.ODOMETRY] > 0, 30, what="odom")
 
-        proc.send_signal(signal.SIGSTOP)  # type: ignore[attr-defined]
+        proc.send_signal(signal.SIGSTOP)
         frozen = True
         sim = node.sim
         # backwards into the wall behind: the contact happens while nothing gets through
@@ -75,7 +78,7 @@ async def test_a_collision_during_a_router_freeze_is_one_row_after_it(
         assert node.outbox.waiting() == 1
         assert await rows(db_url) == []
 
-        proc.send_signal(signal.SIGCONT)  # type: ignore[attr-defined]
+        proc.send_signal(signal.SIGCONT)
         frozen = False
         await eventually(lambda: node.outbox.waiting() == 0, 30, what="the acknowledgement")
         got = await rows(db_url)
@@ -93,7 +96,7 @@ async def test_a_collision_during_a_router_freeze_is_one_row_after_it(
         assert len(await rows(db_url)) == 1
     finally:
         if frozen:
-            proc.send_signal(signal.SIGCONT)  # type: ignore[attr-defined]
+            proc.send_signal(signal.SIGCONT)
         stop.set()
         await asyncio.to_thread(loop.join, 10)
         await bridge.stop()

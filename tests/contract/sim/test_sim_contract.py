@@ -279,7 +279,7 @@ def test_a_collision_event_is_resent_until_acknowledged_and_then_no_more(
     zenoh_settings: ZenohSettings, listener: Listener
 ) -> None:
     key = keys.robot_key("r1", keys.COLLISION)
-    with running_sim(zenoh_settings, rate=0.0, **HELD) as node:
+    with running_sim(zenoh_settings, rate=0.0, cmd_timeout_s=0.0) as node:
         listener.send("r1", cmd(0.22, 0.0))
         listener.wait(lambda: len(listener.of(key)) >= 3, timeout=20.0)  # every 0.5 s wall
         copies = listener.of(key)
