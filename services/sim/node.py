@@ -293,6 +293,8 @@ class SimNode:
             sim_time=round(self.sim.time, 3),
             commands=self.commands_received,
             cmd_timeout_stops=self.sim.cmd_timeout_stops,
+            contacts=self.sim.counts[keys.COLLISION],
+            max_after_command_m=round(self.sim.max_after_command_m, 4),
             collisions_resent=self.outbox.resent,
             collisions_unacked=self.outbox.waiting(),
             **self.gate_figures(),
