@@ -186,7 +186,8 @@ async def _spoof(fault: Fault, ctx: Context) -> Injection:
 _RECOMMEND = f"""
 INSERT INTO {keys.COMMAND_RECOMMENDATION} (robot_id, kind, source, priority, linear_mps,
     angular_rps, stamp, expires_stamp, inputs, reason)
-VALUES ($1, 'robot', 'rogue', $2, 0.22, 0.0, $3, $3 + 0.5, '{{}}', 'fault injection')
+VALUES ($1, 'robot', 'rogue', $2, 0.22, 0.0, $3::float8, $3::float8 + 0.5, '{{}}',
+        'fault injection')
 RETURNING id"""
 
 
