@@ -51,6 +51,6 @@ class CollisionAcks:
                 congestion_control=zenoh.CongestionControl.BLOCK,
             )
         except Exception as exc:  # Zenoh closing: the robot resends, the row is not doubled
-            self._alerts.warning("ack", "collision ack failed", error=repr(exc))
+            self._alerts.warning("ack", "collision ack failed", error=exc)
             return
         self.counters.collision_acks += 1

@@ -207,7 +207,7 @@ class Bridge:
             try:
                 await self._load_robots()
             except Exception as exc:
-                self._malformed_log.warning("robots", "robot table read failed", error=repr(exc))
+                self._malformed_log.warning("robots", "robot table read failed", error=exc)
             again = self._reload_again
 
     # -- lockstep --------------------------------------------------------------------------
@@ -260,7 +260,7 @@ class Bridge:
             try:
                 deleted = await self.prune()
             except Exception as exc:
-                self._malformed_log.warning("prune", "prune_sensor_rows failed", error=repr(exc))
+                self._malformed_log.warning("prune", "prune_sensor_rows failed", error=exc)
                 continue
             if deleted:
                 log.event(logger, logging.DEBUG, "sensor rows pruned", deleted=deleted)

@@ -188,7 +188,7 @@ class SensorWriter:
             # milliseconds anyway), back off a little, and carry on with newer data.
             self.counters.dropped[table.name] += len(batch)
             self._alerts.warning(
-                ("db_error", table.name), "sensor write failed", table=table.name, error=repr(exc)
+                ("db_error", table.name), "sensor write failed", table=table.name, error=exc
             )
             await asyncio.sleep(0.2)
             return
@@ -201,7 +201,7 @@ class SensorWriter:
                 return
             self.counters.rejected_by_db[table.name] += 1
             self._alerts.warning(
-                ("rejected", table.name), "row refused", table=table.name, error=repr(exc)
+                ("rejected", table.name), "row refused", table=table.name, error=exc
             )
             self._committed(batch)
             return
@@ -213,7 +213,7 @@ class SensorWriter:
             try:
                 notify(table.name, robot_id, row_id, image)
             except Exception as exc:  # Zenoh closing: the row is written, the hint is lost
-                self._alerts.warning(("notify", table.name), "notify failed", error=repr(exc))
+                self._alerts.warning(("notify", table.name), "notify failed", error=exc)
         self.counters.batches[table.name] += 1
         if len(batch) > self.counters.largest_batch[table.name]:
             self.counters.largest_batch[table.name] = len(batch)
@@ -225,7 +225,7 @@ class SensorWriter:
         try:
             self.on_committed(batch)
         except Exception as exc:  # the rows are written; the robot resends, nothing doubles
-            self._alerts.warning(("committed", "hook"), "after-commit hook failed", error=repr(exc))
+            self._alerts.warning(("committed", "hook"), "after-commit hook failed", error=exc)
 
     async def _insert(self, table: _Table, batch: list[SensorRecord]) -> list[tuple[int, str]]:
         if self.pool is None:
