@@ -14,6 +14,7 @@ committed rows lost. docs/BENCHMARKS.md ("Faults") has a run.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import platform
 import tempfile
@@ -22,6 +23,7 @@ from pathlib import Path
 
 import uvloop
 
+from common.outage import fold_outage_logs
 from pnav.bench.faults.catalogue import mission_goal, select
 from pnav.bench.faults.report import as_json, misses, table
 from pnav.bench.faults.trial import Result, run_trial
@@ -38,6 +40,10 @@ def run(
 ) -> int:
     """Run the faults; print the table; 0 if every target was met, 1 otherwise."""
     faults = select(only)
+    # the launcher's lines (restarts) on stderr; this process's own pool, cut off by the
+    # Postgres fault like the services', folds its errors into one outage line too
+    logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
+    fold_outage_logs()
     world_path, goal = mission_goal(world)
     points = bad_goals(world_path)
     work = Path(tempfile.mkdtemp(prefix="pnav-faults-"))
