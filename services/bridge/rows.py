@@ -188,13 +188,18 @@ class SensorTable:
     sql: str
     args: Callable[[Sequence[Any]], list[Any]]
     image: Callable[[Any], Image]
+    # committed with synchronous_commit on: the robot forgets an event once it is
+    # acknowledged, so its row must survive a Postgres crash (writer.py)
+    durable: bool = False
 
 
 SENSOR_TABLES: dict[type, SensorTable] = {
     Odometry: SensorTable(keys.ODOMETRY, _ODOMETRY_SQL, _odometry_args, _odometry_image),
     LaserScan: SensorTable(keys.LASER_SCAN, _LASER_SCAN_SQL, _laser_scan_args, _laser_scan_image),
     BatteryState: SensorTable(keys.BATTERY, _BATTERY_SQL, _battery_args, _battery_image),
-    Collision: SensorTable(keys.COLLISION_EVENT, _COLLISION_SQL, _collision_args, _collision_image),
+    Collision: SensorTable(
+        keys.COLLISION_EVENT, _COLLISION_SQL, _collision_args, _collision_image, durable=True
+    ),
 }
 
 

@@ -17,7 +17,11 @@ a commit returns, and its rows are visible to every reader, without waiting for 
 reach the disk. That fsync was most of the sensor-to-row latency (1-4 ms of the ~2-5 ms
 measured with it on). The price: if Postgres itself crashes, the last few hundred
 milliseconds of sensor rows may be lost (never corrupted), which is harmless for data that
-is stale a moment later anyway. Commands and the world use the service's normal pool.
+is stale a moment later anyway (``pnav bench faults`` sees it: a row or two of odometry lost
+to a kill -9 of the postmaster). Collision events are the exception: the robot forgets an
+event once its row is acknowledged (acks.py), so their batches commit with
+``synchronous_commit`` on, in a transaction of their own. Commands and the world use the
+service's normal pool.
 """
 
 from __future__ import annotations
@@ -231,5 +235,10 @@ class SensorWriter:
         if self.pool is None:
             raise ConnectionFailure("the sensor writer is not started")
         async with self.pool.acquire() as conn:
-            records = await conn.fetch(table.spec.sql, *table.spec.args(batch))
+            if table.spec.durable:
+                async with conn.transaction():
+                    await conn.execute("SET LOCAL synchronous_commit TO on")
+                    records = await conn.fetch(table.spec.sql, *table.spec.args(batch))
+            else:
+                records = await conn.fetch(table.spec.sql, *table.spec.args(batch))
         return [(r[0], r[1]) for r in records]
