@@ -281,13 +281,15 @@ def test_a_collision_event_is_resent_until_acknowledged_and_then_no_more(
     key = keys.robot_key("r1", keys.COLLISION)
     with running_sim(zenoh_settings, rate=0.0, cmd_timeout_s=0.0) as node:
         listener.send("r1", cmd(0.22, 0.0))
+        listener.wait(lambda: listener.of(key), timeout=20.0)
+        listener.send("r1", cmd(0.0, 0.0))  # against the wall, standing: one contact
         listener.wait(lambda: len(listener.of(key)) >= 3, timeout=20.0)  # every 0.5 s wall
         copies = listener.of(key)
         assert all(c == copies[0] for c in copies)  # the same event, not new ones
         assert node.sim.counts[keys.COLLISION] == 1
         ack = {"run": copies[0]["run"], "seq": copies[0]["seq"]}
         listener.session.put(keys.robot_key("r1", keys.COLLISION_ACK), pack(ack))
-        listener.wait(lambda: node.outbox.waiting() == 0)
+        listener.wait(lambda: node.outbox.waiting() == 0, timeout=20.0)
         sent = len(listener.of(key))
         time.sleep(3 * 0.5)  # three resend periods: nothing more may come
         assert len(listener.of(key)) <= sent + 1  # at most one already on its way
