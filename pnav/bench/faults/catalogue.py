@@ -18,7 +18,6 @@ SERVICES = ("sim", "bridge", "strategy", "planner", "controller", "decision")
 MISSIONS: dict[str, tuple[float, float]] = {
     "warehouse": (6.0, 1.0),  # from (1.0, 2.5): round the first rack, along the south aisle
     "cluttered_room": (4.8, 5.6),
-    "open_room": (4.0, 4.0),
 }
 
 
