@@ -7,12 +7,13 @@ import math
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NoReturn, cast
+from typing import TYPE_CHECKING, NoReturn, cast
 
 import uvloop
 
 from common.contract import limits
 from common.errors import PnavError, UsageError
+from pnav.bench.faults_cli import add_faults_parser
 from pnav.navbench.worlds_cli import add_worlds_parser
 
 if TYPE_CHECKING:
@@ -218,29 +219,10 @@ def build_parser() -> argparse.ArgumentParser:
     nav.add_argument(
         "--compare", type=Path, metavar="FILE", help="compare each run with an earlier --json"
     )
-    _add_faults_bench(benches)
+    add_faults_parser(benches, _positive)
     # _SubParsersAction is invariant in its parser class; ours only makes _Parser ones
     add_worlds_parser(cast("argparse._SubParsersAction[argparse.ArgumentParser]", commands))
     return parser
-
-
-def _add_faults_bench(benches: Any) -> None:
-    faults = benches.add_parser(
-        "faults",
-        help="one mission per injected fault: outcome, collisions, drift, rows lost",
-        description="Runs one mission per fault (kill -9 of each service and of Postgres, "
-        "router freezes, cut links, a spoofed sensor stream, a rogue recommendation, bad "
-        "goals) and reports the outcome, collisions, metres driven after the last command, "
-        "committed rows lost and restart times. 25-90 s per fault on 2 cores. Faults: "
-        "kill-{sim,bridge,strategy,planner,controller,decision}, kill-postgres, "
-        "freeze-router-3s, freeze-router-10s, cut-bridge-5s, cut-decision-5s, spoof-odom, "
-        "rogue-priority, goal-nan, goal-inf, goal-1e308, tolerance-nan, tolerance-negative, "
-        "goal-outside-map, goal-in-obstacle.",
-    )
-    faults.add_argument("--json", metavar="FILE", help="write every fault's figures as JSON")
-    faults.add_argument("--only", metavar="NAME,...", help="only these faults (names below)")
-    faults.add_argument("--world", default="warehouse", help="warehouse (default), cluttered_room")
-    faults.add_argument("--rate", type=_positive, default=2.0, help="sim rate (default 2)")
 
 
 def parse_counts(text: str, option: str) -> list[int]:
