@@ -11,6 +11,7 @@ import contextlib
 import os
 import shutil
 import socket
+import subprocess
 import tempfile
 import time
 import uuid
@@ -51,6 +52,42 @@ def loopback_zenoh() -> Iterator[ZenohSettings]:
             router.close()
         return
     raise RuntimeError(f"could not start a loopback Zenoh router: {last_error}")
+
+
+_ROUTER = (
+    "import sys, time\n"
+    "from common.bus import start_router\n"
+    "router = start_router((sys.argv[1],))\n"
+    "print('up', flush=True)\n"
+    "time.sleep(1e6)\n"
+)
+
+
+@contextlib.contextmanager
+def router_process() -> Iterator[tuple[subprocess.Popen[str], ZenohSettings]]:
+    """A loopback Zenoh router in a process of its own, so that it alone can be frozen
+    (SIGSTOP/SIGCONT) or killed; yield the process and the settings clients use."""
+    import signal
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _ROUTER, endpoint],
+        cwd=root,
+        stdout=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(root)},
+    )
+    try:
+        if proc.stdout is None or proc.stdout.readline().strip() != "up":
+            raise RuntimeError("the Zenoh router process did not start")
+        yield proc, ZenohSettings(mode="client", connect=(endpoint,))
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            proc.send_signal(signal.SIGCONT)
+        proc.kill()
+        proc.wait()
 
 
 class EmbeddedPostgres:

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, cast
 import uvloop
 
 from common.errors import PnavError, UsageError
+from pnav.bench.faults_cli import add_faults_parser
 from pnav.cli_args import (
     GOAL_M,
     MAX_TOL_M,
@@ -179,6 +180,7 @@ def build_parser() -> argparse.ArgumentParser:
     nav.add_argument(
         "--compare", type=Path, metavar="FILE", help="compare each run with an earlier --json"
     )
+    add_faults_parser(benches, positive)
     # _SubParsersAction is invariant in its parser class; ours only makes Parser ones
     add_worlds_parser(cast("argparse._SubParsersAction[argparse.ArgumentParser]", commands))
     return parser
@@ -285,6 +287,10 @@ def _bench(args: argparse.Namespace) -> int:
         from pnav.navbench import runner
 
         return runner.run(args)
+    if args.bench == "faults":
+        from pnav.bench import faults
+
+        return faults.run(args.json, args.only, args.world, f"{args.rate:g}")
     raise AssertionError(f"unhandled bench {args.bench}")  # argparse enforces the choices
 
 

@@ -30,7 +30,7 @@ from common.robotmodel import DEFAULT_MODEL, load_model
 from common.runtime import Runtime
 from pnav import commands
 from pnav.launcher import DashboardOptions, StackOptions, launched
-from pnav.mission import MissionLog, MissionMonitor
+from pnav.mission import GoalEnded, MissionLog, MissionMonitor
 
 ROBOT = "r1"
 WORLD = "warehouse"
@@ -50,6 +50,7 @@ class Demo:
         self.started = time.monotonic()
         self.tty = sys.stdout.isatty()
         self._last_print = 0.0
+        self.goal: int | None = None  # the goal in force: its failure ends the demo
 
     def event(self, text: str) -> None:
         log = self.monitor.log
@@ -82,7 +83,12 @@ class Demo:
         return max(1.0, WALL_LIMIT_S - (time.monotonic() - self.started))
 
     async def until(self, what: str, predicate: Callable[[MissionLog], bool]) -> None:
-        ok = await self.monitor.wait_for(predicate, self.remaining(), on_poll=self.progress)
+        try:
+            ok = await self.monitor.wait_for(
+                predicate, self.remaining(), on_poll=self.progress, goal=self.goal
+            )
+        except GoalEnded as end:
+            raise MissionFailed(f"waiting for {what}: {end}") from None
         if not ok:
             raise MissionFailed(f"{what} did not happen within the demo's time limit")
 
@@ -99,7 +105,7 @@ class Demo:
     async def run(self) -> int:
         await self.until("the robot's first odometry", lambda log: log.now.stamp > 0)
         await self.until("the default strategy", lambda log: log.now.strategy == "GOTO_AVOID")
-        near = await commands.set_goal(self.rt, ROBOT, *GOAL_NEAR)
+        near = self.goal = await commands.set_goal(self.rt, ROBOT, *GOAL_NEAR)
         self.event(f"user: goal {near} at {GOAL_NEAR} (GOTO_AVOID)")
         await self.after_sim(3.0)
         await self.strategy("GOTO_DIRECT")
@@ -108,7 +114,7 @@ class Demo:
         await self.after_sim(1.0)
         if self.monitor.log.goals.get(near) != "active":
             raise MissionFailed("the first goal ended before the goal change")
-        far = await commands.set_goal(self.rt, ROBOT, *GOAL_FAR)
+        far = self.goal = await commands.set_goal(self.rt, ROBOT, *GOAL_FAR)
         self.event(f"user: goal changed in motion to {far} at {GOAL_FAR}; hands off from now")
         await self.until("the battery detour (CHARGE)", lambda log: log.now.strategy == "CHARGE")
         self.event(f"system: CMD_BATTSAVE -> CHARGE at {self.monitor.log.now.battery_pct:.2f}%")

@@ -1,8 +1,13 @@
 """Follow a robot's mission from the contract tables: pose, distance, strategy, decisions.
 
-Used by ``pnav demo`` and the end-to-end tests. It only reads tables, as any dashboard could:
-it polls often enough (every ``poll_s`` of wall time) that the sensor retention never drops
-an odometry row before it is counted.
+Used by ``pnav demo``, ``pnav bench faults`` and the end-to-end tests. It only reads tables,
+as any dashboard could: it polls often enough (every ``poll_s`` of wall time) that the sensor
+retention never drops an odometry row before it is counted.
+
+A goal that ends without being reached, ``failed`` (the planner proved it unreachable) or
+``cancelled`` (by people), is an end of the mission: :meth:`MissionMonitor.wait_for` told to
+follow that goal raises :class:`GoalEnded` with the goal's reason at once, instead of waiting
+out its time limit for something that will not happen.
 """
 
 from __future__ import annotations
@@ -14,6 +19,17 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import asyncpg
+
+# a goal in one of these states will never be reached: the mission is over
+GOAL_ENDS = ("failed", "cancelled")
+
+
+class GoalEnded(Exception):
+    """The goal a mission waits on ended without being reached (``status``, ``reason``)."""
+
+    def __init__(self, goal_id: int, status: str, reason: str | None) -> None:
+        self.goal_id, self.status, self.reason = goal_id, status, reason
+        super().__init__(f"goal {goal_id} {status}: {reason or 'no reason given'}")
 
 
 @dataclass
@@ -38,12 +54,20 @@ class MissionLog:
     decisions: int = 0
     strategy_timeline: list[tuple[float, str]] = field(default_factory=list)
     goals: dict[int, str] = field(default_factory=dict)
+    goal_reasons: dict[int, str] = field(default_factory=dict)  # goals that have a reason
     min_battery_pct: float = math.inf
     max_battery_pct: float = -math.inf
     now: Snapshot = field(default_factory=Snapshot)
     _odom_id: int = 0
     _last_xy: tuple[float, float] | None = None
     _first_decision: int | None = None
+
+    def ended(self, goal_id: int) -> GoalEnded | None:
+        """Why goal ``goal_id`` will never be reached (failed, cancelled), or None."""
+        status = self.goals.get(goal_id)
+        if status not in GOAL_ENDS:
+            return None
+        return GoalEnded(goal_id, status, self.goal_reasons.get(goal_id))
 
     def as_dict(self) -> dict[str, Any]:
         out = {k: v for k, v in asdict(self).items() if not k.startswith("_")}
@@ -69,7 +93,7 @@ class MissionMonitor:
                 "SELECT strategy_code FROM active_strategy WHERE robot_id = $1", robot
             )
             goals = await conn.fetch(
-                "SELECT id, status, x, y FROM goal WHERE robot_id = $1 ORDER BY id", robot
+                "SELECT id, status, reason, x, y FROM goal WHERE robot_id = $1 ORDER BY id", robot
             )
             battery = await conn.fetchrow(
                 "SELECT percentage, charging FROM battery WHERE robot_id = $1 "
@@ -102,6 +126,7 @@ class MissionMonitor:
             log.strategy_timeline.append((round(log.now.stamp, 2), strategy))
         log.now.strategy = strategy or "-"
         log.goals = {g["id"]: g["status"] for g in goals}
+        log.goal_reasons = {g["id"]: g["reason"] for g in goals if g["reason"]}
         active = [g for g in goals if g["status"] == "active"]
         log.now.goal_id = active[0]["id"] if active else None
         log.now.goal = (active[0]["x"], active[0]["y"]) if active else None
@@ -114,9 +139,16 @@ class MissionMonitor:
         return log
 
     async def wait_for(
-        self, predicate: Any, limit_s: float, poll_s: float = 0.1, on_poll: Any = None
+        self,
+        predicate: Any,
+        limit_s: float,
+        poll_s: float = 0.1,
+        on_poll: Any = None,
+        *,
+        goal: int | None = None,
     ) -> bool:
-        """Poll until ``predicate(log)`` holds; False after ``limit_s`` of wall time."""
+        """Poll until ``predicate(log)`` holds; False after ``limit_s`` of wall time. With
+        ``goal``, raise :class:`GoalEnded` as soon as that goal fails or is cancelled."""
         deadline = time.monotonic() + limit_s
         while time.monotonic() < deadline:
             log = await self.poll()
@@ -124,5 +156,7 @@ class MissionMonitor:
                 on_poll(log)
             if predicate(log):
                 return True
+            if goal is not None and (end := log.ended(goal)) is not None:
+                raise end
             await asyncio.sleep(poll_s)
         return False

@@ -11,6 +11,7 @@ Key expressions (``{robot}`` is a robot id; ids are ``[A-Za-z0-9_-]+``):
 - ``pnav/robot/{robot}/odom``     sim -> bridge, odometry
 - ``pnav/robot/{robot}/battery``  sim -> bridge, battery state
 - ``pnav/robot/{robot}/collision`` sim -> bridge, contact event
+- ``pnav/robot/{robot}/collision_ack`` bridge -> sim, a collision event is committed
 - ``pnav/robot/{robot}/cmd_vel``  bridge -> sim, velocity command
 - ``pnav/sim/clock``              sim time
 - ``pnav/sim/world``              the loaded world (map, chargers, robots); also a queryable
@@ -110,6 +111,8 @@ ODOM: Final = "odom"
 BATTERY_MSG: Final = "battery"
 COLLISION: Final = "collision"
 CMD_VEL: Final = "cmd_vel"
+# bridge -> sim: a collision event is committed; the robot stops resending it
+COLLISION_ACK: Final = "collision_ack"
 SENSOR_TOPICS: Final = (SCAN, ODOM, BATTERY_MSG, COLLISION)
 
 

@@ -520,3 +520,17 @@ ALTER TABLE retention_policy DROP CONSTRAINT retention_policy_table_name_check;
 ALTER TABLE retention_policy ADD CONSTRAINT retention_policy_table_name_check
     CHECK (table_name IN ('odometry', 'laser_scan', 'battery', 'collision_event', 'planned_path'));
 INSERT INTO retention_policy (table_name, keep_rows_per_robot) VALUES ('planned_path', 200);
+
+-- migration 7: a collision event is one row, however often the robot sends it
+--
+-- The sim sent a collision event once; a router stall or a Postgres outage lost it, though
+-- the contract says collision events are never dropped. The robot now resends each event
+-- until the bridge acknowledges its committed row (CONTRACT.md, "Robot and sim"), so the
+-- bridge may receive one event several times: one row per (robot, run, seq), where `run`
+-- names the robot driver's run (new at every start, since `seq` starts again from 0 then).
+-- Rows written before, and writers that send no `run`, hold NULLs, which the index never
+-- compares: they are inserted as before.
+ALTER TABLE collision_event
+    ADD COLUMN seq bigint CHECK (seq >= 0),
+    ADD COLUMN run text CHECK (length(run) BETWEEN 1 AND 64);
+CREATE UNIQUE INDEX collision_event_once ON collision_event (robot_id, run, seq);

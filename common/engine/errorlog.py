@@ -19,6 +19,8 @@ from collections import OrderedDict
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
+from common.outage import is_connection_error
+
 WINDOW_S = 10.0
 # Distinct errors remembered; beyond it the least recently logged is forgotten (its pending
 # count is logged first), so a rule whose message varies forever cannot grow memory.
@@ -34,6 +36,9 @@ class _Seen:
     extra: Mapping[str, object]
     logged_at: float
     repeats: int = 0  # since the last line logged
+    # the newest occurrence, when it says the database could not be reached: a summary of
+    # such errors carries it, so that an outage (common/outage.py) folds it while it lasts
+    lost_connection: BaseException | None = None
 
 
 class ErrorLog:
@@ -79,6 +84,7 @@ class ErrorLog:
         if seen.repeats == 0:
             self._pending += 1
         seen.repeats += 1
+        seen.lost_connection = exc_info if is_connection_error(exc_info) else None
         if now - seen.logged_at >= self.window_s:
             self._summarise(key, seen, now)
 
@@ -101,6 +107,7 @@ class ErrorLog:
             seen.repeats,
             now - seen.logged_at,
             extra={**seen.extra, "repeated": seen.repeats},
+            exc_info=seen.lost_connection,
         )
         seen.repeats = 0
         seen.logged_at = now

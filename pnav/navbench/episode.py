@@ -124,6 +124,7 @@ class Watcher:
         self.collisions: list[tuple[float, float, float, str]] = []
         self.first_decision: float | None = None
         self.checked = 0  # odometry points already looked at for arrival
+        self._events: set[tuple[object, object]] = set()  # collision events seen (run, seq)
 
     def on_odom(self, _key: str, payload: bytes) -> None:
         m = bus.unpack(payload)
@@ -133,6 +134,11 @@ class Watcher:
     def on_collision(self, _key: str, payload: bytes) -> None:
         m = bus.unpack(payload)
         with self.lock:
+            # the sim resends an event until the bridge acknowledges it: count it once
+            event = (m.get("run"), m.get("seq"))
+            if event[0] is not None and event in self._events:
+                return
+            self._events.add(event)
             self.collisions.append((float(m["stamp"]), m["x"], m["y"], str(m["other"])))
 
     def on_cmd_vel(self, _key: str, payload: bytes) -> None:

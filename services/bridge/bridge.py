@@ -3,8 +3,10 @@
 Wiring only; each concern lives in its own module:
 
 - sensors: ``pnav/robot/*/{scan,odom,battery,collision}`` -> :mod:`.messages` (validate)
-  -> :mod:`.writer` (batched INSERTs + notifications). Zenoh callbacks only hand the bytes
-  to the loop (``bus.subscribe``), so a slow INSERT never stalls Zenoh's threads;
+  -> :mod:`.writer` (batched INSERTs + notifications) -> :mod:`.acks` (a collision event's
+  committed row acknowledged to the robot, which resends it until then). Zenoh callbacks
+  only hand the bytes to the loop (``bus.subscribe``), so a slow INSERT never stalls
+  Zenoh's threads;
 - world: :mod:`.world_sync` and :mod:`.world` (robot, map and charging_station rows);
 - commands: :mod:`.commands` (command2robot -> cmd_vel, clamp, :mod:`.watchdog`);
 - housekeeping here: ``prune_sensor_rows()`` every ``prune_period_s``, the counters logged
@@ -29,6 +31,7 @@ from common.config import ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime, run_service
 from common.tasks import cancel_and_wait
+from services.bridge.acks import CollisionAcks
 from services.bridge.commands import CommandRelay
 from services.bridge.counters import Counters, RateLimitedLog
 from services.bridge.messages import UNKNOWN_ROBOT, LaserScan, MalformedMessage, parse_sensor
@@ -60,6 +63,8 @@ class Bridge:
             self.counters,
             max_pending=self.settings.max_pending_rows,
         )
+        self.acks = CollisionAcks(runtime.zenoh, self.counters, runtime.ledger)
+        self.writer.on_committed = self.acks.committed
         self.world = WorldSync(
             runtime.zenoh,
             db,
@@ -204,7 +209,7 @@ class Bridge:
             try:
                 await self._load_robots()
             except Exception as exc:
-                self._malformed_log.warning("robots", "robot table read failed", error=repr(exc))
+                self._malformed_log.warning("robots", "robot table read failed", error=exc)
             again = self._reload_again
 
     # -- lockstep --------------------------------------------------------------------------
@@ -257,7 +262,7 @@ class Bridge:
             try:
                 deleted = await self.prune()
             except Exception as exc:
-                self._malformed_log.warning("prune", "prune_sensor_rows failed", error=repr(exc))
+                self._malformed_log.warning("prune", "prune_sensor_rows failed", error=exc)
                 continue
             if deleted:
                 log.event(logger, logging.DEBUG, "sensor rows pruned", deleted=deleted)

@@ -229,7 +229,7 @@ class CommandRelay:
                     self.limits.check(command.robot_id, limits)
                     self._consider(command)
             except Exception as exc:  # Postgres away: the watchdog still stops the robots
-                self._alerts.warning("read", "command2robot read failed", error=repr(exc))
+                self._alerts.warning("read", "command2robot read failed", error=exc)
                 await asyncio.sleep(0.1)
             finally:
                 self._polling = False
@@ -296,7 +296,7 @@ class CommandRelay:
         try:
             self._send(robot, verdict.linear, angular, cmd.id, decided_stamp=cmd.stamp)
         except Exception as exc:  # Zenoh closing
-            self._alerts.warning("send", "cmd_vel publish failed", error=repr(exc))
+            self._alerts.warning("send", "cmd_vel publish failed", error=exc)
             return
         self.counters.commands_out += 1
         if verdict.noted:  # after the send: the note never delays the cmd_vel
@@ -334,7 +334,7 @@ class CommandRelay:
         try:
             self._send(robot, 0.0, 0.0, None, reliable=True)
         except Exception as exc:
-            self._alerts.warning("send", "cmd_vel publish failed", error=repr(exc))
+            self._alerts.warning("send", "cmd_vel publish failed", error=exc)
             return
         self._stopped.add(robot)
         self.safety.sent_stop(robot)

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from common import log
+from common.outage import is_connection_error
 
 
 @dataclass
@@ -39,6 +40,7 @@ class Counters:
     worlds_applied: int = 0
     worlds_unchanged: int = 0
     worlds_malformed: int = 0
+    collision_acks: int = 0  # collision events acknowledged to the robot (acks.py)
 
     def malformed_total(self, topic: str | None = None) -> int:
         return sum(n for (t, _), n in self.malformed.items() if topic is None or t == topic)
@@ -65,6 +67,7 @@ class Counters:
             "worlds_applied": self.worlds_applied,
             "worlds_unchanged": self.worlds_unchanged,
             "worlds_malformed": self.worlds_malformed,
+            "collision_acks": self.collision_acks,
         }
 
 
@@ -73,6 +76,11 @@ class RateLimitedLog:
 
     The key must come from a small set (topic and reason, never a robot id taken from the
     wire), or the table of keys itself becomes the flood.
+
+    An ``error`` field that is an exception is logged as its repr; when it says the database
+    could not be reached, the record also carries it, so that while Postgres is down the
+    process's outage (common/outage.py) folds the line into its periodic summary: one
+    outage, a bounded handful of lines, whatever the number of tables and loops failing.
     """
 
     def __init__(self, logger: logging.Logger, period_s: float = 5.0) -> None:
@@ -92,6 +100,13 @@ class RateLimitedLog:
         suppressed = self._suppressed.pop(key, 0)
         if suppressed:
             fields["suppressed"] = suppressed
+        error = fields.get("error")
+        if isinstance(error, BaseException):
+            fields["error"] = repr(error)
+            if is_connection_error(error):
+                if self.logger.isEnabledFor(level):
+                    self.logger.log(level, msg, extra=fields, exc_info=error)
+                return True
         log.event(self.logger, level, msg, **fields)
         return True
 

@@ -41,6 +41,7 @@ MAX_ABS_ANGULAR_RPS: Final = 1000.0
 MAX_ABS_POWER_W: Final = 1.0e5
 MAX_RANGE_M: Final = 1.0e4
 MAX_TEXT: Final = 256
+MAX_RUN: Final = 64  # a collision event's run id (migration 7's CHECK)
 MAX_SEQ: Final = 2**63 - 1  # bigint
 # percentage is energy/capacity x 100; float rounding may land a hair outside [0, 100]
 PERCENT_SLACK: Final = 1e-6
@@ -125,6 +126,8 @@ class Collision:
     other: str
     x: float
     y: float
+    # the robot driver's run (CONTRACT.md): with seq, names the event across resends
+    run: str | None = None
 
 
 SensorRecord = Odometry | LaserScan | BatteryState | Collision
@@ -293,6 +296,7 @@ def parse_collision(robot_id: str, body: dict[str, Any]) -> Collision:
         text(body, "other"),
         number(body, "x", -p, p),
         number(body, "y", -p, p),
+        None if body.get("run") is None else text(body, "run", MAX_RUN),
     )
 
 

@@ -84,7 +84,7 @@ class SafetyNotes:
                     await conn.executemany(_UPDATE, batch)
             except Exception as exc:  # Postgres away: the note is lost, the robot is safe
                 self.failed += len(batch)
-                self._alerts.warning("update", "safety note not written", error=repr(exc))
+                self._alerts.warning("update", "safety note not written", error=exc)
                 await asyncio.sleep(0.2)
             else:
                 self.written += len(batch)

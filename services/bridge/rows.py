@@ -51,9 +51,13 @@ SELECT * FROM unnest($1::text[], $2::float8[], $3::float8[], $4::float8[], $5::f
                      $6::bool[], $7::float8[])
 RETURNING id, robot_id"""
 
+# A resent event (CONTRACT.md, "Robot and sim") finds its row there and adds none; RETURNING
+# then gives fewer rows than the batch, and the writer sends no image (a plain hint).
 _COLLISION_SQL = f"""
-INSERT INTO {keys.COLLISION_EVENT} (robot_id, stamp, other, x, y)
-SELECT * FROM unnest($1::text[], $2::float8[], $3::text[], $4::float8[], $5::float8[])
+INSERT INTO {keys.COLLISION_EVENT} (robot_id, stamp, other, x, y, seq, run)
+SELECT * FROM unnest($1::text[], $2::float8[], $3::text[], $4::float8[], $5::float8[],
+                     $6::int8[], $7::text[])
+ON CONFLICT (robot_id, run, seq) DO NOTHING
 RETURNING id, robot_id"""
 
 
@@ -158,12 +162,22 @@ def _collision_args(rows: Sequence[Any]) -> list[Any]:
         [c.other for c in r],
         [c.x for c in r],
         [c.y for c in r],
+        [c.seq for c in r],
+        [c.run for c in r],
     ]
 
 
 def _collision_image(record: Any) -> Image:
     c: Collision = record
-    return {"robot_id": c.robot_id, "stamp": c.stamp, "other": c.other, "x": c.x, "y": c.y}
+    return {
+        "robot_id": c.robot_id,
+        "stamp": c.stamp,
+        "other": c.other,
+        "x": c.x,
+        "y": c.y,
+        "seq": c.seq,
+        "run": c.run,
+    }
 
 
 @dataclass(frozen=True)
@@ -174,13 +188,18 @@ class SensorTable:
     sql: str
     args: Callable[[Sequence[Any]], list[Any]]
     image: Callable[[Any], Image]
+    # committed with synchronous_commit on: the robot forgets an event once it is
+    # acknowledged, so its row must survive a Postgres crash (writer.py)
+    durable: bool = False
 
 
 SENSOR_TABLES: dict[type, SensorTable] = {
     Odometry: SensorTable(keys.ODOMETRY, _ODOMETRY_SQL, _odometry_args, _odometry_image),
     LaserScan: SensorTable(keys.LASER_SCAN, _LASER_SCAN_SQL, _laser_scan_args, _laser_scan_image),
     BatteryState: SensorTable(keys.BATTERY, _BATTERY_SQL, _battery_args, _battery_image),
-    Collision: SensorTable(keys.COLLISION_EVENT, _COLLISION_SQL, _collision_args, _collision_image),
+    Collision: SensorTable(
+        keys.COLLISION_EVENT, _COLLISION_SQL, _collision_args, _collision_image, durable=True
+    ),
 }
 
 

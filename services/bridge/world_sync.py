@@ -108,7 +108,7 @@ class WorldSync:
             try:
                 self.query()
             except Exception as exc:
-                self._alerts.warning("query", "world query failed", error=repr(exc))
+                self._alerts.warning("query", "world query failed", error=exc)
             await asyncio.sleep(self.retry_s)
 
     def idle(self) -> bool:
@@ -148,7 +148,7 @@ class WorldSync:
             await upsert_world(self.db, world)
         except Exception as exc:
             # Postgres away or refusing: try again with the next republication
-            self._alerts.warning("upsert", "world not written", error=repr(exc))
+            self._alerts.warning("upsert", "world not written", error=exc)
             await asyncio.sleep(1.0)
             return
         self.world = world

@@ -17,7 +17,11 @@ a commit returns, and its rows are visible to every reader, without waiting for 
 reach the disk. That fsync was most of the sensor-to-row latency (1-4 ms of the ~2-5 ms
 measured with it on). The price: if Postgres itself crashes, the last few hundred
 milliseconds of sensor rows may be lost (never corrupted), which is harmless for data that
-is stale a moment later anyway. Commands and the world use the service's normal pool.
+is stale a moment later anyway (``pnav bench faults`` sees it: a row or two of odometry lost
+to a kill -9 of the postmaster). Collision events are the exception: the robot forgets an
+event once its row is acknowledged (acks.py), so their batches commit with
+``synchronous_commit`` on, in a transaction of their own. Commands and the world use the
+service's normal pool.
 """
 
 from __future__ import annotations
@@ -90,6 +94,9 @@ class SensorWriter:
         self._closing = False
         # called on the loop whenever a table's writing goes idle (lockstep's reporter)
         self.on_idle: Callable[[], None] | None = None
+        # called with each batch once its rows are committed (or were already there), and
+        # with a row the database refused for its values: the collision acks (acks.py)
+        self.on_committed: Callable[[list[SensorRecord]], None] | None = None
         self._tables = {spec.name: _Table(spec) for spec in SENSOR_TABLES.values()}
 
     async def start(self) -> None:
@@ -185,7 +192,7 @@ class SensorWriter:
             # milliseconds anyway), back off a little, and carry on with newer data.
             self.counters.dropped[table.name] += len(batch)
             self._alerts.warning(
-                ("db_error", table.name), "sensor write failed", table=table.name, error=repr(exc)
+                ("db_error", table.name), "sensor write failed", table=table.name, error=exc
             )
             await asyncio.sleep(0.2)
             return
@@ -198,8 +205,9 @@ class SensorWriter:
                 return
             self.counters.rejected_by_db[table.name] += 1
             self._alerts.warning(
-                ("rejected", table.name), "row refused", table=table.name, error=repr(exc)
+                ("rejected", table.name), "row refused", table=table.name, error=exc
             )
+            self._committed(batch)
             return
         self.counters.rows_written[table.name] += len(rows)
         notify = self.notifier.notify
@@ -209,14 +217,28 @@ class SensorWriter:
             try:
                 notify(table.name, robot_id, row_id, image)
             except Exception as exc:  # Zenoh closing: the row is written, the hint is lost
-                self._alerts.warning(("notify", table.name), "notify failed", error=repr(exc))
+                self._alerts.warning(("notify", table.name), "notify failed", error=exc)
         self.counters.batches[table.name] += 1
         if len(batch) > self.counters.largest_batch[table.name]:
             self.counters.largest_batch[table.name] = len(batch)
+        self._committed(batch)
+
+    def _committed(self, batch: list[SensorRecord]) -> None:
+        if self.on_committed is None:
+            return
+        try:
+            self.on_committed(batch)
+        except Exception as exc:  # the rows are written; the robot resends, nothing doubles
+            self._alerts.warning(("committed", "hook"), "after-commit hook failed", error=exc)
 
     async def _insert(self, table: _Table, batch: list[SensorRecord]) -> list[tuple[int, str]]:
         if self.pool is None:
             raise ConnectionFailure("the sensor writer is not started")
         async with self.pool.acquire() as conn:
-            records = await conn.fetch(table.spec.sql, *table.spec.args(batch))
+            if table.spec.durable:
+                async with conn.transaction():
+                    await conn.execute("SET LOCAL synchronous_commit TO on")
+                    records = await conn.fetch(table.spec.sql, *table.spec.args(batch))
+            else:
+                records = await conn.fetch(table.spec.sql, *table.spec.args(batch))
         return [(r[0], r[1]) for r in records]

@@ -21,6 +21,7 @@ from common.log import event
 from services.sim.clock import Pacer
 from services.sim.gate import Gate
 from services.sim.lockstep import Barrier
+from services.sim.outbox import CollisionOutbox
 from services.sim.sim import SimConfig, Simulation
 from services.sim.trace import CMD_VEL, Tracer
 from services.sim.world import World
@@ -43,6 +44,8 @@ LISTENERS_WAIT_S = 1.0
 WORLD_PERIOD_S = 1.0
 # at most one log line per robot per this many seconds about bad cmd_vel
 BAD_COMMAND_LOG_PERIOD_S = 1.0
+# how often (wall s) the loop looks for collision events to resend (outbox.py)
+RESEND_CHECK_S = 0.1
 
 
 class SimNode:
@@ -68,20 +71,18 @@ class SimNode:
         # in lockstep a step's readings wait here, to go out one at a time
         self._held: list[tuple[str, str, dict[str, Any]]] = []
         self._publishers: dict[tuple[str, str], zenoh.Publisher] = {}
+        # collision events are held until acknowledged and resent meanwhile (outbox.py)
+        self.outbox = CollisionOutbox()
         for spec in world.robots:
             for topic in keys.SENSOR_TOPICS:
-                # a lost collision event cannot be recomputed, so it waits for room; sensor
-                # streams drop under congestion instead of stalling the sim
-                congestion = (
-                    zenoh.CongestionControl.BLOCK
-                    if topic == keys.COLLISION
-                    else zenoh.CongestionControl.DROP
-                )
+                # Every topic drops under congestion rather than stall the sim: a reading is
+                # replaced by the next, a collision event is resent until acknowledged (a
+                # blocking put would stop the physics for as long as a router is frozen).
                 # express: sent at once, not held for Zenoh's batching (up to a millisecond
                 # per link, twice through the router, measured in sense-to-act latency)
                 self._publishers[(spec.robot_id, topic)] = session.declare_publisher(
                     keys.robot_key(spec.robot_id, topic),
-                    congestion_control=congestion,
+                    congestion_control=zenoh.CongestionControl.DROP,
                     express=True,
                 )
         self._clock_pub = session.declare_publisher(keys.SIM_CLOCK, express=True)
@@ -93,6 +94,9 @@ class SimNode:
         self._bad_logged: dict[str, float] = {}
         self._subscriber = subscribe_threaded(
             session, keys.robot_watch(keys.CMD_VEL), self._on_cmd_vel
+        )
+        self._ack_subscriber = subscribe_threaded(
+            session, keys.robot_watch(keys.COLLISION_ACK), self.outbox.on_ack
         )
         self._queryable = session.declare_queryable(keys.SIM_WORLD, self._on_world_query)
         self._token = session.liveliness().declare_token(keys.alive_key(SERVICE, instance))
@@ -139,10 +143,26 @@ class SimNode:
         self._send(robot, topic, message)
 
     def _send(self, robot: str, topic: str, message: dict[str, Any]) -> None:
+        if topic == keys.COLLISION:
+            message = {**message, "run": self.outbox.run}
+            self.outbox.sent(robot, message)
         payload = pack(message)
         if self.tracer is not None:
             self.tracer.record(topic, robot, message["seq"])
         self._publishers[(robot, topic)].put(payload)
+
+    def resend_collisions(
+        self, barrier: Barrier | None = None, stop: threading.Event | None = None
+    ) -> None:
+        """Send again every collision event not acknowledged within the outbox's resend_s
+        (in lockstep each counted and waited for, as any reading)."""
+        for robot, message in self.outbox.due():
+            key = keys.robot_key(robot, keys.COLLISION)
+            if barrier is not None:
+                barrier.published(key)
+            self._publishers[(robot, keys.COLLISION)].put(pack(message))
+            if barrier is not None:
+                barrier.wait(stop or threading.Event())
 
     def publish_clock(self) -> None:
         # in lockstep the clock stands still between messages: rate 0, no extrapolation
@@ -164,7 +184,7 @@ class SimNode:
         clock_period = 1.0 / CLOCK_HZ
         self.publish_world()
         next_world = time.monotonic() + WORLD_PERIOD_S
-        next_clock = 0.0
+        next_clock = next_resend = 0.0
         self._next_gate_clock = 0.0
         self._await_listeners(stop)
         self._log_running(max_lag=None if self.gate is None else self.gate.max_lag_s)
@@ -176,6 +196,9 @@ class SimNode:
             if now >= next_world:
                 self.publish_world()
                 next_world = now + WORLD_PERIOD_S
+            if now >= next_resend:
+                self.resend_collisions()
+                next_resend = now + RESEND_CHECK_S
             if self.tracer is not None:
                 self.tracer.maybe_flush()
             owed = pacer.steps_due(sim.steps)
@@ -255,6 +278,7 @@ class SimNode:
                 barrier.published(keys.robot_key(robot, topic))
                 self._send(robot, topic, message)
                 barrier.wait(stop)
+            self.resend_collisions(barrier, stop)
             if self.tracer is not None:
                 self.tracer.maybe_flush()
         self.publish_clock()
@@ -269,6 +293,10 @@ class SimNode:
             sim_time=round(self.sim.time, 3),
             commands=self.commands_received,
             cmd_timeout_stops=self.sim.cmd_timeout_stops,
+            contacts=self.sim.counts[keys.COLLISION],
+            max_after_command_m=round(self.sim.max_after_command_m, 4),
+            collisions_resent=self.outbox.resent,
+            collisions_unacked=self.outbox.waiting(),
             **self.gate_figures(),
         )
 
@@ -325,6 +353,7 @@ class SimNode:
             self.barrier.close()
         entities: list[Any] = [
             self._subscriber,
+            self._ack_subscriber,
             self._queryable,
             self._token,
             self._clock_pub,

@@ -111,6 +111,10 @@ class Simulation:
             math.ceil(config.cmd_timeout_s / self.dt - 1e-9) if config.cmd_timeout_s > 0 else 0
         )
         self.cmd_timeout_stops = 0  # robots whose wheels the timeout stopped
+        # metres each robot moved since it last took a command, and the most any did: how
+        # far a robot goes on a command stream that stopped (pnav bench faults)
+        self._after_command_m = [0.0 for _ in self.robots]
+        self.max_after_command_m = 0.0
         self.counts: dict[str, int] = {SCAN: 0, ODOM: 0, BATTERY: 0, COLLISION: 0}
         # contact tests skipped per robot while its clearance lasts; the closing speed bound
         # is two robots driving at each other flat out
@@ -143,6 +147,7 @@ class Simulation:
             for i, (v, w) in pending.items():
                 self.robots[i].cmd_linear, self.robots[i].cmd_angular = v, w
                 self._commanded_at[i] = self.steps
+                self._after_command_m[i] = 0.0
         if self._timeout_steps:
             self._time_out_commands()
         self.steps += 1
@@ -188,6 +193,13 @@ class Simulation:
         return robot.drive_linear, robot.drive_angular
 
     def _advance(self, i: int, robot: RobotState) -> None:
+        x0, y0 = robot.x, robot.y
+        self._move(i, robot)
+        if robot.x != x0 or robot.y != y0:
+            self._after_command_m[i] += math.hypot(robot.x - x0, robot.y - y0)
+            self.max_after_command_m = max(self.max_after_command_m, self._after_command_m[i])
+
+    def _move(self, i: int, robot: RobotState) -> None:
         bat = self.batteries[i]
         v, w = self._drive(robot, bat.empty)
         if self._unchecked[i] > 0:

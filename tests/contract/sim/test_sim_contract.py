@@ -62,7 +62,7 @@ BATTERY = {
     "charging": bool,
     "power_w": float,
 }
-COLLISION = {"stamp": float, "seq": int, "other": str, "x": float, "y": float}
+COLLISION = {"stamp": float, "seq": int, "other": str, "x": float, "y": float, "run": str}
 CLOCK = {"stamp": float, "rate": float}
 WORLD = {"name": str, "map": dict, "robots": list, "charging_stations": list}
 WORLD_MAP = {
@@ -271,8 +271,10 @@ def test_collision_event_on_the_wire(zenoh_settings: ZenohSettings, listener: Li
     key = keys.robot_key("r1", keys.COLLISION)
     with running_sim(zenoh_settings, rate=0.0, **HELD):
         listener.send("r1", cmd(0.22, 0.0))
-        (event,) = listener.wait(lambda: listener.of(key), timeout=20.0)
+        # the first copy: nobody acknowledges it here, so the sim sends it again later
+        event = listener.wait(lambda: listener.of(key), timeout=20.0)[0]
     check(event, COLLISION)
+    assert 1 <= len(event["run"]) <= 64
     assert event["other"] == "wall" and event["seq"] == 0
     assert event["x"] == pytest.approx(5.0 - 0.105, abs=0.002)
     # the robot set off between the last odom at rest and the first one moving
@@ -281,6 +283,26 @@ def test_collision_event_on_the_wire(zenoh_settings: ZenohSettings, listener: Li
     at_rest, set_off = odom[moving - 1]["stamp"], odom[moving]["stamp"]
     drive = (5.0 - 0.105 - 1.0) / 0.22
     assert at_rest + drive - 0.01 <= event["stamp"] <= set_off + drive + 0.01
+
+
+def test_a_collision_event_is_resent_until_acknowledged_and_then_no_more(
+    zenoh_settings: ZenohSettings, listener: Listener
+) -> None:
+    key = keys.robot_key("r1", keys.COLLISION)
+    with running_sim(zenoh_settings, rate=0.0, cmd_timeout_s=0.0) as node:
+        listener.send("r1", cmd(0.22, 0.0))
+        listener.wait(lambda: listener.of(key), timeout=20.0)
+        listener.send("r1", cmd(0.0, 0.0))  # against the wall, standing: one contact
+        listener.wait(lambda: len(listener.of(key)) >= 3, timeout=20.0)  # every 0.5 s wall
+        copies = listener.of(key)
+        assert all(c == copies[0] for c in copies)  # the same event, not new ones
+        assert node.sim.counts[keys.COLLISION] == 1
+        ack = {"run": copies[0]["run"], "seq": copies[0]["seq"]}
+        listener.session.put(keys.robot_key("r1", keys.COLLISION_ACK), pack(ack))
+        listener.wait(lambda: node.outbox.waiting() == 0, timeout=20.0)
+        sent = len(listener.of(key))
+        time.sleep(3 * 0.5)  # three resend periods: nothing more may come
+        assert len(listener.of(key)) <= sent + 1  # at most one already on its way
 
 
 def test_a_robot_whose_cmd_vel_stops_coming_stops_after_half_a_second_of_sim_time(

@@ -154,3 +154,15 @@ def test_the_option_and_its_variable(open_floor: Path, monkeypatch: pytest.Monke
     monkeypatch.setenv("PNAV_SIM_CMD_TIMEOUT", "-1")
     with pytest.raises(ConfigError, match="PNAV_SIM_CMD_TIMEOUT"):
         build(parse_args(world))
+
+
+def test_the_most_a_robot_drove_after_its_last_command_is_measured(sim: Simulation) -> None:
+    for _ in range(10):  # commands every 0.1 s: at most 0.02 m on any one of them
+        sim.set_command("r1", 0.2, 0.0)
+        sim.run_for(0.1)
+    assert sim.max_after_command_m == pytest.approx(0.2 * 0.1, abs=1e-9)
+    # the stream stops: the timeout zeroes the command after 0.1 m, and the motors brake at
+    # their deceleration, covering the ramp's worth more
+    sim.run_for(2.0)
+    braking = ramp_loss(0.2, ACCEL, sim.dt)
+    assert sim.max_after_command_m == pytest.approx(0.2 * 0.5 + braking, abs=1e-9)
