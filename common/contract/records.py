@@ -30,6 +30,10 @@ class Robot:
     max_angular_rps: float
     footprint_radius_m: float
     battery_capacity_wh: float
+    # migration 5 (defaults: the Burger's, as the columns'): what a local controller's
+    # dynamic window is made of
+    max_linear_accel_mps2: float = 2.5
+    max_angular_accel_rps2: float = 3.2
 
 
 @dataclass(frozen=True)
@@ -127,7 +131,8 @@ class ChargingStation:
 async def robots(db: Executor) -> list[Robot]:
     rows = await db.fetch(
         "SELECT robot_id, max_linear_mps, max_angular_rps, footprint_radius_m, "
-        "battery_capacity_wh FROM robot ORDER BY robot_id"
+        "battery_capacity_wh, max_linear_accel_mps2, max_angular_accel_rps2 "
+        "FROM robot ORDER BY robot_id"
     )
     return [Robot(**dict(r)) for r in rows]
 

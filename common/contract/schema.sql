@@ -519,3 +519,16 @@ ALTER TABLE retention_policy DROP CONSTRAINT retention_policy_table_name_check;
 ALTER TABLE retention_policy ADD CONSTRAINT retention_policy_table_name_check
     CHECK (table_name IN ('odometry', 'laser_scan', 'battery', 'collision_event', 'planned_path'));
 INSERT INTO retention_policy (table_name, keep_rows_per_robot) VALUES ('planned_path', 200);
+
+-- migration 7: GOTO_FAST, the robot's own speed with a local controller and recovery
+--
+-- (Numbered 8 in the plan of the session that added it: renumber on merge.) The planner
+-- plans and publishes the path (planned_path), decides arrival and failure, and does not
+-- drive ("planner_drives": false); the dwa local controller drives along the path at the
+-- robot's limits (docs/CONTROLLER.md); the planner's recovery rule backs up, rotates and
+-- re-plans when the robot is stuck, then gives the goal up with a reason
+-- (docs/PLANNER.md, "Recovery"); safety_stop keeps the last word.
+INSERT INTO strategy (code, planner_scenario, controller_scenarios, params, description) VALUES
+    ('GOTO_FAST', 'turn_then_move', '{dwa,safety_stop}',
+     '{"target": "goal", "planner_drives": false, "recovery": true, "battery_wh_per_m": 0.006, "battery_reserve_wh": 0.05}',
+     'go to the goal at the robot''s speed: dwa along the planned path, recovery when stuck, safety_stop');

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from common.contract import keys
+from common.contract.planned_path import PlannedPath, planned_path_of
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot, Strategy
 from common.engine import Engine
 from pnav.monolith.contract import MemoryContract, Row
@@ -27,8 +28,15 @@ _ROBOT = (
     *("robot_id", "max_linear_mps", "max_angular_rps", "footprint_radius_m"),
     "battery_capacity_wh",
 )
+_ACCEL = ("max_linear_accel_mps2", "max_angular_accel_rps2")
 _ODOMETRY = ("id", "robot_id", "stamp", "x", "y", "yaw", "linear_mps", "angular_rps")
 _SCAN = ("id", "robot_id", "stamp", "angle_min", "angle_increment", "range_min", "range_max")
+
+
+def _robot(row: Row) -> Robot:
+    # the acceleration limits are the table's defaults (the Burger's) unless the row has them
+    accel = {c: row[c] for c in _ACCEL if row.get(c) is not None}
+    return Robot(**_pick(row, _ROBOT), **accel)
 
 
 def _pick(row: Row, columns: tuple[str, ...]) -> dict[str, Any]:
@@ -51,7 +59,7 @@ class MemoryControllerSource:
 
     async def robots(self) -> list[Robot]:
         rows = self.contract[keys.ROBOT].all_rows()
-        return sorted((Robot(**_pick(r, _ROBOT)) for r in rows), key=lambda r: r.robot_id)
+        return sorted((_robot(r) for r in rows), key=lambda r: r.robot_id)
 
     async def active_strategies(self) -> dict[str, ActiveStrategy]:
         # the strategy join; a robot's newest active_strategy row is its row (an upsert)
@@ -81,6 +89,10 @@ class MemoryControllerSource:
 
     async def newest_odometry(self, robot_id: str) -> Odometry | None:
         return _odometry(self.contract[keys.ODOMETRY].newest(robot_id))
+
+    async def newest_planned_path(self, robot_id: str) -> PlannedPath | None:
+        row = self.contract[keys.PLANNED_PATH].newest(robot_id)
+        return None if row is None else planned_path_of(row)
 
     async def recommend(self, recommendation: Recommendation) -> int:
         r = recommendation
