@@ -37,7 +37,7 @@ from common.engine.supervisor import Ticket
 from services.planner.paths import PathKey, PathRow, empty_key, empty_row, route_row
 from services.planner.routes import Target
 from services.planner.target import RuleKey, Spec, TargetRule
-from services.planner.tracking import Progress, heading_error
+from services.planner.tracking import Progress, Route, heading_error
 from services.planner.view import PlannerView
 from services.planner.world import RobotInfo, RobotState
 
@@ -256,9 +256,9 @@ class MoveScenario(TargetRule):
 
     def _path_gone(self) -> None:
         """No target any more (cancelled, or the strategy has none): an empty path, once,
-        if a path was published."""
-        key = empty_key(None)
-        if self.published is not None and self.published != key:
+        if a route was published."""
+        if isinstance(self.published, Route):  # an empty one (reached, failed) says it already
+            key = empty_key(None)
             self.path_due = (key, empty_row(self.robot_id, self.sim_now, None))
 
     def conditions(self) -> Iterator[bool]:
