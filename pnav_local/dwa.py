@@ -71,7 +71,7 @@ def choose(
 ) -> Choice | None:
     """Score the dynamic window for this scan (None: the path has no point)."""
     top = robot.max_linear_mps
-    lookahead = p.lookahead_m or max(0.8, top * p.horizon_s)
+    lookahead = p.lookahead_m or max(0.8, top * (p.horizon_s + p.delay_s) + 0.3)
     local = tr.localise(path_in_robot_frame(path, odom), lookahead)
     if local is None:
         return None

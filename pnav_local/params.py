@@ -25,7 +25,7 @@ class DwaParams:
     window_s: float = 0.3  # the acceleration window: until the next decision takes effect
     delay_s: float = 0.1  # scan to wheels: the robot keeps its velocity meanwhile
     margin_m: float = 0.05  # kept beyond the footprint radius
-    lookahead_m: float = 0.0  # the carrot along the path; 0: max(0.8 m, top speed x horizon)
+    lookahead_m: float = 0.0  # the carrot along the path; 0: beyond what the horizon reaches
     clearance_cap_m: float = 0.5  # gaps beyond this score no better
     obstacle_range_m: float = 0.0  # hits farther than this are ignored; 0: what the horizon reaches
     # safety_stop's reach (its own params): the speed is kept below what would trigger it

@@ -49,7 +49,8 @@ def surroundings(
     ranges = scan.ranges.astype(np.float64)
     angles = scan.angles()
     valid = np.isfinite(ranges) & (ranges >= scan.range_min - 1e-4)
-    x, y = ranges * np.cos(angles), ranges * np.sin(angles)
+    finite = np.where(valid, ranges, 0.0)  # inf x cos(90 deg) would be nan
+    x, y = finite * np.cos(angles), finite * np.sin(angles)
     behind = valid & (x < 0) & (np.abs(y) < footprint_m + 0.05)
     behind &= -x < footprint_m + back_up_m + REAR_MARGIN_M
     capped = np.where(valid, np.minimum(ranges, FREER_HORIZON_M), FREER_HORIZON_M)
