@@ -97,6 +97,9 @@ def choose(
         v_cap=v_cap,
     )
     start = tr.start_pose(odom.linear_mps, odom.angular_rps, p.delay_s)
+    # only what this window's arcs can come near matters to them
+    near = math.hypot(start[0], start[1]) + float(win.v.max()) * p.horizon_s + radius + 0.5
+    points = points[np.hypot(points[:, 0], points[:, 1]) <= near]
     poses = tr.rollout(win, start, p.horizon_s, p.steps)
     gaps = tr.distances(*poses[:2], points)
     start_gap = float(tr.distances(np.array([start[0]]), np.array([start[1]]), points)[0])
