@@ -128,7 +128,8 @@ def merge_obstacles(points: FloatArray, cell_m: float = MERGE_M) -> FloatArray:
     cells = np.floor(points / cell_m).astype(np.int64)
     key = cells[:, 0] * 1_000_003 + cells[:, 1]  # one integer per cell: a 1-D unique
     _, first = np.unique(key, return_index=True)
-    return points[np.sort(first)]
+    merged: FloatArray = points[np.sort(first)]
+    return merged
 
 
 def distances(xs: FloatArray, ys: FloatArray, obstacles: FloatArray) -> FloatArray:
