@@ -80,6 +80,23 @@ def _stack_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--battery", type=_percent, help="start charge of every robot, percent")
 
 
+def _record_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--record",
+        type=Path,
+        metavar="FILE",
+        help="record the mission into FILE as MCAP, Foxglove's schemas (docs/RECORDING.md)",
+    )
+
+
+def _record_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    record = commands.add_parser("record", help="MCAP recordings: `pnav record info FILE`")
+    verbs = record.add_subparsers(dest="record", metavar="VERB", required=True)
+    info = verbs.add_parser("info", help="channels, schemas, messages, sim time, robots")
+    info.add_argument("file", type=Path, help="an MCAP file (pnav up/demo --record)")
+    info.add_argument("--json", metavar="FILE", help="also write it as JSON ('-': stdout only)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="pnav", description="proactive-nav: rule-based robot navigation")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
@@ -111,6 +128,8 @@ def build_parser() -> argparse.ArgumentParser:
         "controller='python -m examples.sql_controller' (docs/SWAP.md; repeatable)",
     )
 
+    _record_option(up)
+
     goal = commands.add_parser("goal", help="send a robot to X Y (replaces its goal)")
     goal.add_argument("x", type=_coordinate, help=f"metres, within +-{_GOAL_M:.0f}")
     goal.add_argument("y", type=_coordinate, help=f"metres, within +-{_GOAL_M:.0f}")
@@ -141,6 +160,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo = commands.add_parser("demo", help="the demo mission (see README)")
     demo.add_argument("--json", metavar="FILE", help="also write the summary as JSON")
     demo.add_argument("--rate", default=None, help="sim rate (default: the demo's own)")
+    _record_option(demo)
+    _record_parser(cast("argparse._SubParsersAction[argparse.ArgumentParser]", commands))
 
     bench = commands.add_parser("bench", help="benchmarks: print figures and JSON")
     benches = bench.add_subparsers(dest="bench", metavar="BENCH", required=True)
@@ -264,7 +285,12 @@ def dispatch(args: argparse.Namespace) -> int:
     if args.command == "demo":
         from pnav import demo
 
-        return demo.run(args.json, args.rate)
+        record = launcher_record(args.record)
+        return demo.run(args.json, args.rate, record)
+    if args.command == "record":
+        from pnav.record import info
+
+        return info.run(args.file, args.json)
     if args.command == "bench":
         return _bench(args)
     if args.command == "worlds":
@@ -290,10 +316,18 @@ def _up(args: argparse.Namespace) -> int:
         echo=not args.quiet,
         replicas=parse_replicas(args.replicas),
         replace=parse_replace(args.replace),
+        record=launcher_record(args.record),
     )
     if args.lockstep:
         options.extra_env.update(lockstep_env(options))
     return uvloop.run(up(options))
+
+
+def launcher_record(path: Path | None) -> Path | None:
+    """``--record FILE`` checked before the stack starts (None: not recording)."""
+    from pnav.launcher import record_target
+
+    return None if path is None else record_target(path)
 
 
 def _bench(args: argparse.Namespace) -> int:

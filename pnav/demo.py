@@ -142,12 +142,13 @@ def summary_text(summary: dict[str, Any]) -> str:
     )
 
 
-async def demo(rate: str) -> dict[str, Any]:
+async def demo(rate: str, record: Path | None = None) -> dict[str, Any]:
     wall_start = time.monotonic()
     print(f"proactive-nav demo: {WORLD} world, sim rate {rate}, robot {ROBOT}")
     options = StackOptions(
         world=WORLD, rate=rate, robots=1, battery=START_BATTERY_PCT, zenoh_port=None
     )
+    options.record = record
     async with launched(options) as stack:
         print(f"  stack up in {time.monotonic() - wall_start:.1f} s; logs in {stack.log_dir}")
         rt = await Runtime.open(
@@ -181,11 +182,13 @@ async def demo(rate: str) -> dict[str, Any]:
         **{k: v for k, v in log.as_dict().items() if k != "now"},
     }
     print(summary_text(summary))
+    if record is not None:
+        print(f"  recording        {record} (`pnav record info {record}`; open it in Foxglove)")
     return summary
 
 
-def run(json_path: str | None = None, rate: str | None = None) -> int:
-    summary = uvloop.run(demo(rate or RATE))
+def run(json_path: str | None = None, rate: str | None = None, record: Path | None = None) -> int:
+    summary = uvloop.run(demo(rate or RATE, record))
     if json_path:
         Path(json_path).write_text(json.dumps(summary, indent=2, default=str) + "\n")
     return 0 if summary["outcome"] == "success" else 1

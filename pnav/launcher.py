@@ -20,6 +20,7 @@ from common.errors import UsageError
 from common.stack import LocalStack, local_stack
 from pnav import stackfile
 from pnav.supervisor import ProcessSpec, Supervisor
+from pnav.supervisor_report import SupervisorReport
 
 ROOT = Path(__file__).resolve().parents[1]
 WORLDS = ROOT / "worlds"
@@ -54,6 +55,8 @@ class StackOptions:
     replicas: dict[str, int] = field(default_factory=dict)
     # service -> the command run in its place (another implementation, docs/SWAP.md)
     replace: dict[str, list[str]] = field(default_factory=dict)
+    # record the mission into this MCAP file (pnav/record, docs/RECORDING.md)
+    record: Path | None = None
 
 
 @dataclass
@@ -140,6 +143,27 @@ def lockstep_env(options: StackOptions) -> dict[str, str]:
     return {"PNAV_LOCKSTEP": ",".join(names)}
 
 
+def record_target(path: Path) -> Path:
+    """The MCAP file ``--record`` names, checked before anything starts: a recording is never
+    overwritten, and its folder must exist."""
+    path = path.expanduser()
+    if path.exists():
+        raise UsageError(f"--record {path}: the file exists; remove it or choose another name")
+    if not path.parent.is_dir():
+        raise UsageError(f"--record {path}: no folder {path.parent}")
+    return path.resolve()
+
+
+def recorder_spec(local: LocalStack, options: StackOptions) -> list[ProcessSpec]:
+    """The recorder process when ``options.record`` names a file. It comes first: the
+    supervisor stops the last started first, so the recorder stops after every service and
+    the file holds the mission to its end."""
+    if options.record is None:
+        return []
+    argv = [sys.executable, "-m", "pnav.record", str(options.record)]
+    return [ProcessSpec("recorder", argv, {**local.env(), **options.extra_env})]
+
+
 def service_specs(local: LocalStack, options: StackOptions, world: Path) -> list[ProcessSpec]:
     """One process per service; ``options.replicas[name]`` processes for a replicated one,
     named ``name-1``, ``name-2``... with ``PNAV_INSTANCE`` set to that name (a lone process
@@ -173,7 +197,8 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
     world = resolve_world(options.world)
     log_dir = options.log_dir or Path(tempfile.mkdtemp(prefix="pnav-logs-"))
     async with local_stack(options.data_dir, options.zenoh_port) as local:
-        supervisor = Supervisor(service_specs(local, options, world), log_dir, echo=options.echo)
+        specs = recorder_spec(local, options) + service_specs(local, options, world)
+        supervisor = Supervisor(specs, log_dir, echo=options.echo)
         running = RunningStack(local, supervisor, options, world, log_dir)
         stackfile.write(
             stackfile.StackInfo(
@@ -191,11 +216,14 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
         # whether the stack serves `pnav up`, the demo or a test.
         stop_watching = asyncio.Event()
         watcher: asyncio.Task[None] | None = None
+        report = SupervisorReport(supervisor, local.router)  # restarts, for /metrics
         try:
             await supervisor.start()
+            report.start()
             watcher = asyncio.create_task(supervisor.watch(stop_watching), name="supervise")
             yield running
         finally:
+            await report.close()
             stop_watching.set()
             if watcher is not None:
                 try:

@@ -71,4 +71,6 @@ async def up(options: StackOptions) -> int:
         await stop.wait()
         logger.info("stopping")
     logger.info("stack down")
+    if options.record is not None:
+        print(f"recorded to {options.record}: `pnav record info {options.record}`", flush=True)
     return 0

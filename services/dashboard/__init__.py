@@ -1,0 +1,1 @@
+"""The dashboard service: a web page, its endpoints and GET /metrics."""
