@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -43,6 +43,7 @@ class Choice:
     best: int | None
     local: tr.Local
     v_cap: float
+    blocked: bool = False  # the path ahead runs into a lidar hit
 
 
 def obstacles(scan: LaserScan, reach_m: float) -> tr.FloatArray:
@@ -115,6 +116,12 @@ def choose(
     )
     if not ok.any():
         return Choice(win, ok, None, None, local, v_cap)
+    weights = p.weights
+    blocked = tr.path_blocked(local, points, radius + p.margin_m)
+    if blocked:
+        # the path runs into what the lidar shows (the planner has not re-planned yet):
+        # keeping to it is worth little, getting round toward the carrot is what counts
+        weights = replace(weights, path=weights.path * p.blocked_path_factor)
     scores = tr.score(
         win,
         poses,
@@ -125,10 +132,10 @@ def choose(
         max_v=top,
         horizon_s=p.horizon_s,
         clearance_cap_m=p.clearance_cap_m,
-        weights=p.weights,
+        weights=weights,
     )
     best = int(np.argmax(np.where(ok, scores.total, -np.inf)))
-    return Choice(win, ok, scores, best, local, v_cap)
+    return Choice(win, ok, scores, best, local, v_cap, blocked)
 
 
 def command_for(choice: Choice, path: PlannedPath) -> Command:
@@ -143,7 +150,8 @@ def command_for(choice: Choice, path: PlannedPath) -> Command:
         w,
         f"dwa: best of {admitted}/{n} admissible trajectories: progress {s.progress[i]:+.2f},"
         f" path {s.path[i]:.2f}, heading {s.heading[i]:.2f}, clearance {s.clearance[i]:.2f},"
-        f" speed {s.speed[i]:.2f}; {choice.local.remaining_m:.2f} m of path left",
+        f" speed {s.speed[i]:.2f}; {choice.local.remaining_m:.2f} m of path left"
+        + (" (blocked ahead: rounding it)" if choice.blocked else ""),
         inputs,
     )
 

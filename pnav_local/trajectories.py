@@ -29,6 +29,7 @@ clearance + speed_w * speed``; the best admissible one wins.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -210,6 +211,28 @@ def localise(path_xy: FloatArray, lookahead_m: float) -> Local | None:
         carrot = ahead[k - 1] + f * (ahead[k] - ahead[k - 1])
         kept = np.vstack([ahead[:k], carrot])
     return Local(kept, (float(carrot[0]), float(carrot[1])), remaining)
+
+
+def densify(points: FloatArray, step_m: float = 0.05) -> FloatArray:
+    """The polyline ``points`` as points at most ``step_m`` apart (its vertices kept)."""
+    if len(points) < 2:
+        return points
+    parts = [points[:1]]
+    for a, b in itertools.pairwise(points):
+        n = max(1, math.ceil(float(np.hypot(*(b - a))) / step_m))
+        t = np.linspace(0.0, 1.0, n + 1)[1:, None]
+        parts.append(a + t * (b - a))
+    dense: FloatArray = np.vstack(parts)
+    return dense
+
+
+def path_blocked(local: Local, obstacles: FloatArray, clearance_m: float) -> bool:
+    """Whether the path ahead, up to the carrot, runs within ``clearance_m`` of a hit: the
+    planner has not yet planned round something the lidar shows."""
+    dense = densify(local.points)
+    if len(obstacles) == 0 or len(dense) == 0:
+        return False
+    return bool(distances(dense[:, 0], dense[:, 1], obstacles).min() < clearance_m)
 
 
 def to_path(xs: FloatArray, ys: FloatArray, points: FloatArray) -> FloatArray:

@@ -123,11 +123,18 @@ def test_decisions_tick_by_tick_as_the_world_ahead_changes() -> None:
     c = choose(scan(), odom(), BURGER, path, p)
     assert c is not None and c.best is not None
     assert (c.window.v[c.best], c.window.w[c.best]) == pytest.approx((0.22, 0.0))
-    # tick 2: something on the path 0.35 m ahead (0 to +10 deg): slows to the fastest
-    # sampled speed whose 1.2 s arc (after 0.1 s at 0.22 m/s) stays 0.155 m short of it,
-    # 0.1375 m/s, still on the path (leaving it is the planner's call: it re-plans round
-    # what the lidar shows)
+    # tick 2: something on the path 0.35 m ahead (0 to +10 deg): the path runs into it
+    # (the planner has not re-planned yet), so keeping to the path weighs 0.2 x as much
+    # and it rounds the obstacle on its free side, right, at full speed: w = -0.84 rad/s
+    # (the 17 samples are 0.12 rad/s apart); -0.96 would end farther from the carrot
     c = choose(scan((0.0, 10.0, 0.35)), odom(0.22), BURGER, path, p)
+    assert c is not None and c.best is not None and c.blocked
+    assert (c.window.v[c.best], c.window.w[c.best]) == pytest.approx((0.22, -0.84))
+    # the same with the path-keeping weight left whole (dwa_blocked_path_factor 1): it
+    # keeps to the path and slows to the fastest sampled speed whose 1.2 s arc (after
+    # 0.1 s at 0.22 m/s) stays 0.155 m short of the obstacle, 0.1375 m/s
+    whole = DwaParams.read({"dwa_blocked_path_factor": 1.0})
+    c = choose(scan((0.0, 10.0, 0.35)), odom(0.22), BURGER, path, whole)
     assert c is not None and c.best is not None
     assert (c.window.v[c.best], c.window.w[c.best]) == pytest.approx((0.1375, 0.0))
     # tick 2b: the path turns left 0.3 m ahead: it curves left, still driving
