@@ -13,6 +13,7 @@ import uvloop
 
 from common.contract import limits
 from common.errors import PnavError, UsageError
+from pnav.dashboard_cli import add_dashboard_options, dashboard_options
 from pnav.navbench.worlds_cli import add_worlds_parser
 
 if TYPE_CHECKING:
@@ -127,6 +128,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="run COMMAND instead of a scenario service, with the same environment, e.g. "
         "controller='python -m examples.sql_controller' (docs/SWAP.md; repeatable)",
     )
+    add_dashboard_options(up, 8080)
 
     _record_option(up)
 
@@ -162,6 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--rate", default=None, help="sim rate (default: the demo's own)")
     _record_option(demo)
     _record_parser(cast("argparse._SubParsersAction[argparse.ArgumentParser]", commands))
+    add_dashboard_options(demo, None)
 
     bench = commands.add_parser("bench", help="benchmarks: print figures and JSON")
     benches = bench.add_subparsers(dest="bench", metavar="BENCH", required=True)
@@ -286,7 +289,7 @@ def dispatch(args: argparse.Namespace) -> int:
         from pnav import demo
 
         record = launcher_record(args.record)
-        return demo.run(args.json, args.rate, record)
+        return demo.run(args.json, args.rate, record, dashboard_options(args))
     if args.command == "record":
         from pnav.record import info
 
@@ -317,6 +320,7 @@ def _up(args: argparse.Namespace) -> int:
         replicas=parse_replicas(args.replicas),
         replace=parse_replace(args.replace),
         record=launcher_record(args.record),
+        dashboard=dashboard_options(args),
     )
     if args.lockstep:
         options.extra_env.update(lockstep_env(options))

@@ -62,12 +62,15 @@ async def up(options: StackOptions) -> int:
             logs=str(stack.log_dir),
             services=",".join(stack.supervisor.children),
             replicas=",".join(f"{k}={v}" for k, v in sorted(options.replicas.items())) or "-",
+            dashboard=stack.dashboard_url or "off",
         )
         print(
             "stack up: `pnav status` to watch, `pnav goal X Y` to send the robot, "
             "Ctrl-C or `pnav down` to stop",
             flush=True,
         )
+        if stack.dashboard_url:
+            print(f"dashboard: {stack.dashboard_url}", flush=True)
         await stop.wait()
         logger.info("stopping")
     logger.info("stack down")

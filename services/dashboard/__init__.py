@@ -1,1 +1,1 @@
-"""The dashboard service: a web page, its endpoints and GET /metrics."""
+"""The dashboard: a browser view of every robot, a foreign client of the contract; GET /metrics."""
