@@ -20,7 +20,7 @@ delay during which the robot keeps its measured velocity):
 - **heading**: the angle between the arc's final heading and the direction to the carrot
   from its end, as a share of pi;
 - **clearance**: the smallest gap along it (beyond the footprint), capped, as a share of the
-  cap;
+  cap, times the speed share (room matters where the robot goes: standing still earns none);
 - **speed**: ``v / max_linear``.
 
 ``score = progress_w * progress - path_w * path - heading_w * heading + clearance_w *
@@ -288,8 +288,10 @@ def score(
     heading = np.abs(np.arctan2(np.sin(bearing), np.cos(bearing))) / math.pi
     # close to the carrot the bearing means little (the carrot is the path's end)
     heading = np.where(np.hypot(cx - ex, cy - ey) < 0.1 * reach, 0.0, heading)
-    gap = np.clip(gaps.min(axis=1) - radius_m, 0.0, clearance_cap_m) / clearance_cap_m
     speed = win.v / max(max_v, 1e-6)
+    # room counts where the robot goes: weighted by the speed share, so that standing
+    # still (all the room it has now, no progress) never wins on clearance alone
+    gap = np.clip(gaps.min(axis=1) - radius_m, 0.0, clearance_cap_m) / clearance_cap_m * speed
     total = (
         weights.progress * progress
         - weights.path * path

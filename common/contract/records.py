@@ -18,6 +18,10 @@ import numpy as np
 
 from common.contract import keys
 from common.db import Database
+from common.robotmodel import DEFAULT_MODEL, load_model
+
+# the robot table's defaults for the model columns are the default model's (schema.sql)
+_DEFAULT_MODEL = load_model(DEFAULT_MODEL)
 
 # A connection or a pool: both have fetch/fetchrow/fetchval.
 Executor: TypeAlias = Any
@@ -30,10 +34,13 @@ class Robot:
     max_angular_rps: float
     footprint_radius_m: float
     battery_capacity_wh: float
-    # migration 5 (defaults: the Burger's, as the columns'): what a local controller's
-    # dynamic window is made of
-    max_linear_accel_mps2: float = 2.5
-    max_angular_accel_rps2: float = 3.2
+    # the hardest the robot speeds up and brakes (its model's; stopping distances use them)
+    max_linear_accel_mps2: float = _DEFAULT_MODEL.max_linear_accel_mps2
+    max_angular_accel_rps2: float = _DEFAULT_MODEL.max_angular_accel_rps2
+
+    def braking_m(self, speed_mps: float) -> float:
+        """Distance the robot needs to stop from ``speed_mps`` at its acceleration limit."""
+        return speed_mps * speed_mps / (2.0 * self.max_linear_accel_mps2)
 
 
 @dataclass(frozen=True)

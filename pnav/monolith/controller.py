@@ -26,17 +26,10 @@ from services.controller.store import ControllerStore, ScanAndOdometry
 
 _ROBOT = (
     *("robot_id", "max_linear_mps", "max_angular_rps", "footprint_radius_m"),
-    "battery_capacity_wh",
+    *("battery_capacity_wh", "max_linear_accel_mps2", "max_angular_accel_rps2"),
 )
-_ACCEL = ("max_linear_accel_mps2", "max_angular_accel_rps2")
 _ODOMETRY = ("id", "robot_id", "stamp", "x", "y", "yaw", "linear_mps", "angular_rps")
 _SCAN = ("id", "robot_id", "stamp", "angle_min", "angle_increment", "range_min", "range_max")
-
-
-def _robot(row: Row) -> Robot:
-    # the acceleration limits are the table's defaults (the Burger's) unless the row has them
-    accel = {c: row[c] for c in _ACCEL if row.get(c) is not None}
-    return Robot(**_pick(row, _ROBOT), **accel)
 
 
 def _pick(row: Row, columns: tuple[str, ...]) -> dict[str, Any]:
@@ -59,7 +52,7 @@ class MemoryControllerSource:
 
     async def robots(self) -> list[Robot]:
         rows = self.contract[keys.ROBOT].all_rows()
-        return sorted((_robot(r) for r in rows), key=lambda r: r.robot_id)
+        return sorted((Robot(**_pick(r, _ROBOT)) for r in rows), key=lambda r: r.robot_id)
 
     async def active_strategies(self) -> dict[str, ActiveStrategy]:
         # the strategy join; a robot's newest active_strategy row is its row (an upsert)

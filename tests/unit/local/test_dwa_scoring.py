@@ -70,9 +70,10 @@ def test_a_small_trajectory_set_scores_term_by_term() -> None:
     local = tr.Local(np.array([[0.0, 0.0], [1.0, 0.0]]), (1.0, 0.0), 3.0)
     s = tr.score(win, poses, gaps, local, start=(0.0, 0.0, 0.0), radius_m=0.105, max_v=0.2,
                  horizon_s=1.0, clearance_cap_m=0.5, weights=tr.Weights())  # fmt: skip
-    # stand still: no progress, on the path, facing the carrot, all clear, no speed
-    assert (s.progress[0], s.path[0], s.heading[0], s.clearance[0], s.speed[0]) == (0, 0, 0, 1, 0)
-    assert s.total[0] == pytest.approx(0.3)
+    # stand still: no progress, on the path, facing the carrot, no speed, and so no
+    # clearance either (it counts times the speed share: standing never wins on room alone)
+    assert (s.progress[0], s.path[0], s.heading[0], s.clearance[0], s.speed[0]) == (0, 0, 0, 0, 0)
+    assert s.total[0] == pytest.approx(0.0)
     # straight on at top speed: 0.2 of the 0.2 m the horizon allows nearer the carrot
     assert (s.progress[1], s.path[1], s.heading[1], s.speed[1]) == pytest.approx((1, 0, 0, 1))
     assert s.total[1] == pytest.approx(1.6)
@@ -124,16 +125,22 @@ def test_decisions_tick_by_tick_as_the_world_ahead_changes() -> None:
     assert c is not None and c.best is not None
     assert (c.window.v[c.best], c.window.w[c.best]) == pytest.approx((0.22, 0.0))
     # tick 2: something on the path 0.35 m ahead (0 to +10 deg): the path runs into it
-    # (the planner has not re-planned yet), so keeping to the path weighs 0.2 x as much
-    # and it rounds the obstacle on its free side, right, at full speed: w = -0.84 rad/s
-    # (the 17 samples are 0.12 rad/s apart); -0.96 would end farther from the carrot
+    # (the planner has not re-planned yet). The Burger's motors reach any turn rate within
+    # the window (31.25 rad/s^2), so the 17 default samples are 0.355 rad/s apart and none
+    # rounds it well: it slows to the fastest sampled speed whose 1.2 s arc (after 0.1 s
+    # at 0.22 m/s) stays 0.155 m short of it, 0.1375 m/s, straight on
     c = choose(scan((0.0, 10.0, 0.35)), odom(0.22), BURGER, path, p)
     assert c is not None and c.best is not None and c.blocked
-    assert (c.window.v[c.best], c.window.w[c.best]) == pytest.approx((0.22, -0.84))
-    # the same with the path-keeping weight left whole (dwa_blocked_path_factor 1): it
-    # keeps to the path and slows to the fastest sampled speed whose 1.2 s arc (after
-    # 0.1 s at 0.22 m/s) stays 0.155 m short of the obstacle, 0.1375 m/s
-    whole = DwaParams.read({"dwa_blocked_path_factor": 1.0})
+    assert (c.window.v[c.best], c.window.w[c.best]) == pytest.approx((0.1375, 0.0))
+    # with 21 samples (0.284 rad/s apart) and the path weighing 0.2 x as much while it is
+    # blocked, rounding it on its free side, right, at full speed wins: w = -0.852 rad/s
+    fine = DwaParams.read({"dwa_angular_samples": 21})
+    c = choose(scan((0.0, 10.0, 0.35)), odom(0.22), BURGER, path, fine)
+    assert c is not None and c.best is not None
+    assert (c.window.v[c.best], c.window.w[c.best]) == pytest.approx((0.22, -0.852))
+    # ...and with the path weighing its whole (dwa_blocked_path_factor 1) it keeps to the
+    # path and slows instead
+    whole = DwaParams.read({"dwa_angular_samples": 21, "dwa_blocked_path_factor": 1.0})
     c = choose(scan((0.0, 10.0, 0.35)), odom(0.22), BURGER, path, whole)
     assert c is not None and c.best is not None
     assert (c.window.v[c.best], c.window.w[c.best]) == pytest.approx((0.1375, 0.0))
@@ -146,10 +153,12 @@ def test_decisions_tick_by_tick_as_the_world_ahead_changes() -> None:
     # (0.155 m): any forward motion brings it nearer: none at all
     c = choose(scan((-90.0, 90.0, 0.15)), odom(0.05), BURGER, path, p)
     assert c is not None and c.best is not None and c.window.v[c.best] == 0.0
-    # tick 4: facing away from the path (yaw pi): it turns in place first
+    # tick 4: facing away from the path (yaw pi): it turns round at the full turn rate
+    # (2.84 rad/s, reachable within the window), on an arc of radius v / w < 0.08 m
     c = choose(scan(), odom(yaw=math.pi), BURGER, path, p)
     assert c is not None and c.best is not None
-    assert c.window.v[c.best] < 0.1 and abs(c.window.w[c.best]) == pytest.approx(0.96)
+    assert abs(c.window.w[c.best]) == pytest.approx(2.84)
+    assert c.window.v[c.best] / abs(c.window.w[c.best]) < 0.08
     # tick 5: 0.1 m from the path's end at 0.2 m/s: the end caps the speed
     # (sqrt(2 x 2.5 x 0.1) x 0.8 = 0.566 m/s, no cap for the Burger), but the carrot is
     # the end: no trajectory goes past it for long
