@@ -534,3 +534,15 @@ ALTER TABLE collision_event
     ADD COLUMN seq bigint CHECK (seq >= 0),
     ADD COLUMN run text CHECK (length(run) BETWEEN 1 AND 64);
 CREATE UNIQUE INDEX collision_event_once ON collision_event (robot_id, run, seq);
+
+-- migration 8: GOTO_FAST, the robot's own speed with a local controller and recovery
+--
+-- The planner plans and publishes the path (planned_path), decides arrival and failure, and
+-- does not drive ("planner_drives": false); the dwa local controller drives along the path at
+-- the robot's limits (docs/CONTROLLER.md); the planner's recovery rule backs up, rotates and
+-- re-plans when the robot is stuck, then gives the goal up with a reason
+-- (docs/PLANNER.md, "Recovery"); safety_stop keeps the last word.
+INSERT INTO strategy (code, planner_scenario, controller_scenarios, params, description) VALUES
+    ('GOTO_FAST', 'turn_then_move', '{dwa,safety_stop}',
+     '{"target": "goal", "planner_drives": false, "recovery": true, "battery_wh_per_m": 0.006, "battery_reserve_wh": 0.05}',
+     'go to the goal at the robot''s speed: dwa along the planned path, recovery when stuck, safety_stop');

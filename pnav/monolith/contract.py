@@ -32,6 +32,7 @@ RETENTION = {
     keys.LASER_SCAN: 150,
     keys.BATTERY: 300,
     keys.COLLISION_EVENT: 1000,
+    keys.PLANNED_PATH: 200,
 }
 
 
@@ -98,6 +99,7 @@ class MemoryContract:
                 keys.COMMAND2ROBOT,
                 keys.SYSTEM_COMMAND,
                 keys.USER_COMMAND,
+                keys.PLANNED_PATH,
             )
         }
         self.listeners: list[Listener] = []

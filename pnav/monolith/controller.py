@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from common.contract import keys
+from common.contract.planned_path import PlannedPath, planned_path_of
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot, Strategy
 from common.engine import Engine
 from pnav.monolith.contract import MemoryContract, Row
@@ -81,6 +82,10 @@ class MemoryControllerSource:
 
     async def newest_odometry(self, robot_id: str) -> Odometry | None:
         return _odometry(self.contract[keys.ODOMETRY].newest(robot_id))
+
+    async def newest_planned_path(self, robot_id: str) -> PlannedPath | None:
+        row = self.contract[keys.PLANNED_PATH].newest(robot_id)
+        return None if row is None else planned_path_of(row)
 
     async def recommend(self, recommendation: Recommendation) -> int:
         r = recommendation

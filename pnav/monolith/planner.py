@@ -20,7 +20,9 @@ from common.contract import keys, records
 from common.engine import Engine
 from pnav.monolith.contract import MemoryContract, Row
 from services.planner import meta
-from services.planner.store import PlannerStore, Recommendation
+from services.planner.paths import PathRow
+from services.planner.recommendation import Recommendation
+from services.planner.store import PlannerStore
 from services.planner.world import MapRow, RobotInfo, Station
 
 
@@ -160,6 +162,9 @@ class MemoryPlannerSource:
             "treated_by": None,
         }
         return self.contract.insert(keys.COMMAND_RECOMMENDATION, row)
+
+    async def publish_path(self, path: PathRow) -> int:
+        return self.contract.insert(keys.PLANNED_PATH, dict(path))
 
 
 def planner_engine(

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
 
 from common import log
+from common.contract.planned_path import PlannedPath
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
 from common.engine.supervisor import Supervised, Ticket
 from common.errors import InternalError
@@ -52,6 +53,9 @@ class Command:
     linear: float
     angular: float
     reason: str
+    # more provenance for the row's ``inputs`` (e.g. the planned_path a local controller
+    # scored against), beside the scan and odometry the base names
+    inputs: Mapping[str, Any] | None = None
 
 
 @dataclass(frozen=True)
@@ -102,6 +106,10 @@ class Host(Protocol):
         """The robot's odometry as of ``scan``: its motion when the scan was read, which is
         what a decision about the scan needs."""
 
+    async def planned_path(self, robot_id: str) -> PlannedPath | None:
+        """The path in force for the robot (the planner's newest planned_path row), for the
+        local controllers that score against it."""
+
     def last_recommended_scan(self, robot_id: str, source: str) -> int | None:
         """The newest scan ``source`` recommended on for the robot (this tenure), if any."""
 
@@ -133,6 +141,13 @@ class ControllerScenario(Supervised[Key, ScenarioSpec]):
         """The scenario's policy: a command for this scan, or None to stay silent."""
         raise NotImplementedError
 
+    def judge(self, scan: LaserScan, odom: Odometry | None) -> Command | None:
+        """The command for ``scan``: ``decide``'s with the spec's robot and params. A
+        scenario that also uses what it read in its own acquisition (a local controller's
+        planned path) overrides this."""
+        spec = self.spec
+        return self.decide(scan, odom, spec.robot, spec.params)
+
     # -- lifecycle (common.engine.supervisor) --------------------------------------------------
     def initialise(self) -> None:
         self._log("controller scenario started")
@@ -156,7 +171,7 @@ class ControllerScenario(Supervised[Key, ScenarioSpec]):
         # error is kept for conditions to raise: a failing policy counts as a false test
         # there (logged, counted; the rule lives on), as it did when conditions called it.
         try:
-            self.command = self.decide(scan, self.odom, spec.robot, spec.params)
+            self.command = self.judge(scan, self.odom)
         except Exception as exc:
             self.failure = exc
 
@@ -176,6 +191,8 @@ class ControllerScenario(Supervised[Key, ScenarioSpec]):
         inputs: dict[str, Any] = {"laser_scan": scan.id, "scan_stamp": scan.stamp}
         if self.odom is not None:
             inputs.update(odometry=self.odom.id, odometry_stamp=self.odom.stamp)
+        if command.inputs:
+            inputs.update(command.inputs)
         await self.host.recommend(
             Recommendation(
                 robot_id=self.spec.robot.robot_id,

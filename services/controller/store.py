@@ -26,6 +26,7 @@ from typing import Protocol
 from common import log
 from common.bus import Notification
 from common.contract import keys, records
+from common.contract.planned_path import PlannedPath, newest_planned_path, planned_path_of
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
 from common.db import Database
 from common.freshness import FreshCache, Sequences
@@ -58,6 +59,9 @@ class ControllerSource(Protocol):
 
     async def newest_odometry(self, robot_id: str) -> Odometry | None: ...
 
+    async def newest_planned_path(self, robot_id: str) -> PlannedPath | None:
+        """The path in force for the robot (the planner's newest planned_path row)."""
+
     async def recommend(self, recommendation: Recommendation) -> int:
         """Write a command_recommendation row (notified after commit); its id."""
 
@@ -80,6 +84,9 @@ class PgControllerSource:
     async def newest_odometry(self, robot_id: str) -> Odometry | None:
         return await records.newest_odometry(self.db.pool, robot_id)
 
+    async def newest_planned_path(self, robot_id: str) -> PlannedPath | None:
+        return await newest_planned_path(self.db.pool, robot_id)
+
     async def recommend(self, recommendation: Recommendation) -> int:
         r = recommendation
         return await records.recommend_velocity(
@@ -100,6 +107,10 @@ def _scan_id(pair: ScanAndOdometry) -> int | None:
     return pair[0].id if pair[0] is not None else None
 
 
+def _path_id(path: PlannedPath | None) -> int | None:
+    return path.id if path is not None else None
+
+
 class ControllerStore:
     """The rules' :class:`~services.controller.scenario.Host` over a source, with caches.
 
@@ -115,7 +126,11 @@ class ControllerStore:
     # 10 points of a core more than the query it saves, with no latency gain to see: each
     # notification crosses from Zenoh's thread to the loop (and takes the GIL) for a row
     # that only matters at the next scan. ODOMETRY_LISTENS is the set to hear it.
-    listens: frozenset[str] = frozenset()
+    #
+    # planned_path is heard (a row per plan: a few a minute per robot), for the local
+    # controllers that score against the path (docs/CONTROLLER.md, dwa); read only by the
+    # scenarios that ask for it (Host.planned_path).
+    listens: frozenset[str] = frozenset((keys.PLANNED_PATH,))
 
     def __init__(
         self,
@@ -132,6 +147,8 @@ class ControllerStore:
         # per robot: its newest scan with the odometry read in the same round trip (the
         # avoid scenarios and safety_stop want both, for the same scan)
         self.scans: FreshCache[str, ScanAndOdometry] = FreshCache(clock, recheck_s, _scan_id)
+        # per robot: the path in force (planned_path), for the scenarios that ask for it
+        self.paths: FreshCache[str, PlannedPath | None] = FreshCache(clock, recheck_s, _path_id)
         # per robot: (scan id, odometry) for a scan whose odometry the pair above does not
         # hold (an image's scan, or one the pair no longer holds)
         self._odometry: dict[str, tuple[int, Odometry | None]] = {}
@@ -160,6 +177,11 @@ class ControllerStore:
         elif note.table == keys.ODOMETRY:
             if note.robot is not None:
                 self._odometry_image(note.robot, note)
+        elif note.table == keys.PLANNED_PATH:
+            if note.robot is None:
+                self.paths.announce_all()
+            elif not self._path_image(note.robot, note):
+                self.paths.announce(note.robot, note.id)
         elif note.table in _META_TABLES or not note.table:
             self.tables.announce(_META)  # which row changed does not matter: read both again
 
@@ -198,12 +220,27 @@ class ControllerStore:
         self.images_used += 1
         return True
 
+    def _path_image(self, robot_id: str, note: Notification) -> bool:
+        """Keep a planned_path image as the robot's path in force; False if it cannot."""
+        if not self._usable(note) or note.row is None:
+            return False
+        held = self.paths.peek(robot_id)
+        if held is not None and held.id >= (note.id or 0):
+            return True
+        try:
+            path = planned_path_of(note.row)
+        except (KeyError, TypeError, ValueError):
+            return False
+        self.paths.put(robot_id, path)
+        return True
+
     def forget(self, robots: Iterable[str]) -> None:
         """Drop what was read and written for ``robots`` (they changed hands: another
         replica served, or will serve, them)."""
         gone = frozenset(robots)
         for robot_id in gone:
             self.scans.forget(robot_id)
+            self.paths.forget(robot_id)
             self._odometry.pop(robot_id, None)
             self._odometry_images.pop(robot_id, None)
             self._imaged.discard(robot_id)
@@ -253,6 +290,9 @@ class ControllerStore:
         self.odometry_reads += 1
         self._odometry[robot_id] = (scan.id, odometry)
         return odometry
+
+    async def planned_path(self, robot_id: str) -> PlannedPath | None:
+        return await self.paths.get(robot_id, lambda: self.source.newest_planned_path(robot_id))
 
     def last_recommended_scan(self, robot_id: str, source: str) -> int | None:
         return self._recommended.get((robot_id, source))

@@ -29,6 +29,7 @@ from common.engine import Engine, Rule
 from common.engine.supervisor import Supervisor, Ticket
 from common.plugins import load_scenarios
 from services.planner.battery import BatteryCheck, ChargeComplete
+from services.planner.recovery_rule import Recovery
 from services.planner.scenario import MoveScenario
 from services.planner.target import RuleKey, Spec, TargetRule
 from services.planner.view import PlannerStoreView, PlannerView
@@ -40,7 +41,7 @@ SCENARIO_GROUP = "pnav.planner.scenarios"  # the entry points naming the move sc
 # The planner's own scenarios, listed first (the thesis' order); plug-ins follow by name.
 SHIPPED = ("turn_then_move", "move_while_turning")
 TARGETS = ("goal", "nearest_charger")
-MOVE, BATTERY = "move", "battery"
+MOVE, BATTERY, RECOVERY = "move", "battery", "recovery"
 
 
 def move_scenarios() -> dict[str, type[MoveScenario]]:
@@ -50,6 +51,11 @@ def move_scenarios() -> dict[str, type[MoveScenario]]:
     rank = {name: i for i, name in enumerate(SHIPPED)}
     order = sorted(found, key=lambda name: (rank.get(name, len(SHIPPED)), name))
     return {name: found[name] for name in order}
+
+
+def recovers(params: Mapping[str, object]) -> bool:
+    """Whether a strategy driving to the goal asks for the recovery rule (recovery.py)."""
+    return params.get("recovery") is True
 
 
 class PlannerRules:
@@ -127,9 +133,12 @@ class MetaPlanner(Rule):
             if not self.owns(robot_id):
                 continue  # another replica's robot: its rules end here (docs/REPLICAS.md)
             strategy = robot.strategy
-            for kind, rule in zip((MOVE, BATTERY), self.wanted(robot), strict=True):
+            move, battery = self.wanted(robot)
+            for kind, rule in ((MOVE, move), (BATTERY, battery)):
                 if rule is not None and strategy is not None:
                     wanted[(robot_id, kind)] = Spec(rule, strategy.code)
+            if battery is BatteryCheck and strategy is not None and recovers(strategy.params):
+                wanted[(robot_id, RECOVERY)] = Spec(Recovery, strategy.code)
             if strategy is None or strategy.params.get("target") != "nearest_charger":
                 robot.station = None  # the next CHARGE session chooses its charger afresh
         self.spawned = self.rules.supervisor.reconcile(wanted)

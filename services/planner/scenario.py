@@ -34,9 +34,10 @@ from typing import Any, ClassVar
 from common import log
 from common.contract import records
 from common.engine.supervisor import Ticket
+from services.planner.paths import PathKey, PathRow, empty_key, empty_row, route_row
 from services.planner.routes import Target
 from services.planner.target import RuleKey, Spec, TargetRule
-from services.planner.tracking import Progress, heading_error
+from services.planner.tracking import Progress, Route, heading_error
 from services.planner.view import PlannerView
 from services.planner.world import RobotInfo, RobotState
 
@@ -145,6 +146,9 @@ class MoveScenario(TargetRule):
         self.failed: str | None = None  # why the map proves the goal unreachable
         self.move: Movement | None = None
         self.why = ""
+        # The planned_path row (paths.py): what was published last, and what is due now.
+        self.published: PathKey | None = None
+        self.path_due: tuple[PathKey, PathRow] | None = None
 
     @abstractmethod
     def select(
@@ -157,6 +161,7 @@ class MoveScenario(TargetRule):
         self.robot = self.claim()
         self.odom = self.target = None
         self.news = False
+        self.path_due = None
         if self.robot is None:
             return
         view = self.view
@@ -193,7 +198,9 @@ class MoveScenario(TargetRule):
             scan = await view.newest_scan(self.robot_id)
             if scan is not None and scan.id != (robot.seen.scan_id if robot.seen else None):
                 view.see(robot, scan)
-        if self._ready():
+        if self.target is None:
+            self._path_gone()
+        if self._ready() and self.target is not None:
             self._evaluate()
 
     def _ready(self) -> bool:
@@ -205,7 +212,7 @@ class MoveScenario(TargetRule):
         yield self.odom is not None and self.view.started()
         assert self.odom is not None
         yield self.sim_now - self.odom.stamp <= ODOM_MAX_AGE_S
-        yield self.target is not None
+        yield self.target is not None or self.path_due is not None
 
     def _evaluate(self) -> None:
         """What the conditions test: something new, then whether it is worth saying (and
@@ -221,26 +228,52 @@ class MoveScenario(TargetRule):
         if distance <= target.reach_m or (target.key in self.held and distance <= target.hold_m):
             self.arrived = distance
             self.worth_saying = target.key not in self.held  # stopped there already: no
+            self._path_done(target)
             return
         self.held.discard(target.key)
         progress = self.view.route_for(robot, odom.x, odom.y, target, odom.stamp)
         if progress.unreachable is not None and target.goal_id is not None:
             self.failed = progress.unreachable
             self.worth_saying = target.key not in self.dropped  # stopped for it already: no
+            self._path_done(target)
             return
+        if robot.route is not None and robot.route is not self.published:
+            self.path_due = (robot.route, route_row(self.robot_id, odom.stamp, target, robot.route))
         error = heading_error(odom.x, odom.y, odom.yaw, progress.lookahead)
         move = self.select(error, progress.remaining_m, robot.info, odom.angular_rps)
         self.move = move
         self.why = self._reason(move, error, progress, target)
-        self.worth_saying = due(self.said, odom.stamp, target.key, move)
+        # A strategy whose local controller drives (``planner_drives`` false, e.g. GOTO_FAST)
+        # gets the route, the arrival and the failure from the planner, no velocity.
+        drives = robot.strategy is None or robot.strategy.params.get("planner_drives") is not False
+        self.worth_saying = drives and due(self.said, odom.stamp, target.key, move)
+
+    def _path_done(self, target: Target) -> None:
+        """The target is reached or failed: the path in force becomes an empty one."""
+        key = empty_key(target)
+        if self.published != key:
+            self.path_due = (key, empty_row(self.robot_id, self.sim_now, target))
+
+    def _path_gone(self) -> None:
+        """No target any more (cancelled, or the strategy has none): an empty path, once,
+        if a route was published."""
+        if isinstance(self.published, Route):  # an empty one (reached, failed) says it already
+            key = empty_key(None)
+            self.path_due = (key, empty_row(self.robot_id, self.sim_now, None))
 
     def conditions(self) -> Iterator[bool]:
-        yield self.news
-        yield self.worth_saying
+        yield self.path_due is not None or (self.news and self.worth_saying)
 
     async def actions(self) -> None:
+        if self.path_due is not None:
+            # the path first: a local controller then stops on its empty path at once
+            key, row = self.path_due
+            await self.view.publish_path(row)
+            self.published = key
         odom, target = self.odom, self.target
-        assert odom is not None and target is not None
+        assert odom is not None
+        if target is None or not (self.news and self.worth_saying):
+            return
         if self.arrived is not None:
             await self._arrived(odom, target, self.arrived)
             return

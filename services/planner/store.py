@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
@@ -30,9 +29,11 @@ import numpy as np
 import services.planner.chargers as chargers
 import services.planner.obstacles as obstacles
 from common.bus import Notification
-from common.contract import keys, records
+from common.contract import keys, planned_path, records
 from common.db import Database
 from common.freshness import FreshCache, Sequences
+from services.planner.paths import PathRow
+from services.planner.recommendation import Recommendation
 from services.planner.routes import Router, Target
 from services.planner.tracking import Progress
 from services.planner.world import MapData, MapRow, RobotInfo, RobotState, Station, World
@@ -69,23 +70,6 @@ _STRATEGY_TABLES = (keys.ACTIVE_STRATEGY, keys.STRATEGY)
 _WORLD, _ACTIVE = "world", "active"  # the keys of the two whole-table caches
 
 
-@dataclass(frozen=True)
-class Recommendation:
-    """A command_recommendation row to write: a velocity, or a system ``command``, valid
-    from ``stamp`` for ``ttl_s`` (sim s)."""
-
-    robot_id: str
-    source: str
-    priority: int
-    stamp: float
-    ttl_s: float
-    reason: str
-    inputs: dict[str, Any]
-    linear: float = 0.0
-    angular: float = 0.0
-    command: str | None = None  # a system recommendation (no velocity) when set
-
-
 class PlannerSource(Protocol):
     """The planner's reads and writes of the contract, typed (CONTRACT.md has the tables)."""
 
@@ -120,6 +104,9 @@ class PlannerSource(Protocol):
 
     async def recommend(self, rec: Recommendation) -> int:
         """Write a command_recommendation row and notify; its id."""
+
+    async def publish_path(self, path: PathRow) -> int:
+        """Write a planned_path row (``path``: its contract columns) and notify; its id."""
 
 
 class PgPlannerSource:
@@ -187,6 +174,9 @@ class PgPlannerSource:
                 self.db, rec.robot_id, linear=rec.linear, angular=rec.angular, **fields
             )
         return await records.recommend_system(self.db, rec.robot_id, command=rec.command, **fields)
+
+    async def publish_path(self, path: PathRow) -> int:
+        return await planned_path.write_planned_path(self.db, path)
 
 
 class PlannerStore:
@@ -372,6 +362,9 @@ class PlannerStore:
                 robot_id, source, priority, stamp, ttl_s, reason, inputs, command=command
             )
         )
+
+    async def publish_path(self, path: PathRow) -> int:
+        return await self.source.publish_path(path)
 
     # -- the world and routes ----------------------------------------------------------------
     def robot(self, robot_id: str) -> RobotState | None:

@@ -12,6 +12,7 @@ from collections.abc import Iterable
 from typing import Any, Protocol
 
 from common.contract import records
+from services.planner.paths import PathRow
 from services.planner.routes import Target
 from services.planner.tracking import Progress
 from services.planner.world import MapData, RobotInfo, RobotState, Station
@@ -85,6 +86,9 @@ class Contract(Clocks, Protocol):
         reason: str,
         inputs: dict[str, Any],
     ) -> int: ...
+
+    async def publish_path(self, path: PathRow) -> int:
+        """Write a planned_path row and notify (CONTRACT.md, planned_path); its id."""
 
 
 class Planning(Protocol):

@@ -124,7 +124,10 @@ def test_an_unknown_strategy_is_refused_with_the_known_ones(
 ) -> None:
     code, _, err = run_cli(["strategy", "no_such_thing"], capsys)
     assert_one_line_refusal(
-        code, err, "unknown strategy 'NO_SUCH_THING'", "CHARGE, GOTO_AVOID, GOTO_DIRECT, IDLE"
+        code,
+        err,
+        "unknown strategy 'NO_SUCH_THING'",
+        "CHARGE, GOTO_AVOID, GOTO_DIRECT, GOTO_FAST, IDLE",
     )
 
 

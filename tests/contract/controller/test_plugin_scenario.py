@@ -32,4 +32,6 @@ async def test_a_scenario_installed_as_a_package_recommends(
     assert row["reason"] == f"creeping on scan {row['inputs']['laser_scan']}"
     assert row["expires_stamp"] - row["stamp"] == pytest.approx(0.5)
     # it says at start which scenarios it found
-    assert "controller scenarios names=avoid_left,avoid_right,creep,safety_stop" in log.read_text()
+    assert (
+        "controller scenarios names=avoid_left,avoid_right,creep,dwa,safety_stop" in log.read_text()
+    )

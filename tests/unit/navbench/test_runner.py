@@ -58,11 +58,10 @@ def drive(world: BenchmarkWorld, *, to: float = 1.0, speed: float = 0.2, hz: flo
 
 
 def test_the_goal_strategies_of_the_contract_times_the_registered_planners() -> None:
-    assert runner.navigation_strategies(schema_text()) == ["GOTO_AVOID", "GOTO_DIRECT"]
+    goal_strategies = ["GOTO_AVOID", "GOTO_DIRECT", "GOTO_FAST"]
+    assert runner.navigation_strategies(schema_text()) == goal_strategies
     combos = runner.shipped_combos()
-    assert [c.label for c in combos] == [
-        f"{s}/{p}" for s in ("GOTO_AVOID", "GOTO_DIRECT") for p in SCENARIOS
-    ]
+    assert [c.label for c in combos] == [f"{s}/{p}" for s in goal_strategies for p in SCENARIOS]
     assert set(SCENARIOS) == {"turn_then_move", "move_while_turning"}
 
 
@@ -87,7 +86,11 @@ def test_combos_are_picked_by_label_strategy_or_planner() -> None:
     assert runner.pick_combos("goto_avoid/TURN_THEN_MOVE", shipped) == [AVOID]
     assert [c.planner for c in runner.pick_combos("GOTO_DIRECT", shipped)] == list(SCENARIOS)
     both = runner.pick_combos("move_while_turning, GOTO_DIRECT/move_while_turning", shipped)
-    assert [c.label for c in both] == ["GOTO_AVOID/move_while_turning", DIRECT.label]
+    assert [c.label for c in both] == [
+        "GOTO_AVOID/move_while_turning",
+        DIRECT.label,
+        "GOTO_FAST/move_while_turning",
+    ]
     with pytest.raises(UsageError, match="GOTO_AVOID/turn_then_move"):
         runner.pick_combos("GOTO_AVOID/teleport", shipped)
 

@@ -1,0 +1,193 @@
+"""dwa: a dynamic-window local controller, driving the robot along the planner's path at the
+robot's own speed.
+
+Per fresh scan it samples the velocities the robot can reach before its next decision (the
+robot row's limits and accelerations), rolls each out for ``dwa_horizon_s``, drops those
+that would hit what the lidar sees, and recommends the best of the rest for progress along
+the path in force (``planned_path``), distance from it, heading, clearance and speed
+(trajectories.py has the arithmetic). Priority 30: above the planner's own move scenarios
+(10), below the avoid scenarios (50), recovery (70, the planner's) and the safety band
+(safety_stop, 100, and the bridge's safety layer), which keep the last word.
+
+Silent without a fresh scan, odometry or a path; on an empty path (the target reached,
+failed or gone) it recommends one stop, so its own last command does not outlive the path.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+import pnav_local.trajectories as tr
+from common.contract.planned_path import PlannedPath
+from common.contract.records import LaserScan, Odometry, Robot
+from pnav_local.params import DwaParams
+from services.controller.scenario import Command, ControllerScenario
+
+PRIORITY = 30
+_RANGE_TOLERANCE_M = 1e-4  # float32 ranges: a hit at range_min reads a hair below it
+
+
+@dataclass(frozen=True)
+class Choice:
+    """What one decision found: the window, the scores, and the winner (None: no
+    admissible trajectory)."""
+
+    window: tr.Window
+    ok: tr.BoolArray
+    scores: tr.Scores | None
+    best: int | None
+    local: tr.Local
+    v_cap: float
+    blocked: bool = False  # the path ahead runs into a lidar hit
+
+
+def obstacles(scan: LaserScan, reach_m: float) -> tr.FloatArray:
+    """The scan's hits within ``reach_m``, robot frame (x ahead, y left), merged."""
+    ranges = scan.ranges.astype(np.float64)
+    angles = scan.angles()
+    valid = (
+        np.isfinite(ranges)
+        & (ranges >= scan.range_min - _RANGE_TOLERANCE_M)
+        & (ranges <= min(scan.range_max, reach_m))
+    )
+    r, a = ranges[valid], angles[valid]
+    return tr.merge_obstacles(np.column_stack([r * np.cos(a), r * np.sin(a)]))
+
+
+def path_in_robot_frame(path: PlannedPath, odom: Odometry) -> tr.FloatArray:
+    """The path's points in the frame of the robot at ``odom``."""
+    dx = np.asarray(path.xs, dtype=np.float64) - odom.x
+    dy = np.asarray(path.ys, dtype=np.float64) - odom.y
+    c, s = math.cos(odom.yaw), math.sin(odom.yaw)
+    return np.column_stack([c * dx + s * dy, -s * dx + c * dy])
+
+
+def choose(
+    scan: LaserScan, odom: Odometry, robot: Robot, path: PlannedPath, p: DwaParams
+) -> Choice | None:
+    """Score the dynamic window for this scan (None: the path has no point)."""
+    top = robot.max_linear_mps
+    lookahead = p.lookahead_m or max(0.8, top * (p.horizon_s + p.delay_s) + 0.3)
+    local = tr.localise(path_in_robot_frame(path, odom), lookahead)
+    if local is None:
+        return None
+    radius = robot.footprint_radius_m
+    reach = p.obstacle_range_m or (top * (p.horizon_s + p.delay_s) + radius + 0.5)
+    points = obstacles(scan, reach)
+    accel = robot.max_linear_accel_mps2
+    # stop at the path's end, and stay below safety_stop's reach straight ahead
+    v_cap = math.sqrt(2.0 * accel * max(0.0, local.remaining_m)) * 0.8
+    straight = tr.straight_gap(points, radius) - radius - p.safety_margin_m
+    if p.safety_lookahead_s > 0:
+        v_cap = min(v_cap, max(0.0, straight) / p.safety_lookahead_s)
+    win = tr.window(
+        odom.linear_mps,
+        odom.angular_rps,
+        max_v=top,
+        max_w=robot.max_angular_rps,
+        accel_v=accel,
+        accel_w=robot.max_angular_accel_rps2,
+        dt=p.window_s,
+        v_samples=p.linear_samples,
+        w_samples=p.angular_samples,
+        v_cap=v_cap,
+    )
+    start = tr.start_pose(odom.linear_mps, odom.angular_rps, p.delay_s)
+    # only what this window's arcs can come near matters to them
+    near = math.hypot(start[0], start[1]) + float(win.v.max()) * p.horizon_s + radius + 0.5
+    points = points[np.hypot(points[:, 0], points[:, 1]) <= near]
+    poses = tr.rollout(win, start, p.horizon_s, p.steps)
+    gaps = tr.distances(*poses[:2], points)
+    start_gap = float(tr.distances(np.array([start[0]]), np.array([start[1]]), points)[0])
+    ok = tr.admissible(
+        win,
+        gaps,
+        start_gap,
+        radius_m=radius,
+        margin_m=p.margin_m,
+        accel_v=accel,
+        delay_s=p.delay_s,
+        horizon_s=p.horizon_s,
+    )
+    if not ok.any():
+        return Choice(win, ok, None, None, local, v_cap)
+    weights = p.weights
+    blocked = tr.path_blocked(local, points, radius + p.margin_m)
+    if blocked:
+        # the path runs into what the lidar shows (the planner has not re-planned yet):
+        # keeping to it is worth little, getting round toward the carrot is what counts
+        weights = replace(weights, path=weights.path * p.blocked_path_factor)
+    scores = tr.score(
+        win,
+        poses,
+        gaps,
+        local,
+        start=start,
+        radius_m=radius,
+        max_v=top,
+        horizon_s=p.horizon_s,
+        clearance_cap_m=p.clearance_cap_m,
+        weights=weights,
+    )
+    best = int(np.argmax(np.where(ok, scores.total, -np.inf)))
+    return Choice(win, ok, scores, best, local, v_cap, blocked)
+
+
+def command_for(choice: Choice, path: PlannedPath) -> Command:
+    inputs = {"planned_path": path.id}
+    n, admitted = len(choice.window.v), int(choice.ok.sum())
+    if choice.best is None or choice.scores is None:
+        return Command(0.0, 0.0, f"dwa: none of {n} trajectories is admissible: brake", inputs)
+    i, s = choice.best, choice.scores
+    v, w = float(choice.window.v[i]), float(choice.window.w[i])
+    return Command(
+        v,
+        w,
+        f"dwa: best of {admitted}/{n} admissible trajectories: progress {s.progress[i]:+.2f},"
+        f" path {s.path[i]:.2f}, heading {s.heading[i]:.2f}, clearance {s.clearance[i]:.2f},"
+        f" speed {s.speed[i]:.2f}; {choice.local.remaining_m:.2f} m of path left"
+        + (" (blocked ahead: rounding it)" if choice.blocked else ""),
+        inputs,
+    )
+
+
+class Dwa(ControllerScenario):
+    scenario = "dwa"
+    priority = PRIORITY
+    needs_odometry = True
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.path: PlannedPath | None = None
+        self.stopped_for: int | None = None  # the empty path it has recommended a stop on
+
+    async def data_acquisition(self) -> None:
+        # the path in force, from the store's cache (read again on a planned_path note)
+        self.path = await self.host.planned_path(self.spec.robot.robot_id) if self.live else None
+        await super().data_acquisition()
+
+    @classmethod
+    def decide(
+        cls, scan: LaserScan, odom: Odometry | None, robot: Robot, params: Mapping[str, Any]
+    ) -> Command | None:
+        """Without a path there is nothing to follow: silent (``judge`` has the path)."""
+        return None
+
+    def judge(self, scan: LaserScan, odom: Odometry | None) -> Command | None:
+        path = self.path
+        if path is None or odom is None:
+            return None
+        if path.empty:
+            if self.stopped_for == path.id:
+                return None
+            self.stopped_for = path.id
+            return Command(
+                0.0, 0.0, f"dwa: no path ({path.target}): stop", {"planned_path": path.id}
+            )
+        choice = choose(scan, odom, self.spec.robot, path, DwaParams.read(self.spec.params))
+        return None if choice is None else command_for(choice, path)

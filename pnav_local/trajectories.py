@@ -1,0 +1,311 @@
+"""The dynamic window: sample the velocities the robot can reach before the next decision,
+roll each out as an arc, and score the arcs against the lidar and the planned path.
+
+Pure numpy, no I/O, everything in the robot's frame at the scan (x ahead, y left). The
+scenario (dwa.py) turns a scan, the odometry, the robot row and the planned_path row into
+these arrays and reads the winner back; the unit tests drive the functions directly.
+
+Per trajectory (constant linear ``v`` and angular ``w`` for the horizon, after the command
+delay during which the robot keeps its measured velocity):
+
+- **admissible** if the robot's round body stays farther than ``footprint + margin`` from
+  every lidar hit along it over the whole horizon (as Nav2's DWB), or, for the window's
+  slowest speed only (the brake), if it can stop before the first pose that does not
+  (``v^2 / 2a`` plus the delay's travel); a robot already closer than that may still take
+  any arc that does not bring it closer (turning in place always qualifies);
+- **progress**: how much nearer the arc's end is to the carrot (the point ``lookahead`` m
+  along the path ahead of the robot) than its start, as a share of the most the robot could
+  cover in the horizon;
+- **path**: the arc end's distance from the path ahead, in the same unit;
+- **heading**: the angle between the arc's final heading and the direction to the carrot
+  from its end, as a share of pi;
+- **clearance**: the smallest gap along it (beyond the footprint), capped, as a share of the
+  cap, times the speed share (room matters where the robot goes: standing still earns none);
+- **speed**: ``v / max_linear``.
+
+``score = progress_w * progress - path_w * path - heading_w * heading + clearance_w *
+clearance + speed_w * speed``; the best admissible one wins.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+
+# Obstacles are merged onto a grid this fine before the distance test: a 720-beam scan of a
+# cluttered world has many hits a few millimetres apart, which tell nothing more.
+MERGE_M = 0.04
+
+
+@dataclass(frozen=True)
+class Weights:
+    progress: float = 1.0
+    path: float = 0.6
+    heading: float = 0.4
+    clearance: float = 0.3
+    speed: float = 0.3
+
+
+@dataclass(frozen=True)
+class Window:
+    """The sampled velocities: ``v[i], w[i]`` for trajectory i."""
+
+    v: FloatArray
+    w: FloatArray
+
+
+def window(
+    v0: float,
+    w0: float,
+    *,
+    max_v: float,
+    max_w: float,
+    accel_v: float,
+    accel_w: float,
+    dt: float,
+    v_samples: int,
+    w_samples: int,
+    v_cap: float | None = None,
+) -> Window:
+    """The dynamic window around the measured (v0, w0): what ``dt`` of acceleration reaches,
+    within the robot's limits (forward only: backing up is recovery's), as a grid. ``v_cap``
+    lowers the top speed (the path's end is near). The slowest speed reachable and
+    ``w = 0`` are always among the samples, so there is a brake and a straight line."""
+    top = max_v if v_cap is None else max(0.0, min(max_v, v_cap))
+    v_low = min(max(0.0, v0 - accel_v * dt), top)
+    v_high = min(top, max(0.0, v0) + accel_v * dt)
+    w_low = max(-max_w, w0 - accel_w * dt)
+    w_high = min(max_w, w0 + accel_w * dt)
+    vs = np.linspace(v_low, max(v_low, v_high), max(1, v_samples))
+    ws = np.linspace(min(w_low, w_high), max(w_low, w_high), max(1, w_samples))
+    if w_low <= 0.0 <= w_high and not np.any(ws == 0.0):
+        ws = np.sort(np.append(ws, 0.0))
+    grid_v, grid_w = np.meshgrid(np.unique(vs), ws, indexing="ij")
+    return Window(grid_v.ravel(), grid_w.ravel())
+
+
+def start_pose(v0: float, w0: float, delay_s: float) -> tuple[float, float, float]:
+    """Where the robot is when a command sent now takes effect: ``delay_s`` at (v0, w0)."""
+    x, y, yaw = arcs(np.array([v0]), np.array([w0]), np.array([delay_s]))
+    return float(x[0, 0]), float(y[0, 0]), float(yaw[0, 0])
+
+
+def arcs(
+    v: FloatArray, w: FloatArray, times: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Poses (x, y, yaw), each trajectories x times, of constant-velocity arcs from the
+    origin facing +x."""
+    t = times[None, :]
+    yaw = w[:, None] * t
+    straight = np.abs(w) < 1e-6
+    safe_w = np.where(straight, 1.0, w)[:, None]
+    x = np.where(straight[:, None], v[:, None] * t, v[:, None] / safe_w * np.sin(yaw))
+    y = np.where(straight[:, None], 0.0, v[:, None] / safe_w * (1.0 - np.cos(yaw)))
+    return x, y, yaw
+
+
+def rollout(
+    win: Window, start: tuple[float, float, float], horizon_s: float, steps: int
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Every sampled trajectory's poses at ``steps`` instants over the horizon, from ``start``."""
+    times = np.linspace(horizon_s / steps, horizon_s, steps)
+    x, y, yaw = arcs(win.v, win.w, times)
+    sx, sy, syaw = start
+    c, s = math.cos(syaw), math.sin(syaw)
+    return sx + c * x - s * y, sy + s * x + c * y, syaw + yaw
+
+
+def merge_obstacles(points: FloatArray, cell_m: float = MERGE_M) -> FloatArray:
+    """One point per ``cell_m`` grid cell (the first of each)."""
+    if len(points) == 0:
+        return points
+    cells = np.floor(points / cell_m).astype(np.int64)
+    key = cells[:, 0] * 1_000_003 + cells[:, 1]  # one integer per cell: a 1-D unique
+    _, first = np.unique(key, return_index=True)
+    merged: FloatArray = points[np.sort(first)]
+    return merged
+
+
+def distances(xs: FloatArray, ys: FloatArray, obstacles: FloatArray) -> FloatArray:
+    """Per pose, the distance to the nearest obstacle point (inf with none)."""
+    if len(obstacles) == 0:
+        return np.full(xs.shape, np.inf)
+    # |p - o|^2 = |p|^2 - 2 p.o + |o|^2: one matrix product (BLAS) instead of a pose x
+    # obstacle array per coordinate; float32 is centimetre-exact at these ranges
+    poses = np.column_stack([xs.ravel(), ys.ravel()]).astype(np.float32)
+    obs = obstacles.astype(np.float32)
+    d2 = (poses @ (-2.0 * obs.T)) + (obs * obs).sum(axis=1)[None, :]
+    nearest = d2.min(axis=1) + (poses * poses).sum(axis=1)
+    out: FloatArray = np.sqrt(np.maximum(nearest, 0.0)).astype(np.float64).reshape(xs.shape)
+    return out
+
+
+def admissible(
+    win: Window,
+    gaps: FloatArray,
+    start_gap: float,
+    *,
+    radius_m: float,
+    margin_m: float,
+    accel_v: float,
+    delay_s: float,
+    horizon_s: float,
+) -> BoolArray:
+    """Per trajectory: it keeps ``radius + margin`` from every obstacle over the horizon, or
+    it is at the window's slowest speed and can brake before the first pose that does not.
+    ``gaps``: trajectories x steps distances to obstacles."""
+    # already inside the margin: any arc that does not bring it closer
+    limit = min(radius_m + margin_m, start_gap - 0.005)
+    hit = gaps < limit
+    steps = gaps.shape[1]
+    first = np.where(hit.any(axis=1), hit.argmax(axis=1), steps)
+    travel = np.abs(win.v) * horizon_s * (first / steps)  # arc length to the first hit
+    brake = win.v**2 / (2.0 * accel_v) + np.abs(win.v) * delay_s
+    # Only the window's slowest speed may head for a hit it can brake before (it is the
+    # brake); a faster one that needs braking is no plan.
+    slowest = win.v <= win.v.min() + 1e-9
+    out: BoolArray = (first == steps) | (slowest & (brake < travel))
+    return out
+
+
+@dataclass(frozen=True)
+class Local:
+    """The planned path in the robot's frame, near the robot."""
+
+    points: FloatArray  # the path's vertices from the robot's projection on, in order
+    carrot: tuple[float, float]  # ``lookahead`` along the path ahead
+    remaining_m: float  # from the projection to the path's end
+
+
+def localise(path_xy: FloatArray, lookahead_m: float) -> Local | None:
+    """The path (robot frame, n x 2) from the robot's projection on it: the vertices ahead
+    up to the carrot, the carrot, and the length left. None for fewer than one point."""
+    if len(path_xy) == 0:
+        return None
+    if len(path_xy) == 1:
+        p = (float(path_xy[0, 0]), float(path_xy[0, 1]))
+        return Local(path_xy.copy(), p, math.hypot(*p))
+    a, b = path_xy[:-1], path_xy[1:]
+    ab = b - a
+    length2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12)
+    t = np.clip(np.einsum("ij,ij->i", -a, ab) / length2, 0.0, 1.0)
+    proj = a + ab * t[:, None]
+    seg = int(np.argmin(np.hypot(proj[:, 0], proj[:, 1])))  # the first of equals
+    ahead = np.vstack([proj[seg], path_xy[seg + 1 :]])
+    steps = np.hypot(*np.diff(ahead, axis=0).T)
+    cumulative = np.concatenate([[0.0], np.cumsum(steps)])
+    remaining = float(cumulative[-1])
+    if remaining <= lookahead_m:
+        carrot = ahead[-1]
+        kept = ahead
+    else:
+        k = int(np.searchsorted(cumulative, lookahead_m))  # cumulative[k-1] < L <= [k]
+        f = (lookahead_m - cumulative[k - 1]) / max(steps[k - 1], 1e-12)
+        carrot = ahead[k - 1] + f * (ahead[k] - ahead[k - 1])
+        kept = np.vstack([ahead[:k], carrot])
+    return Local(kept, (float(carrot[0]), float(carrot[1])), remaining)
+
+
+def densify(points: FloatArray, step_m: float = 0.05) -> FloatArray:
+    """The polyline ``points`` as points at most ``step_m`` apart (its vertices kept)."""
+    if len(points) < 2:
+        return points
+    parts = [points[:1]]
+    for a, b in itertools.pairwise(points):
+        n = max(1, math.ceil(float(np.hypot(*(b - a))) / step_m))
+        t = np.linspace(0.0, 1.0, n + 1)[1:, None]
+        parts.append(a + t * (b - a))
+    dense: FloatArray = np.vstack(parts)
+    return dense
+
+
+def path_blocked(local: Local, obstacles: FloatArray, clearance_m: float) -> bool:
+    """Whether the path ahead, up to the carrot, runs within ``clearance_m`` of a hit: the
+    planner has not yet planned round something the lidar shows."""
+    dense = densify(local.points)
+    if len(obstacles) == 0 or len(dense) == 0:
+        return False
+    return bool(distances(dense[:, 0], dense[:, 1], obstacles).min() < clearance_m)
+
+
+def to_path(xs: FloatArray, ys: FloatArray, points: FloatArray) -> FloatArray:
+    """Per (x, y), its distance to the polyline ``points``."""
+    if len(points) == 1:
+        single: FloatArray = np.hypot(xs - points[0, 0], ys - points[0, 1])
+        return single
+    a, b = points[:-1], points[1:]
+    ab = b - a
+    length2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12)
+    rx = xs[:, None] - a[None, :, 0]
+    ry = ys[:, None] - a[None, :, 1]
+    t = np.clip((rx * ab[None, :, 0] + ry * ab[None, :, 1]) / length2[None, :], 0.0, 1.0)
+    dx = rx - t * ab[None, :, 0]
+    dy = ry - t * ab[None, :, 1]
+    return np.asarray(np.hypot(dx, dy).min(axis=1), dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class Scores:
+    """Per trajectory, each term (before weights) and the total."""
+
+    progress: FloatArray
+    path: FloatArray
+    heading: FloatArray
+    clearance: FloatArray
+    speed: FloatArray
+    total: FloatArray
+
+
+def score(
+    win: Window,
+    poses: tuple[FloatArray, FloatArray, FloatArray],
+    gaps: FloatArray,
+    local: Local,
+    *,
+    start: tuple[float, float, float],
+    radius_m: float,
+    max_v: float,
+    horizon_s: float,
+    clearance_cap_m: float,
+    weights: Weights,
+) -> Scores:
+    """Every term of every trajectory (see the module's docstring)."""
+    xs, ys, yaws = poses
+    ex, ey, eyaw = xs[:, -1], ys[:, -1], yaws[:, -1]
+    cx, cy = local.carrot
+    reach = max(max_v * horizon_s, 1e-6)
+    before = math.hypot(cx - start[0], cy - start[1])
+    progress = (before - np.hypot(cx - ex, cy - ey)) / reach
+    path = to_path(ex, ey, local.points) / reach
+    bearing = np.arctan2(cy - ey, cx - ex) - eyaw
+    heading = np.abs(np.arctan2(np.sin(bearing), np.cos(bearing))) / math.pi
+    # close to the carrot the bearing means little (the carrot is the path's end)
+    heading = np.where(np.hypot(cx - ex, cy - ey) < 0.1 * reach, 0.0, heading)
+    speed = win.v / max(max_v, 1e-6)
+    # room counts where the robot goes: weighted by the speed share, so that standing
+    # still (all the room it has now, no progress) never wins on clearance alone
+    gap = np.clip(gaps.min(axis=1) - radius_m, 0.0, clearance_cap_m) / clearance_cap_m * speed
+    total = (
+        weights.progress * progress
+        - weights.path * path
+        - weights.heading * heading
+        + weights.clearance * gap
+        + weights.speed * speed
+    )
+    return Scores(progress, path, heading, gap, speed, total)
+
+
+def straight_gap(obstacles: FloatArray, radius_m: float) -> float:
+    """Distance ahead to the first obstacle in the corridor the round body sweeps driving
+    straight on (inf with none): what safety_stop measures."""
+    if len(obstacles) == 0:
+        return math.inf
+    ahead = (obstacles[:, 0] > 0.0) & (np.abs(obstacles[:, 1]) < radius_m)
+    return float(np.hypot(*obstacles[ahead].T).min()) if ahead.any() else math.inf

@@ -1,0 +1,173 @@
+"""The recovery rule: one per robot whose strategy asks for it (``"recovery": true`` in its
+params, with the goal as target), running recovery.py's machine on the robot's odometry.
+
+1. acquisition: at most every EVAL_PERIOD_S of sim time, the newest odometry and the active
+   goal; the newest laser scan only while a manoeuvre is on or about to start; then the
+   machine's step, once the guards are known to hold (so guards and conditions only look);
+2. guards: still wanted, fresh odometry, an active goal;
+3. conditions: the step has something to do;
+4. actions: ``drive``: a velocity recommendation (source ``recovery``, priority 70: above
+   the local controllers and avoidance, below the safety band, so safety_stop and the
+   bridge's safety layer still win; valid VALIDITY_S, short, so that the local controller
+   takes over soon after a manoeuvre); ``replan``: the robot's route is dropped, so the move
+   rule plans it again (and publishes it) from where the robot is now; ``fail``: the goal is
+   set ``failed`` with the machine's reason, and one stop is recommended.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Iterator
+from typing import Any, ClassVar
+
+import numpy as np
+
+from common import log
+from common.contract import records
+from common.engine.supervisor import Ticket
+from services.planner.recovery import NOTHING, Action, Machine, Observation, RecoveryParams
+from services.planner.scenario import ODOM_MAX_AGE_S
+from services.planner.target import RuleKey, Spec, TargetRule
+from services.planner.view import PlannerView
+from services.planner.world import RobotState
+
+logger = logging.getLogger("pnav.planner")
+
+PRIORITY = 70
+VALIDITY_S = 0.25
+STOP_VALIDITY_S = 0.5
+EVAL_PERIOD_S = 0.1  # sim s between two steps: a recommendation each, well inside VALIDITY_S
+REAR_MARGIN_M = 0.1  # beyond the footprint and the distance to back up
+FREER_HORIZON_M = 1.0  # how far the freer side is judged
+
+
+def surroundings(
+    scan: records.LaserScan, footprint_m: float, back_up_m: float
+) -> tuple[bool, bool]:
+    """(nothing seen behind within the back-up's reach, the left half is the freer one)."""
+    ranges = scan.ranges.astype(np.float64)
+    angles = scan.angles()
+    valid = np.isfinite(ranges) & (ranges >= scan.range_min - 1e-4)
+    finite = np.where(valid, ranges, 0.0)  # inf x cos(90 deg) would be nan
+    x, y = finite * np.cos(angles), finite * np.sin(angles)
+    behind = valid & (x < 0) & (np.abs(y) < footprint_m + 0.05)
+    behind &= -x < footprint_m + back_up_m + REAR_MARGIN_M
+    capped = np.where(valid, np.minimum(ranges, FREER_HORIZON_M), FREER_HORIZON_M)
+    left, right = angles > 0, angles < 0
+    left_open = float(capped[left].mean()) if left.any() else 0.0
+    right_open = float(capped[right].mean()) if right.any() else 0.0
+    return not bool(behind.any()), left_open >= right_open
+
+
+class Recovery(TargetRule):
+    scenario = "recovery"
+    kind: ClassVar[str] = "recovery"
+
+    def __init__(self, view: PlannerView, ticket: Ticket[RuleKey, Spec]) -> None:
+        super().__init__(view, ticket)
+        self.machine = Machine()
+        self.robot: RobotState | None = None
+        self.odom: records.Odometry | None = None
+        self.goal: records.Goal | None = None
+        self.sim_now = 0.0
+        self.evaluated_at = -math.inf
+        self.action: Action = NOTHING
+
+    async def data_acquisition(self) -> None:
+        self.action = NOTHING
+        self.odom = self.goal = None
+        self.robot = self.claim()
+        if self.robot is None or self.robot.strategy is None:
+            return
+        view = self.view
+        self.sim_now = view.now()
+        if 0.0 <= self.sim_now - self.evaluated_at < EVAL_PERIOD_S:
+            return
+        self.evaluated_at = self.sim_now
+        self.odom = await view.newest_odometry(self.robot_id)
+        self.goal = await view.active_goal(self.robot)
+        if not all(self.activation_guards()):
+            return
+        assert self.odom is not None and self.goal is not None
+        params = RecoveryParams.read(self.robot.strategy.params)
+        info = self.robot.info
+        o = self._observe(self.odom, self.goal, info.footprint_radius_m)
+        if self.machine.wants_scan(o, params):
+            scan = await view.newest_scan(self.robot_id)
+            if scan is not None:
+                clear, left = surroundings(scan, info.footprint_radius_m, params.back_up_m)
+                o = self._observe(self.odom, self.goal, info.footprint_radius_m, clear, left)
+        params = RecoveryParams(
+            **{**vars(params), "back_up_mps": min(params.back_up_mps, info.max_linear_mps)}
+        )
+        self.action = self.machine.step(o, params)
+
+    @staticmethod
+    def _observe(
+        odom: records.Odometry,
+        goal: records.Goal,
+        footprint_m: float,
+        rear_clear: bool = True,
+        left_freer: bool = True,
+    ) -> Observation:
+        return Observation(
+            *(odom.stamp, odom.x, odom.y, odom.yaw, ("goal", goal.id), goal.x, goal.y),
+            footprint_m,
+            rear_clear,
+            left_freer,
+        )
+
+    def activation_guards(self) -> Iterator[bool]:
+        yield self.robot is not None
+        yield self.odom is not None and self.view.started()
+        assert self.odom is not None
+        yield self.sim_now - self.odom.stamp <= ODOM_MAX_AGE_S
+        yield self.goal is not None
+
+    def conditions(self) -> bool:
+        return self.action.kind != "none"
+
+    async def actions(self) -> None:
+        action, odom, goal, robot = self.action, self.odom, self.goal, self.robot
+        assert odom is not None and goal is not None and robot is not None
+        if action.kind == "drive":
+            await self._recommend(odom, goal, action.linear, action.angular, action.reason)
+        elif action.kind == "replan":
+            robot.route = None  # the move rule plans again from here, around what it sees now
+            self._log("recovery re-plan", goal=goal.id, why=action.reason)
+        elif action.kind == "fail":
+            await self._fail(odom, goal, action.reason)
+
+    async def _fail(self, odom: records.Odometry, goal: records.Goal, why: str) -> None:
+        """Give the goal up with ``why`` (only if it is still active) and stop the robot."""
+        if not await self.view.mark_failed(goal.id, self.robot_id, why, self.sim_now):
+            return  # superseded or cancelled meanwhile: not ours to close
+        self._log("goal failed", goal=goal.id, why=why)
+        reason = f"goal {goal.id} failed: {why}: stop"
+        await self._recommend(odom, goal, 0.0, 0.0, reason, STOP_VALIDITY_S)
+
+    async def _recommend(
+        self,
+        odom: records.Odometry,
+        goal: records.Goal,
+        linear: float,
+        angular: float,
+        reason: str,
+        ttl_s: float = VALIDITY_S,
+    ) -> None:
+        inputs: dict[str, Any] = {"odometry": odom.id, "odom_stamp": odom.stamp, "goal": goal.id}
+        await self.view.recommend_velocity(
+            self.robot_id,
+            source=self.scenario,
+            priority=PRIORITY,
+            linear=linear,
+            angular=angular,
+            stamp=odom.stamp,
+            ttl_s=ttl_s,
+            reason=reason,
+            inputs=inputs,
+        )
+
+    def _log(self, message: str, **fields: Any) -> None:
+        log.event(logger, logging.WARNING, message, robot=self.robot_id, **fields)
