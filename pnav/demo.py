@@ -152,7 +152,7 @@ async def demo(rate: str) -> dict[str, Any]:
         print(f"  stack up in {time.monotonic() - wall_start:.1f} s; logs in {stack.log_dir}")
         rt = await Runtime.open(
             ServiceConfig(
-                service="demo", database_url=stack.local.database_url, zenoh=stack.local.zenoh
+                service="demo", database_url=stack.local.url_for("user"), zenoh=stack.local.zenoh
             )
         )
         monitor = MissionMonitor(rt.database.pool, ROBOT)

@@ -144,9 +144,9 @@ def service_specs(local: LocalStack, options: StackOptions, world: Path) -> list
     """One process per service; ``options.replicas[name]`` processes for a replicated one,
     named ``name-1``, ``name-2``... with ``PNAV_INSTANCE`` set to that name (a lone process
     keeps the plain name, and the supervisor gives it instance ``name-1``)."""
-    env = {**local.env(), **options.extra_env}
     specs = []
     for name in options.services:
+        env = {**local.env(), **service_database(local, name), **options.extra_env}
         argv = options.replace.get(name) or [sys.executable, "-m", f"services.{name}"]
         if name == "sim":
             argv += ["--world", str(world), "--rate", options.rate]
@@ -168,6 +168,14 @@ def service_specs(local: LocalStack, options: StackOptions, world: Path) -> list
     return specs
 
 
+def service_database(local: LocalStack, name: str) -> dict[str, str]:
+    """PNAV_DATABASE_URL of service ``name``: its own role's (a replacement, docs/SWAP.md,
+    gets the role of the service it replaces); none for the sim, which has no database."""
+    if name == "sim":
+        return {"PNAV_DATABASE_URL": ""}
+    return {"PNAV_DATABASE_URL": local.url_for(name)}
+
+
 @contextlib.asynccontextmanager
 async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
     world = resolve_world(options.world)
@@ -178,7 +186,7 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
         stackfile.write(
             stackfile.StackInfo(
                 pid=os.getpid(),
-                database_url=local.database_url,
+                database_url=local.url_for("user"),  # the CLI acts for people
                 zenoh_connect=local.zenoh.connect[0],
                 world=str(world),
                 rate=options.rate,

@@ -519,3 +519,15 @@ ALTER TABLE retention_policy DROP CONSTRAINT retention_policy_table_name_check;
 ALTER TABLE retention_policy ADD CONSTRAINT retention_policy_table_name_check
     CHECK (table_name IN ('odometry', 'laser_scan', 'battery', 'collision_event', 'planned_path'));
 INSERT INTO retention_policy (table_name, keep_rows_per_robot) VALUES ('planned_path', 200);
+
+-- migration 7: least privilege: pruning runs with its owner's rights
+--
+-- Every service now connects as its own role, which may write only the tables CONTRACT.md's
+-- "Roles" table grants it (common/contract/roles.py creates the roles and applies the
+-- GRANTs; roles are cluster-wide and passwords per deployment, so neither is a migration).
+-- prune_sensor_rows() deletes old rows of every table of retention_policy, planned_path
+-- among them, which its caller (the bridge) does not write: it now runs as its owner
+-- (SECURITY DEFINER), with a search_path no caller can redirect to tables of its own, and
+-- only the roles granted EXECUTE may call it.
+ALTER FUNCTION prune_sensor_rows() SECURITY DEFINER SET search_path = public, pg_temp;
+REVOKE EXECUTE ON FUNCTION prune_sensor_rows() FROM PUBLIC;
