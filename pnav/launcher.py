@@ -193,6 +193,7 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
                 log_dir=str(log_dir),
                 postgres_dir=str(local.postgres.data_dir) if local.postgres else "",
                 postgres_temporary=local.postgres is not None and local.postgres.temporary,
+                role_urls=dict(local.role_urls),
             )
         )
         # Supervision runs for as long as the stack does: a crashed service is restarted
