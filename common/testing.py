@@ -14,7 +14,7 @@ import socket
 import tempfile
 import time
 import uuid
-from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -51,6 +51,30 @@ def loopback_zenoh() -> Iterator[ZenohSettings]:
             router.close()
         return
     raise RuntimeError(f"could not start a loopback Zenoh router: {last_error}")
+
+
+@contextlib.contextmanager
+def acl_router(
+    config_file: str | Path, passwords: Mapping[str, str], directory: str | Path
+) -> Iterator[str]:
+    """Run the router of ``config_file`` (deploy/zenoh/router.json5: its access control and
+    user/password authentication) in this process on a free loopback port, its dictionary
+    written to ``directory`` from ``passwords`` (user -> password); yield the endpoint."""
+    import json
+
+    import zenoh
+
+    dictionary = Path(directory) / "zenoh-users.txt"
+    dictionary.write_text("".join(f"{user}:{pw}\n" for user, pw in passwords.items()))
+    config = zenoh.Config.from_file(str(config_file))
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    config.insert_json5("listen/endpoints", json.dumps([endpoint]))
+    config.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(dictionary)))
+    router = zenoh.open(config)
+    try:
+        yield endpoint
+    finally:
+        router.close()
 
 
 class EmbeddedPostgres:

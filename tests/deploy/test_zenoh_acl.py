@@ -14,7 +14,6 @@ test) and clients with each identity:
 
 from __future__ import annotations
 
-import json
 import threading
 import time
 from collections.abc import Iterator
@@ -28,7 +27,7 @@ from common.config import ZenohSettings
 from common.contract import acl, keys
 from common.contract.grants import BUS_IDENTITIES
 from common.errors import ConnectionFailure
-from common.testing import free_port
+from common.testing import acl_router
 
 ROUTER_CONFIG = Path(__file__).resolve().parents[2] / "deploy" / "zenoh" / "router.json5"
 PASSWORDS = {name: f"pw-{name}-{i}" for i, name in enumerate(BUS_IDENTITIES)}
@@ -79,20 +78,14 @@ class Fleet:
 
 @pytest.fixture(scope="module")
 def fleet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Fleet]:
-    dictionary = tmp_path_factory.mktemp("zenoh") / "users.txt"
-    dictionary.write_text("".join(f"{u}:{p}\n" for u, p in PASSWORDS.items()))
-    config = zenoh.Config.from_file(str(ROUTER_CONFIG))
-    endpoint = f"tcp/127.0.0.1:{free_port()}"  # not 0.0.0.0:7447 in a test
-    config.insert_json5("listen/endpoints", json.dumps([endpoint]))
-    config.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(dictionary)))
-    router = zenoh.open(config)
-    fleet = Fleet(endpoint)
-    try:
-        yield fleet
-    finally:
-        for session in fleet.sessions.values():
-            session.close()
-        router.close()
+    # not 0.0.0.0:7447 and /run/secrets in a test: a free loopback port, a temporary file
+    with acl_router(ROUTER_CONFIG, PASSWORDS, tmp_path_factory.mktemp("zenoh")) as endpoint:
+        fleet = Fleet(endpoint)
+        try:
+            yield fleet
+        finally:
+            for session in fleet.sessions.values():
+                session.close()
 
 
 @pytest.fixture(scope="module")

@@ -142,3 +142,20 @@ def test_up_lockstep_waits_for_every_service_started_but_a_replaced_one() -> Non
     assert {s.env["PNAV_LOCKSTEP"] for s in specs} == {
         "bridge,strategy,planner,controller,decision"
     }
+
+
+def test_each_service_connects_as_its_own_role_and_a_replacement_as_the_replaced_one() -> None:
+    from dataclasses import replace as with_fields
+
+    from pnav.launcher import parse_replace
+
+    roles = {n: f"postgresql://pnav_{n}:pw@/y" for n in ("bridge", "planner", "controller")}
+    stack = with_fields(local(), role_urls=roles)
+    options = StackOptions(replace=parse_replace(["controller=python -m examples.sql_controller"]))
+    specs = {s.name: s for s in service_specs(stack, options, Path("worlds/open_room.yaml"))}
+    assert specs["bridge"].env["PNAV_DATABASE_URL"] == roles["bridge"]
+    assert specs["planner"].env["PNAV_DATABASE_URL"] == roles["planner"]
+    assert specs["controller"].env["PNAV_DATABASE_URL"] == roles["controller"]
+    assert specs["sim"].env["PNAV_DATABASE_URL"] == ""  # no database account at all
+    # a role the stack could not set up: the account the stack was given
+    assert specs["decision"].env["PNAV_DATABASE_URL"] == "postgresql://x/y"
