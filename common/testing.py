@@ -77,6 +77,24 @@ def acl_router(
         router.close()
 
 
+async def as_service_role(db_url: str, service: str) -> str:
+    """``db_url`` set up with the roles, as ``pnav up`` and the compose migration do
+    (common.contract.roles.bootstrap, as the superuser ``db_url`` names), then the DSN of
+    ``service``'s role: a contract test runs the service with exactly its grants. The test
+    server trusts its local socket, so no password."""
+    import asyncpg
+
+    from common.contract.grants import role_name
+    from common.contract.roles import bootstrap, role_url
+
+    conn = await asyncpg.connect(db_url)
+    try:
+        await bootstrap(conn)
+    finally:
+        await conn.close()
+    return role_url(db_url, role_name(service), None)
+
+
 class EmbeddedPostgres:
     """A real Postgres server in a private directory, started with ``pgserver``."""
 
