@@ -49,8 +49,10 @@ async def _permitted(conn: asyncpg.Connection, sql: str) -> bool:
     try:
         await conn.execute(sql)
         return True
-    except asyncpg.InsufficientPrivilegeError:
-        return False
+    except asyncpg.InsufficientPrivilegeError as exc:
+        # row security (robot_lease, engine_stats: a row of one's own family only) is checked
+        # after the GRANT: its refusal of a DEFAULT VALUES row means the GRANT let it through
+        return "row-level security" in str(exc)
     except asyncpg.IntegrityConstraintViolationError:
         return True
     finally:
@@ -187,3 +189,32 @@ def test_role_url_replaces_the_user_and_quotes_the_password() -> None:
         role_url("postgresql://a:b@db:5432/pnav", "pnav_user", "p@ss/w:rd")
         == "postgresql://pnav_user:p%40ss%2Fw%3Ard@db:5432/pnav"
     )
+
+
+async def test_a_service_writes_leases_and_statistics_only_under_its_own_name(
+    admin: asyncpg.Connection, empty_db_url: str
+) -> None:
+    await admin.execute("INSERT INTO robot (robot_id) VALUES ('r1'), ('r2')")
+    planner = await asyncpg.connect(role_url(empty_db_url, "pnav_planner", None))
+    controller = await asyncpg.connect(role_url(empty_db_url, "pnav_controller", None))
+    try:
+        # through the contract's functions, as every replica takes and gives back a robot
+        assert await controller.fetchval("SELECT robot_lease_acquire('controller', 'r1', 'c-1')")
+        with pytest.raises(asyncpg.InsufficientPrivilegeError, match="row-level security"):
+            await planner.fetchval("SELECT robot_lease_acquire('controller', 'r2', 'p-1')")
+        # the planner cannot close the controller's tenure: the row is not its to change
+        closed = await planner.execute(
+            "UPDATE robot_lease SET released_at = clock_timestamp(), reason = 'forged' "
+            "WHERE service = 'controller'"
+        )
+        assert closed == "UPDATE 0"
+        assert await planner.fetchval("SELECT count(*) FROM robot_lease") == 1  # it reads it
+        assert await controller.fetchval("SELECT robot_lease_release('controller', 'r1', 'x')")
+        stats = "INSERT INTO engine_stats (service, instance, rule_type) VALUES ($1, 'i', 'R')"
+        await planner.execute(stats, "planner")
+        with pytest.raises(asyncpg.InsufficientPrivilegeError, match="row-level security"):
+            await planner.execute(stats, "controller")
+        assert await controller.execute("UPDATE engine_stats SET executed = 9") == "UPDATE 0"
+    finally:
+        await planner.close()
+        await controller.close()
