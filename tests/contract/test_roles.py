@@ -14,9 +14,11 @@ from collections.abc import AsyncIterator
 import asyncpg
 import pytest
 
+from common.config import ServiceConfig, ZenohSettings
 from common.contract import grants as g
 from common.contract.migrate import apply_migrations
 from common.contract.roles import bootstrap, role_url
+from common.runtime import Runtime
 
 
 @pytest.fixture
@@ -218,3 +220,35 @@ async def test_a_service_writes_leases_and_statistics_only_under_its_own_name(
     finally:
         await planner.close()
         await controller.close()
+
+
+async def test_the_cli_drives_a_robot_as_pnav_user_and_a_service_role_cannot(
+    admin: asyncpg.Connection, empty_db_url: str, zenoh_settings: ZenohSettings
+) -> None:
+    from pnav import commands
+
+    await admin.execute("INSERT INTO robot (robot_id) VALUES ('r1')")
+
+    async def cli(role: str) -> Runtime:
+        url = role_url(empty_db_url, g.role_name(role), None)
+        return await Runtime.open(
+            ServiceConfig(service="cli", database_url=url, zenoh=zenoh_settings)
+        )
+
+    people = await cli(g.USER)
+    try:
+        first = await commands.set_goal(people, "r1", 1.0, 2.0)
+        second = await commands.set_goal(people, "r1", 3.0, 4.0)  # supersedes the first
+        assert await commands.cancel_goal(people, "r1") == second
+        status, reason = await commands.send_user_command(people, "r1", "SET_STRATEGY", "IDLE", 0.1)
+        assert (status, reason) == ("pending", "no answer from the strategy service within 0 s")
+        goals = await admin.fetch("SELECT id, status FROM goal ORDER BY id")
+        assert [tuple(r) for r in goals] == [(first, "superseded"), (second, "cancelled")]
+    finally:
+        await people.close()
+    planner = await cli("planner")
+    try:
+        with pytest.raises(asyncpg.InsufficientPrivilegeError):
+            await commands.set_goal(planner, "r1", 1.0, 2.0)  # the planner never sets goals
+    finally:
+        await planner.close()
