@@ -9,6 +9,7 @@ other must fail with ``permission denied`` (SQLSTATE 42501).
 
 from __future__ import annotations
 
+import uuid
 from collections.abc import AsyncIterator
 
 import asyncpg
@@ -17,8 +18,9 @@ import pytest
 from common.config import ServiceConfig, ZenohSettings
 from common.contract import grants as g
 from common.contract.migrate import apply_migrations
-from common.contract.roles import bootstrap, role_url
+from common.contract.roles import RolesUnavailable, bootstrap, role_url
 from common.runtime import Runtime
+from common.testing import EmbeddedPostgres
 
 
 @pytest.fixture
@@ -252,3 +254,22 @@ async def test_the_cli_drives_a_robot_as_pnav_user_and_a_service_role_cannot(
             await commands.set_goal(planner, "r1", 1.0, 2.0)  # the planner never sets goals
     finally:
         await planner.close()
+
+
+async def test_a_stack_given_a_plain_account_migrates_and_runs_everything_as_it(
+    pg: EmbeddedPostgres, caplog: pytest.LogCaptureFixture
+) -> None:
+    from common.stack import _set_up_roles
+
+    name = f"t_plain_{uuid.uuid4().hex[:8]}"
+    pg._server.psql(f"CREATE ROLE {name} LOGIN; CREATE DATABASE {name} OWNER {name};")
+    url = role_url(pg.dsn(name), name, None)
+    conn = await asyncpg.connect(url)
+    try:
+        with pytest.raises(RolesUnavailable, match="not a superuser"):
+            await bootstrap(conn)
+        assert await _set_up_roles(conn, url) == {}  # every service: the account given
+        assert await conn.fetchval("SELECT max(version) FROM schema_version") >= 7
+    finally:
+        await conn.close()
+    assert "is not a superuser: every service connects as it" in caplog.text
