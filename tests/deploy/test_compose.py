@@ -440,8 +440,12 @@ def test_the_shell_sets_the_database_name_and_the_passwords() -> None:
 
 
 def test_pnav_secrets_writes_every_variable_the_compose_file_requires(tmp_path: Path) -> None:
+    from common.contract.grants import BUS_IDENTITIES, LOGIN_ROLES
     from pnav.credentials import generate
 
+    # one password per role of CONTRACT.md and per identity on the bus, none forgotten
+    assert set(DB_PASSWORDS) == set(LOGIN_ROLES)
+    assert set(ZENOH_PASSWORDS) == set(BUS_IDENTITIES)
     env_file, users_file = generate(tmp_path)
     written = dict(line.split("=", 1) for line in env_file.read_text().splitlines() if "=" in line)
     assert set(written) == set(SECRETS)
