@@ -49,6 +49,9 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
         config.insert_json5("connect/endpoints", json.dumps(list(settings.connect)))
     if settings.listen:
         config.insert_json5("listen/endpoints", json.dumps(list(settings.listen)))
+    if settings.user and settings.password:
+        auth = {"user": settings.user, "password": settings.password}
+        config.insert_json5("transport/auth/usrpwd", json.dumps(auth))
     return config
 
 

@@ -15,6 +15,9 @@ PNAV_ZENOH_LISTEN          comma-separated endpoints to listen   (none)
 PNAV_ZENOH_MULTICAST       multicast scouting on (true/false)    false
 PNAV_ZENOH_CONFIG          path of a Zenoh JSON5 config file,    (none)
                            applied before the variables above
+PNAV_ZENOH_USER            user name this process authenticates  (none: no authentication)
+                           as to the router (compose: its service)
+PNAV_ZENOH_PASSWORD        that user's password                  (none)
 PNAV_ENGINE_PERIOD_MS      F: activation period and bound        50
 PNAV_ENGINE_MAX_RULES      N: most rules run per activation      1000
 PNAV_ENGINE_PAUSE_MS       P: least pause between activations    0
@@ -93,10 +96,15 @@ class ZenohSettings:
     listen: tuple[str, ...] = ()
     multicast: bool = False
     config_file: str | None = None
+    # user/password authentication to the router (docs/DEPLOY.md, "Zenoh access control")
+    user: str | None = None
+    password: str | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if self.mode not in ("client", "peer", "router"):
             raise ConfigError(f"PNAV_ZENOH_MODE={self.mode!r} must be client, peer or router")
+        if bool(self.user) != bool(self.password):
+            raise ConfigError("PNAV_ZENOH_USER and PNAV_ZENOH_PASSWORD go together: set both")
 
     @classmethod
     def from_env(cls, env: Env | None = None) -> ZenohSettings:
@@ -107,6 +115,8 @@ class ZenohSettings:
             listen=_list(env, "PNAV_ZENOH_LISTEN", cls.listen),
             multicast=_bool(env, "PNAV_ZENOH_MULTICAST", cls.multicast),
             config_file=env.get("PNAV_ZENOH_CONFIG") or None,
+            user=env.get("PNAV_ZENOH_USER", "").strip() or None,
+            password=env.get("PNAV_ZENOH_PASSWORD") or None,
         )
 
     def to_env(self) -> dict[str, str]:
@@ -119,6 +129,9 @@ class ZenohSettings:
         }
         if self.config_file:
             out["PNAV_ZENOH_CONFIG"] = self.config_file
+        if self.user and self.password:
+            out["PNAV_ZENOH_USER"] = self.user
+            out["PNAV_ZENOH_PASSWORD"] = self.password
         return out
 
 

@@ -6,6 +6,13 @@
 looked after (common.postmaster): restarted on the same data directory if it dies, and
 stopped (its temporary data directory removed) by a watcher if this process dies first.
 A server named by ``PNAV_DATABASE_URL`` is not ours: neither is done to it.
+
+Least privilege (common.contract.roles, docs/DEPLOY.md): the launcher connects as the
+server's superuser only to set the database up; every service then connects as its own role
+(``LocalStack.url_for``), with a password made for this run. The embedded server listens on
+a Unix socket in a directory only this OS user can open; on it the superuser ``postgres``
+keeps ``trust`` (pgserver's own tooling and restarts use it), every other role must give its
+password (scram-sha-256).
 """
 
 from __future__ import annotations
@@ -14,8 +21,9 @@ import asyncio
 import contextlib
 import logging
 import os
+import secrets
 from collections.abc import AsyncIterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import asyncpg
@@ -23,7 +31,9 @@ from zenoh import Session
 
 from common.bus import start_router
 from common.config import ZenohSettings
+from common.contract.grants import LOGIN_ROLES, role_name
 from common.contract.migrate import apply_migrations
+from common.contract.roles import bootstrap, is_superuser, role_url
 from common.postmaster import Keeper, Lifeline, start_lifeline
 from common.testing import EmbeddedPostgres, free_port
 
@@ -35,10 +45,46 @@ class LocalStack:
     router: Session
     postgres: EmbeddedPostgres | None
     keeper: Keeper | None = None
+    # role (short name: "planner", "user") -> the DSN to connect as it; empty when the
+    # server's account given could not set roles up (every process then uses database_url)
+    role_urls: dict[str, str] = field(default_factory=dict)
 
     def env(self) -> dict[str, str]:
-        """The variables a service process needs to join this stack."""
+        """The variables a process needs to join this stack (as the setup account: tests and
+        benchmarks; a service gets its own role's DSN from :meth:`url_for`)."""
         return {"PNAV_DATABASE_URL": self.database_url, **self.zenoh.to_env()}
+
+    def url_for(self, role: str) -> str:
+        """The DSN of ``role`` (a service's name, or ``user`` for people)."""
+        return self.role_urls.get(role, self.database_url)
+
+
+_PASSWORD_HBA = """\
+# written by proactive-nav (common/stack.py): the superuser keeps trust on this private
+# socket (pgserver's tooling uses it), every other role gives its password
+local   all   postgres   trust
+local   all   all        scram-sha-256
+"""
+
+
+async def _set_up_roles(conn: asyncpg.Connection, url: str) -> dict[str, str]:
+    """Create the roles with fresh passwords, migrate as pnav_owner, grant; return each
+    role's DSN. A non-superuser account gets the migrations only, and a warning."""
+    if not await is_superuser(conn):
+        await apply_migrations(conn)
+        logging.getLogger("pnav.roles").warning(
+            "PNAV_DATABASE_URL's user is not a superuser: every service connects as it "
+            "(no per-service roles; docs/DEPLOY.md, Least privilege)"
+        )
+        return {}
+    passwords = {role: secrets.token_hex(16) for role in LOGIN_ROLES}
+    await bootstrap(conn, passwords)
+    return {role: role_url(url, role_name(role), pw) for role, pw in passwords.items()}
+
+
+def _require_passwords(data_dir: Path) -> None:
+    """Ask every role but the superuser for its password (read at the next reload)."""
+    (data_dir / "pg_hba.conf").write_text(_PASSWORD_HBA)
 
 
 @contextlib.asynccontextmanager
@@ -62,6 +108,7 @@ async def local_stack(
             lifeline.close()
             raise
         url = postgres.dsn()
+        _require_passwords(postgres.data_dir)
         keeper = Keeper(postgres)
     stop_keeper = asyncio.Event()
     keeping: asyncio.Task[None] | None = None
@@ -71,13 +118,15 @@ async def local_stack(
         try:
             conn = await asyncpg.connect(url)
             try:
-                await apply_migrations(conn)
+                if postgres is not None:
+                    await conn.execute("SELECT pg_reload_conf()")  # _require_passwords
+                role_urls = await _set_up_roles(conn, url)
             finally:
                 await conn.close()
             if keeper is not None:
                 keeping = asyncio.create_task(keeper.run(stop_keeper), name="postgres-keeper")
             zenoh = ZenohSettings(mode="client", connect=(endpoint,))
-            yield LocalStack(url, zenoh, router, postgres, keeper)
+            yield LocalStack(url, zenoh, router, postgres, keeper, role_urls)
         finally:
             stop_keeper.set()
             if keeping is not None:

@@ -15,7 +15,7 @@ import subprocess
 import tempfile
 import time
 import uuid
-from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -88,6 +88,48 @@ def router_process() -> Iterator[tuple[subprocess.Popen[str], ZenohSettings]]:
             proc.send_signal(signal.SIGCONT)
         proc.kill()
         proc.wait()
+
+
+@contextlib.contextmanager
+def acl_router(
+    config_file: str | Path, passwords: Mapping[str, str], directory: str | Path
+) -> Iterator[str]:
+    """Run the router of ``config_file`` (deploy/zenoh/router.json5: its access control and
+    user/password authentication) in this process on a free loopback port, its dictionary
+    written to ``directory`` from ``passwords`` (user -> password); yield the endpoint."""
+    import json
+
+    import zenoh
+
+    dictionary = Path(directory) / "zenoh-users.txt"
+    dictionary.write_text("".join(f"{user}:{pw}\n" for user, pw in passwords.items()))
+    config = zenoh.Config.from_file(str(config_file))
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    config.insert_json5("listen/endpoints", json.dumps([endpoint]))
+    config.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(dictionary)))
+    router = zenoh.open(config)
+    try:
+        yield endpoint
+    finally:
+        router.close()
+
+
+async def as_service_role(db_url: str, service: str) -> str:
+    """``db_url`` set up with the roles, as ``pnav up`` and the compose migration do
+    (common.contract.roles.bootstrap, as the superuser ``db_url`` names), then the DSN of
+    ``service``'s role: a contract test runs the service with exactly its grants. The test
+    server trusts its local socket, so no password."""
+    import asyncpg
+
+    from common.contract.grants import role_name
+    from common.contract.roles import bootstrap, role_url
+
+    conn = await asyncpg.connect(db_url)
+    try:
+        await bootstrap(conn)
+    finally:
+        await conn.close()
+    return role_url(db_url, role_name(service), None)
 
 
 class EmbeddedPostgres:

@@ -95,6 +95,13 @@ def build_parser() -> argparse.ArgumentParser:
     migrate.add_argument(
         "--wait", type=not_negative, default=60.0, help="seconds to wait for Postgres"
     )
+    migrate.add_argument(
+        "--roles",
+        action="store_true",
+        help="also create one role per service (passwords from PNAV_DB_PASSWORD_*) and grant "
+        "each what CONTRACT.md allows; needs the server's superuser",
+    )
+    _secrets_parser(commands)
 
     demo = commands.add_parser("demo", help="the demo mission (see README)")
     demo.add_argument("--json", metavar="FILE", help="also write the summary as JSON")
@@ -208,7 +215,9 @@ def dispatch(args: argparse.Namespace) -> int:
     if args.command == "down":
         return commands.down()
     if args.command == "migrate":
-        return uvloop.run(commands.migrate(args.wait))
+        return uvloop.run(commands.migrate(args.wait, roles=args.roles))
+    if args.command == "secrets":
+        return _secrets(args)
     if args.command == "status":
         return uvloop.run(commands.status(args.once or not sys.stdout.isatty()))
     if args.command in ("goal", "strategy", "cancel"):
@@ -229,6 +238,24 @@ def dispatch(args: argparse.Namespace) -> int:
 
         return run_worlds(args)
     raise AssertionError(f"unhandled command {args.command}")  # argparse enforces the choices
+
+
+def _secrets_parser(commands: argparse._SubParsersAction[Parser]) -> None:
+    secrets = commands.add_parser(
+        "secrets", help="write random passwords for docker compose (.env, zenoh-users.txt)"
+    )
+    secrets.add_argument(
+        "--dir", type=Path, default=Path("deploy"), help="where to write them (default: deploy)"
+    )
+    secrets.add_argument("--force", action="store_true", help="replace existing files")
+
+
+def _secrets(args: argparse.Namespace) -> int:
+    from pnav.credentials import generate
+
+    env_file, users_file = generate(args.dir, force=args.force)
+    print(f"wrote {env_file} and {users_file} (mode 600); docs/DEPLOY.md, Least privilege")
+    return 0
 
 
 def _up(args: argparse.Namespace) -> int:

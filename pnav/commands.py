@@ -262,18 +262,26 @@ def down(wait_s: float = 20.0) -> int:
     return 1
 
 
-async def migrate(wait_s: float) -> int:
-    """Apply the contract's migrations to PNAV_DATABASE_URL (the compose one-shot job)."""
+async def migrate(wait_s: float, *, roles: bool = False) -> int:
+    """Apply the contract's migrations to PNAV_DATABASE_URL (the compose one-shot job); with
+    ``roles``, as pnav_owner after creating every role and before granting (common.contract.
+    roles), the role passwords read from PNAV_DB_PASSWORD_*."""
     from common.contract.migrate import apply_migrations, current_version
+    from common.contract.roles import bootstrap
     from common.db import create_pool
+    from pnav.credentials import db_passwords_from_env
 
     url = os.environ.get("PNAV_DATABASE_URL", "").strip()
     if not url:
         raise UsageError("PNAV_DATABASE_URL is not set: which database should be migrated?")
+    passwords = db_passwords_from_env() if roles else {}
     pool = await create_pool(url, max_size=1, wait_s=wait_s)
     try:
         async with pool.acquire() as conn:
-            applied = await apply_migrations(conn)
+            if roles:
+                applied = await bootstrap(conn, passwords)
+            else:
+                applied = await apply_migrations(conn)
             version = await current_version(conn)
     finally:
         await pool.close()

@@ -183,7 +183,7 @@ async def demo(
             print(f"  dashboard: {stack.dashboard_url} (watch the mission live)", flush=True)
         rt = await Runtime.open(
             ServiceConfig(
-                service="demo", database_url=stack.local.database_url, zenoh=stack.local.zenoh
+                service="demo", database_url=stack.local.url_for("user"), zenoh=stack.local.zenoh
             )
         )
         monitor = MissionMonitor(rt.database.pool, ROBOT)

@@ -195,16 +195,17 @@ def recorder_spec(local: LocalStack, options: StackOptions) -> list[ProcessSpec]
     if options.record is None:
         return []
     argv = [sys.executable, "-m", "pnav.record", str(options.record)]
-    return [ProcessSpec("recorder", argv, {**local.env(), **options.extra_env})]
+    env = {**local.env(), "PNAV_DATABASE_URL": local.url_for("user"), **options.extra_env}
+    return [ProcessSpec("recorder", argv, env)]
 
 
 def service_specs(local: LocalStack, options: StackOptions, world: Path) -> list[ProcessSpec]:
     """One process per service; ``options.replicas[name]`` processes for a replicated one,
     named ``name-1``, ``name-2``... with ``PNAV_INSTANCE`` set to that name (a lone process
     keeps the plain name, and the supervisor gives it instance ``name-1``)."""
-    env = {**local.env(), **options.extra_env}
     specs = []
     for name in options.services:
+        env = {**local.env(), **service_database(local, name), **options.extra_env}
         argv = options.replace.get(name) or [sys.executable, "-m", f"services.{name}"]
         if name == "sim":
             argv += ["--world", str(world), "--rate", options.rate]
@@ -226,7 +227,9 @@ def service_specs(local: LocalStack, options: StackOptions, world: Path) -> list
             instance = f"{name}-{i}"
             specs.append(ProcessSpec(instance, argv, {**env, "PNAV_INSTANCE": instance}))
     if options.dashboard is not None:
-        specs.append(dashboard_spec(env, options.dashboard))
+        # the page writes only people's rows: it acts as people do (pnav_user)
+        people = {**local.env(), "PNAV_DATABASE_URL": local.url_for("user"), **options.extra_env}
+        specs.append(dashboard_spec(people, options.dashboard))
     return specs
 
 
@@ -260,6 +263,14 @@ def resolve_dashboard(options: StackOptions) -> StackOptions:
     return dataclasses.replace(options, dashboard=dataclasses.replace(dashboard, port=port))
 
 
+def service_database(local: LocalStack, name: str) -> dict[str, str]:
+    """PNAV_DATABASE_URL of service ``name``: its own role's (a replacement, docs/SWAP.md,
+    gets the role of the service it replaces); none for the sim, which has no database."""
+    if name == "sim":
+        return {"PNAV_DATABASE_URL": ""}
+    return {"PNAV_DATABASE_URL": local.url_for(name)}
+
+
 @contextlib.asynccontextmanager
 async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
     world = resolve_world(options.world)
@@ -274,13 +285,14 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
         stackfile.write(
             stackfile.StackInfo(
                 pid=os.getpid(),
-                database_url=local.database_url,
+                database_url=local.url_for("user"),  # the CLI acts for people
                 zenoh_connect=local.zenoh.connect[0],
                 world=str(world),
                 rate=options.rate,
                 log_dir=str(log_dir),
                 postgres_dir=str(local.postgres.data_dir) if local.postgres else "",
                 postgres_temporary=local.postgres is not None and local.postgres.temporary,
+                role_urls=dict(local.role_urls),
             )
         )
         # Supervision runs for as long as the stack does: a crashed service is restarted

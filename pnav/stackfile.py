@@ -10,7 +10,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from common.config import ZenohSettings
@@ -41,15 +41,24 @@ class StackInfo:
     # whether it is a temporary one: what a later `pnav up` cleans if this stack died
     postgres_dir: str = ""
     postgres_temporary: bool = False
+    # each role's DSN (common.contract.roles): a service started by hand next to the stack
+    # connects as its own role, `url_for("controller")`; database_url is people's (pnav_user)
+    role_urls: dict[str, str] = field(default_factory=dict)
 
     def zenoh(self) -> ZenohSettings:
         return ZenohSettings(mode="client", connect=(self.zenoh_connect,))
+
+    def url_for(self, role: str) -> str:
+        """The DSN of ``role`` (a service's name, or ``user``)."""
+        return self.role_urls.get(role, self.database_url)
 
 
 def write(info: StackInfo) -> None:
     path = stack_file()
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")
+    tmp.touch(mode=0o600)  # it holds the roles' passwords of this run
+    tmp.chmod(0o600)
     tmp.write_text(json.dumps(asdict(info), indent=2))
     tmp.replace(path)
 

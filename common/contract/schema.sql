@@ -546,3 +546,37 @@ INSERT INTO strategy (code, planner_scenario, controller_scenarios, params, desc
     ('GOTO_FAST', 'turn_then_move', '{dwa,safety_stop}',
      '{"target": "goal", "planner_drives": false, "recovery": true, "battery_wh_per_m": 0.006, "battery_reserve_wh": 0.05}',
      'go to the goal at the robot''s speed: dwa along the planned path, recovery when stuck, safety_stop');
+
+-- migration 9: least privilege: pruning as its owner, each family's own lease and stats rows
+--
+-- Every service now connects as its own role, which may write only the tables CONTRACT.md's
+-- "Roles" table grants it (common/contract/roles.py creates the roles and applies the
+-- GRANTs; roles are cluster-wide and passwords per deployment, so neither is a migration).
+-- prune_sensor_rows() deletes old rows of every table of retention_policy, planned_path
+-- among them, which its caller (the bridge) does not write: it now runs as its owner
+-- (SECURITY DEFINER), with a search_path no caller can redirect to tables of its own, and
+-- only the roles granted EXECUTE may call it.
+ALTER FUNCTION prune_sensor_rows() SECURITY DEFINER SET search_path = public, pg_temp;
+REVOKE EXECUTE ON FUNCTION prune_sensor_rows() FROM PUBLIC;
+
+-- Two tables are written by every scenario service, each under its own name in `service`:
+-- robot_lease and engine_stats. A GRANT cannot say "only your own rows", so row security
+-- does: a role of the pnav_<family> naming (common/contract/roles.py) may insert and change
+-- only rows whose `service` is its family (a planner cannot take or close a controller's
+-- lease, nor write its statistics); every role reads every row. The tables' owner and
+-- superusers are not subject to row security; a role outside the naming (a deployment's own
+-- account) is not restricted either.
+CREATE FUNCTION writes_as(p_service text) RETURNS boolean
+LANGUAGE sql STABLE PARALLEL SAFE AS $$
+    SELECT current_user NOT LIKE 'pnav\_%' OR current_user = 'pnav_' || p_service
+$$;
+ALTER TABLE robot_lease ENABLE ROW LEVEL SECURITY;
+CREATE POLICY robot_lease_read ON robot_lease FOR SELECT USING (true);
+CREATE POLICY robot_lease_insert ON robot_lease FOR INSERT WITH CHECK (writes_as(service));
+CREATE POLICY robot_lease_update ON robot_lease FOR UPDATE
+    USING (writes_as(service)) WITH CHECK (writes_as(service));
+ALTER TABLE engine_stats ENABLE ROW LEVEL SECURITY;
+CREATE POLICY engine_stats_read ON engine_stats FOR SELECT USING (true);
+CREATE POLICY engine_stats_insert ON engine_stats FOR INSERT WITH CHECK (writes_as(service));
+CREATE POLICY engine_stats_update ON engine_stats FOR UPDATE
+    USING (writes_as(service)) WITH CHECK (writes_as(service));

@@ -7,10 +7,12 @@ it into exit code 2, as the shipped services do.
 
 Read here: PNAV_DATABASE_URL (required), PNAV_DB_POOL_MAX, PNAV_DB_WAIT_S, PNAV_ZENOH_MODE,
 PNAV_ZENOH_CONNECT, PNAV_ZENOH_LISTEN, PNAV_ZENOH_MULTICAST, PNAV_ZENOH_CONFIG,
-PNAV_ENGINE_PERIOD_MS (this loop's fallback period: it has no engine, but the variable means
-"re-read at least this often" for every service), PNAV_STATS_PERIOD_S, PNAV_INSTANCE,
-PNAV_LEASES, PNAV_LEASE_PERIOD_MS, PNAV_LEASE_TIMEOUT_S, PNAV_LOG_LEVEL. The engine's N and P
-(PNAV_ENGINE_MAX_RULES, PNAV_ENGINE_PAUSE_MS) have no meaning without an engine.
+PNAV_ZENOH_USER and PNAV_ZENOH_PASSWORD (the router's user/password authentication; in
+compose it is the ``controller`` user), PNAV_ENGINE_PERIOD_MS (this loop's fallback period:
+it has no engine, but the variable means "re-read at least this often" for every service),
+PNAV_STATS_PERIOD_S, PNAV_INSTANCE, PNAV_LEASES, PNAV_LEASE_PERIOD_MS, PNAV_LEASE_TIMEOUT_S,
+PNAV_LOG_LEVEL. The engine's N and P (PNAV_ENGINE_MAX_RULES, PNAV_ENGINE_PAUSE_MS) have no
+meaning without an engine.
 """
 
 from __future__ import annotations
@@ -87,6 +89,8 @@ class Settings:
     zenoh_listen: tuple[str, ...] = ()
     zenoh_multicast: bool = False
     zenoh_config_file: str | None = None
+    zenoh_user: str | None = None
+    zenoh_password: str | None = None
     pool_max: int = 4
     db_wait_s: float = 10.0
     period_s: float = 0.05
@@ -106,6 +110,8 @@ class Settings:
         mode = _text(env, "PNAV_ZENOH_MODE", "client")
         if mode not in ("client", "peer", "router"):
             raise ConfigError(f"PNAV_ZENOH_MODE={mode!r} must be client, peer or router")
+        if bool(env.get("PNAV_ZENOH_USER", "").strip()) != bool(env.get("PNAV_ZENOH_PASSWORD")):
+            raise ConfigError("PNAV_ZENOH_USER and PNAV_ZENOH_PASSWORD go together: set both")
         instance = _text(env, "PNAV_INSTANCE", default_instance())
         if not _ID.match(instance):
             raise ConfigError(f"PNAV_INSTANCE={instance!r} must match [A-Za-z0-9_-]+")
@@ -124,6 +130,8 @@ class Settings:
             zenoh_listen=_endpoints(env, "PNAV_ZENOH_LISTEN", ()),
             zenoh_multicast=_flag(env, "PNAV_ZENOH_MULTICAST", False),
             zenoh_config_file=env.get("PNAV_ZENOH_CONFIG") or None,
+            zenoh_user=env.get("PNAV_ZENOH_USER", "").strip() or None,
+            zenoh_password=env.get("PNAV_ZENOH_PASSWORD") or None,
             pool_max=_whole(env, "PNAV_DB_POOL_MAX", 4, minimum=1),
             db_wait_s=_number(env, "PNAV_DB_WAIT_S", 10.0, minimum=0.0),
             period_s=_number(env, "PNAV_ENGINE_PERIOD_MS", 50.0, minimum=0.1) / 1000,

@@ -59,6 +59,9 @@ def open_session(settings: Settings) -> zenoh.Session:
         config.insert_json5("connect/endpoints", json.dumps(list(settings.zenoh_connect)))
     if settings.zenoh_listen:
         config.insert_json5("listen/endpoints", json.dumps(list(settings.zenoh_listen)))
+    if settings.zenoh_user and settings.zenoh_password:
+        auth = {"user": settings.zenoh_user, "password": settings.zenoh_password}
+        config.insert_json5("transport/auth/usrpwd", json.dumps(auth))
     return zenoh.open(config)
 
 

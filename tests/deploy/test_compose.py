@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import ast
+import asyncio
 import importlib
 import importlib.metadata
 import importlib.resources
@@ -33,6 +34,7 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
+import asyncpg
 import jsonschema
 import pytest
 import yaml
@@ -41,8 +43,17 @@ from packaging.specifiers import SpecifierSet
 
 from common import bus
 from common.config import ServiceConfig, ZenohSettings, default_instance
-from common.contract import keys
+from common.contract import acl, keys
+from common.contract.grants import role_name
+from common.contract.roles import bootstrap, role_url
+from common.errors import UsageError
 from common.testing import free_port
+from pnav.credentials import (
+    DB_PASSWORDS,
+    SUPERUSER_PASSWORD,
+    ZENOH_PASSWORDS,
+    ZENOH_USERS_FILE,
+)
 from pnav.launcher import SCENARIO_SERVICES, StackOptions
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -56,6 +67,14 @@ COMPONENTS = ("sim", "bridge", *SCENARIO_SERVICES, "dashboard")
 # the one component that publishes a port (the web page, on the host's loopback)
 DASHBOARD_PORT = "8080"
 INFRASTRUCTURE = ("postgres", "zenoh", "migrate")
+
+
+def identity_of(component: str) -> str:
+    """The role and Zenoh user a component connects as: its own, but for the dashboard,
+    which writes only people's rows and so acts as people do."""
+    return "user" if component == "dashboard" else component
+
+
 # where each component's code names itself (its liveliness token is pnav/alive/<name>/...)
 SERVICE_NAMES = {
     "sim": ("services.sim.node", "SERVICE"),
@@ -84,16 +103,30 @@ def services() -> dict[str, dict[str, Any]]:
     return result
 
 
-_VARIABLE = re.compile(r"\$\$|\$\{([A-Za-z_][A-Za-z0-9_]*)(?:(:?-)([^{}$]*))?\}")
+_VARIABLE = re.compile(r"\$\$|\$\{([A-Za-z_][A-Za-z0-9_]*)(?:(:?[-?])([^{}$]*))?\}")
+# What `pnav secrets` writes to deploy/.env: the passwords the compose file has no default for.
+SECRETS = {
+    SUPERUSER_PASSWORD: "pw-superuser",
+    **{var: f"pw-{role}-db" for role, var in DB_PASSWORDS.items()},
+    **{var: f"pw-{user}-zenoh" for user, var in ZENOH_PASSWORDS.items()},
+    ZENOH_USERS_FILE: "./zenoh-users.txt",
+}
+
+
+class Unset(Exception):
+    """A ${VAR:?message} whose variable is unset: `docker compose` stops with the message."""
 
 
 def interpolate(value: str, env: Mapping[str, str] | None = None) -> str:
-    """Compose's interpolation for the forms this file uses: $$, ${VAR}, ${VAR:-d}, ${VAR-d}.
+    """Compose's interpolation for the forms this file uses: $$, ${VAR}, ${VAR:-d}, ${VAR-d},
+    ${VAR:?message}.
 
-    ``env`` plays the shell; left out, every variable takes its default (an unset shell).
-    Any other use of ``$`` fails, so a form this helper does not know is not skipped.
+    ``env`` plays the shell, on top of the secrets `pnav secrets` writes (``SECRETS``); left
+    out, every other variable takes its default. ``secrets=False``-style checks pass an
+    ``env`` with a secret set to "" to see the refusal. Any other use of ``$`` fails, so a
+    form this helper does not know is not skipped.
     """
-    env = env or {}
+    env = {**SECRETS, **(env or {})}
 
     def one(match: re.Match[str]) -> str:
         if match.group(0) == "$$":
@@ -104,6 +137,8 @@ def interpolate(value: str, env: Mapping[str, str] | None = None) -> str:
             return default
         if operator == "-" and value is None:
             return default
+        if operator == ":?" and not value:
+            raise Unset(f"{name}: {default}")
         return value or ""
 
     plain = _VARIABLE.sub(lambda m: "" if m.group(0) == "$$" else "x", value)
@@ -346,36 +381,94 @@ def test_deploy_md_gives_the_commands() -> None:
         assert command in doc, command
 
 
-def test_the_components_reach_postgres_and_the_router_as_clients() -> None:
+def test_each_component_reaches_postgres_as_its_own_role_and_the_router_as_its_own_user() -> None:
     postgres = environment(interpolated(services()["postgres"]))
-    expected_url = (
-        f"postgresql://{postgres['POSTGRES_USER']}:{postgres['POSTGRES_PASSWORD']}"
-        f"@postgres:5432/{postgres['POSTGRES_DB']}"
+    assert postgres["POSTGRES_USER"] == "postgres"
+    assert postgres["POSTGRES_PASSWORD"] == SECRETS["POSTGRES_PASSWORD"]
+    database = postgres["POSTGRES_DB"]
+    migrate = environment(interpolated(services()["migrate"]))
+    assert migrate["PNAV_DATABASE_URL"] == (
+        f"postgresql://postgres:{SECRETS['POSTGRES_PASSWORD']}@postgres:5432/{database}"
     )
-    for name in (*COMPONENTS, "migrate"):
+    for variable in DB_PASSWORDS.values():  # what the migrate job creates the roles with
+        assert migrate[variable] == SECRETS[variable], variable
+    for name in COMPONENTS:
         env = environment(interpolated(services()[name]))
-        assert env["PNAV_DATABASE_URL"] == expected_url, name
         assert "PNAV_INSTANCE" not in env, f"{name}: replicas would share one instance id"
-        if name == "migrate":
-            continue
+        identity = identity_of(name)
         assert env["PNAV_ZENOH_MODE"] == "client"
         assert env["PNAV_ZENOH_CONNECT"] == "tcp/zenoh:7447"
         assert env["PNAV_ZENOH_MULTICAST"] == "false"
+        assert env["PNAV_ZENOH_USER"] == identity
+        assert env["PNAV_ZENOH_PASSWORD"] == SECRETS[ZENOH_PASSWORDS[identity]]
+        zenoh_settings = ZenohSettings(
+            mode="client",
+            connect=("tcp/zenoh:7447",),
+            multicast=False,
+            user=identity,
+            password=SECRETS[ZENOH_PASSWORDS[identity]],
+        )
+        if name == "sim":  # it never connects to Postgres: no account at all
+            assert "PNAV_DATABASE_URL" not in env
+            assert ZenohSettings.from_env(env) == zenoh_settings
+            continue
+        password = SECRETS[DB_PASSWORDS[identity]]
+        expected_url = f"postgresql://pnav_{identity}:{password}@postgres:5432/{database}"
+        assert env["PNAV_DATABASE_URL"] == expected_url, name
         # the values are ones the services accept
         config = ServiceConfig.from_env(name, env)
-        assert config.zenoh == ZenohSettings(
-            mode="client", connect=("tcp/zenoh:7447",), multicast=False
-        )
+        assert config.zenoh == zenoh_settings
         assert config.database_url == expected_url
         assert config.instance == default_instance()
 
 
-def test_the_shell_sets_the_database_credentials_for_postgres_and_the_services_alike() -> None:
-    shell = {"POSTGRES_USER": "fleet", "POSTGRES_PASSWORD": "s3cret", "POSTGRES_DB": "nav"}
-    postgres = environment(interpolated(services()["postgres"], shell))
-    assert postgres == shell
+def test_no_password_has_a_default_and_only_the_migration_is_superuser() -> None:
+    required = {
+        m.group(1)
+        for text in strings(compose())
+        for m in _VARIABLE.finditer(text)
+        if m.group(2) == ":?"
+    }
+    # every secret: the dashboard's container is people's (pnav_user, Zenoh user `user`)
+    assert required == set(SECRETS)
+    for variable in compose_variables():
+        if "PASSWORD" in variable or variable == ZENOH_USERS_FILE:
+            assert variable in required, f"${{{variable}}} has a default"
+    for variable in required:
+        with pytest.raises(Unset, match=variable):
+            interpolated(compose(), {variable: ""})
+    for name, service in services().items():
+        url = environment(interpolated(service)).get("PNAV_DATABASE_URL", "")
+        user = url.partition("://")[2].partition(":")[0]
+        own = "postgres" if name == "migrate" else f"pnav_{identity_of(name)}"
+        assert user in ("", own), name
+
+
+def test_the_shell_sets_the_database_name_and_the_passwords() -> None:
+    shell = {"POSTGRES_DB": "nav", "PNAV_DB_PASSWORD_PLANNER": "s3cret"}
+    assert environment(interpolated(services()["postgres"], shell))["POSTGRES_DB"] == "nav"
     url = environment(interpolated(services()["planner"], shell))["PNAV_DATABASE_URL"]
-    assert url == "postgresql://fleet:s3cret@postgres:5432/nav"
+    assert url == "postgresql://pnav_planner:s3cret@postgres:5432/nav"
+
+
+def test_pnav_secrets_writes_every_variable_the_compose_file_requires(tmp_path: Path) -> None:
+    from common.contract.grants import BUS_IDENTITIES, LOGIN_ROLES
+    from pnav.credentials import generate
+
+    # one password per role of CONTRACT.md and per identity on the bus, none forgotten
+    assert set(DB_PASSWORDS) == set(LOGIN_ROLES)
+    assert set(ZENOH_PASSWORDS) == set(BUS_IDENTITIES)
+    env_file, users_file = generate(tmp_path)
+    written = dict(line.split("=", 1) for line in env_file.read_text().splitlines() if "=" in line)
+    assert set(written) == set(SECRETS)
+    passwords = [v for k, v in written.items() if k != ZENOH_USERS_FILE]
+    assert len(set(passwords)) == len(passwords) and all(len(p) >= 32 for p in passwords)
+    users = dict(line.split(":", 1) for line in users_file.read_text().splitlines())
+    assert users == {user: written[var] for user, var in ZENOH_PASSWORDS.items()}
+    assert (tmp_path / written[ZENOH_USERS_FILE]).resolve() == users_file.resolve()
+    assert env_file.stat().st_mode & 0o077 == 0 and users_file.stat().st_mode & 0o077 == 0
+    with pytest.raises(UsageError, match="exists"):
+        generate(tmp_path)
 
 
 def test_the_sim_takes_world_rate_and_robots_from_the_shell(
@@ -442,7 +535,7 @@ def test_every_service_has_a_health_check_and_a_restart_policy() -> None:
             # a one-shot job: the services wait for its exit code, not for a health status
             assert health == {"disable": True}
             assert service["restart"] == "no"
-            assert service["command"] == ["pnav", "migrate", "--wait", "60"]
+            assert service["command"] == ["pnav", "migrate", "--roles", "--wait", "60"]
             continue
         assert service["restart"] == "unless-stopped", name
         assert health["test"][0] in ("CMD", "CMD-SHELL"), name
@@ -486,6 +579,21 @@ def test_the_router_container_uses_the_mounted_config() -> None:
 @pytest.fixture
 def router_endpoint(zenoh_settings: ZenohSettings) -> str:
     return zenoh_settings.connect[0]
+
+
+def as_role(db_url: str, service: str) -> str:
+    """``db_url`` set up with the roles (as the migrate job does), as ``service``'s role (this
+    test server trusts its local connections: no password)."""
+
+    async def set_up() -> None:
+        conn = await asyncpg.connect(db_url)
+        try:
+            await bootstrap(conn)
+        finally:
+            await conn.close()
+
+    asyncio.run(set_up())
+    return role_url(db_url, role_name(service), None)
 
 
 def check_env(endpoint: str, **extra: str) -> dict[str, str]:
@@ -579,14 +687,17 @@ def test_the_health_check_fails_without_a_router() -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["strategy", "sim"])
 def test_a_service_started_as_compose_starts_it_turns_healthy_then_not(
-    name: str, db_url: str, router_endpoint: str
+    name: str, db_url: str, acl_router_endpoint: str
 ) -> None:
-    """The compose command and environment (hosts pointed at this test's Postgres and router),
-    no PNAV_INSTANCE: the health check passes while the process runs, fails once it stops."""
+    """The compose command and environment (hosts pointed at this test's Postgres, where it
+    connects as its role, and at a router with the compose access control, where it logs in
+    as its user), no PNAV_INSTANCE: the health check passes while the process runs, fails
+    once it stops."""
     service = services()[name]
     env = {**base_env(), **environment(interpolated(service))}
-    env["PNAV_DATABASE_URL"] = db_url
-    env["PNAV_ZENOH_CONNECT"] = router_endpoint
+    if name != "sim":
+        env["PNAV_DATABASE_URL"] = as_role(db_url, name)
+    env["PNAV_ZENOH_CONNECT"] = acl_router_endpoint
     command = [sys.executable if w == "python" else w for w in service["command"]]
     # cwd: the image's working directory /app holds worlds/, as the repository root does
     process = subprocess.Popen(
@@ -621,32 +732,44 @@ def test_the_router_config_is_what_zenoh_reads() -> None:
     assert json.loads(config.get_json("plugins")) == {}  # no REST plugin, no other
 
 
-def test_a_router_from_the_config_carries_liveliness_between_clients() -> None:
-    config = zenoh.Config.from_file(str(ROUTER_CONFIG))
-    endpoint = f"tcp/127.0.0.1:{free_port()}"  # not 0.0.0.0:7447 in a test
-    config.insert_json5("listen/endpoints", json.dumps([endpoint]))
-    router = zenoh.open(config)
+def test_a_router_from_the_config_carries_liveliness_between_clients(
+    acl_router_endpoint: str,
+) -> None:
+    def settings(user: str) -> ZenohSettings:
+        password = SECRETS[ZENOH_PASSWORDS[user]]
+        return ZenohSettings(
+            mode="client", connect=(acl_router_endpoint,), user=user, password=password
+        )
+
+    announcer = bus.open_session(settings("planner"))
+    asker = bus.open_session(settings("user"))
     try:
-        settings = ZenohSettings(mode="client", connect=(endpoint,))
-        announcer = bus.open_session(settings)
-        asker = bus.open_session(settings)
-        try:
-            token = announcer.liveliness().declare_token(keys.alive_key("planner", "p-1"))
-            deadline = time.monotonic() + 10
-            while True:
-                replies = asker.liveliness().get(keys.alive_watch("planner"), timeout=2)
-                found = [str(r.ok.key_expr) for r in replies if r.ok is not None]
-                if found:
-                    break
-                assert time.monotonic() < deadline, "the token never reached the other client"
-                time.sleep(0.1)
-            assert found == ["pnav/alive/planner/p-1"]
-            token.undeclare()
-        finally:
-            asker.close()
-            announcer.close()
+        token = announcer.liveliness().declare_token(keys.alive_key("planner", "p-1"))
+        deadline = time.monotonic() + 10
+        while True:
+            replies = asker.liveliness().get(keys.alive_watch("planner"), timeout=2)
+            found = [str(r.ok.key_expr) for r in replies if r.ok is not None]
+            if found:
+                break
+            assert time.monotonic() < deadline, "the token never reached the other client"
+            time.sleep(0.1)
+        assert found == ["pnav/alive/planner/p-1"]
+        token.undeclare()
     finally:
-        router.close()
+        asker.close()
+        announcer.close()
+
+
+def test_the_router_authenticates_from_the_mounted_secret() -> None:
+    zenoh_service = services()["zenoh"]
+    assert zenoh_service["secrets"] == ["zenoh_users"]
+    secret = interpolated(compose()["secrets"]["zenoh_users"])
+    assert secret == {"file": SECRETS[ZENOH_USERS_FILE]}
+    config = zenoh.Config.from_file(str(ROUTER_CONFIG))
+    usrpwd = json.loads(config.get_json("transport/auth/usrpwd"))
+    assert usrpwd["dictionary_file"] == "/run/secrets/zenoh_users" == acl.DICTIONARY_FILE
+    control = json.loads(config.get_json("access_control"))
+    assert control["enabled"] is True and control["default_permission"] == "deny"
 
 
 # -- the Dockerfile --------------------------------------------------------------------------

@@ -25,11 +25,11 @@ from typing import Any
 import pytest
 import yaml
 
-from common.config import ZenohSettings
 from tests.deploy.test_compose import (
     COMPOSE_FILE,
     DEPLOY,
     ROOT,
+    as_role,
     base_env,
     compose,
     dockerfile_instructions,
@@ -117,12 +117,15 @@ def test_the_example_uses_the_contract_only() -> None:
 
 @pytest.mark.slow
 def test_the_swapped_controller_started_as_compose_starts_it_turns_healthy_then_not(
-    db_url: str, zenoh_settings: ZenohSettings
+    db_url: str, acl_router_endpoint: str
 ) -> None:
+    """As the controller's role in Postgres and its user on a router with the compose access
+    control: a replacement gets the credentials of the service it replaces."""
     service = swapped()["services"]["controller"]
     env = {**base_env(), **environment(interpolated(service))}
-    env["PNAV_DATABASE_URL"] = db_url
-    env["PNAV_ZENOH_CONNECT"] = zenoh_settings.connect[0]
+    assert env["PNAV_ZENOH_USER"] == "controller"
+    env["PNAV_DATABASE_URL"] = as_role(db_url, "controller")
+    env["PNAV_ZENOH_CONNECT"] = acl_router_endpoint
     command = [sys.executable if w == "python" else w for w in service["command"]]
     # cwd: the repository root holds examples/, as the image's working directory /app does
     process = subprocess.Popen(

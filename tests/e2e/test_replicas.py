@@ -2,10 +2,12 @@
 it, without Docker: every container's command and environment, read from
 deploy/docker-compose.yml, run as a local process against one Postgres and one Zenoh router.
 
-- `migrate` runs first (its compose command) on an empty database, then sim (warehouse,
-  PNAV_SIM_ROBOTS=6 from "the shell"), bridge, strategy, planner, three controllers and
-  decision, with the hosts pointed at this test's Postgres and router and, as in compose,
-  no PNAV_INSTANCE: each replica is <hostname>-<pid>.
+- `migrate` runs first (its compose command: roles, migrations, grants) on an empty
+  database, then sim (warehouse, PNAV_SIM_ROBOTS=6 from "the shell"), bridge, strategy,
+  planner, three controllers and decision, with the hosts pointed at this test's Postgres
+  (each service as its own role) and at a router with the compose access control and
+  user/password authentication (each as its own user) and, as in compose, no PNAV_INSTANCE:
+  each replica is <hostname>-<pid>.
 - Every robot is owned by exactly one controller replica, two each; one replica is killed
   with SIGKILL; the two others own all six robots within the takeover bound; a new replica
   (the restarted container) gets its share back; the history in robot_lease never shows two
@@ -23,7 +25,7 @@ import signal
 import socket
 import sys
 import time
-from collections.abc import AsyncIterator, Mapping
+from collections.abc import AsyncIterator, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -32,8 +34,11 @@ import pytest
 import yaml
 
 from common.config import ZenohSettings
+from common.contract.roles import role_url
 from common.lease import history_overlaps, live_replicas, ownership
-from common.testing import eventually
+from common.testing import acl_router, eventually
+from pnav.credentials import ZENOH_PASSWORDS
+from tests.deploy.test_compose import ROUTER_CONFIG, SECRETS
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -48,13 +53,14 @@ GAP_BOUND_S = 0.5 + TAKEOVER_BOUND_S + 2.0
 # drives to the farthest, many seconds away.
 GOALS = ((8.8, 6.6), (1.0, 2.5), (1.0, 5.5))
 # What the shell gives compose (docker compose up --scale controller=3 with these set).
-SHELL = {"PNAV_SIM_ROBOTS": str(ROBOTS)}
+SHELL = {"PNAV_SIM_ROBOTS": str(ROBOTS), **SECRETS}
 ORDER = ("sim", "bridge", "strategy", "planner", "controller", "decision")
-_VARIABLE = re.compile(r"\$\$|\$\{([A-Za-z_][A-Za-z0-9_]*)(?:(:?-)([^}]*))?\}")
+_VARIABLE = re.compile(r"\$\$|\$\{([A-Za-z_][A-Za-z0-9_]*)(?:(:?[-?])([^}]*))?\}")
 
 
 def interpolate(value: str, shell: Mapping[str, str]) -> str:
-    """Compose's interpolation for the forms the file uses: $$, ${VAR}, ${VAR:-d}, ${VAR-d}."""
+    """Compose's interpolation for the forms the file uses: $$, ${VAR}, ${VAR:-d}, ${VAR-d},
+    ${VAR:?message} (the shell has every secret `pnav secrets` writes)."""
 
     def one(match: re.Match[str]) -> str:
         if match.group(0) == "$$":
@@ -65,6 +71,8 @@ def interpolate(value: str, shell: Mapping[str, str]) -> str:
             return str(default)
         if operator == "-" and value is None:
             return str(default)
+        if operator == ":?" and not value:
+            raise AssertionError(f"{name} is required: {default}")
         return value or ""
 
     return _VARIABLE.sub(one, value)
@@ -78,8 +86,12 @@ def container(name: str, db_url: str, zenoh: ZenohSettings) -> tuple[list[str], 
         for key, value in service.get("environment", {}).items()
     }
     assert "PNAV_INSTANCE" not in env  # replicas name themselves <hostname>-<pid>
-    assert "@postgres:5432/" in env["PNAV_DATABASE_URL"]
-    env["PNAV_DATABASE_URL"] = db_url
+    if name != "sim":  # the sim has no database account
+        url = env["PNAV_DATABASE_URL"]
+        assert "@postgres:5432/" in url
+        # the compose URL's user and password, this test's server (which trusts its socket)
+        user, _, password = url.partition("://")[2].partition("@")[0].partition(":")
+        env["PNAV_DATABASE_URL"] = role_url(db_url, user, password)
     if "PNAV_ZENOH_CONNECT" in env:  # every service but the migrate job
         assert env["PNAV_ZENOH_CONNECT"] == "tcp/zenoh:7447"
         env["PNAV_ZENOH_CONNECT"] = zenoh.connect[0]
@@ -158,7 +170,8 @@ async def status_shows_owners(
     db_url: str, zenoh: ZenohSettings, owned: dict[str, str | None]
 ) -> None:
     """`pnav status` names each robot's controller replica and counts the replicas."""
-    env = {**os.environ, "PNAV_DATABASE_URL": db_url, **zenoh.to_env()}
+    env = {**os.environ, "PNAV_DATABASE_URL": role_url(db_url, "pnav_user", None)}
+    env.update(zenoh.to_env())  # as people: the user `user`
     process = await asyncio.create_subprocess_exec(
         sys.executable, "-m", "pnav", "status", "--once",
         cwd=ROOT, env=env, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
@@ -170,6 +183,16 @@ async def status_shows_owners(
     lines = {line.split()[0]: line for line in text.splitlines()[1:] if line.strip()}
     for robot, instance in owned.items():
         assert instance is not None and instance in lines[robot], (robot, instance, text)
+
+
+@pytest.fixture
+def zenoh_settings(tmp_path: Path) -> Iterator[ZenohSettings]:
+    """A router from deploy/zenoh/router.json5 (access control, user/password; the passwords
+    of the shell); people's settings on it: the user `user` (CLI, dashboards)."""
+    passwords = {user: SECRETS[var] for user, var in ZENOH_PASSWORDS.items()}
+    with acl_router(ROUTER_CONFIG, passwords, tmp_path) as endpoint:
+        password = passwords["user"]
+        yield ZenohSettings(connect=(endpoint,), user="user", password=password)
 
 
 async def test_three_controller_replicas_split_six_robots_and_survive_a_kill(

@@ -153,3 +153,20 @@ def test_the_model_option_reaches_the_sim_and_only_the_sim() -> None:
     assert all("--model" not in s.argv for name, s in specs.items() if name != "sim")
     plain = service_specs(local(), StackOptions(), Path("worlds/open_room.yaml"))
     assert all("--model" not in s.argv for s in plain)  # the sim's default: the Burger
+
+
+def test_each_service_connects_as_its_own_role_and_a_replacement_as_the_replaced_one() -> None:
+    from dataclasses import replace as with_fields
+
+    from pnav.launcher import parse_replace
+
+    roles = {n: f"postgresql://pnav_{n}:pw@/y" for n in ("bridge", "planner", "controller")}
+    stack = with_fields(local(), role_urls=roles)
+    options = StackOptions(replace=parse_replace(["controller=python -m examples.sql_controller"]))
+    specs = {s.name: s for s in service_specs(stack, options, Path("worlds/open_room.yaml"))}
+    assert specs["bridge"].env["PNAV_DATABASE_URL"] == roles["bridge"]
+    assert specs["planner"].env["PNAV_DATABASE_URL"] == roles["planner"]
+    assert specs["controller"].env["PNAV_DATABASE_URL"] == roles["controller"]
+    assert specs["sim"].env["PNAV_DATABASE_URL"] == ""  # no database account at all
+    # a role the stack could not set up: the account the stack was given
+    assert specs["decision"].env["PNAV_DATABASE_URL"] == "postgresql://x/y"

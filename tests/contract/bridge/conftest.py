@@ -19,7 +19,7 @@ from common import bus
 from common.config import ServiceConfig, ZenohSettings
 from common.contract import keys
 from common.runtime import Runtime
-from common.testing import eventually
+from common.testing import as_service_role, eventually
 from services.bridge import Bridge, BridgeSettings
 from tests.unit.bridge import payloads
 from tests.unit.bridge.payloads import pack
@@ -124,10 +124,11 @@ BridgeFactory = Callable[..., Awaitable[Bridge]]
 async def start_bridge(db_url: str, zenoh_settings: ZenohSettings) -> AsyncIterator[BridgeFactory]:
     """``await start_bridge(settings=FAST)``: a started in-process bridge, stopped at the end."""
     bridges: list[Bridge] = []
+    role_url = await as_service_role(db_url, "bridge")  # exactly the bridge's grants
 
     async def start(settings: BridgeSettings = FAST) -> Bridge:
         config = ServiceConfig(
-            service="bridge", database_url=db_url, zenoh=zenoh_settings, instance="test-bridge"
+            service="bridge", database_url=role_url, zenoh=zenoh_settings, instance="test-bridge"
         )
         runtime = await Runtime.open(config)
         bridge = Bridge(runtime, settings)

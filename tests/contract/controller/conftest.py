@@ -32,7 +32,7 @@ from common import bus
 from common.config import EngineSettings, ServiceConfig, ZenohSettings
 from common.contract import keys
 from common.db import connect
-from common.testing import publish_clock, running_service
+from common.testing import as_service_role, publish_clock, running_service
 
 T = TypeVar("T")
 
@@ -50,16 +50,18 @@ IMPLEMENTATIONS = ("shipped", "sql_controller")
 async def controller(
     request: pytest.FixtureRequest, db_url: str, zenoh_settings: ZenohSettings, tmp_path: Path
 ) -> AsyncIterator[None]:
-    """A controller, running until the test ends: the shipped one, then the example."""
+    """A controller, running until the test ends: the shipped one, then the example; both
+    as the controller's Postgres role (exactly its grants)."""
+    role_url = await as_service_role(db_url, "controller")
     if request.param == "sql_controller":
-        async with example_controller(db_url, zenoh_settings, tmp_path / "sql_controller.log"):
+        async with example_controller(role_url, zenoh_settings, tmp_path / "sql_controller.log"):
             yield
         return
     from services.controller.service import ControllerService
 
     config = ServiceConfig(
         service="controller",
-        database_url=db_url,
+        database_url=role_url,
         zenoh=zenoh_settings,
         engine=EngineSettings(period_s=0.05),
         stats_period_s=30.0,

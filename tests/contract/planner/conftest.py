@@ -22,7 +22,7 @@ from common import bus
 from common.config import EngineSettings, ServiceConfig, ZenohSettings
 from common.contract import keys
 from common.db import Database, create_pool
-from common.testing import eventually, publish_clock, running_service
+from common.testing import as_service_role, eventually, publish_clock, running_service
 from services.planner.service import PlannerService
 
 ROBOT = "r1"
@@ -193,7 +193,7 @@ async def planner(
 ) -> AsyncIterator[PlannerService]:
     config = ServiceConfig(
         service="planner",
-        database_url=db_url,
+        database_url=await as_service_role(db_url, "planner"),  # exactly its grants
         zenoh=zenoh_settings,
         engine=EngineSettings(period_s=0.05),
         stats_period_s=5.0,

@@ -5,13 +5,15 @@ from __future__ import annotations
 import pytest
 
 from common.config import EngineSettings, ServiceConfig, ZenohSettings
+from common.testing import as_service_role
 
 
 @pytest.fixture
-def service_config(db_url: str, zenoh_settings: ZenohSettings) -> ServiceConfig:
+async def service_config(db_url: str, zenoh_settings: ZenohSettings) -> ServiceConfig:
+    """The service as its own Postgres role: the tests prove it needs no other grant."""
     return ServiceConfig(
         service="strategy",
-        database_url=db_url,
+        database_url=await as_service_role(db_url, "strategy"),
         zenoh=zenoh_settings,
         engine=EngineSettings(period_s=0.05),
         stats_period_s=5.0,
