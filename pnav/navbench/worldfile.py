@@ -115,6 +115,8 @@ class BenchmarkWorld:
     fill_ratio: float
     difficulty: Difficulty
     generator: dict[str, Any]
+    protocol: str = "default"  # or "barn": obstacles only in the sim world (barnfile.py)
+    model: str = ""  # the robot model the world was made for ("": the Burger, before models)
 
     @property
     def inflation_m(self) -> float:
@@ -192,6 +194,8 @@ def read_benchmark(path: str | Path) -> BenchmarkWorld:
         fill_ratio=_number(path, bench, "fill_ratio"),
         difficulty=parsed,
         generator=generator if isinstance(generator, dict) else {},
+        protocol=str(bench.get("protocol", "default")),
+        model=str(bench.get("model", "")),
     )
 
 
