@@ -4,7 +4,8 @@
     ├── UsageError                 the caller misused something; the message says how to fix it
     │   ├── ConfigError            an environment variable or option has a bad value
     │   ├── ContractError          a row, payload or key does not follow CONTRACT.md
-    │   └── WorldError             a world or map file cannot be loaded (names file + problem)
+    │   ├── WorldError             a world or map file cannot be loaded (names file + problem)
+    │   └── ModelError             a robot model file is wrong (names file + field)
     ├── ConnectionFailure          Postgres or Zenoh could not be reached or was lost
     ├── MigrationError             the contract schema could not be applied
     └── InternalError              a bug in proactive-nav itself; please report it
@@ -34,6 +35,11 @@ class ContractError(UsageError):
 
 class WorldError(UsageError):
     """A world file or map cannot be loaded; the message names the file and the problem."""
+
+
+class ModelError(UsageError):
+    """A robot model (models/*.yaml, or overrides of one) is wrong; the message names the file
+    and the field, e.g. ``models/jackal.yaml: lidar.beams: ...``."""
 
 
 class ConnectionFailure(PnavError):

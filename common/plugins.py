@@ -14,7 +14,9 @@ file of the service's.
 An entry point that cannot be loaded (an import error, not a subclass of the service's
 base, a name that disagrees with the class) is logged and skipped: one broken plug-in does
 not take the service, and with it every robot, down. Two entry points claiming one name
-are refused the same way (the first in distribution order is kept).
+are refused the same way: a scenario shipped with proactive-nav keeps its name whatever the
+order of sys.path (a plug-in must never replace ``safety_stop`` by claiming its name), and
+between two plug-ins the first in distribution order is kept.
 """
 
 from __future__ import annotations
@@ -29,11 +31,16 @@ logger = logging.getLogger("pnav.plugins")
 
 T = TypeVar("T")
 
+# the distribution whose scenarios no plug-in can displace
+SHIPPED = "proactive-nav"
+
 
 def load_scenarios(group: str, base: type[T]) -> dict[str, type[T]]:
     """Scenario name -> class, for every loadable entry point of ``group``."""
     found: dict[str, type[T]] = {}
-    for point in sorted(entry_points(group=group), key=lambda p: p.name):
+    # sorted() is stable: within the shipped and the foreign points, distribution order holds
+    points = sorted(entry_points(group=group), key=lambda p: (p.name, not _shipped(p)))
+    for point in points:
         cls = _load(point, base)
         if cls is None:
             continue
@@ -50,6 +57,11 @@ def load_scenarios(group: str, base: type[T]) -> dict[str, type[T]]:
             continue
         found[point.name] = cls
     return found
+
+
+def _shipped(point: EntryPoint) -> bool:
+    dist = point.dist
+    return dist is not None and dist.name.replace("_", "-").lower() == SHIPPED
 
 
 def _load(point: EntryPoint, base: type[T]) -> type[T] | None:

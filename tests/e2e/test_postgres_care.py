@@ -52,7 +52,9 @@ async def start_up(
     )
     deadline = time.monotonic() + 60
     while not (stack.exists() and json.loads(stack.read_text() or "{}").get("pid") == up.pid):
-        assert up.returncode is None, "pnav up exited during start-up"
+        if up.returncode is not None:
+            said = (await up.stdout.read()).decode(errors="replace") if up.stdout else ""
+            raise AssertionError(f"pnav up exited {up.returncode} during start-up:\n{said}")
         assert time.monotonic() < deadline, "pnav up never wrote its stack file"
         await asyncio.sleep(0.2)
     return up, json.loads(stack.read_text())

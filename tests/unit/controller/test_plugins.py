@@ -68,3 +68,32 @@ def test_a_scenario_package_is_found_and_what_cannot_run_is_refused(
         ("scenario plug-in refused; ignored", "misnamed"),
         ("scenario name claimed twice; the second is ignored", "safety_stop"),
     }
+
+
+def test_a_plugin_first_on_sys_path_cannot_take_a_shipped_scenarios_name(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    root = tmp_path / "front"
+    root.mkdir()
+    write_scenario_package(
+        root,
+        "pnav-test-front",
+        {
+            "pnav_test_front_impostor": "from services.controller.safety_stop import SafetyStop"
+            "\n\nclass Impostor(SafetyStop):\n    pass\n"
+        },
+        {"safety_stop": "pnav_test_front_impostor:Impostor"},
+    )
+    # PYTHONPATH puts a directory before site-packages: its distributions come first
+    monkeypatch.setattr(sys, "path", [str(root), *sys.path])
+    importlib.invalidate_caches()
+    caplog.set_level(logging.ERROR, logger="pnav.plugins")
+    try:
+        found = installed_scenarios()
+    finally:
+        sys.modules.pop("pnav_test_front_impostor", None)
+
+    assert found["safety_stop"] is SafetyStop
+    assert [getattr(r, "ignored", None) for r in caplog.records] == [
+        "pnav_test_front_impostor:Impostor"
+    ]
