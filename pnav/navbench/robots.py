@@ -37,19 +37,12 @@ class RobotFit:
 
 
 def resolve_model(name: str) -> RobotFit:
-    """The robot model ``name`` (a name from ``models/`` or a model file's path); UsageError
-    naming the known models when there is none."""
-    try:
-        from common.robotmodel import load_model
-    except ImportError as exc:  # a checkout older than the robot models
-        raise UsageError(f"--model {name}: this installation has no robot models ({exc})") from None
-    try:
-        model = load_model(name)
-    except UsageError:
-        raise
-    except Exception as exc:  # the loader's own errors name the file and the problem
-        raise UsageError(f"--model {name}: {exc}") from None
-    return RobotFit(model.name, float(model.max_linear_mps), float(model.footprint_radius_m))
+    """The robot model ``name`` (a name from ``models/`` or a model file's path); a
+    ModelError (a UsageError) naming the known models when there is none."""
+    from common.robotmodel import load_model
+
+    model = load_model(name)
+    return RobotFit(model.name, model.max_linear_mps, model.footprint_radius_m)
 
 
 def for_model(world: BenchmarkWorld, robot: RobotFit, folder: Path) -> BenchmarkWorld:

@@ -23,8 +23,9 @@ from tests.unit.navbench.conftest import min_clearance
 
 pytestmark = pytest.mark.timeout(120)
 
-# a robot of the Jackal's size (half its 0.508 x 0.430 m diagonal) and BARN's top speed
-JACKAL_SIZE = RobotFit("jackal_sized", 2.0, 0.333)
+# a robot of the Jackal's size (models/jackal.yaml: the circle inscribed in its 0.508 x 0.430
+# m body) and its top speed
+JACKAL_SIZE = RobotFit("jackal_sized", 2.0, 0.22)
 BURGER = RobotFit("burger", 0.22, 0.105)
 LAYOUT = BarnLayout()
 
@@ -111,7 +112,7 @@ def test_a_bigger_robot_gets_a_world_with_room_for_it() -> None:
     small = generate_barn_world("hard", 5, BURGER)
     big = generate_barn_world("hard", 5, JACKAL_SIZE)
     assert small.attempts <= big.attempts  # same stream: the Burger fits through more fields
-    assert min_clearance(big.occupied, 0.05, big.reference.points) >= 0.333 + 0.015
+    assert min_clearance(big.occupied, 0.05, big.reference.points) >= 0.22 + 0.015
     with pytest.raises(UsageError, match="no hard world passable for huge"):
         generate_barn_world("hard", 5, RobotFit("huge", 1.0, 2.3), max_attempts=3)
 

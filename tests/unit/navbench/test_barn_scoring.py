@@ -20,7 +20,7 @@ from services.sim.world import load_world
 
 pytestmark = pytest.mark.timeout(60)
 
-JACKAL_SIZE = RobotFit("jackal_sized", 2.0, 0.333)
+JACKAL_SIZE = RobotFit("jackal_sized", 2.0, 0.22)
 GOAL = (2.4, 10.7)
 SUITE = Path(__file__).resolve().parents[3] / "worlds" / "barn"
 
