@@ -1,10 +1,12 @@
 """``pnav worlds generate``: write a suite of BARN-style benchmark worlds.
 
     pnav worlds generate --out DIR [--count N] [--seed S] [--levels easy,medium,hard] [--png]
+                         [--protocol default|barn] [--model NAME]
 
 writes N worlds per level (world i of a level drawn with seed S * 1000 + i) as DIR/NAME.yaml
 plus DIR/maps/NAME.{yaml,pgm}, with --png a preview DIR/preview/NAME.png of each, and
-DIR/SUITE.md (the command, the levels, a table of the worlds); prints the same table. This
+DIR/SUITE.md (the command, the levels, a table of the worlds); prints the same table.
+``--protocol barn`` writes BARN-protocol worlds for ``--model`` (``pnav.navbench.barn``). This
 module imports nothing heavy at load time: ``pnav``'s parser is built on every command.
 """
 
