@@ -37,6 +37,7 @@ if TYPE_CHECKING:
     # parser: pnav imports this module lazily, and the tests import it without a stack
     from pnav.navbench.episode import Combo, Episode, Outcome
     from pnav.navbench.report import RunRecord
+    from pnav.navbench.robots import RobotFit
     from pnav.navbench.workers import EpisodeWorkers
     from pnav.navbench.worldfile import BenchmarkWorld
 
@@ -232,15 +233,14 @@ def load_monolith() -> Callable[[Episode], Any]:
 
 
 def with_model(
-    worlds: list[BenchmarkWorld], model: str | None, folder: Path
+    worlds: list[BenchmarkWorld], robot: RobotFit | None, folder: Path
 ) -> list[BenchmarkWorld]:
     """``--model NAME``: every world run and scored with that robot model
     (``pnav.navbench.robots.for_model``); None: each world with its own."""
-    if not model:
+    if robot is None:
         return worlds
-    from pnav.navbench.robots import for_model, resolve_model, too_big
+    from pnav.navbench.robots import for_model, too_big
 
-    robot = resolve_model(model)
     tight = too_big(worlds, robot)
     if tight:
         print(
@@ -268,14 +268,16 @@ def run(args: argparse.Namespace) -> int:
     from pnav.bench.report import emit, machine
     from pnav.navbench import compare, report
     from pnav.navbench.episode import MAX_LAG_S
+    from pnav.navbench.robots import resolve_model
     from pnav.navbench.worldfile import load_suite
 
     if args.runs < 1:
         raise UsageError("--runs must be 1 or more")
     combos = pick_combos(args.combos, shipped_combos())
     worlds = select_worlds(load_suite(args.suite), args.levels, args.worlds)
+    robot = resolve_model(args.model) if getattr(args, "model", None) else None
     logs = args.report / "logs" if args.report else Path(tempfile.mkdtemp(prefix="pnav-nav-"))
-    worlds = with_model(worlds, getattr(args, "model", None), logs / "worlds")
+    worlds = with_model(worlds, robot, logs / "worlds")
     before: list[dict[str, Any]] = []
     if args.compare is not None:
         try:

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from common.errors import UsageError
+from pnav import cli
 from pnav.navbench import barn, worlds_cli
 from pnav.navbench.barn import BarnLayout, field_boxes, generate_barn_world, time_limit
 from pnav.navbench.barnfile import write_barn_world
@@ -163,3 +164,22 @@ def test_model_needs_the_barn_protocol_and_levels_are_checked(tmp_path: Path) ->
     with pytest.raises(UsageError, match="unknown brutal"):
         worlds_cli.generate(args)
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["worlds", "generate", "--protocol", "barn", "--model", "nope", "--out", "{out}"],
+        ["worlds", "generate", "--model", "jackal", "--out", "{out}"],
+        ["bench", "nav", "--suite", "worlds/barn_protocol", "--model", "nope"],
+    ],
+)
+def test_a_bad_model_is_refused_in_one_line_before_anything_runs(
+    argv: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "suite"
+    code = cli.main([a.replace("{out}", str(out)) for a in argv])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert "model" in err
+    assert not out.exists()
