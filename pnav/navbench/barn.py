@@ -37,7 +37,7 @@ import numpy as np
 from common.errors import UsageError
 from pnav.navbench.automaton import AutomatonRule, BoolGrid, grow_field
 from pnav.navbench.difficulty import Difficulty, measure
-from pnav.navbench.generator import ORIGIN, suite_seed
+from pnav.navbench.generator import ORIGIN, SEEDS_PER_SUITE, suite_seed
 from pnav.navbench.robots import RobotFit
 from pnav.navbench.search import Point, ReferencePath, reference_path
 
@@ -276,6 +276,8 @@ def generate_barn_suite(
     levels: Sequence[str], count: int, base_seed: int, robot: RobotFit
 ) -> list[BarnWorld]:
     """``count`` worlds per level, named ``barn_<level>_<index>`` as the default suite's."""
+    if not 0 < count <= SEEDS_PER_SUITE:
+        raise UsageError(f"count must be within 1..{SEEDS_PER_SUITE}, got {count}")
     for level in levels:
         level_rule(level)  # fail before any work on a typo
     return [
