@@ -13,6 +13,7 @@ import uvloop
 
 from common.contract import limits
 from common.errors import PnavError, UsageError
+from pnav.dashboard_cli import add_dashboard_options, dashboard_options
 from pnav.navbench.worlds_cli import add_worlds_parser
 
 if TYPE_CHECKING:
@@ -80,6 +81,23 @@ def _stack_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--battery", type=_percent, help="start charge of every robot, percent")
 
 
+def _record_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--record",
+        type=Path,
+        metavar="FILE",
+        help="record the mission into FILE as MCAP, Foxglove's schemas (docs/RECORDING.md)",
+    )
+
+
+def _record_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    record = commands.add_parser("record", help="MCAP recordings: `pnav record info FILE`")
+    verbs = record.add_subparsers(dest="record", metavar="VERB", required=True)
+    info = verbs.add_parser("info", help="channels, schemas, messages, sim time, robots")
+    info.add_argument("file", type=Path, help="an MCAP file (pnav up/demo --record)")
+    info.add_argument("--json", metavar="FILE", help="also write it as JSON ('-': stdout only)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="pnav", description="proactive-nav: rule-based robot navigation")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
@@ -110,6 +128,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="run COMMAND instead of a scenario service, with the same environment, e.g. "
         "controller='python -m examples.sql_controller' (docs/SWAP.md; repeatable)",
     )
+    add_dashboard_options(up, 8080)
+
+    _record_option(up)
 
     goal = commands.add_parser("goal", help="send a robot to X Y (replaces its goal)")
     goal.add_argument("x", type=_coordinate, help=f"metres, within +-{_GOAL_M:.0f}")
@@ -141,6 +162,9 @@ def build_parser() -> argparse.ArgumentParser:
     demo = commands.add_parser("demo", help="the demo mission (see README)")
     demo.add_argument("--json", metavar="FILE", help="also write the summary as JSON")
     demo.add_argument("--rate", default=None, help="sim rate (default: the demo's own)")
+    _record_option(demo)
+    _record_parser(cast("argparse._SubParsersAction[argparse.ArgumentParser]", commands))
+    add_dashboard_options(demo, None)
 
     bench = commands.add_parser("bench", help="benchmarks: print figures and JSON")
     benches = bench.add_subparsers(dest="bench", metavar="BENCH", required=True)
@@ -269,7 +293,12 @@ def dispatch(args: argparse.Namespace) -> int:
     if args.command == "demo":
         from pnav import demo
 
-        return demo.run(args.json, args.rate)
+        record = launcher_record(args.record)
+        return demo.run(args.json, args.rate, record, dashboard_options(args))
+    if args.command == "record":
+        from pnav.record import info
+
+        return info.run(args.file, args.json)
     if args.command == "bench":
         return _bench(args)
     if args.command == "worlds":
@@ -295,10 +324,19 @@ def _up(args: argparse.Namespace) -> int:
         echo=not args.quiet,
         replicas=parse_replicas(args.replicas),
         replace=parse_replace(args.replace),
+        record=launcher_record(args.record),
+        dashboard=dashboard_options(args),
     )
     if args.lockstep:
         options.extra_env.update(lockstep_env(options))
     return uvloop.run(up(options))
+
+
+def launcher_record(path: Path | None) -> Path | None:
+    """``--record FILE`` checked before the stack starts (None: not recording)."""
+    from pnav.launcher import record_target
+
+    return None if path is None else record_target(path)
 
 
 def _bench(args: argparse.Namespace) -> int:

@@ -28,7 +28,7 @@ import uvloop
 from common.config import ServiceConfig
 from common.runtime import Runtime
 from pnav import commands
-from pnav.launcher import StackOptions, launched
+from pnav.launcher import DashboardOptions, StackOptions, launched
 from pnav.mission import MissionLog, MissionMonitor
 
 ROBOT = "r1"
@@ -142,14 +142,24 @@ def summary_text(summary: dict[str, Any]) -> str:
     )
 
 
-async def demo(rate: str) -> dict[str, Any]:
+async def demo(
+    rate: str, record: Path | None = None, dashboard: DashboardOptions | None = None
+) -> dict[str, Any]:
     wall_start = time.monotonic()
     print(f"proactive-nav demo: {WORLD} world, sim rate {rate}, robot {ROBOT}")
     options = StackOptions(
-        world=WORLD, rate=rate, robots=1, battery=START_BATTERY_PCT, zenoh_port=None
+        world=WORLD,
+        rate=rate,
+        robots=1,
+        battery=START_BATTERY_PCT,
+        zenoh_port=None,
+        dashboard=dashboard,
     )
+    options.record = record
     async with launched(options) as stack:
         print(f"  stack up in {time.monotonic() - wall_start:.1f} s; logs in {stack.log_dir}")
+        if stack.dashboard_url:
+            print(f"  dashboard: {stack.dashboard_url} (watch the mission live)", flush=True)
         rt = await Runtime.open(
             ServiceConfig(
                 service="demo", database_url=stack.local.database_url, zenoh=stack.local.zenoh
@@ -181,11 +191,18 @@ async def demo(rate: str) -> dict[str, Any]:
         **{k: v for k, v in log.as_dict().items() if k != "now"},
     }
     print(summary_text(summary))
+    if record is not None:
+        print(f"  recording        {record} (`pnav record info {record}`; open it in Foxglove)")
     return summary
 
 
-def run(json_path: str | None = None, rate: str | None = None) -> int:
-    summary = uvloop.run(demo(rate or RATE))
+def run(
+    json_path: str | None = None,
+    rate: str | None = None,
+    record: Path | None = None,
+    dashboard: DashboardOptions | None = None,
+) -> int:
+    summary = uvloop.run(demo(rate or RATE, record, dashboard))
     if json_path:
         Path(json_path).write_text(json.dumps(summary, indent=2, default=str) + "\n")
     return 0 if summary["outcome"] == "success" else 1

@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import os
 import shlex
+import socket
 import sys
 import tempfile
 from collections.abc import AsyncIterator
@@ -18,13 +20,16 @@ from pathlib import Path
 
 from common.errors import UsageError
 from common.stack import LocalStack, local_stack
+from common.testing import free_port
 from pnav import stackfile
 from pnav.supervisor import ProcessSpec, Supervisor
+from pnav.supervisor_report import SupervisorReport
 
 ROOT = Path(__file__).resolve().parents[1]
 WORLDS = ROOT / "worlds"
 SCENARIO_SERVICES = ("strategy", "planner", "controller", "decision")
 DEFAULT_ZENOH_PORT = 7447
+DEFAULT_HTTP_PORT = 8080
 
 
 def resolve_world(world: str) -> Path:
@@ -35,6 +40,19 @@ def resolve_world(world: str) -> Path:
             return path.resolve()
     names = ", ".join(sorted(p.stem for p in WORLDS.glob("*.yaml")))
     raise UsageError(f"no world {world!r}: give a world file, or one of: {names}")
+
+
+@dataclass(frozen=True)
+class DashboardOptions:
+    """The dashboard the stack serves (services/dashboard, docs/DASHBOARD.md)."""
+
+    host: str = "127.0.0.1"
+    port: int | None = DEFAULT_HTTP_PORT  # None: a free port, chosen at launch
+
+    @property
+    def url(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"http://{host}:{self.port}/"
 
 
 @dataclass
@@ -54,6 +72,10 @@ class StackOptions:
     replicas: dict[str, int] = field(default_factory=dict)
     # service -> the command run in its place (another implementation, docs/SWAP.md)
     replace: dict[str, list[str]] = field(default_factory=dict)
+    # record the mission into this MCAP file (pnav/record, docs/RECORDING.md)
+    record: Path | None = None
+    # the dashboard, supervised like the services; None: none (tests and benchmarks)
+    dashboard: DashboardOptions | None = None
 
 
 @dataclass
@@ -63,6 +85,11 @@ class RunningStack:
     options: StackOptions
     world_path: Path
     log_dir: Path
+
+    @property
+    def dashboard_url(self) -> str | None:
+        dashboard = self.options.dashboard
+        return None if dashboard is None else dashboard.url
 
 
 MAX_REPLICAS = 32
@@ -140,6 +167,27 @@ def lockstep_env(options: StackOptions) -> dict[str, str]:
     return {"PNAV_LOCKSTEP": ",".join(names)}
 
 
+def record_target(path: Path) -> Path:
+    """The MCAP file ``--record`` names, checked before anything starts: a recording is never
+    overwritten, and its folder must exist."""
+    path = path.expanduser()
+    if path.exists():
+        raise UsageError(f"--record {path}: the file exists; remove it or choose another name")
+    if not path.parent.is_dir():
+        raise UsageError(f"--record {path}: no folder {path.parent}")
+    return path.resolve()
+
+
+def recorder_spec(local: LocalStack, options: StackOptions) -> list[ProcessSpec]:
+    """The recorder process when ``options.record`` names a file. It comes first: the
+    supervisor stops the last started first, so the recorder stops after every service and
+    the file holds the mission to its end."""
+    if options.record is None:
+        return []
+    argv = [sys.executable, "-m", "pnav.record", str(options.record)]
+    return [ProcessSpec("recorder", argv, {**local.env(), **options.extra_env})]
+
+
 def service_specs(local: LocalStack, options: StackOptions, world: Path) -> list[ProcessSpec]:
     """One process per service; ``options.replicas[name]`` processes for a replicated one,
     named ``name-1``, ``name-2``... with ``PNAV_INSTANCE`` set to that name (a lone process
@@ -165,15 +213,49 @@ def service_specs(local: LocalStack, options: StackOptions, world: Path) -> list
         for i in range(1, replicas + 1):
             instance = f"{name}-{i}"
             specs.append(ProcessSpec(instance, argv, {**env, "PNAV_INSTANCE": instance}))
+    if options.dashboard is not None:
+        specs.append(dashboard_spec(env, options.dashboard))
     return specs
+
+
+def dashboard_spec(env: dict[str, str], dashboard: DashboardOptions) -> ProcessSpec:
+    """The dashboard's process: a service like the others, with its address. It takes no
+    part in lockstep (it writes only what people ask for)."""
+    if dashboard.port is None:
+        raise UsageError("the dashboard's port is chosen by the launcher (resolve_dashboard)")
+    address = {"PNAV_DASHBOARD_HOST": dashboard.host, "PNAV_DASHBOARD_PORT": str(dashboard.port)}
+    argv = [sys.executable, "-m", "services.dashboard"]
+    return ProcessSpec("dashboard", argv, {**env, **address})
+
+
+def resolve_dashboard(options: StackOptions) -> StackOptions:
+    """``options`` with the dashboard's port chosen (a free one when None) and checked free
+    now, so a port in use is one clear error instead of a dashboard restarted forever."""
+    dashboard = options.dashboard
+    if dashboard is None:
+        return options
+    port = dashboard.port if dashboard.port is not None else free_port()
+    try:
+        infos = socket.getaddrinfo(dashboard.host, port, type=socket.SOCK_STREAM)
+        with socket.socket(infos[0][0], socket.SOCK_STREAM) as probe:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            probe.bind(infos[0][4])
+    except OSError as exc:
+        raise UsageError(
+            f"the dashboard cannot listen on {dashboard.host}:{port} ({exc.strerror or exc}): "
+            "pick another with --http-port, or run without it (--no-dashboard)"
+        ) from None
+    return dataclasses.replace(options, dashboard=dataclasses.replace(dashboard, port=port))
 
 
 @contextlib.asynccontextmanager
 async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
     world = resolve_world(options.world)
+    options = resolve_dashboard(options)
     log_dir = options.log_dir or Path(tempfile.mkdtemp(prefix="pnav-logs-"))
     async with local_stack(options.data_dir, options.zenoh_port) as local:
-        supervisor = Supervisor(service_specs(local, options, world), log_dir, echo=options.echo)
+        specs = recorder_spec(local, options) + service_specs(local, options, world)
+        supervisor = Supervisor(specs, log_dir, echo=options.echo)
         running = RunningStack(local, supervisor, options, world, log_dir)
         stackfile.write(
             stackfile.StackInfo(
@@ -191,11 +273,14 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
         # whether the stack serves `pnav up`, the demo or a test.
         stop_watching = asyncio.Event()
         watcher: asyncio.Task[None] | None = None
+        report = SupervisorReport(supervisor, local.router)  # restarts, for /metrics
         try:
             await supervisor.start()
+            report.start()
             watcher = asyncio.create_task(supervisor.watch(stop_watching), name="supervise")
             yield running
         finally:
+            await report.close()
             stop_watching.set()
             if watcher is not None:
                 try:

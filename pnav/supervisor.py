@@ -15,6 +15,7 @@ import os
 import signal
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
@@ -41,6 +42,7 @@ class Child:
     restarts: int = 0
     backoff: float = _BACKOFF_FIRST_S
     pump: asyncio.Task[None] | None = None
+    last_exit: int | None = None  # the exit code of its last run, None before any
 
 
 class Supervisor:
@@ -50,6 +52,28 @@ class Supervisor:
         self.echo = echo
         self._stopping = False
         self._logs: dict[str, IO[str]] = {}
+        # called after a child exits and after it is started again (pnav/supervisor_report.py)
+        self.on_change: list[Callable[[], None]] = []
+
+    def status(self) -> dict[str, dict[str, int | bool | None]]:
+        """Per process: ``restarts``, ``running``, ``pid`` (None when not running) and
+        ``last_exit`` (the code its last run ended with, None before any)."""
+        return {
+            name: {
+                "restarts": child.restarts,
+                "running": _alive(child),
+                "pid": child.process.pid if child.process is not None and _alive(child) else None,
+                "last_exit": child.last_exit,
+            }
+            for name, child in self.children.items()
+        }
+
+    def _changed(self) -> None:
+        for listener in self.on_change:
+            try:
+                listener()
+            except Exception:
+                log.warning("a supervisor listener failed", exc_info=True)
 
     async def start(self) -> None:
         self.log_dir.mkdir(parents=True, exist_ok=True)
@@ -116,6 +140,8 @@ class Supervisor:
         if ran_for > _HEALTHY_AFTER_S:
             child.backoff = _BACKOFF_FIRST_S
         child.restarts += 1
+        child.last_exit = code
+        self._changed()
         log.warning(
             "%s exited with code %s after %.1f s; restarting in %.1f s (restart %d)",
             child.spec.name,
@@ -128,6 +154,7 @@ class Supervisor:
         child.backoff = min(child.backoff * 2, _BACKOFF_MAX_S)
         if not self._stopping:
             await self._spawn(child)
+            self._changed()
 
     async def stop(self, grace_s: float = 8.0) -> None:
         """SIGTERM every child (last started first), wait ``grace_s``, SIGKILL the rest."""

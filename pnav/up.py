@@ -62,13 +62,18 @@ async def up(options: StackOptions) -> int:
             logs=str(stack.log_dir),
             services=",".join(stack.supervisor.children),
             replicas=",".join(f"{k}={v}" for k, v in sorted(options.replicas.items())) or "-",
+            dashboard=stack.dashboard_url or "off",
         )
         print(
             "stack up: `pnav status` to watch, `pnav goal X Y` to send the robot, "
             "Ctrl-C or `pnav down` to stop",
             flush=True,
         )
+        if stack.dashboard_url:
+            print(f"dashboard: {stack.dashboard_url}", flush=True)
         await stop.wait()
         logger.info("stopping")
     logger.info("stack down")
+    if options.record is not None:
+        print(f"recorded to {options.record}: `pnav record info {options.record}`", flush=True)
     return 0

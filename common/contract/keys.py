@@ -16,6 +16,7 @@ Key expressions (``{robot}`` is a robot id; ids are ``[A-Za-z0-9_-]+``):
 - ``pnav/sim/world``              the loaded world (map, chargers, robots); also a queryable
 - ``pnav/alive/{service}/{instance}`` liveliness token of a running service
 - ``pnav/lockstep/{service}/{instance}`` a participant's quiet report (lockstep runs only)
+- ``pnav/supervisor/{launcher}``  a launcher's report of the processes it supervises
 """
 
 from __future__ import annotations
@@ -165,3 +166,11 @@ LEASE_ACQUIRE_FN: Final = "robot_lease_acquire"
 LEASE_RELEASE_FN: Final = "robot_lease_release"
 # The second key of the shared advisory lock every live replica of a service holds.
 LEASE_MEMBER_KEY: Final = 0
+
+
+# -- the launcher's supervisor (pnav up / pnav demo): restarts, for /metrics ----------------
+def supervisor_key(launcher: str) -> str:
+    return f"{PREFIX}/supervisor/{launcher}"
+
+
+SUPERVISOR_WATCH: Final = f"{PREFIX}/supervisor/*"

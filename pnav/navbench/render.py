@@ -4,7 +4,9 @@ Colours (also in docs/NAVBENCH.md): occupied cells dark grey; free cells the rob
 cannot reach (within the footprint plus margin of an obstacle) light grey; free white; the
 reference path green; the driven trajectory blue; the start a green disc of the robot's size;
 the goal an orange dot inside an orange ring of the goal tolerance; each collision a red
-cross in a red ring. North (+y) is up.
+cross in a red ring; the world's unmapped obstacles (in the world file, not on the map: only the
+lidar sees them) purple, their true shape. North (+y) is up. A legend strip under the picture
+names every colour (pnav/navbench/legend.py).
 """
 
 from __future__ import annotations
@@ -17,9 +19,11 @@ import numpy as np
 import numpy.typing as npt
 
 from pnav.navbench.generator import ORIGIN, GeneratedWorld
+from pnav.navbench.legend import with_legend
 from pnav.navbench.png import encode_png
 from pnav.navbench.search import BoolGrid, Point, inflate
 from pnav.navbench.worldfile import BenchmarkWorld, occupied_cells
+from services.sim.world import ObstacleSpec
 
 Colour = tuple[int, int, int]
 Image = npt.NDArray[np.uint8]
@@ -32,6 +36,7 @@ TRAJECTORY: Colour = (30, 100, 235)
 COLLISION: Colour = (225, 20, 20)
 START: Colour = (20, 160, 60)
 GOAL: Colour = (240, 130, 0)
+UNMAPPED: Colour = (150, 60, 200)
 
 
 class Canvas:
@@ -99,6 +104,31 @@ class Canvas:
         rows, cols = self.to_px([centre])
         self.stamp(rows, cols, radius_m / self.resolution * self.scale, colour)
 
+    def obstacle(self, ob: ObstacleSpec, colour: Colour) -> None:
+        """Fill the pixels whose centre lies inside an obstacle's footprint (a box turned by
+        its yaw, or a cylinder's disc); at least its centre pixel, however small it is."""
+        sx, sy, _ = ob.size
+        reach = math.hypot(sx, sy) / 2.0
+        rows, cols = self.to_px([(ob.x - reach, ob.y + reach), (ob.x + reach, ob.y - reach)])
+        height, width = self.image.shape[:2]
+        r0, r1 = max(0, math.floor(rows[0])), min(height, math.ceil(rows[1]) + 1)
+        c0, c1 = max(0, math.floor(cols[0])), min(width, math.ceil(cols[1]) + 1)
+        if r0 < r1 and c0 < c1:
+            per_m = self.scale / self.resolution
+            rr, cc = np.mgrid[r0:r1, c0:c1]
+            dx = self.origin[0] + (cc + 0.5) / per_m - ob.x
+            dy = self.origin[1] + (height - (rr + 0.5)) / per_m - ob.y
+            if ob.shape == "cylinder":
+                inside = np.hypot(dx, dy) <= sx / 2.0
+            else:
+                c, s = math.cos(-ob.yaw), math.sin(-ob.yaw)
+                inside = (np.abs(c * dx - s * dy) <= sx / 2.0) & (
+                    np.abs(s * dx + c * dy) <= sy / 2.0
+                )
+            self.image[rr[inside], cc[inside]] = colour
+        centre_rows, centre_cols = self.to_px([(ob.x, ob.y)])
+        self.stamp(centre_rows, centre_cols, 0.5, colour)
+
     def ring(self, centre: Point, radius_m: float, colour: Colour, width_px: float = 2.0) -> None:
         n = max(16, math.ceil(2 * math.pi * radius_m / self.resolution * self.scale * 2))
         t = np.linspace(0.0, 2.0 * math.pi, n + 1)
@@ -126,10 +156,15 @@ def draw_world(
     goal_tolerance_m: float = 0.3,
     footprint_radius_m: float = 0.105,
     inflation_m: float | None = None,
+    obstacles: Sequence[ObstacleSpec] = (),
     scale: int = 4,
+    legend: bool = False,
 ) -> Image:
-    """The picture (height, width, 3) of a world and, optionally, of one run in it."""
+    """The picture (height, width, 3) of a world and, optionally, of one run in it;
+    ``obstacles``: the world's unmapped ones; ``legend``: add the colour key under it."""
     canvas = Canvas(occupied, resolution, origin, scale=scale, inflation_m=inflation_m)
+    for ob in obstacles:
+        canvas.obstacle(ob, UNMAPPED)
     canvas.polyline(reference_path, REFERENCE, 2.0)
     canvas.polyline(trajectory, TRAJECTORY, 2.0)
     if start is not None:
@@ -140,7 +175,22 @@ def draw_world(
     for point in collisions:  # last, so nothing hides them
         canvas.ring(point, 0.12, COLLISION, 2.0)
         canvas.cross(point, 0.08, COLLISION, 2.0)
-    return canvas.image
+    if not legend:
+        return canvas.image
+    return with_legend(canvas.image, _key(inflation_m, bool(obstacles), bool(collisions)))
+
+
+def _key(inflation: float | None, unmapped: bool, collisions: bool) -> list[tuple[Colour, str]]:
+    """The legend's entries: every colour the picture may show (the optional ones when used)."""
+    key = [(OCCUPIED, "map obstacle")]
+    if unmapped:
+        key.append((UNMAPPED, "unmapped obstacle"))
+    if inflation:
+        key.append((UNREACHABLE, "too close"))
+    key += [(REFERENCE, "reference"), (TRAJECTORY, "driven"), (GOAL, "goal")]
+    if collisions:
+        key.append((COLLISION, "collision"))
+    return key
 
 
 def write_world_png(path: Path, image: Image) -> Path:
@@ -185,7 +235,9 @@ def draw_run(
         goal_tolerance_m=world.goal_tolerance_m,
         footprint_radius_m=world.footprint_radius_m,
         inflation_m=world.inflation_m,
+        obstacles=world.obstacles,
         scale=scale,
+        legend=True,
     )
 
 

@@ -27,7 +27,7 @@ from pnav.navbench.generator import LEVELS, ORIGIN, GeneratedWorld
 from pnav.navbench.metrics import GOAL_TOLERANCE_M, TOP_SPEED_MPS, default_time_limit, optimal_time
 from pnav.navbench.search import BoolGrid, Point
 from services.sim.mapserver import OCCUPIED, OccupancyGrid, encode_pgm, load_map, map_yaml
-from services.sim.world import read_world_yaml
+from services.sim.world import ObstacleSpec, load_world, read_world_yaml
 
 FORMAT = 1
 FREE_PX, OCCUPIED_PX = 254, 0  # as map_saver writes them
@@ -115,6 +115,8 @@ class BenchmarkWorld:
     fill_ratio: float
     difficulty: Difficulty
     generator: dict[str, Any]
+    # in the world file but not on the map: only the lidar sees them (the sim's `obstacles`)
+    obstacles: tuple[ObstacleSpec, ...] = ()
     protocol: str = "default"  # or "barn": obstacles only in the sim world (barnfile.py)
     model: str = ""  # the robot model the world was made for ("": the Burger, before models)
 
@@ -194,6 +196,8 @@ def read_benchmark(path: str | Path) -> BenchmarkWorld:
         fill_ratio=_number(path, bench, "fill_ratio"),
         difficulty=parsed,
         generator=generator if isinstance(generator, dict) else {},
+        # parsed (and checked) as the sim parses them; only then is the map loaded twice
+        obstacles=load_world(path).obstacles if doc.get("obstacles") else (),
         protocol=str(bench.get("protocol", "default")),
         model=str(bench.get("model", "")),
     )

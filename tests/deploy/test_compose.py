@@ -52,7 +52,9 @@ DOCKERFILE = DEPLOY / "Dockerfile"
 ROUTER_CONFIG = DEPLOY / "zenoh" / "router.json5"
 DEPLOY_DOC = ROOT / "docs" / "DEPLOY.md"
 
-COMPONENTS = ("sim", "bridge", *SCENARIO_SERVICES)
+COMPONENTS = ("sim", "bridge", *SCENARIO_SERVICES, "dashboard")
+# the one component that publishes a port (the web page, on the host's loopback)
+DASHBOARD_PORT = "8080"
 INFRASTRUCTURE = ("postgres", "zenoh", "migrate")
 # where each component's code names itself (its liveliness token is pnav/alive/<name>/...)
 SERVICE_NAMES = {
@@ -62,6 +64,7 @@ SERVICE_NAMES = {
     "planner": ("services.planner.service", "PlannerService.service"),
     "controller": ("services.controller.service", "ControllerService.service"),
     "decision": ("services.decision.service", "DecisionService.service"),
+    "dashboard": ("services.dashboard.service", "SERVICE"),
 }
 PNAV_NAME = re.compile(r"PNAV_[A-Z0-9_]*[A-Z0-9]")
 PINNED_TAG = re.compile(r"^\d+(\.\d+)+(-[A-Za-z0-9.]+)?$")
@@ -252,8 +255,9 @@ def test_the_schema_check_does_catch_a_mistake() -> None:
 
 def test_every_service_of_the_stack_is_there() -> None:
     assert set(services()) == {*INFRASTRUCTURE, *COMPONENTS}
-    # the same services `pnav up` starts, each run the way the launcher runs it
-    assert set(StackOptions().services) == set(COMPONENTS)
+    # the same services `pnav up` starts (the dashboard unless --no-dashboard), each run the
+    # way the launcher runs it
+    assert set(StackOptions().services) | {"dashboard"} == set(COMPONENTS)
     for name in COMPONENTS:
         assert services()[name]["command"] == ["python", "-m", f"services.{name}"]
         assert (ROOT / "services" / name / "__main__.py").is_file()
@@ -400,23 +404,34 @@ def test_the_sim_takes_world_rate_and_robots_from_the_shell(
 
 
 def test_scenario_services_can_be_scaled() -> None:
-    for name in COMPONENTS:
+    for name in (n for n in COMPONENTS if n != "dashboard"):
         service = services()[name]
         for key in ("container_name", "ports", "hostname"):
             assert key not in service, f"{name} has {key}: it could not run as replicas"
         assert "replicas" not in (service.get("deploy") or {}), name
 
 
-def test_only_postgres_and_the_router_publish_ports_on_loopback() -> None:
+def test_only_postgres_the_router_and_the_dashboard_publish_ports_on_loopback() -> None:
     published = {name: s["ports"] for name, s in services().items() if "ports" in s}
-    assert set(published) <= {"postgres", "zenoh"}
+    assert set(published) <= {"postgres", "zenoh", "dashboard"}
     assert "zenoh" in published, "pnav status on the host needs the router's port"
-    container_port = {"postgres": "5432", "zenoh": "7447"}
+    assert "dashboard" in published, "the browser on the host needs the dashboard's port"
+    container_port = {"postgres": "5432", "zenoh": "7447", "dashboard": DASHBOARD_PORT}
     for name, ports in published.items():
         for port in interpolated(ports):
             address, host_port, target = str(port).split(":")
             assert address == "127.0.0.1", f"{name} publishes beyond loopback by default"
             assert target == container_port[name] == host_port
+
+
+def test_the_dashboard_listens_in_its_container_on_the_port_compose_publishes() -> None:
+    from services.dashboard.settings import DashboardSettings
+
+    settings = DashboardSettings.from_env(environment(interpolated(services()["dashboard"])))
+    # every interface inside the container (the published port is the host's loopback only)
+    assert settings.host == "0.0.0.0"
+    (port,) = interpolated(services()["dashboard"]["ports"])
+    assert str(settings.port) == port.split(":")[-1] == DASHBOARD_PORT
 
 
 def test_every_service_has_a_health_check_and_a_restart_policy() -> None:

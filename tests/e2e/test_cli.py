@@ -43,9 +43,27 @@ async def wait_until_up(env: dict[str, str], up: asyncio.subprocess.Process) -> 
     raise AssertionError("pnav up never showed robot r1 in `pnav status`")
 
 
+async def dashboard_shows_r1(port: int) -> None:
+    """The dashboard `pnav up` serves answers on the port asked for, and knows the robot."""
+    import httpx
+
+    deadline = time.monotonic() + 60
+    async with httpx.AsyncClient(timeout=5) as client:
+        while True:
+            try:
+                state = (await client.get(f"http://127.0.0.1:{port}/api/state")).json()
+                if "r1" in state["robots"]:
+                    return
+            except (httpx.TransportError, ValueError, KeyError):
+                pass
+            assert time.monotonic() < deadline, "the dashboard never showed r1"
+            await asyncio.sleep(0.5)
+
+
 async def test_up_goal_strategy_cancel_status_down(tmp_path: Path) -> None:
     env = {**os.environ, "PNAV_STATE_DIR": str(tmp_path / "state")}
     env.pop("PNAV_DATABASE_URL", None)
+    http_port = free_port()
     up = await asyncio.create_subprocess_exec(
         *PNAV,
         "up",
@@ -57,6 +75,8 @@ async def test_up_goal_strategy_cancel_status_down(tmp_path: Path) -> None:
         str(free_port()),
         "--log-dir",
         str(tmp_path / "logs"),
+        "--http-port",
+        str(http_port),
         "--quiet",
         env=env,
         stdout=asyncio.subprocess.PIPE,
@@ -65,7 +85,9 @@ async def test_up_goal_strategy_cancel_status_down(tmp_path: Path) -> None:
     try:
         await wait_until_up(env, up)
         children = psutil.Process(up.pid).children(recursive=True)
-        assert len(children) >= 6  # sim, bridge, strategy, planner, controller, decision
+        # sim, bridge, strategy, planner, controller, decision, dashboard
+        assert len(children) >= 7
+        await dashboard_shows_r1(http_port)
 
         code, out = await pnav("goal", "3.0", "3.0", env=env)
         assert code == 0 and "goal 1 set to (3.0, 3.0)" in out, out
@@ -102,6 +124,7 @@ async def test_up_goal_strategy_cancel_status_down(tmp_path: Path) -> None:
         assert up.stdout is not None
         up_log = (await up.stdout.read()).decode()
         assert "planner exited with code -9" in up_log and "restarting" in up_log, up_log
+        assert f"dashboard: http://127.0.0.1:{http_port}/" in up_log, up_log
         assert (log / "planner.log").exists()
         for child in children:
             assert not child.is_running() or child.status() == psutil.STATUS_ZOMBIE

@@ -45,6 +45,7 @@ async def start_up(
         "--log-dir",
         str(tmp_path / "logs"),
         "--quiet",
+        "--no-dashboard",
         *extra,
         env=env,
         stdout=asyncio.subprocess.PIPE,

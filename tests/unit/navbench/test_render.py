@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import struct
 import zlib
 from pathlib import Path
@@ -9,11 +10,13 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 import pytest
+import yaml
 
 from pnav.navbench import render
 from pnav.navbench.png import encode_png, write_png
 from pnav.navbench.render import draw_run, draw_world, render_run
-from pnav.navbench.worldfile import load_suite
+from pnav.navbench.worldfile import load_suite, read_benchmark
+from services.sim.mapserver import encode_pgm, map_yaml
 
 pytestmark = pytest.mark.timeout(20)
 
@@ -95,13 +98,67 @@ def test_run_picture_of_a_shipped_world(tmp_path: Path) -> None:
     trajectory = [world.start[:2], (world.start[0], world.start[1] + 1.0)]
     image = draw_run(world, trajectory=trajectory, collisions=[trajectory[-1]], scale=4)
     grid = world.grid()
-    assert image.shape == (grid.height * 4, grid.width * 4, 3)
-    colours = {tuple(int(v) for v in c) for c in image.reshape(-1, 3)}
+    # the map on top, the legend strip under it
+    assert image.shape[1:] == (grid.width * 4, 3) and image.shape[0] > grid.height * 4
+    colours = {tuple(int(v) for v in c) for c in image[: grid.height * 4].reshape(-1, 3)}
     for colour in (render.OCCUPIED, render.UNREACHABLE, render.FREE, render.REFERENCE):
         assert colour in colours
     for colour in (render.TRAJECTORY, render.COLLISION, render.START, render.GOAL):
         assert colour in colours
     out = render_run(tmp_path / "pics" / "run.png", world, trajectory=trajectory)
     header, pixels = decode_png(out.read_bytes())
-    assert (header["width"], header["height"]) == (grid.width * 4, grid.height * 4)
+    assert header["width"] == grid.width * 4 and header["height"] > grid.height * 4
     assert render.COLLISION not in {tuple(int(v) for v in c) for c in pixels.reshape(-1, 3)}
+
+
+def test_a_world_whose_obstacles_are_all_unmapped_shows_them(tmp_path: Path) -> None:
+    """A shipped world's file with an empty map and a box and a cylinder in its
+    ``obstacles``: the report picture shows both where they stand, in the unmapped colour,
+    and the map's own cells stay free."""
+    shipped = load_suite(SUITE)[0]
+    doc = yaml.safe_load(shipped.world_file.read_text())
+    grid = shipped.grid()
+    (tmp_path / "maps").mkdir()
+    (tmp_path / "maps" / "empty.pgm").write_bytes(
+        encode_pgm(np.full((grid.height, grid.width), 254, dtype=np.uint8))
+    )
+    (tmp_path / "maps" / "empty.yaml").write_text(
+        map_yaml("empty.pgm", grid.resolution, grid.origin[0], grid.origin[1])
+    )
+    sx, sy = shipped.start[:2]
+    box, post = (sx + 1.5, sy), (sx + 1.5, sy + 1.0)  # clear of the start
+    doc["map"] = "maps/empty.yaml"
+    doc["obstacles"] = [
+        {"name": "crate", "type": "box", "x": box[0], "y": box[1], "yaw": math.pi / 4,
+         "size": [0.4, 0.2, 0.3]},
+        {"name": "post", "type": "cylinder", "x": post[0], "y": post[1], "radius": 0.1},
+    ]  # fmt: skip
+    (tmp_path / "w.yaml").write_text(yaml.safe_dump(doc))
+    world = read_benchmark(tmp_path / "w.yaml")
+    assert [ob.name for ob in world.obstacles] == ["crate", "post"]
+    image = draw_run(world, scale=4)
+    map_h = grid.height * 4
+    per_m = 4 / grid.resolution
+
+    def at(x: float, y: float) -> tuple[int, ...]:
+        row = int(map_h - (y - grid.origin[1]) * per_m)
+        return tuple(int(v) for v in image[row, int((x - grid.origin[0]) * per_m)])
+
+    assert at(*box) == render.UNMAPPED  # the box's centre
+    assert at(box[0] + 0.12, box[1] + 0.12) == render.UNMAPPED  # along its long side (45 deg)
+    assert at(box[0] + 0.12, box[1] - 0.12) != render.UNMAPPED  # beyond its short side
+    assert at(*post) == render.UNMAPPED and at(post[0] + 0.08, post[1]) == render.UNMAPPED
+    assert at(post[0] + 0.14, post[1]) != render.UNMAPPED  # just outside the post
+    assert render.OCCUPIED not in colours_of(image[:map_h])  # nothing is on the map
+    assert render.UNMAPPED in colours_of(image[map_h:])  # the legend's swatch
+
+
+def test_legend_lists_unmapped_obstacles_only_when_there_are_some() -> None:
+    occupied = np.zeros((10, 10), dtype=bool)
+    plain = draw_world(occupied, 0.1, (0.0, 0.0), scale=4, legend=True)
+    assert plain.shape[0] > 40 and render.UNMAPPED not in colours_of(plain)
+    assert render.OCCUPIED in colours_of(plain[40:])  # the map-obstacle swatch
+
+
+def colours_of(image: npt.NDArray[np.uint8]) -> set[tuple[int, ...]]:
+    return {tuple(int(v) for v in c) for c in image.reshape(-1, 3)}

@@ -1,0 +1,44 @@
+"""The options that say where the dashboard is served: ``pnav up`` and ``pnav demo``
+(docs/DASHBOARD.md)."""
+
+from __future__ import annotations
+
+import argparse
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    # imported when used: `pnav --help` does not load the launcher's dependencies
+    from pnav.launcher import DashboardOptions
+
+
+def _port(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"must be a port number from 1 to 65535, got {text!r}")
+    return value
+
+
+def add_dashboard_options(parser: argparse.ArgumentParser, default_port: int | None) -> None:
+    """--http-port, --http-host and --no-dashboard; ``default_port`` None: a free port."""
+    where = "a free port, printed" if default_port is None else str(default_port)
+    parser.add_argument(
+        "--http-port", type=_port, default=default_port, help=f"dashboard port ({where})"
+    )
+    parser.add_argument(
+        "--http-host",
+        default="127.0.0.1",
+        help="dashboard address (127.0.0.1: this machine only; 0.0.0.0 serves a page that "
+        "sends robots, with no login, to the whole network)",
+    )
+    parser.add_argument("--no-dashboard", action="store_true", help="serve no dashboard")
+
+
+def dashboard_options(args: argparse.Namespace) -> DashboardOptions | None:
+    from pnav.launcher import DashboardOptions
+
+    if args.no_dashboard:
+        return None
+    return DashboardOptions(host=args.http_host, port=args.http_port)

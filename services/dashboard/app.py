@@ -1,0 +1,207 @@
+"""The dashboard's HTTP and websocket endpoints (docs/DASHBOARD.md), as a Starlette app.
+
+:func:`create_app` takes the store and the hub, plus ``extra_routes`` for what another part
+of the service mounts on the same port (e.g. /metrics). Every refusal is JSON
+``{"error": "<one line>"}`` with a 4xx status, and writes nothing.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import Sequence
+from importlib.metadata import entry_points
+from pathlib import Path
+from typing import Any
+
+import asyncpg
+from starlette.applications import Starlette
+from starlette.exceptions import HTTPException
+from starlette.requests import Request
+from starlette.responses import FileResponse, JSONResponse, Response
+from starlette.routing import BaseRoute, Mount, Route, WebSocketRoute
+from starlette.staticfiles import StaticFiles
+from starlette.websockets import WebSocket, WebSocketDisconnect
+
+from common.contract import keys
+from common.errors import ConnectionFailure
+from services.dashboard import provenance
+from services.dashboard.hub import Hub
+from services.dashboard.orders import Orders
+from services.dashboard.requests import (
+    GoalRequest,
+    NewStrategy,
+    Refused,
+    StrategyChoice,
+    check_scenarios,
+    json_object,
+    same_origin,
+)
+from services.dashboard.store import DashboardStore
+
+logger = logging.getLogger("pnav.dashboard.app")
+
+STATIC = Path(__file__).resolve().parent / "static"
+# how long POST .../strategy waits for the strategy service's verdict
+VERDICT_WAIT_S = 5.0
+
+
+def scenario_names() -> dict[str, list[str]]:
+    """The scenarios installed here, by entry point name (none is imported: the dashboard
+    only names them, the planner and controller services load them)."""
+    return {
+        family: sorted({p.name for p in entry_points(group=f"pnav.{family}.scenarios")})
+        for family in ("planner", "controller")
+    }
+
+
+def refusal(status: int, reason: str) -> JSONResponse:
+    return JSONResponse({"error": reason}, status_code=status)
+
+
+class Endpoints:
+    """The handlers, bound to one store and hub."""
+
+    def __init__(self, store: DashboardStore, hub: Hub) -> None:
+        self.store, self.hub = store, hub
+        self.orders = Orders(store)
+
+    @staticmethod
+    async def body(request: Request) -> dict[str, Any]:
+        same_origin(request.headers)
+        return json_object(await request.body(), request.headers.get("content-type"))
+
+    @staticmethod
+    def robot_of(request: Request) -> str:
+        robot = str(request.path_params["robot"])
+        if not keys.valid_id(robot):
+            raise Refused(404, f"no robot {robot!r}: robot ids are letters, digits, _ and -")
+        return robot
+
+    async def index(self, request: Request) -> Response:
+        return FileResponse(STATIC / "index.html")
+
+    async def state(self, request: Request) -> Response:
+        snapshot = self.store.snapshot()
+        snapshot.pop("type")
+        return JSONResponse(snapshot)
+
+    async def strategies(self, request: Request) -> Response:
+        return JSONResponse({"strategies": self.store.strategies, "scenarios": scenario_names()})
+
+    async def set_goal(self, request: Request) -> Response:
+        robot = self.robot_of(request)
+        goal = GoalRequest.parse(await self.body(request))
+        goal_id = await self.orders.set_goal(robot, goal.x, goal.y, goal.tolerance_m)
+        body = {"robot": robot, "goal_id": goal_id, "x": goal.x, "y": goal.y}
+        return JSONResponse(body, status_code=201)
+
+    async def cancel_goal(self, request: Request) -> Response:
+        same_origin(request.headers)
+        robot = self.robot_of(request)
+        return JSONResponse({"robot": robot, "cancelled": await self.orders.cancel_goal(robot)})
+
+    async def set_strategy(self, request: Request) -> Response:
+        robot = self.robot_of(request)
+        choice = StrategyChoice.parse(await self.body(request))
+        verdict = await self.orders.set_strategy(robot, choice.code, VERDICT_WAIT_S)
+        status = 202 if verdict["status"] == "pending" else 200
+        return JSONResponse({"robot": robot, "code": choice.code, **verdict}, status_code=status)
+
+    async def add_strategy(self, request: Request) -> Response:
+        new = NewStrategy.parse(await self.body(request))
+        names = scenario_names()
+        check_scenarios(new, set(names["planner"]), set(names["controller"]))
+        await self.orders.add_strategy(new)
+        return JSONResponse({"code": new.code}, status_code=201)
+
+    async def decision(self, request: Request) -> Response:
+        table = {"decisions": keys.COMMAND2ROBOT, "system-commands": keys.SYSTEM_COMMAND}
+        kind = request.url.path.strip("/").split("/")[1]
+        row_id = request.path_params["id"]
+        return JSONResponse(await provenance.provenance(self.store.source, table[kind], row_id))
+
+    async def websocket(self, websocket: WebSocket) -> None:
+        try:
+            same_origin(websocket.headers)
+        except Refused as refused:
+            logger.warning("%s", refused.reason)
+            await websocket.close(code=1008)  # policy violation
+            return
+        await websocket.accept()
+        browser = self.hub.join(self.store.snapshot())
+        reader = asyncio.create_task(_drain(websocket), name="ws-reader")
+        try:
+            while True:
+                getter = asyncio.ensure_future(browser.queue.get())
+                done, _ = await asyncio.wait({getter, reader}, return_when=asyncio.FIRST_COMPLETED)
+                if getter not in done:
+                    getter.cancel()
+                    break
+                text = getter.result()
+                if text is None:
+                    await websocket.close(code=1013)  # try again later: reconnect
+                    break
+                await websocket.send_text(text)
+        except (WebSocketDisconnect, RuntimeError, OSError):
+            pass  # the browser went away mid-send
+        finally:
+            self.hub.leave(browser)
+            reader.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await reader
+
+
+async def _drain(websocket: WebSocket) -> None:
+    """Read (and ignore) what the browser sends, until it disconnects: the page writes
+    through the HTTP endpoints, the websocket only pushes."""
+    with contextlib.suppress(WebSocketDisconnect):
+        while True:
+            message = await websocket.receive()
+            if message["type"] == "websocket.disconnect":
+                return
+
+
+async def _refused(request: Request, exc: Exception) -> Response:
+    assert isinstance(exc, Refused)
+    return refusal(exc.status, exc.reason)
+
+
+async def _http_error(request: Request, exc: Exception) -> Response:
+    assert isinstance(exc, HTTPException)
+    return refusal(exc.status_code, str(exc.detail))
+
+
+async def _unreachable(request: Request, exc: Exception) -> Response:
+    logger.warning("the database is unreachable: %s", exc)
+    return refusal(503, f"the contract database is unreachable now: {exc}")
+
+
+def create_app(
+    store: DashboardStore, hub: Hub, extra_routes: Sequence[BaseRoute] = ()
+) -> Starlette:
+    api = Endpoints(store, hub)
+    routes: list[BaseRoute] = [
+        Route("/", api.index),
+        Route("/api/state", api.state),
+        Route("/api/strategies", api.strategies),
+        Route("/api/strategies", api.add_strategy, methods=["POST"]),
+        Route("/api/robots/{robot}/goal", api.set_goal, methods=["POST"]),
+        Route("/api/robots/{robot}/goal", api.cancel_goal, methods=["DELETE"]),
+        Route("/api/robots/{robot}/strategy", api.set_strategy, methods=["POST"]),
+        Route("/api/decisions/{id:int}", api.decision),
+        Route("/api/system-commands/{id:int}", api.decision),
+        WebSocketRoute("/ws", api.websocket),
+        *extra_routes,
+        Mount("/static", StaticFiles(directory=STATIC), name="static"),
+    ]
+    handlers: dict[Any, Any] = {
+        Refused: _refused,
+        HTTPException: _http_error,
+        ConnectionFailure: _unreachable,
+        OSError: _unreachable,
+        asyncpg.PostgresConnectionError: _unreachable,
+        asyncpg.InterfaceError: _unreachable,
+    }
+    return Starlette(routes=routes, exception_handlers=handlers)

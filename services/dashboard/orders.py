@@ -1,0 +1,82 @@
+"""What people ask the dashboard for: a goal, a cancel, a strategy switch, a new strategy.
+
+Each is checked against what the store knows (the robot exists, the strategy exists), then
+written through the store's source as ``pnav goal`` and ``pnav strategy`` write it. A row
+the database still refuses (a CHECK, a foreign key, a value it cannot store) is the
+request's fault: 422 with the database's one-line reason, never a 500.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from typing import Any
+
+import asyncpg
+
+from common.contract import keys
+from services.dashboard.requests import NewStrategy, Refused
+from services.dashboard.store import DashboardStore
+
+
+@asynccontextmanager
+async def refusal_as_4xx() -> AsyncIterator[None]:
+    try:
+        yield
+    except (asyncpg.IntegrityConstraintViolationError, asyncpg.DataError) as exc:
+        detail = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise Refused(422, f"the database refused the row: {detail}") from None
+
+
+class Orders:
+    def __init__(self, store: DashboardStore) -> None:
+        self.store = store
+        self.source = store.source
+
+    async def require_robot(self, robot: str) -> None:
+        """404 unless ``robot`` is a row of the robot table (read again if not known yet)."""
+        fleet = self.store.fleet
+        if not fleet.known(robot):
+            fleet.set_robots(await self.source.robots())
+        if not fleet.known(robot):
+            known = ", ".join(r for r in sorted(fleet.robots) if fleet.known(r))
+            raise Refused(404, f"no robot {robot!r}; known robots: {known or 'none'}")
+
+    async def require_strategy(self, code: str) -> None:
+        if not any(s["code"] == code for s in self.store.strategies):
+            await self.store.read_globals()
+        codes = [s["code"] for s in self.store.strategies]
+        if code not in codes:
+            raise Refused(422, f"unknown strategy {code!r}; known strategies: {', '.join(codes)}")
+
+    async def set_goal(self, robot: str, x: float, y: float, tolerance: float | None) -> int:
+        await self.require_robot(robot)
+        async with refusal_as_4xx():
+            return await self.source.set_goal(robot, x, y, tolerance)
+
+    async def cancel_goal(self, robot: str) -> int | None:
+        await self.require_robot(robot)
+        return await self.source.cancel_goal(robot)
+
+    async def set_strategy(self, robot: str, code: str, wait_s: float) -> dict[str, Any]:
+        """SET_STRATEGY as a user_command; waits up to ``wait_s`` for the strategy service's
+        verdict (``pending`` if none came: the page shows it when it does)."""
+        await self.require_robot(robot)
+        await self.require_strategy(code)
+        async with refusal_as_4xx():
+            command_id = await self.source.user_command(robot, "SET_STRATEGY", code)
+        deadline = time.monotonic() + wait_s
+        row = await self.source.row(keys.USER_COMMAND, command_id)
+        while row is not None and row["status"] == "pending" and time.monotonic() < deadline:
+            await asyncio.sleep(0.05)
+            row = await self.source.row(keys.USER_COMMAND, command_id)
+        status = "pending" if row is None else row["status"]
+        reason = "" if row is None else row["reason"] or ""
+        return {"command_id": command_id, "status": status, "reason": reason}
+
+    async def add_strategy(self, request: NewStrategy) -> None:
+        async with refusal_as_4xx():
+            await self.source.add_strategy(request)
+        await self.store.read_globals()

@@ -1,0 +1,191 @@
+"""The bodies the dashboard's endpoints accept, checked before anything is written.
+
+A request that cannot be obeyed is refused at the door with :class:`Refused`: an HTTP status
+and one line saying why (docs/DASHBOARD.md lists them). The bounds are the contract's own
+(common.contract.limits, the CHECK constraints of migration 3), so the page refuses exactly
+what the database would, and says so in the same words as ``pnav goal``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+from urllib.parse import urlsplit
+
+from common.contract import limits
+from common.errors import ContractError, UsageError
+
+_CODE = re.compile(r"^[A-Z0-9_]+$")
+_SCENARIO = re.compile(r"^[A-Za-z0-9_]+$")
+MAX_BODY_BYTES = 64 * 1024
+
+
+class Refused(UsageError):
+    """A request refused with HTTP ``status`` (4xx); the message is the reason."""
+
+    def __init__(self, status: int, reason: str) -> None:
+        super().__init__(reason)
+        self.status = status
+        self.reason = reason
+
+
+def _no_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a JSON number")
+
+
+def same_origin(headers: Mapping[str, str]) -> None:
+    """403 for a request a page of another site made: a browser names that page's origin,
+    and the dashboard's own page has the dashboard's host. (Another site's page may send a
+    form to 127.0.0.1 and send a robot; a client that is not a browser sends no Origin.)"""
+    origin = headers.get("origin")
+    if origin is None:
+        return
+    host = headers.get("host", "")
+    if urlsplit(origin).netloc != host:
+        raise Refused(403, f"cross-origin request from {origin} refused: use the dashboard's page")
+
+
+def json_object(body: bytes, content_type: str | None = "application/json") -> dict[str, Any]:
+    """The body as a JSON object; 415 unless it is sent as application/json (what a form of
+    another site cannot send without asking first), 400 for anything but a JSON object (NaN
+    and Infinity included: they are not JSON, though Python's parser accepts them)."""
+    media = (content_type or "").split(";")[0].strip().lower()
+    if media != "application/json":
+        raise Refused(415, f"send the body as application/json, not {media or 'nothing'}")
+    if len(body) > MAX_BODY_BYTES:
+        raise Refused(413, f"the body is over {MAX_BODY_BYTES} bytes")
+    try:
+        value = json.loads(body.decode("utf-8"), parse_constant=_no_constant)
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise Refused(400, f"the body is not valid JSON: {exc}") from None
+    if not isinstance(value, dict):
+        raise Refused(400, f"the body must be a JSON object, got {type(value).__name__}")
+    return value
+
+
+def _number(body: dict[str, Any], name: str, *, required: bool) -> float | None:
+    value = body.get(name)
+    if value is None:
+        if required:
+            raise Refused(422, f"{name!r} is missing: a number of metres")
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise Refused(422, f"{name!r} must be a number, got {value!r}")
+    return float(value)
+
+
+def _unknown_fields(body: dict[str, Any], allowed: set[str]) -> None:
+    extra = sorted(set(body) - allowed)
+    if extra:
+        raise Refused(422, f"unknown field(s) {', '.join(extra)}; accepted: {sorted(allowed)}")
+
+
+@dataclass(frozen=True)
+class GoalRequest:
+    x: float
+    y: float
+    tolerance_m: float | None = None
+
+    @classmethod
+    def parse(cls, body: dict[str, Any]) -> GoalRequest:
+        _unknown_fields(body, {"x", "y", "tolerance_m"})
+        x = _number(body, "x", required=True)
+        y = _number(body, "y", required=True)
+        tolerance = _number(body, "tolerance_m", required=False)
+        assert x is not None and y is not None
+        try:
+            limits.check_goal(x, y, tolerance)
+        except ContractError as exc:
+            raise Refused(422, str(exc)) from None
+        return cls(x, y, tolerance)
+
+
+def strategy_code(value: Any) -> str:
+    if not isinstance(value, str) or not _CODE.match(value.strip().upper()):
+        raise Refused(
+            422, f"'code' must be a strategy code of letters, digits and _, got {value!r}"
+        )
+    return value.strip().upper()
+
+
+@dataclass(frozen=True)
+class StrategyChoice:
+    code: str
+
+    @classmethod
+    def parse(cls, body: dict[str, Any]) -> StrategyChoice:
+        _unknown_fields(body, {"code"})
+        return cls(strategy_code(body.get("code")))
+
+
+@dataclass(frozen=True)
+class NewStrategy:
+    """A row of the strategy table, as a person adds one."""
+
+    code: str
+    planner_scenario: str | None
+    controller_scenarios: tuple[str, ...] = ()
+    params: dict[str, Any] = field(default_factory=dict)
+    description: str = ""
+
+    @classmethod
+    def parse(cls, body: dict[str, Any]) -> NewStrategy:
+        _unknown_fields(
+            body, {"code", "planner_scenario", "controller_scenarios", "params", "description"}
+        )
+        planner = body.get("planner_scenario") or None
+        if planner is not None and not (isinstance(planner, str) and _SCENARIO.match(planner)):
+            raise Refused(422, f"'planner_scenario' must be a scenario name or null: {planner!r}")
+        controllers = body.get("controller_scenarios") or []
+        if not isinstance(controllers, list) or not all(
+            isinstance(c, str) and _SCENARIO.match(c) for c in controllers
+        ):
+            raise Refused(422, "'controller_scenarios' must be a list of scenario names")
+        if len(set(controllers)) != len(controllers):
+            raise Refused(422, "'controller_scenarios' names a scenario twice")
+        description = body.get("description") or ""
+        if not isinstance(description, str):
+            raise Refused(422, "'description' must be text")
+        return cls(
+            strategy_code(body.get("code")),
+            planner,
+            tuple(controllers),
+            _params(body.get("params")),
+            description.strip(),
+        )
+
+
+def _params(value: Any) -> dict[str, Any]:
+    """A JSON object whose top-level numbers are within the contract's bound."""
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise Refused(422, f"'params' must be a JSON object, got {type(value).__name__}")
+    bound = limits.MAX_ABS_PARAM
+    for key, item in value.items():
+        number = isinstance(item, int | float) and not isinstance(item, bool)
+        if number and not (math.isfinite(item) and abs(item) <= bound):
+            raise Refused(422, f"params.{key} must be within +-{bound:.0e}, got {item!r}")
+    return value
+
+
+def check_scenarios(request: NewStrategy, planners: set[str], controllers: set[str]) -> None:
+    """422 when a strategy names a scenario no service here can run: a typo would otherwise
+    make a strategy that silently does nothing."""
+    if request.planner_scenario is not None and request.planner_scenario not in planners:
+        raise Refused(
+            422,
+            f"unknown planner scenario {request.planner_scenario!r}; "
+            f"known: {', '.join(sorted(planners)) or 'none'}",
+        )
+    unknown = [c for c in request.controller_scenarios if c not in controllers]
+    if unknown:
+        raise Refused(
+            422,
+            f"unknown controller scenario(s) {', '.join(unknown)}; "
+            f"known: {', '.join(sorted(controllers)) or 'none'}",
+        )

@@ -1,0 +1,428 @@
+// proactive-nav dashboard: draws what the websocket pushes (docs/DASHBOARD.md), and writes
+// people's rows (goal, user_command, strategy) through the HTTP endpoints. Plain JS, no build.
+"use strict";
+
+const PALETTE = ["#d6336c", "#1c7ed6", "#2f9e44", "#f08c00", "#7048e8", "#0c8599", "#e8590c"];
+const MARGIN = 16;
+
+const state = {
+  world: { map: null, chargers: [] },
+  robots: {},
+  strategies: [],
+  timeline: [],
+  selected: null,
+  connected: false,
+  drawn: {}, // robot -> {x, y, px, py}: where the robot was last drawn (world and canvas)
+  gridImage: null,
+  frames: 0,
+};
+window.pnavDashboard = state; // for people poking at the console, and for the browser test
+
+const $ = (id) => document.getElementById(id);
+const canvas = $("map");
+const ctx = canvas.getContext("2d");
+
+function colorOf(robot) {
+  const ids = Object.keys(state.robots).sort();
+  return PALETTE[Math.max(0, ids.indexOf(robot)) % PALETTE.length];
+}
+
+function fmt(v, digits = 2) {
+  return v === null || v === undefined ? "-" : Number(v).toFixed(digits);
+}
+
+function el(tag, attrs = {}, text = "") {
+  const node = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) node.setAttribute(k, v);
+  if (text) node.textContent = text;
+  return node;
+}
+
+// -- geometry: world metres <-> canvas pixels (y up in the world, down on the canvas) ------
+function bounds() {
+  const m = state.world.map;
+  if (m) {
+    return { x0: m.origin[0], y0: m.origin[1], x1: m.origin[0] + m.width * m.resolution,
+             y1: m.origin[1] + m.height * m.resolution };
+  }
+  return { x0: -1, y0: -1, x1: 11, y1: 9 };
+}
+
+function transform() {
+  const b = bounds();
+  const s = Math.min((canvas.width - 2 * MARGIN) / (b.x1 - b.x0),
+                     (canvas.height - 2 * MARGIN) / (b.y1 - b.y0));
+  return { b, s };
+}
+
+function toCanvas(x, y) {
+  const { b, s } = transform();
+  return [MARGIN + (x - b.x0) * s, canvas.height - MARGIN - (y - b.y0) * s];
+}
+
+function toWorld(px, py) {
+  const { b, s } = transform();
+  return [b.x0 + (px - MARGIN) / s, b.y0 + (canvas.height - MARGIN - py) / s];
+}
+state.toCanvas = toCanvas;
+state.toWorld = toWorld;
+
+// -- drawing -------------------------------------------------------------------------------
+function buildGrid() {
+  const m = state.world.map;
+  state.gridImage = null;
+  if (!m) return;
+  const cells = Uint8Array.from(atob(m.grid), (c) => c.charCodeAt(0));
+  const off = document.createElement("canvas");
+  off.width = m.width;
+  off.height = m.height;
+  const img = off.getContext("2d").createImageData(m.width, m.height);
+  for (let j = 0; j < m.height; j++) {
+    for (let i = 0; i < m.width; i++) {
+      const v = cells[j * m.width + i];
+      const shade = v === 255 ? 205 : Math.round(250 - (v / 100) * 210);
+      const k = ((m.height - 1 - j) * m.width + i) * 4; // row 0 is the bottom row
+      img.data[k] = img.data[k + 1] = img.data[k + 2] = shade;
+      img.data[k + 3] = 255;
+    }
+  }
+  off.getContext("2d").putImageData(img, 0, 0);
+  state.gridImage = off;
+}
+
+function circle(x, y, r, fill, stroke) {
+  const [px, py] = toCanvas(x, y);
+  const { s } = transform();
+  ctx.beginPath();
+  ctx.arc(px, py, Math.max(2, r * s), 0, 2 * Math.PI);
+  if (fill) { ctx.fillStyle = fill; ctx.fill(); }
+  if (stroke) { ctx.strokeStyle = stroke; ctx.lineWidth = 2; ctx.stroke(); }
+}
+
+function drawRobot(id, r) {
+  const color = colorOf(id);
+  if (r.path && r.path.xs.length > 1) {
+    ctx.beginPath();
+    r.path.xs.forEach((x, i) => {
+      const [px, py] = toCanvas(x, r.path.ys[i]);
+      if (i === 0) ctx.moveTo(px, py); else ctx.lineTo(px, py);
+    });
+    ctx.strokeStyle = color;
+    ctx.setLineDash([6, 4]);
+    ctx.lineWidth = 2;
+    ctx.stroke();
+    ctx.setLineDash([]);
+  }
+  if (r.goal && r.goal.status === "active") {
+    circle(r.goal.x, r.goal.y, r.goal.tolerance_m, null, color);
+    const [gx, gy] = toCanvas(r.goal.x, r.goal.y);
+    ctx.strokeStyle = color;
+    ctx.beginPath();
+    ctx.moveTo(gx - 7, gy - 7); ctx.lineTo(gx + 7, gy + 7);
+    ctx.moveTo(gx + 7, gy - 7); ctx.lineTo(gx - 7, gy + 7);
+    ctx.stroke();
+  }
+  if (r.scan) {
+    ctx.fillStyle = "rgba(230, 30, 30, 0.75)";
+    const p = r.scan.points;
+    for (let i = 0; i + 1 < p.length; i += 2) {
+      const [px, py] = toCanvas(p[i], p[i + 1]);
+      ctx.fillRect(px - 1.5, py - 1.5, 3, 3);
+    }
+  }
+  if (!r.pose) return;
+  const radius = (r.limits && r.limits.footprint_m) || 0.105;
+  circle(r.pose.x, r.pose.y, radius, color, "#111");
+  const [px, py] = toCanvas(r.pose.x, r.pose.y);
+  const [hx, hy] = toCanvas(r.pose.x + radius * 1.6 * Math.cos(r.pose.yaw),
+                            r.pose.y + radius * 1.6 * Math.sin(r.pose.yaw));
+  ctx.strokeStyle = "#111";
+  ctx.lineWidth = 2;
+  ctx.beginPath(); ctx.moveTo(px, py); ctx.lineTo(hx, hy); ctx.stroke();
+  ctx.fillStyle = "#111";
+  ctx.font = "12px system-ui";
+  ctx.fillText(id, px + 10, py - 10);
+  state.drawn[id] = { x: r.pose.x, y: r.pose.y, px, py, color };
+}
+
+function draw() {
+  ctx.clearRect(0, 0, canvas.width, canvas.height);
+  if (state.gridImage) {
+    const m = state.world.map;
+    const [x0, y1] = toCanvas(m.origin[0], m.origin[1] + m.height * m.resolution);
+    const { s } = transform();
+    ctx.imageSmoothingEnabled = false;
+    ctx.drawImage(state.gridImage, x0, y1, m.width * m.resolution * s, m.height * m.resolution * s);
+  }
+  for (const c of state.world.chargers) {
+    circle(c.x, c.y, c.radius_m, "rgba(64, 192, 87, 0.25)", "#2f9e44");
+    const [px, py] = toCanvas(c.x, c.y);
+    ctx.fillStyle = "#2f9e44";
+    ctx.font = "bold 14px system-ui";
+    ctx.fillText("⚡", px - 5, py + 5);
+  }
+  for (const id of Object.keys(state.robots).sort()) drawRobot(id, state.robots[id]);
+  state.frames += 1;
+}
+
+// -- panels --------------------------------------------------------------------------------
+function renderRobots() {
+  const list = $("robots");
+  list.replaceChildren();
+  for (const id of Object.keys(state.robots).sort()) {
+    const r = state.robots[id];
+    const li = el("li", { "data-robot": id });
+    const sw = el("span", { class: "swatch" });
+    sw.style.background = colorOf(id);
+    li.append(sw);
+    const batt = r.battery ? `${fmt(r.battery.percentage, 1)}%${r.battery.charging ? " ⚡" : ""}` : "-";
+    const code = r.strategy ? r.strategy.code : "-";
+    li.append(`${id}  ${code}  battery ${batt}`);
+    if (id === state.selected) li.classList.add("selected");
+    li.onclick = () => { state.selected = id; renderAll(); };
+    list.append(li);
+  }
+}
+
+function renderSelected() {
+  const id = state.selected;
+  const r = state.robots[id];
+  $("sel-robot").textContent = id || "-";
+  $("hint-robot").textContent = id || "the robot";
+  const facts = $("robot-facts");
+  facts.replaceChildren();
+  if (!r) return;
+  const rows = [
+    ["pose", r.pose ? `(${fmt(r.pose.x)}, ${fmt(r.pose.y)}) yaw ${fmt(r.pose.yaw)} · sim ${fmt(r.pose.stamp, 1)} s` : "-"],
+    ["speed", r.pose ? `${fmt(r.pose.linear)} m/s, ${fmt(r.pose.angular)} rad/s` : "-"],
+    ["goal", r.goal ? `${r.goal.id} (${fmt(r.goal.x)}, ${fmt(r.goal.y)}) ${r.goal.status}${r.goal.reason ? ": " + r.goal.reason : ""}` : "-"],
+    ["strategy", r.strategy ? `${r.strategy.code} (${r.strategy.source})${r.strategy.resume_code ? " resumes " + r.strategy.resume_code : ""}` : "-"],
+    ["battery", r.battery ? `${fmt(r.battery.percentage, 2)}% ${r.battery.charging ? "charging" : ""}` : "-"],
+    ["path", r.path ? `${r.path.target}, ${r.path.xs.length} points, ${fmt(r.path.length_m)} m` : "-"],
+  ];
+  for (const [k, v] of rows) facts.append(el("dt", {}, k), el("dd", { "data-fact": k }, v));
+  const d = r.decision;
+  const box = $("decision");
+  box.textContent = d
+    ? `#${d.id} · ${d.source || "stop"} · v ${fmt(d.linear)} w ${fmt(d.angular)} · ${d.reason || ""}`
+    : "no decision yet";
+  box.dataset.decision = d ? d.id : "";
+  const body = $("weighed").querySelector("tbody");
+  body.replaceChildren();
+  for (const rec of (d && d.considered) || []) {
+    const tr = el("tr", rec.id === d.recommendation_id ? { class: "won" } : {});
+    for (const v of [rec.source, rec.priority, fmt(rec.linear), fmt(rec.angular), rec.reason || ""]) {
+      tr.append(el("td", {}, String(v)));
+    }
+    body.append(tr);
+  }
+  const select = $("strategy-select");
+  if (r.strategy && document.activeElement !== select && !select.dataset.touched) {
+    select.value = r.strategy.code;
+  }
+}
+
+function renderStrategies() {
+  const select = $("strategy-select");
+  const current = select.value;
+  select.replaceChildren(...state.strategies.map((s) => el("option", { value: s.code }, s.code)));
+  if (current) select.value = current;
+}
+
+function renderTimeline() {
+  const list = $("timeline");
+  list.replaceChildren();
+  for (const e of state.timeline.slice(-150).reverse()) {
+    const li = el("li", { "data-kind": e.kind });
+    const when = new Date(e.t * 1000).toLocaleTimeString();
+    li.append(el("span", { class: `kind ${e.kind}` }, e.kind), `${when} ${e.robot} · ${e.text}`);
+    if (e.ref && e.ref.table === "system_command") {
+      // a system command is a decision too: its provenance leads to the battery row
+      li.classList.add("clickable");
+      li.title = "click for its provenance";
+      li.onclick = async () => {
+        try { showProvenance(await call("GET", `/api/system-commands/${e.ref.id}`)); }
+        catch (err) { say(`provenance: ${err.message}`, false); }
+      };
+    }
+    list.append(li);
+  }
+}
+
+function renderAll() {
+  if (!state.selected || !state.robots[state.selected]) {
+    state.selected = Object.keys(state.robots).sort()[0] || null;
+  }
+  renderRobots();
+  renderSelected();
+}
+
+// -- the websocket -------------------------------------------------------------------------
+function onMessage(msg) {
+  if (msg.type === "snapshot") {
+    state.world = msg.world;
+    state.robots = msg.robots;
+    state.strategies = msg.strategies;
+    state.timeline = msg.timeline;
+    buildGrid();
+    renderStrategies();
+    renderTimeline();
+  } else if (msg.type === "world") {
+    state.world = msg.world;
+    buildGrid();
+  } else if (msg.type === "strategies") {
+    state.strategies = msg.strategies;
+    renderStrategies();
+  } else if (msg.type === "robots") {
+    Object.assign(state.robots, msg.robots);
+  } else if (msg.type === "timeline") {
+    state.timeline.push(...msg.events);
+    state.timeline = state.timeline.slice(-300);
+    renderTimeline();
+  }
+  $("world-name").textContent = state.world.map ? `world ${state.world.map.map_id}` : "";
+  renderAll();
+  draw();
+}
+
+function connect() {
+  const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws`);
+  ws.onopen = () => { state.connected = true; status("live", true); };
+  ws.onmessage = (ev) => onMessage(JSON.parse(ev.data));
+  ws.onclose = () => {
+    state.connected = false;
+    status("disconnected: retrying…", false);
+    setTimeout(connect, 1000);
+  };
+}
+
+function status(text, good) {
+  const s = $("connection");
+  s.textContent = text;
+  s.className = good ? "good" : "bad";
+}
+
+// -- writes --------------------------------------------------------------------------------
+function say(text, ok) {
+  const m = $("message");
+  m.textContent = text;
+  m.className = ok ? "ok" : "error";
+}
+
+async function call(method, url, body) {
+  const response = await fetch(url, {
+    method,
+    headers: { "Content-Type": "application/json" },
+    body: body === undefined ? undefined : JSON.stringify(body),
+  });
+  const data = await response.json().catch(() => ({ error: response.statusText }));
+  if (!response.ok) throw new Error(`${response.status}: ${data.error || response.statusText}`);
+  return data;
+}
+
+canvas.addEventListener("click", async (ev) => {
+  const robot = state.selected;
+  if (!robot) return say("no robot to send", false);
+  const rect = canvas.getBoundingClientRect();
+  const px = (ev.clientX - rect.left) * (canvas.width / rect.width);
+  const py = (ev.clientY - rect.top) * (canvas.height / rect.height);
+  const [x, y] = toWorld(px, py);
+  try {
+    const g = await call("POST", `/api/robots/${robot}/goal`,
+      { x: Math.round(x * 100) / 100, y: Math.round(y * 100) / 100 });
+    say(`${robot}: goal ${g.goal_id} set to (${fmt(g.x)}, ${fmt(g.y)})`, true);
+  } catch (err) { say(`goal refused: ${err.message}`, false); }
+});
+
+$("strategy-select").addEventListener("change", (ev) => { ev.target.dataset.touched = "1"; });
+
+$("strategy-set").addEventListener("click", async () => {
+  const robot = state.selected;
+  const select = $("strategy-select");
+  try {
+    const v = await call("POST", `/api/robots/${robot}/strategy`, { code: select.value });
+    say(`${robot}: ${v.code} ${v.status}${v.reason ? ": " + v.reason : ""}`, v.status !== "rejected");
+  } catch (err) { say(`strategy refused: ${err.message}`, false); }
+  delete select.dataset.touched;
+});
+
+$("goal-cancel").addEventListener("click", async () => {
+  const robot = state.selected;
+  try {
+    const c = await call("DELETE", `/api/robots/${robot}/goal`);
+    say(c.cancelled ? `${robot}: goal ${c.cancelled} cancelled` : `${robot}: no active goal`, true);
+  } catch (err) { say(`cancel refused: ${err.message}`, false); }
+});
+
+$("decision").addEventListener("click", async () => {
+  const id = $("decision").dataset.decision;
+  if (!id) return;
+  try {
+    showProvenance(await call("GET", `/api/decisions/${id}`));
+  } catch (err) { say(`provenance: ${err.message}`, false); }
+});
+
+$("provenance-close").addEventListener("click", () => { $("provenance").hidden = true; });
+
+function showProvenance(p) {
+  const body = $("provenance-body");
+  body.replaceChildren();
+  const d = p.decision;
+  const what = p.table === "system_command"
+    ? `${d.command}, ${d.status}${d.status_reason ? " (" + d.status_reason + ")" : ""}`
+    : `${d.source || "stop"}, v ${fmt(d.linear_mps)} w ${fmt(d.angular_rps)}`;
+  body.append(el("p", {}, `${p.table} ${d.id} at sim ${fmt(d.stamp, 2)} s: ${what}. ` +
+    `${d.reason || ""}` + (d.safety ? ` Safety layer: ${d.safety}` : "")));
+  for (const rec of p.recommendations) {
+    body.append(el("h3", {}, `${rec.won ? "★ won: " : ""}recommendation ${rec.id} from ${rec.source} ` +
+      `(priority ${rec.priority})`));
+    body.append(el("p", {}, rec.reason || ""));
+    for (const src of rec.rows) {
+      body.append(el("div", {}, `← ${src.table} ${src.id}`));
+      body.append(el("pre", {}, src.row ? JSON.stringify(src.row) : src.note));
+    }
+  }
+  if (p.missing_recommendations.length) {
+    body.append(el("p", {}, `not in the table any more: ${p.missing_recommendations.join(", ")}`));
+  }
+  $("provenance").hidden = false;
+}
+
+async function loadScenarios() {
+  try {
+    const data = await call("GET", "/api/strategies");
+    const planner = document.querySelector("#strategy-form select[name=planner_scenario]");
+    planner.replaceChildren(el("option", { value: "" }, "(none: stand still)"),
+      ...data.scenarios.planner.map((n) => el("option", { value: n }, n)));
+    const box = $("controller-choices");
+    for (const n of data.scenarios.controller) {
+      const label = el("label");
+      label.append(el("input", { type: "checkbox", name: "controller", value: n }), ` ${n}`);
+      box.append(label);
+    }
+  } catch (err) { say(`cannot list scenarios: ${err.message}`, false); }
+}
+
+$("strategy-form").addEventListener("submit", async (ev) => {
+  ev.preventDefault();
+  const form = ev.target;
+  let params;
+  try { params = JSON.parse(form.params.value || "{}"); } catch (err) {
+    return say(`params: not JSON (${err.message})`, false);
+  }
+  const body = {
+    code: form.code.value.trim().toUpperCase(),
+    planner_scenario: form.planner_scenario.value || null,
+    controller_scenarios: [...form.querySelectorAll("input[name=controller]:checked")].map((c) => c.value),
+    params,
+    description: form.description.value,
+  };
+  try {
+    const r = await call("POST", "/api/strategies", body);
+    say(`strategy ${r.code} added`, true);
+    form.code.value = "";
+  } catch (err) { say(`strategy refused: ${err.message}`, false); }
+});
+
+loadScenarios();
+connect();
