@@ -71,6 +71,31 @@ def _strategy_code(text: str) -> str:
     return code
 
 
+def _robot_model(text: str) -> str:
+    """An argparse ``type``: a robot model name (models/) or model file, checked now so a bad
+    one is a one-line error, not a sim that exits later. A file becomes an absolute path (the
+    sim may start elsewhere)."""
+    from common.errors import ModelError
+    from common.robotmodel import load_model, model_path
+
+    try:
+        load_model(text)
+        path = model_path(text)
+    except ModelError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text if path.stem == text and not Path(text).suffix else str(path.resolve())
+
+
+def _model_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--model",
+        type=_robot_model,
+        metavar="NAME|FILE",
+        help="robot model of every robot the world does not give one (models/*.yaml; "
+        "default turtlebot3_burger)",
+    )
+
+
 def _stack_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--world", default="warehouse", help="world name or file (warehouse)")
     parser.add_argument(
@@ -79,6 +104,7 @@ def _stack_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--gui", action="store_true", help="open the pybullet window")
     parser.add_argument("--robots", type=_count, help="run exactly N robots")
     parser.add_argument("--battery", type=_percent, help="start charge of every robot, percent")
+    _model_option(parser)
 
 
 def _record_option(parser: argparse.ArgumentParser) -> None:
@@ -165,6 +191,7 @@ def build_parser() -> argparse.ArgumentParser:
     _record_option(demo)
     _record_parser(cast("argparse._SubParsersAction[argparse.ArgumentParser]", commands))
     add_dashboard_options(demo, None)
+    _model_option(demo)
 
     bench = commands.add_parser("bench", help="benchmarks: print figures and JSON")
     benches = bench.add_subparsers(dest="bench", metavar="BENCH", required=True)
@@ -294,7 +321,7 @@ def dispatch(args: argparse.Namespace) -> int:
         from pnav import demo
 
         record = launcher_record(args.record)
-        return demo.run(args.json, args.rate, record, dashboard_options(args))
+        return demo.run(args.json, args.rate, record, dashboard_options(args), args.model)
     if args.command == "record":
         from pnav.record import info
 
@@ -318,6 +345,7 @@ def _up(args: argparse.Namespace) -> int:
         gui=args.gui,
         robots=args.robots,
         battery=args.battery,
+        model=args.model,
         data_dir=args.data_dir,
         zenoh_port=args.zenoh_port,
         log_dir=args.log_dir,

@@ -26,6 +26,7 @@ from typing import Any
 import uvloop
 
 from common.config import ServiceConfig
+from common.robotmodel import DEFAULT_MODEL, load_model
 from common.runtime import Runtime
 from pnav import commands
 from pnav.launcher import DashboardOptions, StackOptions, launched
@@ -34,7 +35,8 @@ from pnav.mission import MissionLog, MissionMonitor
 ROBOT = "r1"
 WORLD = "warehouse"
 RATE = "5"
-# 0.45 % of 19.98 Wh = 0.09 Wh: enough for the first goal, not for the far one.
+# 0.45 % of the Burger's 19.98 Wh = 0.09 Wh: enough for the first goal, not for the far one
+# (another model starts with the same energy: the sim's load model is the same for all)
 START_BATTERY_PCT = 0.45
 GOAL_NEAR = (3.7, 2.5)
 GOAL_FAR = (8.8, 6.6)
@@ -142,18 +144,31 @@ def summary_text(summary: dict[str, Any]) -> str:
     )
 
 
+def start_battery_pct(model: str | None) -> float:
+    """The start charge giving the demo's robot the Burger's 0.09 Wh, whatever its model."""
+    if model is None:
+        return START_BATTERY_PCT
+    burger = load_model(DEFAULT_MODEL).battery_capacity_wh
+    return START_BATTERY_PCT * burger / load_model(model).battery_capacity_wh
+
+
 async def demo(
-    rate: str, record: Path | None = None, dashboard: DashboardOptions | None = None
+    rate: str,
+    record: Path | None = None,
+    dashboard: DashboardOptions | None = None,
+    model: str | None = None,
 ) -> dict[str, Any]:
     wall_start = time.monotonic()
-    print(f"proactive-nav demo: {WORLD} world, sim rate {rate}, robot {ROBOT}")
+    what = f"robot {ROBOT}" if model is None else f"robot {ROBOT} ({model})"
+    print(f"proactive-nav demo: {WORLD} world, sim rate {rate}, {what}")
     options = StackOptions(
         world=WORLD,
         rate=rate,
         robots=1,
-        battery=START_BATTERY_PCT,
+        battery=start_battery_pct(model),
         zenoh_port=None,
         dashboard=dashboard,
+        model=model,
     )
     options.record = record
     async with launched(options) as stack:
@@ -201,8 +216,9 @@ def run(
     rate: str | None = None,
     record: Path | None = None,
     dashboard: DashboardOptions | None = None,
+    model: str | None = None,
 ) -> int:
-    summary = uvloop.run(demo(rate or RATE, record, dashboard))
+    summary = uvloop.run(demo(rate or RATE, record, dashboard, model))
     if json_path:
         Path(json_path).write_text(json.dumps(summary, indent=2, default=str) + "\n")
     return 0 if summary["outcome"] == "success" else 1

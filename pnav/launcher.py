@@ -55,6 +55,14 @@ class DashboardOptions:
         return f"http://{host}:{self.port}/"
 
 
+def check_world(world: Path, model: str | None) -> None:
+    """Load the world as the sim will, with its robots' models: a bad world or model is a
+    one-line UsageError now, not a sim that exits and is restarted over and over."""
+    from services.sim.world import load_world
+
+    load_world(world, model)
+
+
 @dataclass
 class StackOptions:
     world: str = "warehouse"
@@ -62,6 +70,8 @@ class StackOptions:
     gui: bool = False
     robots: int | None = None
     battery: float | None = None
+    # robot model of every robot the world does not give one (None: the Burger)
+    model: str | None = None
     data_dir: Path | None = None
     zenoh_port: int | None = DEFAULT_ZENOH_PORT  # None: any free port
     log_dir: Path | None = None
@@ -204,6 +214,8 @@ def service_specs(local: LocalStack, options: StackOptions, world: Path) -> list
                 argv += ["--robots", str(options.robots)]
             if options.battery is not None:
                 argv += ["--battery", str(options.battery)]
+            if options.model is not None:
+                argv += ["--model", options.model]
         replicas = options.replicas.get(name, 1)
         if replicas > 1 and name not in SCENARIO_SERVICES:
             raise UsageError(f"{name} cannot be replicated: only {', '.join(SCENARIO_SERVICES)}")
@@ -252,6 +264,8 @@ def resolve_dashboard(options: StackOptions) -> StackOptions:
 async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
     world = resolve_world(options.world)
     options = resolve_dashboard(options)
+    if "sim" in options.services and "sim" not in options.replace:
+        check_world(world, options.model)
     log_dir = options.log_dir or Path(tempfile.mkdtemp(prefix="pnav-logs-"))
     async with local_stack(options.data_dir, options.zenoh_port) as local:
         specs = recorder_spec(local, options) + service_specs(local, options, world)

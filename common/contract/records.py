@@ -18,6 +18,10 @@ import numpy as np
 
 from common.contract import keys
 from common.db import Database
+from common.robotmodel import DEFAULT_MODEL, load_model
+
+# the robot table's defaults for the model columns are the default model's (schema.sql)
+_DEFAULT_MODEL = load_model(DEFAULT_MODEL)
 
 # A connection or a pool: both have fetch/fetchrow/fetchval.
 Executor: TypeAlias = Any
@@ -30,6 +34,13 @@ class Robot:
     max_angular_rps: float
     footprint_radius_m: float
     battery_capacity_wh: float
+    # the hardest the robot speeds up and brakes (its model's; stopping distances use them)
+    max_linear_accel_mps2: float = _DEFAULT_MODEL.max_linear_accel_mps2
+    max_angular_accel_rps2: float = _DEFAULT_MODEL.max_angular_accel_rps2
+
+    def braking_m(self, speed_mps: float) -> float:
+        """Distance the robot needs to stop from ``speed_mps`` at its acceleration limit."""
+        return speed_mps * speed_mps / (2.0 * self.max_linear_accel_mps2)
 
 
 @dataclass(frozen=True)
@@ -127,7 +138,8 @@ class ChargingStation:
 async def robots(db: Executor) -> list[Robot]:
     rows = await db.fetch(
         "SELECT robot_id, max_linear_mps, max_angular_rps, footprint_radius_m, "
-        "battery_capacity_wh FROM robot ORDER BY robot_id"
+        "battery_capacity_wh, max_linear_accel_mps2, max_angular_accel_rps2 "
+        "FROM robot ORDER BY robot_id"
     )
     return [Robot(**dict(r)) for r in rows]
 

@@ -467,11 +467,12 @@ ALTER TABLE command2robot
 -- its lidar as constants. A robot model (models/*.yaml, docs/SIM.md) now names them, the
 -- bridge writes them here from the sim's world message, and every scenario reads the
 -- robot's footprint, limits and sensor from this row. The defaults are the Burger's (its
--- LDS-01 lidar; the acceleration limits of Nav2's TurtleBot3 parameters), so rows written
--- before this migration, and writers that do not know the columns, describe the Burger.
+-- LDS-01 lidar; models/turtlebot3_burger.yaml gives the sources of the acceleration limits),
+-- so rows written before this migration, and writers that do not know the columns, describe
+-- the Burger.
 ALTER TABLE robot
     ADD COLUMN max_linear_accel_mps2  double precision NOT NULL DEFAULT 2.5,
-    ADD COLUMN max_angular_accel_rps2 double precision NOT NULL DEFAULT 3.2,
+    ADD COLUMN max_angular_accel_rps2 double precision NOT NULL DEFAULT 31.25,
     ADD COLUMN lidar_beams            integer NOT NULL DEFAULT 360,
     ADD COLUMN lidar_angle_min_rad    double precision NOT NULL DEFAULT 0.0,
     ADD COLUMN lidar_fov_rad          double precision NOT NULL DEFAULT 6.283185307179586,

@@ -117,7 +117,8 @@ class Bridge:
                 continue
             angular = clamp(row["angular_rps"], robot["max_angular_rps"])
             linear = clamp(row["linear_mps"], robot["max_linear_mps"])
-            verdict = self.safety.judge(robot_id, linear, robot["footprint_radius_m"], now)
+            radius, decel = robot["footprint_radius_m"], robot["max_linear_accel_mps2"]
+            verdict = self.safety.judge(robot_id, linear, radius, now, decel)
             linear = verdict.linear
             self.set_command(robot_id, linear, angular)
             if verdict.noted:  # the bridge's one UPDATE of the row, after the send

@@ -25,7 +25,7 @@ from services.controller.store import ControllerStore, ScanAndOdometry
 
 _ROBOT = (
     *("robot_id", "max_linear_mps", "max_angular_rps", "footprint_radius_m"),
-    "battery_capacity_wh",
+    *("battery_capacity_wh", "max_linear_accel_mps2", "max_angular_accel_rps2"),
 )
 _ODOMETRY = ("id", "robot_id", "stamp", "x", "y", "yaw", "linear_mps", "angular_rps")
 _SCAN = ("id", "robot_id", "stamp", "angle_min", "angle_increment", "range_min", "range_max")

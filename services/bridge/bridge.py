@@ -50,7 +50,9 @@ class Bridge:
         self.settings = settings or BridgeSettings()
         self.counters = Counters()
         # robot ids sensors may come from: the robot table, kept up to date
-        self.robots: frozenset[str] = frozenset()
+        # the known robots, each with its lidar's beam count (robot.lidar_beams): a scan
+        # of another shape is malformed
+        self.robots: dict[str, int] = {}
         db = runtime.database
         self.writer = SensorWriter(
             runtime.config.database_url,
@@ -171,7 +173,7 @@ class Bridge:
 
     # -- robots --------------------------------------------------------------------------
     def _on_world(self, world: World) -> None:
-        self.robots = self.robots | {r.robot_id for r in world.robots}
+        self.robots = self.robots | {r.robot_id: r.lidar_beams for r in world.robots}
         # a robot-table read under way may have started before the world's rows were in
         self._reload_again = self._reload is not None and not self._reload.done()
 
@@ -192,8 +194,8 @@ class Bridge:
     async def _load_robots(self) -> None:
         self._last_reload = time.monotonic()
         async with self.runtime.database.pool.acquire() as conn:
-            rows = await conn.fetch(f"SELECT robot_id FROM {keys.ROBOT}")
-        self.robots = frozenset(r[0] for r in rows)
+            rows = await conn.fetch(f"SELECT robot_id, lidar_beams FROM {keys.ROBOT}")
+        self.robots = {r[0]: r[1] for r in rows}
 
     async def _load_robots_safely(self) -> None:
         again = True

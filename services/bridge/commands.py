@@ -48,7 +48,7 @@ logger = logging.getLogger("pnav.bridge.commands")
 # however long command2robot grows (it is not a pruned sensor table).
 _NEWEST = f"""
 SELECT r.robot_id, c.id, c.stamp, c.linear_mps, c.angular_rps,
-       r.max_linear_mps, r.max_angular_rps, r.footprint_radius_m
+       r.max_linear_mps, r.max_angular_rps, r.footprint_radius_m, r.max_linear_accel_mps2
 FROM {keys.ROBOT} r
 CROSS JOIN LATERAL (
     SELECT id, stamp, linear_mps, angular_rps FROM {keys.COMMAND2ROBOT} c
@@ -77,6 +77,7 @@ class Command:
     max_linear: float
     max_angular: float
     footprint: float
+    max_accel: float  # the robot's linear acceleration limit: it brakes no harder
 
     @classmethod
     def from_row(cls, row: asyncpg.Record) -> Command:
@@ -219,7 +220,12 @@ class CommandRelay:
                 rows = await self._read(wanted)
                 for row in rows:
                     command = Command.from_row(row)
-                    limits = (command.max_linear, command.max_angular, command.footprint)
+                    limits = (
+                        command.max_linear,
+                        command.max_angular,
+                        command.footprint,
+                        command.max_accel,
+                    )
                     self.limits.check(command.robot_id, limits)
                     self._consider(command)
             except Exception as exc:  # Postgres away: the watchdog still stops the robots
@@ -285,7 +291,8 @@ class CommandRelay:
             return
         angular = clamp(cmd.angular, cmd.max_angular)
         now = self.clock.now() if self.clock.started else None
-        verdict = self.safety.judge(robot, clamp(cmd.linear, cmd.max_linear), cmd.footprint, now)
+        linear = clamp(cmd.linear, cmd.max_linear)
+        verdict = self.safety.judge(robot, linear, cmd.footprint, now, cmd.max_accel)
         try:
             self._send(robot, verdict.linear, angular, cmd.id, decided_stamp=cmd.stamp)
         except Exception as exc:  # Zenoh closing

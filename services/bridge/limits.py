@@ -1,5 +1,6 @@
-"""The robots' speed limits and footprint, as the command relay clamps to them (and the safety
-layer sizes the swept corridor with the footprint) without reading the table.
+"""The robots' speed limits, footprint and acceleration, as the command relay clamps to them
+(and the safety layer sizes the swept corridor with the footprint and the stopping distance
+with the acceleration) without reading the table.
 
 A command2robot image carries the decision but not the robot's limits; the relay takes them
 from this cache of the ``robot`` table, read at start and again after every robot
@@ -24,16 +25,17 @@ import asyncpg
 from common.contract import keys
 from common.freshness import FreshCache
 
-# (max_linear_mps, max_angular_rps, footprint_radius_m): the clamp's, and the safety layer's
-Limits = tuple[float, float, float]
+# (max_linear_mps, max_angular_rps, footprint_radius_m, max_linear_accel_mps2): the clamp's,
+# and the safety layer's (the swept corridor's width, the stopping distance's deceleration)
+Limits = tuple[float, float, float, float]
+LIMIT_COLUMNS = "max_linear_mps, max_angular_rps, footprint_radius_m, max_linear_accel_mps2"
 
-_READ = f"SELECT robot_id, max_linear_mps, max_angular_rps, footprint_radius_m FROM {keys.ROBOT}"
+_READ = f"SELECT robot_id, {LIMIT_COLUMNS} FROM {keys.ROBOT}"
 _TABLE = keys.ROBOT  # the one key of the cache: the whole table is read as one unit
 
 
 class RobotLimits:
-    """Per robot, (max_linear_mps, max_angular_rps, footprint_radius_m) as last read, while
-    nothing says they changed since."""
+    """Per robot, its :data:`Limits` as last read, while nothing says they changed since."""
 
     def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
         # no recheck period: robot rows change with the world, which is notified; a lost
@@ -66,7 +68,7 @@ class RobotLimits:
 
         async def fetch() -> dict[str, Limits]:
             rows = await conn.fetch(_READ)
-            return {r[0]: (r[1], r[2], r[3]) for r in rows}
+            return {r[0]: (r[1], r[2], r[3], r[4]) for r in rows}
 
         try:
             await self._cache.get(_TABLE, fetch)

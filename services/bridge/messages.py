@@ -14,7 +14,7 @@ sim can add fields without breaking an older bridge. ``bool`` is never a number.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass
 from typing import Any, Final
 
@@ -22,10 +22,16 @@ from common import bus
 from common.contract import keys
 from common.errors import ContractError
 
-# A 360-beam scan packed as float64 is about 3.3 KB; anything far larger is not a sensor
-# message, and refusing it before decoding bounds the memory a bad publisher can cost us.
+# A 360-beam scan packed as float64 is about 3.3 KB, a 720-beam one 6.5 KB; anything far
+# larger is not a sensor message, and refusing it before decoding bounds the memory a bad
+# publisher can cost us. 64 KB holds a scan of about 7000 beams.
 MAX_PAYLOAD_BYTES: Final = 64 * 1024
-SCAN_BEAMS: Final = 360
+# how many beams a scan may have is the robot model's (robot.lidar_beams): the bridge checks
+# the scan's own shape, one sweep of at most a full turn
+MAX_SCAN_BEAMS: Final = 100_000
+# a full turn's last beam is one increment short of 2 pi; float error in a sender's
+# increment is forgiven up to this
+_SWEEP_TOLERANCE_RAD: Final = 1e-6
 
 # Sanity bounds: generous for any indoor or outdoor robot, tight enough to catch garbage
 # (a pose a light-year away is a bug, not a measurement).
@@ -221,11 +227,12 @@ def parse_odom(robot_id: str, body: dict[str, Any]) -> Odometry:
     )
 
 
-def parse_scan(robot_id: str, body: dict[str, Any]) -> LaserScan:
+def parse_scan(robot_id: str, body: dict[str, Any], beams: int | None = None) -> LaserScan:
+    """A scan; ``beams``: how many its robot's lidar has (robot.lidar_beams), if known."""
     stamp, seq = _stamp_seq(body)
     angle_min = number(body, "angle_min", -math.tau, math.tau)
     # beams go counter-clockwise and one sweep covers at most a full turn
-    increment = number(body, "angle_increment", 1e-9, math.tau / (SCAN_BEAMS - 1))
+    increment = number(body, "angle_increment", 1e-9, math.tau)
     range_min = number(body, "range_min", 0.0, MAX_RANGE_M)
     range_max = number(body, "range_max", 0.0, MAX_RANGE_M)
     if not range_max > range_min:
@@ -233,8 +240,15 @@ def parse_scan(robot_id: str, body: dict[str, Any]) -> LaserScan:
     ranges = _get(body, "ranges")
     if not isinstance(ranges, list):
         raise MalformedMessage(WRONG_TYPE, f"'ranges' must be an array, got {_kind(ranges)}")
-    if len(ranges) != SCAN_BEAMS:
-        raise MalformedMessage(BEAM_COUNT, f"{len(ranges)} beams, the contract says {SCAN_BEAMS}")
+    if not 1 <= len(ranges) <= MAX_SCAN_BEAMS:
+        raise MalformedMessage(BEAM_COUNT, f"{len(ranges)} beams, not within [1, {MAX_SCAN_BEAMS}]")
+    if beams is not None and len(ranges) != beams:
+        raise MalformedMessage(BEAM_COUNT, f"{len(ranges)} beams, the robot's lidar has {beams}")
+    if (len(ranges) - 1) * increment > math.tau + _SWEEP_TOLERANCE_RAD:
+        raise MalformedMessage(
+            BEAM_COUNT,
+            f"{len(ranges)} beams {increment:g} rad apart sweep more than a full turn",
+        )
     converted = False
     for i, value in enumerate(ranges):
         kind = type(value)
@@ -312,10 +326,14 @@ def robot_of(key: str, topic: str) -> str:
 
 
 def parse_sensor(
-    topic: str, key: str, payload: bytes, known_robots: set[str] | frozenset[str]
+    topic: str, key: str, payload: bytes, known_robots: Collection[str] | Mapping[str, int]
 ) -> SensorRecord:
-    """Validate one sample of ``topic`` received on ``key``; the robot must be known."""
+    """Validate one sample of ``topic`` received on ``key``; the robot must be known. Given
+    as a mapping robot -> lidar beams (its robot row's ``lidar_beams``), a scan must have
+    exactly that many ranges."""
     robot_id = robot_of(key, topic)
     if robot_id not in known_robots:
         raise MalformedMessage(UNKNOWN_ROBOT, f"robot {robot_id!r} is not in the robot table")
+    if topic == keys.SCAN and isinstance(known_robots, Mapping):
+        return parse_scan(robot_id, decode(payload), known_robots[robot_id])
     return PARSERS[topic](robot_id, decode(payload))

@@ -13,7 +13,8 @@ place sweeps nothing new for a round robot, and is how it gets out):
   footprint disc (radius ``R``). A return at (x, y) in the robot's frame (the lidar sits at the
   centre, CONTRACT.md) with ``x`` in the direction of travel and ``|y| < R`` is touched after
   ``|x| - sqrt(R^2 - y^2)`` of travel: the nearest such is the free travel ``d``;
-- the distance needed: ``|v| * latency + v^2 / (2 * decel) + margin``, plus what the robot
+- the distance needed: ``|v| * latency + v^2 / (2 * decel) + margin`` (``decel``: the robot
+  row's ``max_linear_accel_mps2``, the hardest its model brakes), plus what the robot
   may have travelled since the scan (``age * |last speed sent|``, when that speed was in the
   same direction): the scan is a picture of where the robot was;
 - if ``d`` covers it the command passes unchanged; otherwise the speed is reduced to the
@@ -57,8 +58,9 @@ class SafetyParams:
     """The layer's tunables (``BridgeSettings`` reads them from ``PNAV_BRIDGE_SAFETY_*``)."""
 
     enabled: bool = True
-    # TurtleBot3's Nav2 configuration brakes at 2.5 m/s^2 (velocity_smoother max_decel)
-    decel_mps2: float = 2.5
+    # deceleration the stopping distance assumes; None: each robot's own acceleration limit
+    # (robot.max_linear_accel_mps2, from its model), as the sim and a real base brake at it
+    decel_mps2: float | None = None
     # how long a command acts before the next one is checked: the decision re-issues at
     # least every 0.1 s of sim time
     latency_s: float = 0.1
@@ -144,11 +146,15 @@ class SafetyLayer:
         if held is None or record.stamp >= held.stamp:
             self.scans[record.robot_id] = Scan.of(record)
 
-    def judge(self, robot: str, linear: float, radius: float, now: float | None) -> Verdict:
+    def judge(
+        self, robot: str, linear: float, radius: float, now: float | None, decel_mps2: float
+    ) -> Verdict:
         """The verdict on sending ``linear`` (already clamped) to ``robot`` of footprint
-        ``radius`` at sim time ``now`` (None: no clock yet, the newest scan counts as
+        ``radius`` that brakes at ``decel_mps2`` (its acceleration limit; the params' value
+        instead if set) at sim time ``now`` (None: no clock yet, the newest scan counts as
         fresh). Records the speed the verdict sends as the robot's last."""
-        verdict = self._judge(robot, linear, radius, now)
+        decel = self.params.decel_mps2 if self.params.decel_mps2 is not None else decel_mps2
+        verdict = self._judge(robot, linear, radius, now, decel)
         self.sent[robot] = verdict.linear
         return verdict
 
@@ -156,7 +162,9 @@ class SafetyLayer:
         """A stop went out without a verdict (watchdog, shutdown)."""
         self.sent[robot] = 0.0
 
-    def _judge(self, robot: str, linear: float, radius: float, now: float | None) -> Verdict:
+    def _judge(
+        self, robot: str, linear: float, radius: float, now: float | None, decel: float
+    ) -> Verdict:
         p = self.params
         if not p.enabled or linear == 0.0:
             return Verdict(linear, CLEAR)
@@ -170,15 +178,16 @@ class SafetyLayer:
         moved = age * abs(last) if last * direction > 0 else 0.0
         budget = travel - p.margin_m - moved
         speed = abs(linear)
-        if budget >= stopping_m(speed, p.latency_s, p.decel_mps2):
+        if budget >= stopping_m(speed, p.latency_s, decel):
             return Verdict(linear, CLEAR)
-        allowed = max_speed(budget, p.latency_s, p.decel_mps2)
+        allowed = max_speed(budget, p.latency_s, decel)
         way = "ahead" if direction > 0 else "behind"
         why = (
             f"obstacle {range_m:.2f} m {way} at {bearing:+.0f} deg in the scan of "
             f"{age:.2f} s ago leaves {max(budget, 0.0):.3f} m of travel (footprint "
             f"{radius:.3f} m, margin {p.margin_m:.2f} m, {moved:.3f} m moved since); "
-            f"{speed:.2f} m/s needs {stopping_m(speed, p.latency_s, p.decel_mps2):.3f} m"
+            f"{speed:.2f} m/s needs {stopping_m(speed, p.latency_s, decel):.3f} m "
+            f"braking at {decel:g} m/s^2"
         )
         if allowed < MIN_MPS:
             return Verdict(0.0, STOPPED, f"stopped: {why}")

@@ -13,7 +13,8 @@ PNAV_BRIDGE_COMMAND_PERIOD_MS   wall period of the command2robot re-read that  5
 PNAV_BRIDGE_PRUNE_PERIOD_S      wall period of ``prune_sensor_rows()``         5
 PNAV_BRIDGE_STATS_PERIOD_S      wall period of the counters log line           10
 PNAV_BRIDGE_SAFETY              the safety layer under the decisions (on/off)  on
-PNAV_BRIDGE_SAFETY_DECEL_MPS2   deceleration the stopping distance assumes     2.5
+PNAV_BRIDGE_SAFETY_DECEL_MPS2   deceleration the stopping distance assumes     (each
+                                (empty: each robot's acceleration limit)       robot's)
 PNAV_BRIDGE_SAFETY_LATENCY_S    sim seconds a command acts before the next     0.1
 PNAV_BRIDGE_SAFETY_MARGIN_M     gap kept between footprint and obstacle, m     0.05
 PNAV_BRIDGE_SAFETY_SCAN_AGE_S   sim age beyond which a scan is not evidence    0.5
@@ -33,6 +34,10 @@ from dataclasses import dataclass, field
 
 from common.errors import ConfigError
 from services.bridge.safety import SafetyParams
+
+
+def _optional_positive(env: Mapping[str, str], name: str) -> float | None:
+    return _positive(env, name, math.nan) if env.get(name, "").strip() else None
 
 
 def _positive(env: Mapping[str, str], name: str, default: float, scale: float = 1.0) -> float:
@@ -76,7 +81,7 @@ def _safety(env: Mapping[str, str]) -> SafetyParams:
     d = SafetyParams()
     return SafetyParams(
         enabled=_switch(env, "PNAV_BRIDGE_SAFETY", d.enabled),
-        decel_mps2=_positive(env, "PNAV_BRIDGE_SAFETY_DECEL_MPS2", d.decel_mps2),
+        decel_mps2=_optional_positive(env, "PNAV_BRIDGE_SAFETY_DECEL_MPS2"),
         latency_s=_non_negative(env, "PNAV_BRIDGE_SAFETY_LATENCY_S", d.latency_s),
         margin_m=_non_negative(env, "PNAV_BRIDGE_SAFETY_MARGIN_M", d.margin_m),
         scan_max_age_s=_positive(env, "PNAV_BRIDGE_SAFETY_SCAN_AGE_S", d.scan_max_age_s),

@@ -12,12 +12,23 @@ their whole history.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
+import math
+from dataclasses import asdict, dataclass
+from typing import Any, cast
 
 from common import bus
 from common.contract import keys
 from common.db import Database
+from common.robotmodel import (
+    DEFAULT_MODEL,
+    FULL_TURN,
+    MAX_ACCEL,
+    MAX_BEAMS,
+    MAX_NOISE_M,
+    MAX_RANGE_M,
+    MAX_RATE_HZ,
+    load_model,
+)
 from services.bridge.messages import (
     BAD_MSGPACK,
     MISSING_FIELD,
@@ -32,16 +43,29 @@ from services.bridge.messages import (
 
 MAX_CELLS = 100_000_000  # a 10 km x 10 km map at 1 m, or 1 km x 1 km at 10 cm
 
-# The robot table's defaults (schema.sql): a world may leave any limit out.
-ROBOT_DEFAULTS: dict[str, float] = {
-    "wheel_radius_m": 0.033,
-    "wheel_separation_m": 0.160,
-    "max_linear_mps": 0.22,
-    "max_angular_rps": 2.84,
-    "footprint_radius_m": 0.105,
-    "battery_capacity_wh": 19.98,
+# A world may leave any model column out: it is then the default model's (the Burger's, as
+# the robot table's defaults in schema.sql), read from models/ like any model.
+_DEFAULT_ROW = load_model(DEFAULT_MODEL).robot_row()
+# every number column of the robot row, with the bounds the schema's CHECKs put on it:
+# (lowest, highest, lowest excluded); refused here, a bad world never reaches the table
+ROBOT_NUMBERS: dict[str, tuple[float, float, bool]] = {
+    "wheel_radius_m": (0.0, math.inf, True),
+    "wheel_separation_m": (0.0, math.inf, True),
+    "max_linear_mps": (0.0, math.inf, True),
+    "max_angular_rps": (0.0, math.inf, True),
+    "footprint_radius_m": (0.0, math.inf, True),
+    "battery_capacity_wh": (0.0, math.inf, True),
+    "max_linear_accel_mps2": (0.0, MAX_ACCEL, True),
+    "max_angular_accel_rps2": (0.0, MAX_ACCEL, True),
+    "lidar_angle_min_rad": (-FULL_TURN, FULL_TURN, False),
+    "lidar_fov_rad": (0.0, FULL_TURN, True),
+    "lidar_range_min_m": (0.0, MAX_RANGE_M, False),
+    "lidar_range_max_m": (0.0, MAX_RANGE_M, True),
+    "lidar_noise_m": (0.0, MAX_NOISE_M, False),
+    "lidar_rate_hz": (0.0, MAX_RATE_HZ, True),
 }
-DEFAULT_MODEL = "turtlebot3_burger"
+ROBOT_DEFAULTS: dict[str, float] = {key: cast(float, _DEFAULT_ROW[key]) for key in ROBOT_NUMBERS}
+DEFAULT_BEAMS = cast(int, _DEFAULT_ROW["lidar_beams"])
 
 
 @dataclass(frozen=True)
@@ -67,6 +91,19 @@ class RobotInfo:
     max_angular_rps: float
     footprint_radius_m: float
     battery_capacity_wh: float
+    max_linear_accel_mps2: float
+    max_angular_accel_rps2: float
+    lidar_angle_min_rad: float
+    lidar_fov_rad: float
+    lidar_range_min_m: float
+    lidar_range_max_m: float
+    lidar_noise_m: float
+    lidar_rate_hz: float
+    lidar_beams: int
+
+    def columns(self) -> dict[str, Any]:
+        """The robot row's model columns (and robot_id), as CONTRACT.md names them."""
+        return asdict(self)
 
 
 @dataclass(frozen=True)
@@ -137,13 +174,16 @@ def _parse_robot(body: dict[str, Any]) -> RobotInfo:
         if optional in body:
             number(body, optional)
     limits = {}
-    for key, default in ROBOT_DEFAULTS.items():
-        value = number(body, key, 0.0) if key in body else default
-        if value <= 0:
-            raise MalformedMessage(OUT_OF_RANGE, f"'{key}' must be positive")
+    for key, (lo, hi, open_lo) in ROBOT_NUMBERS.items():
+        value = number(body, key, lo, hi) if key in body else ROBOT_DEFAULTS[key]
+        if open_lo and value <= lo:
+            raise MalformedMessage(OUT_OF_RANGE, f"'{key}' must be greater than {lo:g}")
         limits[key] = value
+    if not limits["lidar_range_max_m"] > limits["lidar_range_min_m"]:
+        raise MalformedMessage(OUT_OF_RANGE, "'lidar_range_max_m' must exceed lidar_range_min_m")
+    beams = integer(body, "lidar_beams", 1, MAX_BEAMS) if "lidar_beams" in body else DEFAULT_BEAMS
     model = text(body, "model") if "model" in body else DEFAULT_MODEL
-    return RobotInfo(robot_id=robot_id, model=model, **limits)
+    return RobotInfo(robot_id=robot_id, model=model, lidar_beams=beams, **limits)
 
 
 def _parse_station(body: dict[str, Any]) -> StationInfo:
@@ -174,18 +214,13 @@ def parse_world(payload: bytes) -> World:
     return World(name, world_map, robots, stations)
 
 
+# every column of RobotInfo (the robot id and the model's), then the world
+_ROBOT_COLUMNS = [*RobotInfo.__dataclass_fields__, "world"]
 _UPSERT_ROBOT = f"""
-INSERT INTO {keys.ROBOT} (robot_id, model, wheel_radius_m, wheel_separation_m, max_linear_mps,
-                          max_angular_rps, footprint_radius_m, battery_capacity_wh, world,
-                          registered_at)
-VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, now())
+INSERT INTO {keys.ROBOT} ({", ".join(_ROBOT_COLUMNS)}, registered_at)
+VALUES ({", ".join(f"${i}" for i in range(1, len(_ROBOT_COLUMNS) + 1))}, now())
 ON CONFLICT (robot_id) DO UPDATE SET
-    model = EXCLUDED.model, wheel_radius_m = EXCLUDED.wheel_radius_m,
-    wheel_separation_m = EXCLUDED.wheel_separation_m,
-    max_linear_mps = EXCLUDED.max_linear_mps, max_angular_rps = EXCLUDED.max_angular_rps,
-    footprint_radius_m = EXCLUDED.footprint_radius_m,
-    battery_capacity_wh = EXCLUDED.battery_capacity_wh, world = EXCLUDED.world,
-    registered_at = now()"""
+    {", ".join(f"{c} = EXCLUDED.{c}" for c in _ROBOT_COLUMNS[1:])}, registered_at = now()"""
 
 _UPSERT_MAP = f"""
 INSERT INTO {keys.MAP} (map_id, resolution_m, origin_x, origin_y, origin_yaw, width, height,
@@ -228,20 +263,7 @@ async def upsert_world(db: Database, world: World) -> None:
         if world.robots:
             await tx.conn.executemany(
                 _UPSERT_ROBOT,
-                [
-                    (
-                        r.robot_id,
-                        r.model,
-                        r.wheel_radius_m,
-                        r.wheel_separation_m,
-                        r.max_linear_mps,
-                        r.max_angular_rps,
-                        r.footprint_radius_m,
-                        r.battery_capacity_wh,
-                        world.name,
-                    )
-                    for r in world.robots
-                ],
+                [(*r.columns().values(), world.name) for r in world.robots],
             )
         for r in world.robots:
             tx.changed(keys.ROBOT, r.robot_id)

@@ -5,9 +5,10 @@ OBJ_DISTANCE and turns away from the side that is too close. Here, with the defa
 
 - the *front-right* sector is -60 to -5 deg, the *front-left* 5 to 60 deg, the *dead-ahead*
   cone -5 to 5 deg (angles counter-clockwise from the heading);
-- a beam counts as an obstacle when it is closer than ``avoid_distance_m`` (0.40 m) *and*
-  its lateral offset from the robot's line of travel, range x |sin(angle)|, is below
-  ``avoid_lateral_m`` (0.25 m): something in or near the robot's way. A wall the robot is
+- a beam counts as an obstacle when it is closer than ``avoid_distance_m`` (footprint radius
+  + 0.295 m: 0.40 m for the Burger) *and* its lateral offset from the robot's line of
+  travel, range x |sin(angle)|, is below ``avoid_lateral_m`` (footprint radius + 0.145 m:
+  0.25 m for the Burger): something in or near the robot's way. A wall the robot is
   merely passing (in the middle of an aisle 0.9 m wide or more, heading along it, the walls
   are 0.45 m to either side) does not count, so the robot is not pushed off its path in
   every aisle; an unmapped pallet or crate ahead still does;
@@ -20,7 +21,9 @@ OBJ_DISTANCE and turns away from the side that is too close. Here, with the defa
 
 The recommendation: ``avoid_angular_rps`` toward the chosen side, forward at
 ``avoid_linear_mps``, or turning in place when the obstacle is nearer than
-``avoid_stop_distance_m``; both clamped to the robot's limits.
+``avoid_stop_distance_m`` (footprint radius + 0.095 m: 0.20 m for the Burger); both clamped
+to the robot's limits. The distances' defaults follow the robot row's footprint, so a bigger
+robot keeps the same clearances; a strategy's params may set them outright.
 """
 
 from __future__ import annotations
@@ -37,19 +40,35 @@ from services.controller.sectors import Hit, ScanView, Sector, clamp, deg, descr
 LEFT, RIGHT = 1, -1
 
 
+# the default distances beyond the robot's footprint radius (the row's), m
+DISTANCE_BEYOND_M = 0.295
+LATERAL_BEYOND_M = 0.145
+STOP_BEYOND_M = 0.095
+
+
 @dataclass(frozen=True)
 class AvoidParams:
-    distance_m: float = 0.40
-    lateral_m: float = 0.25
+    distance_m: float
+    lateral_m: float
+    stop_distance_m: float
     sector_deg: float = 60.0
     front_deg: float = 5.0
     linear_mps: float = 0.05
     angular_rps: float = 1.0
-    stop_distance_m: float = 0.20
 
     @classmethod
-    def read(cls, params: Mapping[str, Any]) -> AvoidParams:
-        d = cls()
+    def defaults(cls, footprint_m: float) -> AvoidParams:
+        """The defaults for a robot of footprint radius ``footprint_m`` (to the micrometre:
+        the Burger's are exactly 0.40, 0.25 and 0.20 m)."""
+        return cls(
+            distance_m=round(footprint_m + DISTANCE_BEYOND_M, 6),
+            lateral_m=round(footprint_m + LATERAL_BEYOND_M, 6),
+            stop_distance_m=round(footprint_m + STOP_BEYOND_M, 6),
+        )
+
+    @classmethod
+    def read(cls, params: Mapping[str, Any], footprint_m: float) -> AvoidParams:
+        d = cls.defaults(footprint_m)
         sector = number(params, "avoid_sector_deg", d.sector_deg, low=1.0, high=180.0)
         return cls(
             distance_m=number(params, "avoid_distance_m", d.distance_m, high=10.0),
@@ -103,7 +122,7 @@ class AvoidScenario(ControllerScenario):
     def decide(
         cls, scan: LaserScan, odom: Odometry | None, robot: Robot, params: Mapping[str, Any]
     ) -> Command | None:
-        p = AvoidParams.read(params)
+        p = AvoidParams.read(params, robot.footprint_radius_m)
         turn = decide_turn(ScanView(scan), p)
         if turn is None or turn.side != cls.side:
             return None

@@ -10,8 +10,12 @@ The direction of travel comes from the newest odometry's measured velocity:
   anything new): nothing, unless the robot is boxed in (an obstacle inside footprint + margin
   in each quadrant), when it recommends a full stop.
 
-The look-ahead term counts the distance covered until the next scan (0.2 s at 5 Hz), so the
-stop comes before the margin is used up rather than after.
+The look-ahead term counts the distance covered until the next scan (0.2 s at 5 Hz), and the
+robot's braking distance at its acceleration limit (``v^2 / (2 max_linear_accel_mps2)``, the
+robot row's), so the stop comes before the margin is used up rather than after.
+
+Moving toward a side its lidar does not see (backing up with a 270-degree lidar), the robot
+has no evidence the way is clear: it stops, and says so (``blind``).
 
 When it fires it recommends zero linear velocity and a turn in place that swings the
 direction of travel toward the freer side (``safety_turn_rps``): the robot recovers instead
@@ -33,6 +37,10 @@ from services.controller.sectors import ScanView, clamp, deg
 MOVING_MPS = 0.01  # below this the robot is not translating (odometry noise, creeping)
 # How far the freer side is judged: where the robot can go once it has turned.
 FREER_HORIZON_M = 1.0
+# the cone round the direction of travel the lidar must see into for the robot to move
+TRAVEL_CONE_DEG = 30.0
+AHEAD = (-deg(TRAVEL_CONE_DEG), deg(TRAVEL_CONE_DEG))
+BEHIND = (deg(180.0 - TRAVEL_CONE_DEG), deg(180.0 + TRAVEL_CONE_DEG))
 
 
 @dataclass(frozen=True)
@@ -69,7 +77,15 @@ class SafetyStop(ControllerScenario):
                 return Command(0.0, 0.0, f"boxed in: obstacles within {stop_m:.2f} m all around")
             return None
         direction = 1 if linear > 0 else -1
-        reach_m = stop_m + abs(linear) * p.lookahead_s
+        reach_m = stop_m + abs(linear) * p.lookahead_s + robot.braking_m(linear)
+        way = "forward" if direction > 0 else "backward"
+        if not view.sees(AHEAD if direction > 0 else BEHIND):
+            return Command(
+                0.0,
+                0.0,
+                f"moving {way} at {abs(linear):.2f} m/s blind: the lidar has no beams "
+                f"within {TRAVEL_CONE_DEG:g} deg of the way: stop",
+            )
         hit = view.swept(direction, robot.footprint_radius_m, reach_m)
         if not hit.found:
             return None
@@ -84,11 +100,10 @@ class SafetyStop(ControllerScenario):
                 (deg(90), deg(180)), (-deg(180), -deg(90)), FREER_HORIZON_M
             )
             angular, side = (turn, "back-right") if back_right_freer else (-turn, "back-left")
-        way = "forward" if direction > 0 else "backward"
         return Command(
             0.0,
             angular,
             f"moving {way} at {abs(linear):.2f} m/s: obstacle {hit.describe()} within "
             f"{reach_m:.2f} m (footprint {robot.footprint_radius_m:.3f} + margin "
-            f"{p.margin_m:.2f} + look-ahead): stop, turn toward the freer {side}",
+            f"{p.margin_m:.2f} + look-ahead + braking): stop, turn toward the freer {side}",
         )

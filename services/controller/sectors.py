@@ -4,6 +4,13 @@ what the robot's round body would sweep driving forward or backward. Pure numpy,
 Angles are radians relative to the robot's heading, counter-clockwise, in (-pi, pi] (the
 contract's laser_scan convention); a sector is ``(low, high)`` with ``low <= high`` and may
 cross +-pi (it is matched by its centre and half-width, wrapped).
+
+A lidar whose field of view is less than a full turn (the Jackal's 270 degrees) has no beams
+behind it: a sector there is *unseen*, not clear. :meth:`ScanView.sees` says whether a sector
+has beams; :meth:`ScanView.openness` of an unseen sector is 0 and :meth:`ScanView.left_is_freer`
+never prefers an unseen side to a seen one, so no scenario steers into what it cannot see;
+:meth:`ScanView.closest` of an unseen sector finds nothing, and a scenario that would act on
+"nothing there" asks :meth:`ScanView.sees` first (safety_stop does, backing up).
 """
 
 from __future__ import annotations
@@ -93,11 +100,17 @@ class ScanView:
             mask = mask & (self.ranges < within_m) & (lateral < lateral_m)
         return self._closest(np.asarray(mask))
 
+    def sees(self, sector: Sector) -> bool:
+        """Whether any beam of the scan points into ``sector`` (a partial field of view
+        leaves some unseen)."""
+        return bool(self._mask(sector).any())
+
     def openness(self, sector: Sector, horizon_m: float) -> float:
-        """Mean range in ``sector``, each beam clipped at ``horizon_m``: higher is freer."""
+        """Mean range in ``sector``, each beam clipped at ``horizon_m``: higher is freer; 0
+        for a sector with no beams (unseen is not free)."""
         mask = self._mask(sector)
         if not mask.any():
-            return horizon_m
+            return 0.0
         return float(np.minimum(self.ranges[mask], horizon_m).mean())
 
     def swept(self, direction: int, half_width_m: float, reach_m: float) -> Hit:
@@ -121,9 +134,13 @@ class ScanView:
 
     def left_is_freer(self, left: Sector, right: Sector, horizon_m: float) -> bool:
         """Whether ``left`` is less obstructed than ``right``: the closer closest obstacle
-        loses; on a tie, the less open sector loses; on a tie again, left wins. Every
-        scenario that must agree on a side (avoid_left and avoid_right) calls this one
-        function, so they can never both claim the same obstacle."""
+        loses; on a tie, the less open sector loses; on a tie again, left wins. A side the
+        lidar does not see at all loses to one it sees. Every scenario that must agree on a
+        side (avoid_left and avoid_right) calls this one function, so they can never both
+        claim the same obstacle."""
+        seen_l, seen_r = self.sees(left), self.sees(right)
+        if seen_l != seen_r:
+            return seen_l
         near_l, near_r = self.closest(left).range_m, self.closest(right).range_m
         if min(near_l, near_r) < math.inf and not abs(near_l - near_r) <= TIE_M:
             return near_l > near_r

@@ -4,9 +4,10 @@
     python -m services.sim --bench --robots 10 --seconds 60 [--world worlds/warehouse.yaml]
 
 Options fall back to environment variables (for containers): PNAV_SIM_WORLD, PNAV_SIM_RATE,
-PNAV_SIM_ROBOTS, PNAV_SIM_BATTERY, PNAV_SIM_SEED, PNAV_SIM_SCAN_HZ, PNAV_SIM_ODOM_HZ,
-PNAV_SIM_TRACE, PNAV_SIM_MAX_LAG, PNAV_SIM_CMD_TIMEOUT, PNAV_LOCKSTEP; Zenoh comes from the
-PNAV_ZENOH_* variables (common.config.ZenohSettings). SIGINT and SIGTERM stop it cleanly.
+PNAV_SIM_ROBOTS, PNAV_SIM_BATTERY, PNAV_SIM_SEED, PNAV_SIM_SCAN_HZ, PNAV_SIM_MODEL,
+PNAV_SIM_ODOM_HZ, PNAV_SIM_TRACE, PNAV_SIM_MAX_LAG, PNAV_SIM_CMD_TIMEOUT, PNAV_LOCKSTEP; Zenoh
+comes from the PNAV_ZENOH_* variables (common.config.ZenohSettings). SIGINT and SIGTERM stop
+it cleanly.
 """
 
 from __future__ import annotations
@@ -29,7 +30,6 @@ from common.lifeline import die_with_parent
 from common.log import event, setup
 from services.sim.bench import report, run_bench
 from services.sim.clock import parse_rate
-from services.sim.lidar import LidarParams
 from services.sim.sim import CMD_TIMEOUT_S, SimConfig
 from services.sim.world import World, load_world
 
@@ -81,8 +81,15 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     ap.add_argument(
         "--scan-hz",
         type=float,
-        default=_float_env("PNAV_SIM_SCAN_HZ") or 5.0,
-        help="lidar rate in sim time [PNAV_SIM_SCAN_HZ, default 5]",
+        default=_float_env("PNAV_SIM_SCAN_HZ"),
+        help="every robot's lidar rate in sim time [PNAV_SIM_SCAN_HZ, default: each robot "
+        "model's lidar rate_hz]",
+    )
+    ap.add_argument(
+        "--model",
+        default=_env("PNAV_SIM_MODEL"),
+        help="robot model of every robot the world does not give one: a name in models/ "
+        "or a model file [PNAV_SIM_MODEL, default turtlebot3_burger]",
     )
     ap.add_argument(
         "--odom-hz",
@@ -159,7 +166,7 @@ def build(args: argparse.Namespace) -> tuple[World, SimConfig, float]:
     path = args.world or (str(BENCH_WORLD) if args.bench else None)
     if not path:
         raise ConfigError("no world: pass --world worlds/<name>.yaml or set PNAV_SIM_WORLD")
-    world = load_world(path)
+    world = load_world(path, args.model)
     if args.robots is not None:
         world = world.with_robot_count(args.robots)
     if args.battery is not None and not 0.0 <= args.battery <= 100.0:
@@ -176,7 +183,8 @@ def build(args: argparse.Namespace) -> tuple[World, SimConfig, float]:
     args.lockstep = lockstep_from_env({"PNAV_LOCKSTEP": args.lockstep or ""})
     if args.lockstep and args.max_lag is not None:
         raise ConfigError("--lockstep and --max-lag exclude each other (lockstep always waits)")
-    if not args.physics_hz > 0 or not args.scan_hz > 0 or not args.odom_hz > 0:
+    scan_ok = args.scan_hz is None or args.scan_hz > 0
+    if not args.physics_hz > 0 or not scan_ok or not args.odom_hz > 0:
         raise ConfigError("--physics-hz, --scan-hz and --odom-hz must be positive")
     config = SimConfig(
         cmd_timeout_s=CMD_TIMEOUT_S if args.cmd_timeout is None else args.cmd_timeout,
@@ -186,7 +194,6 @@ def build(args: argparse.Namespace) -> tuple[World, SimConfig, float]:
         battery_percent=args.battery,
         seed=args.seed,
         gui=args.gui,
-        lidar=LidarParams(),
     )
     return world, config, parse_rate(args.rate)
 

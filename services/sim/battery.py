@@ -17,10 +17,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from common.robotmodel import DEFAULT_MODEL, load_model
+
+# the default capacity; the sim gives each robot its own model's (robot.battery_capacity_wh)
+_DEFAULT_CAPACITY_WH = load_model(DEFAULT_MODEL).battery_capacity_wh
+
 
 @dataclass(frozen=True)
 class BatteryModel:
-    capacity_wh: float = 19.98
+    capacity_wh: float = _DEFAULT_CAPACITY_WH
     idle_w: float = 1.5
     k_linear_w_per_mps: float = 10.0
     k_angular_w_per_rps: float = 0.5

@@ -23,13 +23,15 @@ robot before its static hit; a beam cast again has every robot it may meet first
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 
-from services.sim.lidar import FloatArray, Lidar, LidarParams
+from common.robotmodel import LidarModel
+from services.sim.lidar import FloatArray, Lidar
 from services.sim.physics import Scene
 
 Pose = tuple[float, float, float]
@@ -65,25 +67,30 @@ class _Pairs:
 
 
 def cast_fleet(
-    scene: Scene, lidar: Lidar, poses: Sequence[Pose], scanning: Sequence[int]
+    scene: Scene, lidars: Sequence[Lidar], poses: Sequence[Pose], scanning: Sequence[int]
 ) -> list[Cast]:
-    """(hit, fraction) per beam of each robot in ``scanning`` (indices into ``poses``, where
-    the scene has every robot), in that order, as ``scene.cast_from`` gives each."""
+    """(hit, fraction) per beam of each robot in ``scanning`` (indices into ``poses`` and
+    ``lidars``, robot i's lidar; the scene has every robot), in that order, as
+    ``scene.cast_from`` gives each. Robots may carry different lidars (several models)."""
     if not scanning:
         return []
-    n = lidar.params.beams
-    rays = [lidar.rays(*poses[i]) for i in scanning]
+    mine = [lidars[i] for i in scanning]
+    rays = [lidar.rays(*poses[i]) for lidar, i in zip(mine, scanning, strict=True)]
     starts, ends = rays[0]
     if len(rays) > 1:
         starts = np.concatenate([s for s, _ in rays])
         ends = np.concatenate([e for _, e in rays])
-    radius = scene.params.footprint_radius_m + GRAZE_M
-    within, pairs = _reach(poses, scanning, lidar.params.range_max + radius, lidar.params)
+    first = np.cumsum([0, *(lidar.params.beams for lidar in mine)])  # each one's first ray
+    radii = np.array([scene.radius[b] for b in scene.robot_bodies]) + GRAZE_M
+    range_max = np.array([lidar.params.range_max_m for lidar in mine])
+    reach = range_max + scene.max_radius + GRAZE_M
+    within, pairs = _reach(poses, scanning, reach, [lidar.params for lidar in mine])
+    range_max = np.repeat(range_max, np.diff(first))
     try:
         # pass 1: the walls and obstacles only (a robot out of every beam's reach can stay)
         scene.hide(within)
         hit, fraction = scene.cast(starts, ends)
-        flagged = _flag(pairs, radius, fraction * lidar.params.range_max, lidar.params)
+        flagged = _flag(pairs, radii, fraction * range_max, mine, first)
         # pass 2: the flagged beams, with the robots they may meet in place
         for recast in _group(scanning, flagged):
             scene.show(recast.needs)
@@ -92,60 +99,84 @@ def cast_fleet(
             hit[index], fraction[index] = scene.cast(starts[index], ends[index])
     finally:
         scene.show(list(scene.hidden))
-    return [(hit[k * n : (k + 1) * n], fraction[k * n : (k + 1) * n]) for k in range(len(scanning))]
+    return [(hit[a:b], fraction[a:b]) for a, b in itertools.pairwise(first.tolist())]
 
 
 def _reach(
-    poses: Sequence[Pose], scanning: Sequence[int], reach: float, params: LidarParams
+    poses: Sequence[Pose],
+    scanning: Sequence[int],
+    reach: FloatArray,
+    params: Sequence[LidarModel],
 ) -> tuple[list[int], _Pairs]:
-    """The robots within ``reach`` of a scanning robot (the scanning robots too), and the
-    pairs of a scanning robot and another robot within ``reach`` of it."""
+    """The robots within ``reach`` (per scanning robot) of a scanning robot (the scanning
+    robots too), and the pairs of a scanning robot and another robot within its reach."""
     xy = np.array([(x, y) for x, y, _ in poses])
     offsets = xy[None, :, :] - xy[np.asarray(scanning)][:, None, :]
     dist = np.hypot(offsets[..., 0], offsets[..., 1])
-    near = dist <= reach
+    near = dist <= reach[:, None]
     within = np.flatnonzero(near.any(axis=0)).tolist()
     near[np.arange(len(scanning)), np.asarray(scanning)] = False  # not its own body
     k, j = np.nonzero(near)
     yaw = np.array([poses[i][2] for i in scanning])[k]
-    bearing = np.arctan2(offsets[k, j, 1], offsets[k, j, 0]) - yaw - params.angle_min
+    angle_min = np.array([lidar.angle_min_rad for lidar in params])[k]
+    bearing = np.arctan2(offsets[k, j, 1], offsets[k, j, 0]) - yaw - angle_min
     return within, _Pairs(k, j, dist[k, j], bearing)
 
 
 def _flag(
-    pairs: _Pairs, radius: float, static: FloatArray, params: LidarParams
+    pairs: _Pairs,
+    radii: FloatArray,
+    static: FloatArray,
+    lidars: Sequence[Lidar],
+    first: IntArray,
 ) -> dict[int, tuple[IntArray, set[int]]]:
-    """Per scanning robot (position in ``scanning``): its beams (indices into the batch) that
-    may meet a disc of ``radius`` round another robot before their static hit (``static``,
-    m), and the robots they may meet.
+    """Per scanning robot (position in ``scanning``): its beams (indices into the batch, its
+    own starting at ``first[k]``) that may meet a disc of ``radii[j]`` round another robot j
+    before their static hit (``static``, m), and the robots they may meet.
 
     A beam from the centre meets a disc whose centre lies D away only if its bearing is
     within asin(radius / D) of the disc's; of those, the beams whose line passes within
-    ``radius`` of the centre and enters the disc before the static hit."""
+    the radius of the centre and enters the disc before the static hit."""
     if len(pairs.k) == 0:
         return {}  # alone within reach: nothing to cast again
-    n, inc = params.beams, params.angle_increment
+    beams = np.array([lidar.params.beams for lidar in lidars])
+    increments = np.array([lidar.params.angle_increment for lidar in lidars])
+    full = np.array([lidar.params.full_turn for lidar in lidars])[pairs.k]
+    # A full turn's beams wrap round (index mod beams). A partial field of view's beams span
+    # [0, fov] from beam 0: the disc's bearing is taken in [0, 2 pi) and looked for one turn
+    # either side too, so a disc straddling beam 0's direction is found at both ends.
+    copies = np.where(full, 1, 3)
+    src = np.repeat(np.arange(len(copies)), copies)  # the pair each window looks for
+    turn = np.arange(len(src)) - np.repeat(np.cumsum(copies) - copies, copies) - 1
+    base = np.where(full, pairs.bearing, np.mod(pairs.bearing, 2.0 * np.pi))
+    bearing = base[src] + np.where(full[src], 0.0, turn * 2.0 * np.pi)
+    k, n, inc = pairs.k[src], beams[pairs.k[src]], increments[pairs.k[src]]
+    radius, dist = radii[pairs.j[src]], pairs.dist[src]
     # a disc round the beams' origin (robots never overlap so far) would meet them all
-    wide = np.arcsin(np.minimum(1.0, radius / pairs.dist)) / inc
-    half = np.where(pairs.dist > radius, wide, n) + SLACK_BEAMS
-    centre = pairs.bearing / inc  # in beams
+    wide = np.arcsin(np.minimum(1.0, radius / dist)) / inc
+    half = np.where(dist > radius, wide, n) + SLACK_BEAMS
+    centre = bearing / inc  # in beams
     lo = np.ceil(centre - half).astype(np.intp)
     count = np.minimum(np.floor(centre + half).astype(np.intp) - lo + 1, n)
-    # every (pair, beam) within the pairs' angular extents, flattened
+    # every (window, beam) within the windows' angular extents, flattened
     which = np.repeat(np.arange(len(count)), count)
     beam = lo[which] + np.arange(len(which)) - np.repeat(np.cumsum(count) - count, count)
-    ray = pairs.k[which] * n + beam % n
+    # beams past either end of a partial field of view do not exist
+    exists = full[src[which]] | ((beam >= 0) & (beam < n[which]))
+    which, beam = which[exists], beam[exists]
+    ray = first[k[which]] + beam % n[which]
     # the beam's line passes ``across`` from the disc's centre, and enters it ``entry`` along
-    off = beam * inc - pairs.bearing[which]
-    dist = pairs.dist[which]
-    across = dist * np.abs(np.sin(off))
-    entry = dist * np.cos(off) - np.sqrt(np.maximum(0.0, radius * radius - across * across))
-    maybe = (across <= radius) & (entry <= static[ray] + GRAZE_M)
-    owner = pairs.k[which]
+    off = beam * inc[which] - bearing[which]
+    d, r = dist[which], radius[which]
+    across = d * np.abs(np.sin(off))
+    entry = d * np.cos(off) - np.sqrt(np.maximum(0.0, r * r - across * across))
+    maybe = (across <= r) & (entry <= static[ray] + GRAZE_M)
+    owner = k[which]
+    other = pairs.j[src[which]]
     out: dict[int, tuple[IntArray, set[int]]] = {}
-    for k in np.unique(owner[maybe]).tolist():
-        mine = maybe & (owner == k)
-        out[k] = (np.unique(ray[mine]), set(pairs.j[which[mine]].tolist()))
+    for kk in np.unique(owner[maybe]).tolist():
+        mine = maybe & (owner == kk)
+        out[kk] = (np.unique(ray[mine]), set(other[mine].tolist()))
     return out
 
 

@@ -12,21 +12,23 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from common.robotmodel import LidarModel
 from services.sim.battery import Battery
-from services.sim.lidar import LidarParams
 from services.sim.robot import RobotState
 
 
 def scan(
-    stamp: float, seq: int, params: LidarParams, ranges: npt.NDArray[np.float64]
+    stamp: float, seq: int, params: LidarModel, ranges: npt.NDArray[np.float64]
 ) -> dict[str, Any]:
+    """One sweep: ``ranges`` holds one range per beam of the model's lidar, beam i at
+    ``angle_min + i * angle_increment`` from the heading (CONTRACT.md, the scan message)."""
     return {
         "stamp": stamp,
         "seq": seq,
-        "angle_min": params.angle_min,
+        "angle_min": params.angle_min_rad,
         "angle_increment": params.angle_increment,
-        "range_min": params.range_min,
-        "range_max": params.range_max,
+        "range_min": params.range_min_m,
+        "range_max": params.range_max_m,
         # plain Python floats: msgpack cannot pack numpy scalars, and inf stays a float
         "ranges": ranges.tolist(),
     }

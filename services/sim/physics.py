@@ -67,7 +67,6 @@ class Scene:
             raise RuntimeError("pybullet could not connect (is a display available for --gui?)")
         self.gui = gui
         self.names: dict[int, str] = {}
-        self.params = world.params
         self._ground: set[int] = set()
         # where each robot's body was last placed, to put a hidden one back exactly there
         self._poses: dict[int, tuple[float, float, float]] = {}
@@ -76,12 +75,17 @@ class Scene:
             p.configureDebugVisualizer(p.COV_ENABLE_GUI, 0, physicsClientId=self.client)
         self._build_static(world)
         self.robot_bodies: list[int] = []
-        radius, height = self.params.footprint_radius_m, self.params.height_m
-        shape = p.createCollisionShape(
-            p.GEOM_CYLINDER, radius=radius, height=height, physicsClientId=self.client
-        )
-        visual = self._visual(p.GEOM_CYLINDER, radius=radius, length=height, rgba=(0.1, 0.3, 0.9))
+        # per body: its model's footprint radius and height (robots of several models share a
+        # world), the largest radius for the reach of contact and lidar tests
+        self.radius: dict[int, float] = {}
+        self._height: dict[int, float] = {}
+        self.max_radius = max((r.model.footprint_radius_m for r in world.robots), default=0.0)
+        shapes: dict[tuple[float, float], tuple[int, int]] = {}
         for spec in world.robots:
+            radius, height = spec.model.footprint_radius_m, spec.model.height_m
+            if (radius, height) not in shapes:
+                shapes[(radius, height)] = self._cylinder(radius, height)
+            shape, visual = shapes[(radius, height)]
             body = p.createMultiBody(
                 baseMass=0.0,
                 baseCollisionShapeIndex=shape,
@@ -92,11 +96,20 @@ class Scene:
             )
             self.names[body] = spec.robot_id
             self.robot_bodies.append(body)
+            self.radius[body], self._height[body] = radius, height
             # placed once more as every later move places it, so a body's transform is always
             # the one _place gives for its pose: a hidden robot put back is bit for bit the same
             self._place(body, spec.x, spec.y, spec.yaw)
 
     # -- building --------------------------------------------------------------------------
+    def _cylinder(self, radius: float, height: float) -> tuple[int, int]:
+        """A robot body's collision and visual shapes."""
+        shape: int = p.createCollisionShape(
+            p.GEOM_CYLINDER, radius=radius, height=height, physicsClientId=self.client
+        )
+        visual = self._visual(p.GEOM_CYLINDER, radius=radius, length=height, rgba=(0.1, 0.3, 0.9))
+        return shape, visual
+
     def _visual(self, geom: int, *, rgba: tuple[float, float, float], **kwargs: object) -> int:
         # visuals only matter in the GUI; DIRECT mode skips them to build faster
         if not self.gui:
@@ -225,7 +238,7 @@ class Scene:
         self._poses[body] = (x, y, yaw)
         p.resetBasePositionAndOrientation(
             body,
-            [x, y, self.params.height_m / 2.0],
+            [x, y, self._height[body] / 2.0],
             [0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0)],
             physicsClientId=self.client,
         )
@@ -234,7 +247,7 @@ class Scene:
         """Smallest signed distance (negative: penetration) to every body within ``reach``
         of ``body`` standing at (x, y)."""
         cid = self.client
-        box = self.params.footprint_radius_m + reach
+        box = self.radius[body] + reach
         near = p.getOverlappingObjects(
             [x - box, y - box, -1.0], [x + box, y + box, 2.0], physicsClientId=cid
         )

@@ -1,9 +1,12 @@
-"""The robot model: a TurtleBot3 Burger-class differential drive, moved kinematically.
+"""A robot in the sim: a differential drive of some robot model, moved kinematically.
 
+The model (common/robotmodel.py, ``models/*.yaml``) gives the body, the limits and the lidar.
 The sim integrates the commanded unicycle velocities (v, w) each physics step and places the
 body there, instead of simulating wheel torques and friction: the motion is then exactly
-reproducible for a given command sequence, which benchmarks and tests rely on. The wheel
-geometry is kept to report wheel speeds and to publish the robot's limits.
+reproducible for a given command sequence, which benchmarks and tests rely on. The motors
+reach a command no faster than the model's acceleration limits allow (:func:`accelerate`),
+as a diff-drive controller with acceleration limits does. The wheel geometry is kept to
+report wheel speeds and to publish the robot's limits.
 """
 
 from __future__ import annotations
@@ -11,50 +14,35 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from common.robotmodel import DEFAULT_MODEL, RobotModel, load_model
 
-@dataclass(frozen=True)
-class DiffDriveParams:
-    """Physical limits of one robot model; the field names end in the contract's units."""
-
-    model: str = "turtlebot3_burger"
-    wheel_radius_m: float = 0.033
-    wheel_separation_m: float = 0.160
-    max_linear_mps: float = 0.22
-    max_angular_rps: float = 2.84
-    footprint_radius_m: float = 0.105
-    height_m: float = 0.192
-    # the LDS-01 sits on top of the Burger, about 0.17 m above the floor
-    lidar_height_m: float = 0.17
-    battery_capacity_wh: float = 19.98
-
-    def limits(self) -> dict[str, float | str]:
-        """The `robot` table's limit columns, as the world message carries them."""
-        return {
-            "model": self.model,
-            "wheel_radius_m": self.wheel_radius_m,
-            "wheel_separation_m": self.wheel_separation_m,
-            "max_linear_mps": self.max_linear_mps,
-            "max_angular_rps": self.max_angular_rps,
-            "footprint_radius_m": self.footprint_radius_m,
-            "battery_capacity_wh": self.battery_capacity_wh,
-        }
+# the default robot, loaded from models/ like any other: no model figure lives in code
+BURGER = load_model(DEFAULT_MODEL)
 
 
-BURGER = DiffDriveParams()
-
-
-def clamp_command(params: DiffDriveParams, linear: float, angular: float) -> tuple[float, float]:
+def clamp_command(model: RobotModel, linear: float, angular: float) -> tuple[float, float]:
     """Clamp a command to the robot's limits, as the motor controller would."""
-    v = max(-params.max_linear_mps, min(params.max_linear_mps, linear))
-    w = max(-params.max_angular_rps, min(params.max_angular_rps, angular))
+    v = max(-model.max_linear_mps, min(model.max_linear_mps, linear))
+    w = max(-model.max_angular_rps, min(model.max_angular_rps, angular))
     return v, w
 
 
-def wheel_speeds(params: DiffDriveParams, linear: float, angular: float) -> tuple[float, float]:
+def accelerate(current: float, target: float, limit: float, dt: float) -> float:
+    """The velocity one step of ``dt`` later, moving from ``current`` toward ``target`` by at
+    most ``limit * dt`` (speeding up and slowing down alike)."""
+    step = limit * dt
+    if target > current + step:
+        return current + step
+    if target < current - step:
+        return current - step
+    return target
+
+
+def wheel_speeds(model: RobotModel, linear: float, angular: float) -> tuple[float, float]:
     """(left, right) wheel angular speeds, rad/s, for a unicycle command."""
-    half = params.wheel_separation_m / 2.0
-    left = (linear - angular * half) / params.wheel_radius_m
-    right = (linear + angular * half) / params.wheel_radius_m
+    half = model.wheel_separation_m / 2.0
+    left = (linear - angular * half) / model.wheel_radius_m
+    right = (linear + angular * half) / model.wheel_radius_m
     return left, right
 
 
@@ -91,8 +79,11 @@ class RobotState:
     x: float
     y: float
     yaw: float
-    params: DiffDriveParams = BURGER
+    model: RobotModel = BURGER
     cmd_linear: float = 0.0
     cmd_angular: float = 0.0
+    # what the motors run at: the command reached at the acceleration limits
+    drive_linear: float = 0.0
+    drive_angular: float = 0.0
     linear: float = 0.0  # achieved this step (0 when blocked by an obstacle)
     angular: float = 0.0

@@ -12,7 +12,7 @@ import logging
 import math
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -24,9 +24,9 @@ from common.log import event
 from services.sim.battery import Battery, BatteryModel
 from services.sim.clock import Every
 from services.sim.fleetcast import Cast, cast_fleet
-from services.sim.lidar import Lidar, LidarParams
+from services.sim.lidar import Lidar
 from services.sim.physics import CONTACT_TOLERANCE_M, Scene
-from services.sim.robot import RobotState, clamp_command, integrate
+from services.sim.robot import RobotState, accelerate, clamp_command, integrate
 from services.sim.world import World
 
 log = logging.getLogger(__name__)
@@ -46,10 +46,10 @@ SCAN, ODOM, BATTERY, COLLISION = keys.SCAN, keys.ODOM, keys.BATTERY_MSG, keys.CO
 @dataclass(frozen=True)
 class SimConfig:
     physics_hz: float = 240.0
-    scan_hz: float = 5.0
+    # every robot's lidar rate; None: each robot's model's (common/robotmodel.py)
+    scan_hz: float | None = None
     odom_hz: float = 30.0
     battery_hz: float = 1.0
-    lidar: LidarParams = field(default_factory=LidarParams)
     battery: BatteryModel = field(default_factory=BatteryModel)
     battery_percent: float | None = None  # start charge of every robot; None: the world's
     seed: int = 0
@@ -74,20 +74,18 @@ class Simulation:
         self.dt = 1.0 / config.physics_hz
         self.steps = 0
         self.rng = np.random.default_rng(config.seed)
-        params = world.params
-        self.robots = [RobotState(r.robot_id, r.x, r.y, r.yaw, params) for r in world.robots]
+        self.robots = [RobotState(r.robot_id, r.x, r.y, r.yaw, r.model) for r in world.robots]
         self.index = {r.robot_id: i for i, r in enumerate(self.robots)}
-        model = BatteryModel(
-            capacity_wh=params.battery_capacity_wh,
-            idle_w=config.battery.idle_w,
-            k_linear_w_per_mps=config.battery.k_linear_w_per_mps,
-            k_angular_w_per_rps=config.battery.k_angular_w_per_rps,
-        )
         self.batteries = [
-            Battery.at_percent(model, _start_percent(config.battery_percent, r.battery_percent))
+            Battery.at_percent(
+                replace(config.battery, capacity_wh=r.model.battery_capacity_wh),
+                _start_percent(config.battery_percent, r.battery_percent),
+            )
             for r in world.robots
         ]
-        self.lidar = Lidar(config.lidar, params.lidar_height_m)
+        # robot i's lidar, one object per distinct lidar model
+        shared: dict[object, Lidar] = {}
+        self.lidars = [shared.setdefault(r.model.lidar, Lidar(r.model.lidar)) for r in world.robots]
         self.scene = Scene(world, gui=config.gui)
         self._touching: list[frozenset[str]] = [frozenset() for _ in self.robots]
         self._seq: dict[tuple[int, str], int] = {}
@@ -97,11 +95,11 @@ class Simulation:
         n = len(self.robots)
         self._schedule = [
             {
-                SCAN: Every(1.0 / config.scan_hz, self.dt, i / n),
+                SCAN: Every(1.0 / (config.scan_hz or spec.model.lidar.rate_hz), self.dt, i / n),
                 ODOM: Every(1.0 / config.odom_hz, self.dt, i / n),
                 BATTERY: Every(1.0 / config.battery_hz, self.dt, i / n),
             }
-            for i in range(n)
+            for i, spec in enumerate(world.robots)
         ]
         # commands arrive on Zenoh's threads; the loop takes them under this lock
         self._lock = threading.Lock()
@@ -117,7 +115,7 @@ class Simulation:
         # contact tests skipped per robot while its clearance lasts; the closing speed bound
         # is two robots driving at each other flat out
         self._unchecked = [0 for _ in self.robots]
-        self._closing = 2.0 * params.max_linear_mps * self.dt
+        self._closing = 2.0 * max(r.model.max_linear_mps for r in self.robots) * self.dt
         for i, r in enumerate(self.robots):
             self._touching[i] = self.scene.probe(i, r.x, r.y)[0]
 
@@ -180,11 +178,18 @@ class Simulation:
                 timeout_s=self.config.cmd_timeout_s,
             )
 
+    def _drive(self, robot: RobotState, empty: bool) -> tuple[float, float]:
+        """The motors' velocities this step: the clamped command, reached no faster than the
+        model's acceleration limits (a flat battery brakes them the same way)."""
+        m = robot.model
+        v, w = (0.0, 0.0) if empty else clamp_command(m, robot.cmd_linear, robot.cmd_angular)
+        robot.drive_linear = accelerate(robot.drive_linear, v, m.max_linear_accel_mps2, self.dt)
+        robot.drive_angular = accelerate(robot.drive_angular, w, m.max_angular_accel_rps2, self.dt)
+        return robot.drive_linear, robot.drive_angular
+
     def _advance(self, i: int, robot: RobotState) -> None:
         bat = self.batteries[i]
-        v, w = clamp_command(robot.params, robot.cmd_linear, robot.cmd_angular)
-        if bat.empty:
-            v = w = 0.0  # a flat battery moves nothing
+        v, w = self._drive(robot, bat.empty)
         if self._unchecked[i] > 0:
             # nothing was near enough to be reached by now: move without the contact test
             self._unchecked[i] -= 1
@@ -229,7 +234,7 @@ class Simulation:
         if scanning:
             poses = [(r.x, r.y, r.yaw) for r in self.robots]
             casts = dict(
-                zip(scanning, cast_fleet(self.scene, self.lidar, poses, scanning), strict=True)
+                zip(scanning, cast_fleet(self.scene, self.lidars, poses, scanning), strict=True)
             )
         for i, robot in enumerate(self.robots):
             due = self._schedule[i]
@@ -237,8 +242,9 @@ class Simulation:
                 self._emit(i, ODOM, messages.odom(now, self._next_seq(i, ODOM), robot))
             if i in casts:
                 # in robot order, as before batching: the noise stream is drawn in that order
-                ranges = self.lidar.ranges(*casts[i], self.rng)
-                msg = messages.scan(now, self._next_seq(i, SCAN), self.lidar.params, ranges)
+                lidar = self.lidars[i]
+                ranges = lidar.ranges(*casts[i], self.rng)
+                msg = messages.scan(now, self._next_seq(i, SCAN), lidar.params, ranges)
                 self._emit(i, SCAN, msg)
             if due[BATTERY].due(step):
                 bat = self.batteries[i]

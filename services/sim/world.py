@@ -6,14 +6,18 @@ A world file is YAML (format in docs/SIM.md)::
     map: maps/warehouse.yaml         # a map_server YAML, relative to this file
     robots:
       - {id: r1, x: 1.0, y: 1.0, yaw: 0.0, battery: 80}   # battery: start percent, optional
+      - {id: r2, x: 2.0, y: 1.0, model: jackal}          # a robot model (models/), optional
+      - {id: r3, x: 3.0, y: 1.0, model: {name: jackal, max_linear_mps: 1.5}}  # overridden
     charging_stations:
       - {id: dock1, x: 0.6, y: 0.6, radius: 0.3, power: 20.0}
     obstacles:                       # not drawn in the map: the robot meets them unannounced
       - {type: box, x: 3.0, y: 2.0, yaw: 0.3, size: [0.4, 0.4, 0.4]}
       - {type: cylinder, x: 4.0, y: 2.5, radius: 0.15, height: 0.5}
 
-A bare map_server YAML is accepted too: the world is then the map with one robot placed on
-the first free spot. Every problem raises WorldError naming the file and the problem.
+A robot that names no model is the default one (``pnav up --model``, else the Burger). A bare
+map_server YAML is accepted too: the world is then the map with one robot of the default
+model placed on the first free spot. Every problem raises WorldError naming the file and the
+problem (a bad model: the world file, the robot and the model file's field).
 """
 
 from __future__ import annotations
@@ -26,10 +30,11 @@ from typing import Any
 import yaml
 
 from common.contract import keys
-from common.errors import WorldError
+from common.errors import ModelError, WorldError
+from common.robotmodel import DEFAULT_MODEL, RobotModel, load_model
 from services.sim.mapserver import FREE, OccupancyGrid, load_map
 from services.sim.mapserver import REQUIRED_KEYS as MAP_KEYS
-from services.sim.robot import BURGER, DiffDriveParams
+from services.sim.robot import BURGER
 
 DEFAULT_STATION_RADIUS_M = 0.3
 DEFAULT_CHARGE_POWER_W = 20.0
@@ -43,6 +48,7 @@ class RobotSpec:
     y: float
     yaw: float = 0.0
     battery_percent: float | None = None  # None: full
+    model: RobotModel = BURGER
 
 
 @dataclass(frozen=True)
@@ -82,8 +88,14 @@ class World:
     robots: tuple[RobotSpec, ...]
     stations: tuple[StationSpec, ...] = ()
     obstacles: tuple[ObstacleSpec, ...] = ()
-    params: DiffDriveParams = BURGER
     wall_height_m: float = DEFAULT_WALL_HEIGHT_M
+    # the model of robots that name none: extra robots (with_robot_count) are of this one
+    default_model: RobotModel = BURGER
+
+    @property
+    def models(self) -> tuple[RobotModel, ...]:
+        """The robots' models, in robot order."""
+        return tuple(r.model for r in self.robots)
 
     def blocked(self, x: float, y: float, radius: float) -> str | None:
         """What a disc at (x, y) would overlap, or None: 'outside the map', 'a wall', an
@@ -104,7 +116,7 @@ class World:
             raise WorldError(f"{self.source}: the number of robots must be at least 1")
         robots = list(self.robots[:count])
         used = {r.robot_id for r in robots}
-        clearance = self.params.footprint_radius_m + 0.15
+        clearance = self.default_model.footprint_radius_m + 0.15
         step = max(spacing_m / 2.0, self.grid.resolution)
         ox, oy = self.grid.cell_to_world(0, 0)
         width_m = self.grid.width * self.grid.resolution
@@ -117,7 +129,8 @@ class World:
                 if self._spawnable(x, y, clearance, robots, spacing_m):
                     while f"r{n}" in used:
                         n += 1
-                    robots.append(RobotSpec(f"r{n}", round(x, 3), round(y, 3)))
+                    spec = RobotSpec(f"r{n}", round(x, 3), round(y, 3), model=self.default_model)
+                    robots.append(spec)
                     used.add(f"r{n}")
                 x += step
             y += step
@@ -132,7 +145,10 @@ class World:
             return False
         if any(math.hypot(x - s.x, y - s.y) < s.radius_m + clearance for s in self.stations):
             return False  # keep chargers clear for the robots that need them
-        return all(math.hypot(x - r.x, y - r.y) >= spacing for r in robots)
+        return all(
+            math.hypot(x - r.x, y - r.y) >= max(spacing, clearance + r.model.footprint_radius_m)
+            for r in robots
+        )
 
     def message(self) -> dict[str, Any]:
         """The ``pnav/sim/world`` payload (CONTRACT.md); robots at their start poses."""
@@ -148,7 +164,7 @@ class World:
                 "source": g.source,
             },
             "robots": [
-                {"robot_id": r.robot_id, "x": r.x, "y": r.y, "yaw": r.yaw, **self.params.limits()}
+                {"robot_id": r.robot_id, "x": r.x, "y": r.y, "yaw": r.yaw, **r.model.robot_row()}
                 for r in self.robots
             ],
             "charging_stations": [
@@ -211,14 +227,41 @@ def _list(path: Path, doc: dict[str, Any], key: str) -> list[Any]:
     return value
 
 
-def _robot(path: Path, i: int, doc: Any) -> RobotSpec:
+def _robot(path: Path, i: int, doc: Any, default: RobotModel) -> RobotSpec:
     r = _Reader(path, doc, f"robots[{i}]")
     battery = r.doc.get("battery")
     if battery is not None:
         battery = r.number("battery")
         if not 0.0 <= battery <= 100.0:
             raise r.error(f"'battery' is a percentage within [0, 100], got {battery}")
-    return RobotSpec(r.ident("id"), r.number("x"), r.number("y"), r.number("yaw", 0.0), battery)
+    model = _model(r, default)
+    x, y, yaw = r.number("x"), r.number("y"), r.number("yaw", 0.0)
+    return RobotSpec(r.ident("id"), x, y, yaw, battery, model)
+
+
+def _model(r: _Reader, default: RobotModel) -> RobotModel:
+    """A robot entry's ``model``: a name (``jackal``), or a mapping of a ``name`` and the
+    fields it overrides (``{name: jackal, max_linear_mps: 1.5, lidar: {rate_hz: 10}}``)."""
+    spec = r.doc.get("model")
+    if spec is None:
+        return default
+    overrides: dict[str, Any] = {}
+    if isinstance(spec, dict):
+        overrides = dict(spec)
+        spec = overrides.pop("name", None)
+        if spec is None:
+            raise r.error("model: a mapping needs 'name' (the model its fields override)")
+    if not isinstance(spec, str) or not spec:
+        raise r.error(f"model: must be a model name or a mapping with 'name', got {spec!r}")
+    try:
+        return load_model(spec, overrides or None)
+    except ModelError as exc:
+        raise r.error(f"model: {exc}") from None
+
+
+def resolve_default_model(name: str | None) -> RobotModel:
+    """The model of robots that name none: ``name`` (``--model``), else the Burger."""
+    return BURGER if name is None or name == DEFAULT_MODEL else load_model(name)
 
 
 def _station(path: Path, i: int, doc: Any) -> StationSpec:
@@ -254,7 +297,7 @@ def _obstacle(path: Path, i: int, doc: Any) -> ObstacleSpec:
 
 
 def _check_start(world: World, path: Path, spec: RobotSpec, placed: list[RobotSpec]) -> None:
-    radius = world.params.footprint_radius_m
+    radius = spec.model.footprint_radius_m
     what = world.blocked(spec.x, spec.y, radius)
     if what == "outside the map":
         raise WorldError(
@@ -266,7 +309,7 @@ def _check_start(world: World, path: Path, spec: RobotSpec, placed: list[RobotSp
             f"obstacle ({what})"
         )
     for other in placed:
-        if math.hypot(spec.x - other.x, spec.y - other.y) < 2 * radius:
+        if math.hypot(spec.x - other.x, spec.y - other.y) < radius + other.model.footprint_radius_m:
             raise WorldError(
                 f"{path}: robot {spec.robot_id} start pose overlaps robot {other.robot_id}"
             )
@@ -282,9 +325,11 @@ def read_world_yaml(path: Path) -> Any:
         raise WorldError(f"{path}: cannot read world YAML: {exc}") from None
 
 
-def load_world(path: str | Path) -> World:
-    """Load and check a world file (or a bare map_server YAML)."""
+def load_world(path: str | Path, model: str | None = None) -> World:
+    """Load and check a world file (or a bare map_server YAML); ``model`` names the model of
+    every robot that names none (default: the Burger)."""
     path = Path(path)
+    default = resolve_default_model(model)
     doc = read_world_yaml(path)
     if not isinstance(doc, dict):
         raise WorldError(f"{path}: a world file must be a YAML mapping")
@@ -292,7 +337,7 @@ def load_world(path: str | Path) -> World:
     if "map" not in doc and "robots" not in doc and any(k in doc for k in MAP_KEYS):
         # a bare map_server map: one robot on the first free spot
         grid = load_map(path)
-        bare = World(name=path.stem, source=str(path), grid=grid, robots=())
+        bare = World(name=path.stem, source=str(path), grid=grid, robots=(), default_model=default)
         return bare.with_robot_count(1)
 
     if "map" not in doc:
@@ -311,7 +356,7 @@ def load_world(path: str | Path) -> World:
     robot_docs = _list(path, doc, "robots")
     if not robot_docs:
         raise WorldError(f"{path}: missing required key 'robots' (at least one robot)")
-    robots = [_robot(path, i, d) for i, d in enumerate(robot_docs)]
+    robots = [_robot(path, i, d, default) for i, d in enumerate(robot_docs)]
     stations = [_station(path, i, d) for i, d in enumerate(_list(path, doc, "charging_stations"))]
     obstacles = [_obstacle(path, i, d) for i, d in enumerate(_list(path, doc, "obstacles"))]
     for label, ids in (
@@ -331,6 +376,7 @@ def load_world(path: str | Path) -> World:
         stations=tuple(stations),
         obstacles=tuple(obstacles),
         wall_height_m=wall_height,
+        default_model=default,
     )
     placed: list[RobotSpec] = []
     for spec in robots:

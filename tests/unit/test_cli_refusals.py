@@ -5,13 +5,16 @@ from __future__ import annotations
 
 import asyncio
 import math
+from pathlib import Path
 
 import asyncpg
 import pytest
+import yaml
 
 from common.config import ZenohSettings
 from common.contract import limits
 from common.errors import ContractError
+from common.robotmodel import MODELS
 from pnav import cli, commands
 
 
@@ -144,3 +147,45 @@ async def test_set_goal_refuses_before_writing(db_url: str) -> None:
     with pytest.raises(ContractError, match="goal x must be"):
         await commands.set_goal(None, "r1", math.nan, 0.0)  # type: ignore[arg-type]
     assert await goals(db_url) == []
+
+
+@pytest.mark.parametrize(
+    ("argv", "needles"),
+    [
+        (["up", "--model", "tank"], ["argument --model", "no robot model 'tank'", "jackal"]),
+        (["demo", "--model", "tank"], ["argument --model", "no robot model 'tank'"]),
+        (["up", "--model", "nowhere/bot.yaml"], ["argument --model", "model file not found"]),
+    ],
+)
+def test_a_bad_robot_model_is_a_one_line_refusal(
+    argv: list[str], needles: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, _, err = run_cli(argv, capsys)
+    assert_one_line_refusal(code, err, *needles)
+
+
+def test_a_bad_model_file_names_the_file_and_the_field(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bad = tmp_path / "bot.yaml"
+    doc = yaml.safe_load((MODELS / "jackal.yaml").read_text())
+    doc["footprint_radius_m"] = -0.2
+    bad.write_text(yaml.safe_dump(doc))
+    code, _, err = run_cli(["up", "--model", str(bad)], capsys)
+    assert_one_line_refusal(code, err, f"{bad}: footprint_radius_m: must be positive")
+
+
+def test_a_world_with_a_bad_model_is_refused_before_anything_starts(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    world = tmp_path / "bad.yaml"
+    robot = {"id": "r1", "x": 1.0, "y": 1.0, "model": {"name": "jackal", "lidar": {"beams": 0}}}
+    world.write_text(
+        yaml.safe_dump(
+            {"map": str(MODELS.parent / "worlds/maps/open_room.yaml"), "robots": [robot]}
+        )
+    )
+    code, _, err = run_cli(["up", "--world", str(world)], capsys)  # refused before any port
+    assert_one_line_refusal(
+        code, err, f"{world}: robots[0]: model: models/jackal.yaml (overridden): lidar.beams: "
+    )

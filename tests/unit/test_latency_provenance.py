@@ -133,4 +133,4 @@ def test_the_hall_holds_every_robot_in_its_own_lane(tmp_path: Path, robots: int)
     assert [r.robot_id for r in world.robots] == [lane.robot_id for lane in hall.lanes]
     for lane in hall.lanes:
         for x, y in (lane.a, lane.b):
-            assert world.blocked(x, y, world.params.footprint_radius_m + 0.1) is None
+            assert world.blocked(x, y, world.default_model.footprint_radius_m + 0.1) is None

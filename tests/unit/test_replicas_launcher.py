@@ -142,3 +142,14 @@ def test_up_lockstep_waits_for_every_service_started_but_a_replaced_one() -> Non
     assert {s.env["PNAV_LOCKSTEP"] for s in specs} == {
         "bridge,strategy,planner,controller,decision"
     }
+
+
+def test_the_model_option_reaches_the_sim_and_only_the_sim() -> None:
+    args = build_parser().parse_args(["up", "--model", "jackal"])
+    options = StackOptions(model=args.model)
+    specs = {s.name: s for s in service_specs(local(), options, Path("worlds/open_room.yaml"))}
+    argv = specs["sim"].argv
+    assert argv[argv.index("--model") + 1] == "jackal"
+    assert all("--model" not in s.argv for name, s in specs.items() if name != "sim")
+    plain = service_specs(local(), StackOptions(), Path("worlds/open_room.yaml"))
+    assert all("--model" not in s.argv for s in plain)  # the sim's default: the Burger

@@ -23,7 +23,7 @@ from services.bridge.messages import (
 from tests.unit.bridge import payloads
 from tests.unit.bridge.payloads import Bad, bad_messages, pack
 
-KNOWN = frozenset({"r1"})
+KNOWN = {"r1": 360}  # the robot table: r1, whose lidar has 360 beams
 finite = st.floats(-1e3, 1e3, allow_nan=False)
 
 

@@ -22,6 +22,7 @@ from services.bridge.settings import BridgeSettings
 
 R = 0.105  # the burger's footprint radius
 FULL = 0.22
+DECEL = 2.5  # the burger's linear acceleration limit (its robot row): it brakes at that
 
 
 def scan(stamp: float, *obstacles: tuple[float, float], robot: str = "r1") -> LaserScan:
@@ -39,7 +40,7 @@ def layer(**params: float) -> SafetyLayer:
 def test_an_obstacle_ahead_within_stopping_distance_stops_the_robot_and_says_why() -> None:
     safety = layer()
     safety.scan(scan(10.0, (0.14, 0.0)))
-    verdict = safety.judge("r1", FULL, R, 10.05)
+    verdict = safety.judge("r1", FULL, R, 10.05, DECEL)
     assert verdict.outcome == STOPPED and verdict.linear == 0.0
     assert verdict.reason.startswith("stopped: obstacle 0.14 m ahead at +0 deg")
     assert verdict.noted
@@ -49,32 +50,32 @@ def test_closer_than_the_full_stopping_distance_limits_to_a_speed_that_stops_in_
     p = SafetyParams()
     safety = SafetyLayer(p)
     safety.scan(scan(10.0, (0.18, 0.0)))
-    verdict = safety.judge("r1", FULL, R, 10.0)
+    verdict = safety.judge("r1", FULL, R, 10.0, DECEL)
     assert verdict.outcome == LIMITED and 0.0 < verdict.linear < FULL
     budget = 0.18 - R - p.margin_m
-    assert stopping_m(verdict.linear, p.latency_s, p.decel_mps2) == pytest.approx(budget)
+    assert stopping_m(verdict.linear, p.latency_s, DECEL) == pytest.approx(budget)
     assert verdict.reason.startswith(f"limited to {verdict.linear:.3f} m/s")
     # a speed already within what stops in time passes unchanged
-    assert safety.judge("r1", verdict.linear * 0.99, R, 10.0).outcome == CLEAR
+    assert safety.judge("r1", verdict.linear * 0.99, R, 10.0, DECEL).outcome == CLEAR
 
 
 def test_an_obstacle_farther_than_the_stopping_distance_leaves_the_command_unchanged() -> None:
     safety = layer()
     safety.scan(scan(10.0, (0.5, 0.0)))
-    verdict = safety.judge("r1", FULL, R, 10.0)
+    verdict = safety.judge("r1", FULL, R, 10.0, DECEL)
     assert (verdict.outcome, verdict.linear, verdict.noted) == (CLEAR, FULL, False)
 
 
 def test_an_obstacle_behind_does_not_stop_a_robot_going_forward() -> None:
     safety = layer()
     safety.scan(scan(10.0, (0.13, 180.0)))
-    assert safety.judge("r1", FULL, R, 10.0).outcome == CLEAR
+    assert safety.judge("r1", FULL, R, 10.0, DECEL).outcome == CLEAR
 
 
 def test_reversing_toward_an_obstacle_behind_stops() -> None:
     safety = layer()
     safety.scan(scan(10.0, (0.13, 180.0)))
-    verdict = safety.judge("r1", -FULL, R, 10.0)
+    verdict = safety.judge("r1", -FULL, R, 10.0, DECEL)
     assert verdict.outcome == STOPPED and verdict.linear == 0.0
     assert "behind" in verdict.reason
 
@@ -83,16 +84,16 @@ def test_an_obstacle_beside_the_swept_corridor_does_not_count() -> None:
     safety = layer()
     # 0.13 m away at 60 degrees: 0.113 m to the side, outside the 0.105 m footprint
     safety.scan(scan(10.0, (0.13, 60.0), (0.13, -60.0)))
-    assert safety.judge("r1", FULL, R, 10.0).outcome == CLEAR
+    assert safety.judge("r1", FULL, R, 10.0, DECEL).outcome == CLEAR
     # at 40 degrees (0.084 m to the side) the body would touch it
     safety.scan(scan(10.1, (0.13, 40.0)))
-    assert safety.judge("r1", FULL, R, 10.1).outcome == STOPPED
+    assert safety.judge("r1", FULL, R, 10.1, DECEL).outcome == STOPPED
 
 
 def test_turning_in_place_always_passes() -> None:
     safety = layer()
     safety.scan(scan(10.0, *[(0.121, float(d)) for d in range(360)]))  # boxed in
-    verdict = safety.judge("r1", 0.0, R, 10.0)
+    verdict = safety.judge("r1", 0.0, R, 10.0, DECEL)
     assert (verdict.outcome, verdict.linear) == (CLEAR, 0.0)
 
 
@@ -101,17 +102,18 @@ def test_the_distance_moved_since_the_scan_is_counted() -> None:
     clear of the stopping distance in the scan may no longer be."""
     safety = layer()
     safety.scan(scan(10.0, (0.215, 0.0)))
-    assert safety.judge("r1", FULL, R, 10.0).outcome == CLEAR  # fresh: 0.06 m to spare
-    assert safety.judge("r1", FULL, R, 10.19).outcome == LIMITED  # 4.2 cm later
+    assert safety.judge("r1", FULL, R, 10.0, DECEL).outcome == CLEAR  # fresh: 0.06 m to spare
+    assert safety.judge("r1", FULL, R, 10.19, DECEL).outcome == LIMITED  # 4.2 cm later
 
 
 def test_a_stale_scan_leaves_the_command_unchecked_by_default_and_says_so() -> None:
     safety = layer()
     assert (
-        safety.judge("r1", FULL, R, 3.0).reason == "unchecked: no scan within 0.5 s (no scan yet)"
+        safety.judge("r1", FULL, R, 3.0, DECEL).reason
+        == "unchecked: no scan within 0.5 s (no scan yet)"
     )
     safety.scan(scan(10.0, (0.13, 0.0)))
-    verdict = safety.judge("r1", FULL, R, 10.6)
+    verdict = safety.judge("r1", FULL, R, 10.6, DECEL)
     assert (verdict.outcome, verdict.linear) == (UNCHECKED, FULL)
     assert verdict.reason == "unchecked: no scan within 0.5 s (newest scan 0.60 s old)"
     assert verdict.noted
@@ -119,30 +121,30 @@ def test_a_stale_scan_leaves_the_command_unchecked_by_default_and_says_so() -> N
 
 def test_a_blind_speed_cap_limits_or_stops_without_a_fresh_scan() -> None:
     capped = layer(blind_mps=0.05)
-    verdict = capped.judge("r1", -FULL, R, 3.0)
+    verdict = capped.judge("r1", -FULL, R, 3.0, DECEL)
     assert (verdict.outcome, verdict.linear) == (LIMITED, -0.05)
-    assert capped.judge("r1", 0.04, R, 3.0).outcome == UNCHECKED
+    assert capped.judge("r1", 0.04, R, 3.0, DECEL).outcome == UNCHECKED
     stopped = layer(blind_mps=0.0)
-    assert stopped.judge("r1", FULL, R, 3.0).outcome == STOPPED
+    assert stopped.judge("r1", FULL, R, 3.0, DECEL).outcome == STOPPED
 
 
 def test_no_clock_yet_takes_the_newest_scan_as_fresh() -> None:
     safety = layer()
     safety.scan(scan(10.0, (0.13, 0.0)))
-    assert safety.judge("r1", FULL, R, None).outcome == STOPPED
+    assert safety.judge("r1", FULL, R, None, DECEL).outcome == STOPPED
 
 
 def test_an_older_scan_arriving_late_does_not_replace_the_newer() -> None:
     safety = layer()
     safety.scan(scan(10.2, (0.13, 0.0)))
     safety.scan(scan(10.0))  # reordered: clear, but older
-    assert safety.judge("r1", FULL, R, 10.2).outcome == STOPPED
+    assert safety.judge("r1", FULL, R, 10.2, DECEL).outcome == STOPPED
 
 
 def test_the_layer_turned_off_passes_everything() -> None:
     safety = layer(enabled=False)
     safety.scan(scan(10.0, (0.13, 0.0)))
-    verdict = safety.judge("r1", FULL, R, 10.0)
+    verdict = safety.judge("r1", FULL, R, 10.0, DECEL)
     assert (verdict.outcome, verdict.linear) == (CLEAR, FULL)
 
 
@@ -150,8 +152,8 @@ def test_robots_are_judged_on_their_own_scans() -> None:
     safety = layer()
     safety.scan(scan(10.0, (0.13, 0.0), robot="r1"))
     safety.scan(scan(10.0, robot="r2"))
-    assert safety.judge("r1", FULL, R, 10.0).outcome == STOPPED
-    assert safety.judge("r2", FULL, R, 10.0).outcome == CLEAR
+    assert safety.judge("r1", FULL, R, 10.0, DECEL).outcome == STOPPED
+    assert safety.judge("r2", FULL, R, 10.0, DECEL).outcome == CLEAR
 
 
 def test_max_speed_inverts_the_stopping_distance() -> None:
@@ -175,6 +177,7 @@ def test_the_settings_come_from_pnav_bridge_safety_variables() -> None:
         }
     )
     assert settings.safety == SafetyParams(False, 1.5, 0.2, 0.0, 1.0, 0.0)
+    assert SafetyParams().decel_mps2 is None  # unset: each robot brakes at its own limit
     for name, raw in (
         ("PNAV_BRIDGE_SAFETY", "maybe"),
         ("PNAV_BRIDGE_SAFETY_DECEL_MPS2", "0"),
@@ -183,3 +186,38 @@ def test_the_settings_come_from_pnav_bridge_safety_variables() -> None:
     ):
         with pytest.raises(ConfigError, match=name):
             BridgeSettings.from_env({name: raw})
+
+
+def test_the_stopping_distance_brakes_at_each_robots_own_acceleration_limit() -> None:
+    safety = layer()
+    # 0.3 m ahead of two robots at 0.22 m/s: free travel 0.195 m, 0.145 m once the margin
+    # is kept. Braking at 2.5 m/s^2 needs 0.022 + 0.0097 m: clear; at 0.1 m/s^2 it needs
+    # 0.022 + 0.242 m: the speed is limited to what stops in 0.145 m
+    safety.scan(scan(10.0, (0.3, 0.0)))
+    safety.scan(scan(10.0, (0.3, 0.0), robot="r2"))
+    assert safety.judge("r1", FULL, R, 10.0, 2.5).outcome == CLEAR
+    slow = safety.judge("r2", FULL, R, 10.0, 0.1)
+    assert slow.outcome == LIMITED and "braking at 0.1 m/s^2" in slow.reason
+    assert stopping_m(abs(slow.linear), 0.1, 0.1) == pytest.approx(0.3 - R - 0.05)
+
+
+def test_the_variable_overrides_every_robots_deceleration() -> None:
+    safety = layer(decel_mps2=0.1)
+    safety.scan(scan(10.0, (0.3, 0.0)))
+    # the robot could brake at 2.5 m/s^2, but the operator said to assume 0.1
+    assert safety.judge("r1", FULL, R, 10.0, 2.5).outcome == LIMITED
+
+
+def test_a_partial_field_of_view_checks_the_beams_it_has() -> None:
+    # a 270-degree, 720-beam scan starting 135 degrees right of the heading (the Jackal's):
+    # beam 359.5 is straight ahead
+    ranges = [math.inf] * 720
+    ranges[359] = ranges[360] = 0.5
+    inc = math.radians(270.0) / 719
+    record = LaserScan("j", 10.0, 0, math.radians(-135.0), inc, 0.1, 30.0, ranges)
+    safety = layer()
+    safety.scan(record)
+    verdict = safety.judge("j", 2.0, 0.22, 10.0, 10.0)
+    # free travel 0.28 m, minus the margin: 0.23 m; 2 m/s needs 0.2 + 0.2 m at 10 m/s^2
+    assert verdict.outcome == LIMITED
+    assert stopping_m(verdict.linear, 0.1, 10.0) == pytest.approx(0.5 - 0.22 - 0.05, abs=1e-3)

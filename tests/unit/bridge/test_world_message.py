@@ -8,6 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from common.robotmodel import load_model
 from services.bridge.messages import MalformedMessage
 from services.bridge.world import ROBOT_DEFAULTS, MapInfo, StationInfo, parse_world
 from tests.unit.bridge import payloads
@@ -89,3 +90,35 @@ def test_a_broken_world_is_refused(change: str) -> None:
 def test_random_bytes_are_never_a_world(data: bytes) -> None:
     with pytest.raises(MalformedMessage):
         parse_world(data)
+
+
+def test_every_model_column_of_a_jackal_comes_through() -> None:
+    jackal = load_model("jackal").robot_row()
+    body = payloads.world()
+    body["robots"] = [{"robot_id": "j1", **jackal}]
+    robot = parse_world(pack(body)).robots[0]
+    assert robot.columns() == {"robot_id": "j1", **jackal}
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("lidar_beams", 0),
+        ("lidar_beams", 360.0),
+        ("lidar_fov_rad", 7.0),
+        ("lidar_fov_rad", 0.0),
+        ("lidar_range_max_m", 0.05),  # not above range_min
+        ("lidar_noise_m", -0.01),
+        ("lidar_rate_hz", 0.0),
+        ("max_linear_accel_mps2", 0.0),
+        ("max_angular_accel_rps2", 1000.0),
+        ("lidar_angle_min_rad", 10.0),
+    ],
+)
+def test_a_model_column_the_contract_refuses_is_refused_before_sql(
+    field: str, value: float
+) -> None:
+    body = payloads.world()
+    body["robots"][0][field] = value
+    with pytest.raises(MalformedMessage):
+        parse_world(pack(body))

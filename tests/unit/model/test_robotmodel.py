@@ -40,7 +40,7 @@ def test_burger_model_has_todays_figures() -> None:
     m = load_model("turtlebot3_burger")
     assert (m.footprint_radius_m, m.max_linear_mps, m.max_angular_rps) == (0.105, 0.22, 2.84)
     assert (m.wheel_radius_m, m.wheel_separation_m, m.battery_capacity_wh) == (0.033, 0.16, 19.98)
-    assert (m.max_linear_accel_mps2, m.max_angular_accel_rps2) == (2.5, 3.2)
+    assert (m.max_linear_accel_mps2, m.max_angular_accel_rps2) == (2.5, 31.25)
     lidar = m.lidar
     assert (lidar.beams, lidar.range_min_m, lidar.range_max_m, lidar.rate_hz) == (
         360,

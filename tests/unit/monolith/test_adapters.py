@@ -23,6 +23,7 @@ from services.controller.scenario import Recommendation
 from services.decision.arbitration import RobotDecision
 from services.planner.routes import Target
 from services.planner.world import RobotInfo, RobotState
+from services.sim.robot import BURGER
 from services.sim.sim import SimConfig
 from services.sim.world import load_world
 
@@ -32,16 +33,8 @@ def contract_with_rows() -> tuple[MemoryContract, list[tuple[str, Any, Any]]]:
     notes: list[tuple[str, Any, Any]] = []
     contract.listeners.append(lambda table, robot, row_id: notes.append((table, robot, row_id)))
     for robot in ("r2", "r1"):
-        contract.insert(
-            keys.ROBOT,
-            {
-                "robot_id": robot,
-                "max_linear_mps": 0.22,
-                "max_angular_rps": 2.84,
-                "footprint_radius_m": 0.105,
-                "battery_capacity_wh": 19.98,
-            },
-        )
+        # every model column, as the bridge writes them from the sim's world message
+        contract.insert(keys.ROBOT, {"robot_id": robot, **BURGER.robot_row()})
     for i in range(3):
         row = {"robot_id": "r1", "stamp": i / 30, "seq": i, "x": float(i), "y": 0.0, "yaw": 0.0}
         contract.insert(keys.ODOMETRY, row | {"linear_mps": 0.1, "angular_rps": 0.0})

@@ -11,11 +11,27 @@ import pytest
 
 from common.errors import ConfigError
 from services.sim.__main__ import build, parse_args
+from services.sim.robot import BURGER
 from services.sim.sim import CMD_TIMEOUT_S, SimConfig, Simulation
 from services.sim.world import load_world
 from tests.unit.sim.conftest import MakeWorld
 
 pytestmark = pytest.mark.timeout(30)
+
+# the Burger's acceleration limits (models/turtlebot3_burger.yaml): the motors reach a command
+# at these, and brake at them when the timeout zeroes it
+ACCEL, ANGULAR_ACCEL = BURGER.max_linear_accel_mps2, BURGER.max_angular_accel_rps2
+
+
+def ramp_loss(speed: float, accel: float, dt: float) -> float:
+    """How much less than ``speed x time`` a robot starting from rest covers, ramping up by
+    ``accel x dt`` per step; braking to rest at the same rate covers exactly this much more
+    than stopping dead, so a run that ends standing covers ``speed x time`` in all."""
+    k, loss = 1, 0.0
+    while k * accel * dt < speed:
+        loss += (speed - k * accel * dt) * dt
+        k += 1
+    return loss
 
 
 @pytest.fixture
@@ -43,8 +59,9 @@ def test_a_robot_whose_commands_stop_coming_stops_after_the_timeout(sim: Simulat
     assert robot.linear == pytest.approx(0.2)  # still obeying, one step before the timeout
     sim.step()  # the command has been obeyed for 0.5 s now
     sim.step()
-    assert robot.linear == 0.0 and (robot.cmd_linear, robot.cmd_angular) == (0.0, 0.0)
-    # it drove on its last command for exactly 0.5 s, then stood still
+    assert (robot.cmd_linear, robot.cmd_angular) == (0.0, 0.0)
+    assert robot.linear == pytest.approx(0.2 - ACCEL * sim.dt)  # braking at the limit
+    # it drove on its last command for exactly 0.5 s, then braked to a standstill
     sim.run_for(2.0)
     assert robot.x == pytest.approx(1.0 + 0.2 * 0.5, abs=1e-9)
     assert sim.cmd_timeout_stops == 1
@@ -54,7 +71,8 @@ def test_commands_every_tenth_of_a_second_keep_it_going(sim: Simulation) -> None
     for _ in range(30):
         sim.set_command("r1", 0.2, 0.0)
         sim.run_for(0.1)
-    assert sim.robots[0].x == pytest.approx(1.0 + 0.2 * 3.0, abs=1e-9)
+    still = ramp_loss(0.2, ACCEL, sim.dt)  # driving yet: the ramp up is not made good
+    assert sim.robots[0].x == pytest.approx(1.0 + 0.2 * 3.0 - still, abs=1e-9)
     assert sim.robots[0].linear == pytest.approx(0.2)
     assert sim.cmd_timeout_stops == 0
 
@@ -64,9 +82,10 @@ def test_the_next_command_after_a_stop_moves_it_again(sim: Simulation) -> None:
     sim.run_for(1.0)
     assert sim.robots[0].yaw == pytest.approx(0.5, abs=1e-9)  # turned for 0.5 s only
     sim.set_command("r1", 0.0, 1.0)
-    sim.run_for(0.25)
-    assert sim.robots[0].yaw == pytest.approx(0.75, abs=1e-9)
-    assert sim.robots[0].angular == 1.0
+    sim.run_for(0.45)
+    turned = 1.0 * 0.45 - ramp_loss(1.0, ANGULAR_ACCEL, sim.dt)
+    assert sim.robots[0].yaw == pytest.approx(0.5 + turned, abs=1e-9)
+    assert sim.robots[0].angular == pytest.approx(1.0)
     assert sim.cmd_timeout_stops == 1
 
 
@@ -85,7 +104,9 @@ def test_each_robot_times_out_on_its_own_commands(make_world: MakeWorld) -> None
             sim.set_command("b", 0.1, 0.0)  # b's commands say nothing about a's
             sim.run_for(0.1)
         a, b = sim.robots
-        assert a.x == pytest.approx(1.1, abs=1e-9) and b.x == pytest.approx(1.2, abs=1e-9)
+        b_still = ramp_loss(0.1, ACCEL, sim.dt)  # b drives yet
+        assert a.x == pytest.approx(1.1, abs=1e-9)
+        assert b.x == pytest.approx(1.2 - b_still, abs=1e-9)
         assert sim.cmd_timeout_stops == 1
     finally:
         sim.close()
@@ -107,7 +128,8 @@ def test_zero_disables_it(open_floor: Path) -> None:
     try:
         sim.set_command("r1", 0.2, 0.0)
         sim.run_for(2.0)
-        assert sim.robots[0].x == pytest.approx(1.4, abs=1e-9)
+        still = ramp_loss(0.2, ACCEL, sim.dt)
+        assert sim.robots[0].x == pytest.approx(1.4 - still, abs=1e-9)
         assert sim.cmd_timeout_stops == 0
     finally:
         sim.close()

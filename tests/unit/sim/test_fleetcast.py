@@ -15,6 +15,7 @@ import services.sim.sim as sim_module
 from services.sim.fleetcast import Cast, Pose, cast_fleet
 from services.sim.lidar import Lidar
 from services.sim.physics import RAY_BATCH, Scene
+from services.sim.robot import BURGER
 from services.sim.sim import SimConfig, Simulation
 from services.sim.world import load_world
 from tests.unit.sim.conftest import MakeWorld
@@ -32,10 +33,10 @@ RADIUS = 0.105
 
 
 def per_robot(
-    scene: Scene, lidar: Lidar, poses: Sequence[Pose], scanning: Sequence[int]
+    scene: Scene, lidars: Sequence[Lidar], poses: Sequence[Pose], scanning: Sequence[int]
 ) -> list[Cast]:
     """Today's reference: one cast per robot, its own body lowered."""
-    return [scene.cast_from(i, *lidar.rays(*poses[i])) for i in scanning]
+    return [scene.cast_from(i, *lidars[i].rays(*poses[i])) for i in scanning]
 
 
 def crowd(rng: np.random.Generator, count: int) -> list[Pose]:
@@ -73,7 +74,7 @@ def static_fraction(scene: Scene, lidar: Lidar, pose: Pose) -> np.ndarray:
 
 
 def test_batched_cast_equals_each_robots_own_cast_bit_for_bit(scene: Scene) -> None:
-    lidar = Lidar(SimConfig().lidar, scene.params.lidar_height_m)
+    lidar = Lidar(BURGER.lidar)
     rng = np.random.default_rng(11)
     seen_robots = 0
     for _ in range(12):
@@ -82,9 +83,9 @@ def test_batched_cast_equals_each_robots_own_cast_bit_for_bit(scene: Scene) -> N
             scene.place(i, *pose)
         subsets = [list(range(ROBOTS)), [0, 1], [3], list(range(0, ROBOTS, 3))]
         for scanning in subsets:
-            got = cast_fleet(scene, lidar, poses, scanning)
+            got = cast_fleet(scene, [lidar] * len(poses), poses, scanning)
             assert not scene.hidden
-            want = per_robot(scene, lidar, poses, scanning)
+            want = per_robot(scene, [lidar] * len(poses), poses, scanning)
             for i, (hit, fraction), (want_hit, want_fraction) in zip(
                 scanning, got, want, strict=True
             ):
@@ -93,21 +94,21 @@ def test_batched_cast_equals_each_robots_own_cast_bit_for_bit(scene: Scene) -> N
                 assert fraction.tobytes() == want_fraction.tobytes(), f"robot {i}"
         # the scene really crowds: beams met other robots, nearer than the walls
         for i, pose in enumerate(poses):
-            _, want_fraction = per_robot(scene, lidar, poses, [i])[0]
+            _, want_fraction = per_robot(scene, [lidar] * len(poses), poses, [i])[0]
             seen_robots += int(np.sum(want_fraction < static_fraction(scene, lidar, pose)))
     assert ROBOTS * 360 > RAY_BATCH
     assert seen_robots > 12 * ROBOTS * 20
 
 
 def test_robots_are_back_in_place_after_the_cast(scene: Scene) -> None:
-    lidar = Lidar(SimConfig().lidar, scene.params.lidar_height_m)
+    lidar = Lidar(BURGER.lidar)
     poses = crowd(np.random.default_rng(3), ROBOTS)
     for i, pose in enumerate(poses):
         scene.place(i, *pose)
     before = [
         p.getBasePositionAndOrientation(b, physicsClientId=scene.client) for b in scene.robot_bodies
     ]
-    cast_fleet(scene, lidar, poses, list(range(0, ROBOTS, 2)))
+    cast_fleet(scene, [lidar] * len(poses), poses, list(range(0, ROBOTS, 2)))
     after = [
         p.getBasePositionAndOrientation(b, physicsClientId=scene.client) for b in scene.robot_bodies
     ]
@@ -148,3 +149,49 @@ def test_a_crowded_run_scans_as_with_one_cast_per_robot(
     assert [robot for robot, _ in batched] == [robot for robot, _ in alone]
     for (_, got), (_, want) in zip(batched, alone, strict=True):
         assert np.array(got).tobytes() == np.array(want).tobytes()
+
+
+def test_a_fleet_of_mixed_models_casts_as_each_robot_alone(make_world: MakeWorld) -> None:
+    # Jackals (270-degree, 720-beam lidar, 0.22 m bodies), Burgers and a narrow 90-degree
+    # lidar whose field of view starts behind the robot, crowded: the beams of one model meet
+    # the bodies of the others, and the partial fields of view must find exactly the robots
+    # within them, across beam 0's direction too
+    narrow = {"name": "turtlebot3_burger", "lidar": {"beams": 91, "fov_rad": math.pi / 2}}
+    narrow["lidar"]["angle_min_rad"] = 3 * math.pi / 4  # type: ignore[index]
+    kinds: list[Any] = ["jackal", None, narrow]
+    robots = [
+        {"id": f"r{i}", "x": 0.5 + 0.5 * i, "y": 5.5, "model": kinds[i % 3]} for i in range(9)
+    ]
+    for r in robots:
+        if r["model"] is None:
+            del r["model"]
+    world = load_world(make_world(6.0, 6.0, WALLS, robots=robots, obstacles=OBSTACLES))
+    scene = Scene(world)
+    try:
+        shared: dict[object, Lidar] = {}
+        lidars = [shared.setdefault(m.lidar, Lidar(m.lidar)) for m in world.models]
+        rng = np.random.default_rng(5)
+        met = 0
+        for _ in range(8):
+            poses: list[Pose] = []
+            while len(poses) < len(robots):
+                x, y = rng.uniform(0.35, 2.75), rng.uniform(0.35, 2.75)
+                if all(math.hypot(x - px, y - py) >= 0.441 for px, py, _ in poses):
+                    poses.append((x, y, float(rng.uniform(-math.pi, math.pi))))
+            for i, pose in enumerate(poses):
+                scene.place(i, *pose)
+            for scanning in (list(range(len(robots))), [0, 2, 4], [2]):
+                got = cast_fleet(scene, lidars, poses, scanning)
+                want = per_robot(scene, lidars, poses, scanning)
+                for i, (hit, fraction), (want_hit, want_fraction) in zip(
+                    scanning, got, want, strict=True
+                ):
+                    assert len(hit) == world.models[i].lidar.beams
+                    np.testing.assert_array_equal(hit, want_hit, err_msg=f"robot {i}")
+                    assert fraction.tobytes() == want_fraction.tobytes(), f"robot {i}"
+            for i, pose in enumerate(poses):
+                _, want_fraction = per_robot(scene, lidars, poses, [i])[0]
+                met += int(np.sum(want_fraction < static_fraction(scene, lidars[i], pose)))
+        assert met > 100  # beams really met other robots
+    finally:
+        scene.close()

@@ -9,7 +9,6 @@ from typing import Any
 import numpy as np
 import pytest
 
-from services.sim.lidar import LidarParams
 from services.sim.sim import SimConfig, Simulation
 from services.sim.world import load_world
 from tests.unit.sim.conftest import MakeWorld
@@ -94,7 +93,7 @@ def test_noise_has_the_configured_sigma_and_the_seed_repeats(make_world: MakeWor
 
 
 def test_noise_free_lidar_is_exact_and_clamps_to_range(make_world: MakeWorld) -> None:
-    lidar = LidarParams(noise_sigma=0.0)
-    ranges = scans_of(make_world, [{"id": "r1", "x": 2.8, "y": 5.0}], lidar=lidar)["r1"][0]
+    exact = {"name": "turtlebot3_burger", "lidar": {"noise_m": 0.0}}
+    ranges = scans_of(make_world, [{"id": "r1", "x": 2.8, "y": 5.0, "model": exact}])["r1"][0]
     assert ranges[0] == pytest.approx(0.2, abs=1e-6)
-    assert ranges.min() >= lidar.range_min
+    assert ranges.min() >= 0.12  # the Burger's range_min

@@ -8,6 +8,7 @@ from typing import Any
 
 import pytest
 
+from services.sim.robot import BURGER
 from services.sim.sim import SimConfig, Simulation
 from services.sim.world import load_world
 from tests.unit.sim.conftest import MakeWorld
@@ -25,7 +26,7 @@ class Recorder:
 
 # A command set once is held for the whole run, as the stack's re-issues every 0.1 s would
 # hold it: these tests are about motion and sensors; the command timeout has its own.
-HELD = {"cmd_timeout_s": 0.0}
+HELD: dict[str, Any] = {"cmd_timeout_s": 0.0}
 
 
 def simulate(
@@ -66,8 +67,10 @@ def test_driving_into_a_wall_stops_at_it_with_one_collision(make_world: MakeWorl
     (event,) = rec.msgs[("r1", "collision")]
     assert event["other"] == "wall" and event["seq"] == 0
     assert event["x"] == pytest.approx(2.0 - 0.105, abs=0.001)
-    # the contact starts after about (2.0 - 0.105 - 1.0) / 0.22 s
-    assert event["stamp"] == pytest.approx(0.895 / 0.22, abs=0.02)
+    # the contact starts after about (2.0 - 0.105 - 1.0) / 0.22 s, plus the half of the ramp
+    # up to 0.22 m/s at the Burger's acceleration limit that is lost
+    ramp_s = 0.22 / BURGER.max_linear_accel_mps2
+    assert event["stamp"] == pytest.approx(0.895 / 0.22 + ramp_s / 2, abs=0.02)
     odom = rec.msgs[("r1", "odom")]
     assert odom[30]["linear"] == pytest.approx(0.22)
     assert odom[-1]["linear"] == 0.0  # pushing against the wall, not moving
@@ -101,7 +104,9 @@ def test_turning_in_place_against_a_wall_is_free(make_world: MakeWorld) -> None:
         sim.run_for(5.0)
         sim.set_command("r1", 0.0, 1.0)
         sim.run_for(1.0)
-        assert sim.robots[0].yaw == pytest.approx(1.0, abs=0.01)
+        # 1 rad/s for 1 s, less half the ramp up to it at the angular acceleration limit
+        ramp_s = 1.0 / BURGER.max_angular_accel_rps2
+        assert sim.robots[0].yaw == pytest.approx(1.0 - ramp_s / 2, abs=0.01)
     finally:
         sim.close()
 
@@ -133,6 +138,6 @@ def test_commands_are_clamped_and_unknown_robots_refused(make_world: MakeWorld) 
     sim, rec = simulate(make_world(6.0, 6.0, robots=[{"id": "r1", "x": 3, "y": 3}]), {}, 0.0)
     assert not sim.set_command("ghost", 0.1, 0.0)
     path = make_world(6.0, 6.0, robots=[{"id": "r1", "x": 3.0, "y": 3.0}])
-    _, rec = simulate(path, {"r1": (5.0, -10.0)}, 0.5)
+    _, rec = simulate(path, {"r1": (5.0, -10.0)}, 1.0)  # time to reach both limits
     last = rec.msgs[("r1", "odom")][-1]
     assert (last["linear"], last["angular"]) == (pytest.approx(0.22), pytest.approx(-2.84))

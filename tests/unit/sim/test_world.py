@@ -155,7 +155,7 @@ def test_a_bare_map_is_a_world_with_one_robot_on_free_ground(tmp_path: Path) -> 
     world = load_world(write_map(tmp_path, draw(3.0, 3.0, [(0.0, 0.0, 3.0, 0.5)])))
     assert [r.robot_id for r in world.robots] == ["r1"]
     r = world.robots[0]
-    assert world.blocked(r.x, r.y, world.params.footprint_radius_m) is None
+    assert world.blocked(r.x, r.y, world.default_model.footprint_radius_m) is None
 
 
 def test_extra_robots_are_placed_apart_on_free_ground() -> None:
@@ -163,9 +163,9 @@ def test_extra_robots_are_placed_apart_on_free_ground() -> None:
     ids = [r.robot_id for r in world.robots]
     assert ids[:2] == ["r1", "r2"] and len(set(ids)) == 10
     for i, a in enumerate(world.robots):
-        assert world.blocked(a.x, a.y, world.params.footprint_radius_m) is None
+        assert world.blocked(a.x, a.y, world.default_model.footprint_radius_m) is None
         for b in world.robots[i + 1 :]:
-            assert np.hypot(a.x - b.x, a.y - b.y) >= 2 * world.params.footprint_radius_m
+            assert np.hypot(a.x - b.x, a.y - b.y) >= 2 * world.default_model.footprint_radius_m
     assert [r.robot_id for r in world.with_robot_count(1).robots] == ["r1"]
 
 
