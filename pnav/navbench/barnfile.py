@@ -73,7 +73,9 @@ def barn_document(world: BarnWorld) -> dict[str, Any]:
         "name": world.name,
         "map": f"maps/{world.name}.yaml",
         "wall_height": WALL_HEIGHT_M,
-        "robots": [{"id": "r1", "x": _r(x), "y": _r(y), "yaw": _r(yaw, 6), "model": robot.name}],
+        "robots": [
+            {"id": "r1", "x": _r(x), "y": _r(y), "yaw": _r(yaw, 6), "model": robot.world_ref}
+        ],
         "obstacles": obstacle_entries(world),
         "benchmark": {
             "format": FORMAT,

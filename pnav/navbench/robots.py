@@ -27,6 +27,13 @@ class RobotFit:
     name: str
     max_linear_mps: float
     footprint_radius_m: float
+    # what a world file's robot entry names for the sim to load it: a shipped model's name,
+    # or a model file's absolute path ("": the name)
+    ref: str = ""
+
+    @property
+    def world_ref(self) -> str:
+        return self.ref or self.name
 
     def __post_init__(self) -> None:
         if self.max_linear_mps <= 0 or self.footprint_radius_m <= 0:
@@ -39,10 +46,11 @@ class RobotFit:
 def resolve_model(name: str) -> RobotFit:
     """The robot model ``name`` (a name from ``models/`` or a model file's path); a
     ModelError (a UsageError) naming the known models when there is none."""
-    from common.robotmodel import load_model
+    from common.robotmodel import load_model, model_names
 
     model = load_model(name)
-    return RobotFit(model.name, model.max_linear_mps, model.footprint_radius_m)
+    ref = name if name in model_names() else str(Path(name).resolve())
+    return RobotFit(model.name, model.max_linear_mps, model.footprint_radius_m, ref)
 
 
 def for_model(world: BenchmarkWorld, robot: RobotFit, folder: Path) -> BenchmarkWorld:
@@ -61,7 +69,7 @@ def for_model(world: BenchmarkWorld, robot: RobotFit, folder: Path) -> Benchmark
         doc = yaml.safe_load(world.world_file.read_text())
         doc["map"] = str(world.map_file.resolve())  # the copy lives elsewhere
         for entry in doc["robots"]:
-            entry["model"] = robot.name
+            entry["model"] = robot.world_ref
         folder.mkdir(parents=True, exist_ok=True)
         world_file = folder / f"{world.name}__{robot.name}.yaml"
         world_file.write_text(yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))

@@ -17,17 +17,16 @@ from pnav import cli
 from pnav.navbench import barn, worlds_cli
 from pnav.navbench.barn import BarnLayout, field_boxes, generate_barn_world, time_limit
 from pnav.navbench.barnfile import write_barn_world
-from pnav.navbench.robots import RobotFit
+from pnav.navbench.robots import RobotFit, resolve_model
 from pnav.navbench.worldfile import occupied_cells, read_benchmark
 from services.sim.world import load_world
 from tests.unit.navbench.conftest import min_clearance
 
 pytestmark = pytest.mark.timeout(120)
 
-# a robot of the Jackal's size (models/jackal.yaml: the circle inscribed in its 0.508 x 0.430
-# m body) and its top speed
-JACKAL_SIZE = RobotFit("jackal_sized", 2.0, 0.22)
-BURGER = RobotFit("burger", 0.22, 0.105)
+# the shipped models, as the sim loads them from the world files written here
+JACKAL = resolve_model("jackal")  # 2 m/s, the circle inscribed in its 0.508 x 0.430 m body
+BURGER = resolve_model("turtlebot3_burger")
 LAYOUT = BarnLayout()
 
 
@@ -49,17 +48,17 @@ def world_truth(path: Path) -> tuple[np.ndarray, float]:
 
 def test_same_level_seed_and_robot_give_the_same_bytes(tmp_path: Path) -> None:
     for folder in ("a", "b"):
-        write_barn_world(generate_barn_world("medium", 7, JACKAL_SIZE), tmp_path / folder)
+        write_barn_world(generate_barn_world("medium", 7, JACKAL), tmp_path / folder)
     for rel in ("barn_medium_s7.yaml", "maps/barn_medium_s7.yaml", "maps/barn_medium_s7.pgm"):
         assert (tmp_path / "a" / rel).read_bytes() == (tmp_path / "b" / rel).read_bytes()
-    other = generate_barn_world("medium", 8, JACKAL_SIZE)
-    assert other.boxes != generate_barn_world("medium", 7, JACKAL_SIZE).boxes
+    other = generate_barn_world("medium", 8, JACKAL)
+    assert other.boxes != generate_barn_world("medium", 7, JACKAL).boxes
 
 
 def test_the_goal_lies_10_m_straight_ahead_and_the_start_2_m_below_the_field(
     tmp_path: Path,
 ) -> None:
-    bench = read_benchmark(write_barn_world(generate_barn_world("easy", 3, JACKAL_SIZE), tmp_path))
+    bench = read_benchmark(write_barn_world(generate_barn_world("easy", 3, JACKAL), tmp_path))
     x, y, yaw = bench.start
     assert yaw == pytest.approx(math.pi / 2, abs=1e-6)  # facing +y, the field
     heading = (math.cos(yaw), math.sin(yaw))
@@ -73,13 +72,13 @@ def test_the_goal_lies_10_m_straight_ahead_and_the_start_2_m_below_the_field(
     for ob in load_world(bench.world_file).obstacles:
         low, high = ob.y - ob.size[1] / 2, ob.y + ob.size[1] / 2
         assert field_low - 1e-9 <= low and high <= field_high + 1e-9
-    assert (bench.protocol, bench.model, bench.goal_tolerance_m) == ("barn", "jackal_sized", 1.0)
+    assert (bench.protocol, bench.model, bench.goal_tolerance_m) == ("barn", "jackal", 1.0)
     assert (bench.top_speed_mps, bench.time_limit_s) == (2.0, 100.0)
     assert bench.optimal_time_s == pytest.approx(bench.reference_length_m / 2.0, abs=1e-3)
 
 
 def test_the_map_has_only_the_walls_the_obstacles_only_the_sim_world(tmp_path: Path) -> None:
-    world = generate_barn_world("hard", 2, JACKAL_SIZE)
+    world = generate_barn_world("hard", 2, JACKAL)
     path = write_barn_world(world, tmp_path)
     loaded = load_world(path)
     mapped = occupied_cells(loaded.grid)
@@ -98,12 +97,10 @@ def test_the_robots_disc_fits_along_the_stored_path_in_the_world_as_loaded(
     tmp_path: Path,
 ) -> None:
     for level, seed in (("easy", 0), ("medium", 1), ("hard", 4)):
-        bench = read_benchmark(
-            write_barn_world(generate_barn_world(level, seed, JACKAL_SIZE), tmp_path)
-        )
+        bench = read_benchmark(write_barn_world(generate_barn_world(level, seed, JACKAL), tmp_path))
         truth, res = world_truth(bench.world_file)
         clear = min_clearance(truth, res, bench.reference_path)
-        assert clear >= JACKAL_SIZE.footprint_radius_m + 0.015, (level, seed, clear)
+        assert clear >= JACKAL.footprint_radius_m + 0.015, (level, seed, clear)
         # the path goes through the field: there is no way round it
         assert min(p[1] for p in bench.reference_path) < LAYOUT.field_y[0]
         assert max(p[1] for p in bench.reference_path) > LAYOUT.field_y[1]
@@ -111,9 +108,10 @@ def test_the_robots_disc_fits_along_the_stored_path_in_the_world_as_loaded(
 
 def test_a_bigger_robot_gets_a_world_with_room_for_it() -> None:
     small = generate_barn_world("hard", 5, BURGER)
-    big = generate_barn_world("hard", 5, JACKAL_SIZE)
+    big = generate_barn_world("hard", 5, JACKAL)
     assert small.attempts <= big.attempts  # same stream: the Burger fits through more fields
     assert min_clearance(big.occupied, 0.05, big.reference.points) >= 0.22 + 0.015
+    assert (JACKAL.footprint_radius_m, BURGER.footprint_radius_m) == (0.22, 0.105)
     with pytest.raises(UsageError, match="no hard world passable for huge"):
         generate_barn_world("hard", 5, RobotFit("huge", 1.0, 2.3), max_attempts=3)
 
@@ -134,7 +132,7 @@ def test_boxes_cover_exactly_the_occupied_cells() -> None:
 
 
 def test_levels_fill_more_and_leave_less_room_from_easy_to_hard() -> None:
-    worlds = {lv: [generate_barn_world(lv, s, JACKAL_SIZE) for s in range(8)] for lv in barn.LEVELS}
+    worlds = {lv: [generate_barn_world(lv, s, JACKAL) for s in range(8)] for lv in barn.LEVELS}
 
     def mean(level: str, value: str) -> float:
         got = [getattr(w.difficulty, value, None) or getattr(w, value) for w in worlds[level]]

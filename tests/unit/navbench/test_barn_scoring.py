@@ -14,15 +14,16 @@ from pnav.navbench import barn
 from pnav.navbench.barn import generate_barn_world
 from pnav.navbench.barnfile import write_barn_world
 from pnav.navbench.metrics import RunResult, barn_score, evaluate_run
-from pnav.navbench.robots import RobotFit, for_model, too_big
+from pnav.navbench.robots import RobotFit, for_model, resolve_model, too_big
 from pnav.navbench.worldfile import load_suite, read_benchmark
 from services.sim.world import load_world
 
 pytestmark = pytest.mark.timeout(60)
 
-JACKAL_SIZE = RobotFit("jackal_sized", 2.0, 0.22)
+JACKAL = resolve_model("jackal")
 GOAL = (2.4, 10.7)
-SUITE = Path(__file__).resolve().parents[3] / "worlds" / "barn"
+ROOT = Path(__file__).resolve().parents[3]
+SUITE = ROOT / "worlds" / "barn"
 
 
 def score(time_s: float, length_m: float = 10.0) -> float:
@@ -79,9 +80,19 @@ def test_barns_time_limit_and_collision_rules() -> None:
 
 def test_a_world_run_with_another_model_is_scored_at_its_top_speed(tmp_path: Path) -> None:
     bench = read_benchmark(
-        write_barn_world(generate_barn_world("easy", 1, JACKAL_SIZE), tmp_path / "suite")
+        write_barn_world(generate_barn_world("easy", 1, JACKAL), tmp_path / "suite")
     )
-    slower = RobotFit("slower", 1.0, 0.3)
+    # a model of its own file: the Jackal at half its top speed
+    model_file = tmp_path / "slower.yaml"
+    text = (ROOT / "models" / "jackal.yaml").read_text()
+    text = text.replace("name: jackal", "name: slower")
+    model_file.write_text(text.replace("max_linear_mps: 2.0", "max_linear_mps: 1.0"))
+    slower = resolve_model(str(model_file))
+    assert (slower.name, slower.max_linear_mps, slower.world_ref) == (
+        "slower",
+        1.0,
+        str(model_file),
+    )
     moved = for_model(bench, slower, tmp_path / "worlds")
     assert (moved.top_speed_mps, moved.model) == (1.0, "slower")
     assert moved.optimal_time_s == pytest.approx(bench.reference_length_m / 1.0)
@@ -90,12 +101,13 @@ def test_a_world_run_with_another_model_is_scored_at_its_top_speed(tmp_path: Pat
     # the stack runs a copy of the world whose robot is that model; same map, same obstacles
     assert moved.world_file != bench.world_file and moved.world_file.parent == tmp_path / "worlds"
     copy = yaml.safe_load(moved.world_file.read_text())
-    assert [r["model"] for r in copy["robots"]] == ["slower"]
+    assert [r["model"] for r in copy["robots"]] == [str(model_file)]
     original, loaded = load_world(bench.world_file), load_world(moved.world_file)
     assert loaded.obstacles == original.obstacles
+    assert [r.model.max_linear_mps for r in loaded.robots] == [1.0]  # the sim builds it
     assert (loaded.grid.cells == original.grid.cells).all()
     # its own model: the world file as it is
-    same = for_model(bench, JACKAL_SIZE, tmp_path / "worlds")
+    same = for_model(bench, JACKAL, tmp_path / "worlds")
     assert same.world_file == bench.world_file and same.time_limit_s == 100.0
 
 
@@ -103,9 +115,9 @@ def test_the_default_protocol_keeps_its_time_limit_and_warns_of_a_bigger_robot(
     tmp_path: Path,
 ) -> None:
     worlds = load_suite(SUITE)[:3]
-    moved = for_model(worlds[0], JACKAL_SIZE, tmp_path)
+    moved = for_model(worlds[0], JACKAL, tmp_path)
     assert moved.time_limit_s == worlds[0].time_limit_s  # 8 OT at the Burger's speed: generous
     assert moved.optimal_time_s == pytest.approx(worlds[0].reference_length_m / 2.0)
     # the Burger's worlds were checked for a 0.105 m disc: a Jackal may not fit
-    assert too_big(worlds, JACKAL_SIZE) == [w.name for w in worlds]
+    assert too_big(worlds, JACKAL) == [w.name for w in worlds]
     assert too_big(worlds, RobotFit("tiny", 0.2, 0.1)) == []
