@@ -200,7 +200,8 @@ def barn_suite_markdown(worlds: Sequence[BarnWorld], command: str) -> str:
                 "(*The BARN protocol*). Written by:",
                 f"```sh\n{command}\n```",
                 "The output does not depend on the machine: the same command writes the same "
-                "bytes.",
+                "bytes (a model given as a file is named by its absolute path in the world "
+                "files; a shipped model by its name).",
                 "## The protocol",
                 f"- Robot: `{robot.name}` (top speed {robot.max_linear_mps} m/s, footprint "
                 f"radius {robot.footprint_radius_m} m); every world has a path for its disc "
