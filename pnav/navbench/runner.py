@@ -314,6 +314,7 @@ def run(args: argparse.Namespace) -> int:
         "machine": machine(),
         "suite": str(args.suite),
         "model": getattr(args, "model", None) or "the world's own",
+        "goal_tolerance_m": sorted({w.goal_tolerance_m for w in worlds}),
         "worlds": [w.name for w in worlds],
         "combos": [c.label for c in combos],
         "runs_per_world": args.runs,

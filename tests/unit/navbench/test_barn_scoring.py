@@ -4,15 +4,19 @@ score at its clip edges (2 OT and 8 OT), the 1 m success rule, BARN's time limit
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
 import yaml
 
-from pnav.navbench import barn
+from pnav import cli
+from pnav.navbench import barn, runner
+from pnav.navbench import episode as episode_module
 from pnav.navbench.barn import generate_barn_world
 from pnav.navbench.barnfile import write_barn_world
+from pnav.navbench.episode import Episode, Outcome
 from pnav.navbench.metrics import RunResult, barn_score, evaluate_run
 from pnav.navbench.robots import RobotFit, for_model, resolve_model, too_big
 from pnav.navbench.worldfile import load_suite, read_benchmark
@@ -121,3 +125,36 @@ def test_the_default_protocol_keeps_its_time_limit_and_warns_of_a_bigger_robot(
     # the Burger's worlds were checked for a 0.105 m disc: a Jackal may not fit
     assert too_big(worlds, JACKAL) == [w.name for w in worlds]
     assert too_big(worlds, RobotFit("tiny", 0.2, 0.1)) == []
+
+
+def test_bench_nav_with_a_model_runs_a_copy_of_each_world_and_scores_at_its_speed(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    seen: list[Episode] = []
+
+    async def run_episode(episode: Episode, log_dir: Path | None = None) -> Outcome:
+        seen.append(episode)  # the stack stands in: it arrives 0.9 m short of the goal
+        return Outcome("goal", 20.0, [(0.0, 2.4, 0.7), (20.0, 2.4, 9.8)], [], 0.9, wall_s=1.0)
+
+    monkeypatch.setattr(episode_module, "run_episode", run_episode)
+    report_dir = tmp_path / "report"
+    args = cli.build_parser().parse_args(
+        [
+            *("bench", "nav", "--suite", str(ROOT / "worlds" / "barn_protocol")),
+            *("--levels", "easy", "--worlds", "1", "--combos", "GOTO_AVOID/turn_then_move"),
+            *("--model", "turtlebot3_burger", "--in-process"),
+            *("--json", str(tmp_path / "nav.json"), "--report", str(report_dir)),
+        ]
+    )
+    assert runner.run(args) == 0
+    (episode,) = seen
+    assert episode.world == report_dir / "logs" / "worlds" / "barn_easy_000__turtlebot3_burger.yaml"
+    assert (episode.goal, episode.goal_tolerance_m, episode.time_limit_s) == ((2.4, 10.7), 1.0, 910)
+    assert load_world(episode.world).robots[0].model.name == "turtlebot3_burger"
+    (run,) = json.loads((tmp_path / "nav.json").read_text())["runs"]
+    ot = run["reference_length_m"] / 0.22
+    assert run["optimal_time_s"] == pytest.approx(ot, abs=1e-3)
+    assert (run["outcome"], run["score"]) == ("success", 0.5)  # 20 s is under 2 OT (91 s)
+    readme = (report_dir / "README.md").read_text()
+    assert "within the goal tolerance (1 m)" in readme and "`turtlebot3_burger`" in readme
+    assert "warning" not in capsys.readouterr().err  # the Burger fits where the Jackal does
