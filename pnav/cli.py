@@ -154,6 +154,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--suite", type=Path, default=Path("worlds/barn"), help="suite folder (worlds/barn)"
     )
     nav.add_argument("--runs", type=count, default=1, help="runs per world and combo, seed = run")
+    nav.add_argument(
+        "--model",
+        metavar="NAME|FILE",
+        help="run and score every world with this robot model (OT at its top speed); "
+        "default: each world's own (worlds/barn: the Burger)",
+    )
     nav.add_argument("--levels", help="only these levels, comma-separated (e.g. easy,medium)")
     nav.add_argument(
         "--worlds", metavar="N|NAMES", help="the first N worlds of each level, or these names"

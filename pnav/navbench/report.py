@@ -295,7 +295,10 @@ def readme(records: Sequence[RunRecord], meta: dict[str, Any]) -> str:
             if meta.get("pacing") == "lag"
             else "in lockstep with the stack (the same world and seed give the same run)"
         )
-        + "; success: within the goal tolerance (0.3 m), no collision, within the time limit",
+        + "; success: within the goal tolerance"
+        + f" ({' / '.join(f'{t:g}' for t in meta.get('goal_tolerance_m', [0.3]))} m),"
+        + " no collision, within the time limit"
+        + (f"; robot model `{meta['model']}`" if meta.get("model") else ""),
         "",
         *(["- **interrupted** (Ctrl-C): only the runs done so far"] if meta["interrupted"] else []),
         "## Summary",

@@ -37,6 +37,7 @@ if TYPE_CHECKING:
     # parser: pnav imports this module lazily, and the tests import it without a stack
     from pnav.navbench.episode import Combo, Episode, Outcome
     from pnav.navbench.report import RunRecord
+    from pnav.navbench.robots import RobotFit
     from pnav.navbench.workers import EpisodeWorkers
     from pnav.navbench.worldfile import BenchmarkWorld
 
@@ -231,10 +232,30 @@ def load_monolith() -> Callable[[Episode], Any]:
     return function
 
 
+def with_model(
+    worlds: list[BenchmarkWorld], robot: RobotFit | None, folder: Path
+) -> list[BenchmarkWorld]:
+    """``--model NAME``: every world run and scored with that robot model
+    (``pnav.navbench.robots.for_model``); None: each world with its own."""
+    if robot is None:
+        return worlds
+    from pnav.navbench.robots import for_model, too_big
+
+    tight = too_big(worlds, robot)
+    if tight:
+        print(
+            f"warning: {len(tight)} world(s) were made for a smaller robot than {robot.name} "
+            f"(footprint radius {robot.footprint_radius_m} m): it may not fit through "
+            f"{', '.join(tight[:5])}{' ...' if len(tight) > 5 else ''}",
+            file=sys.stderr,
+        )
+    return [for_model(w, robot, folder) for w in worlds]
+
+
 def command_line(args: argparse.Namespace) -> str:
     parts = ["pnav bench nav", f"--suite {args.suite}", f"--runs {args.runs}"]
-    for option in ("levels", "worlds", "combos", "json", "report", "compare"):
-        if getattr(args, option) is not None:
+    for option in ("model", "levels", "worlds", "combos", "json", "report", "compare"):
+        if getattr(args, option, None) is not None:
             parts.append(f"--{option} {getattr(args, option)}")
     return " ".join(parts + (["--monolith"] if args.monolith else []))
 
@@ -247,12 +268,16 @@ def run(args: argparse.Namespace) -> int:
     from pnav.bench.report import emit, machine
     from pnav.navbench import compare, report
     from pnav.navbench.episode import MAX_LAG_S
+    from pnav.navbench.robots import resolve_model
     from pnav.navbench.worldfile import load_suite
 
     if args.runs < 1:
         raise UsageError("--runs must be 1 or more")
     combos = pick_combos(args.combos, shipped_combos())
     worlds = select_worlds(load_suite(args.suite), args.levels, args.worlds)
+    robot = resolve_model(args.model) if getattr(args, "model", None) else None
+    logs = args.report / "logs" if args.report else Path(tempfile.mkdtemp(prefix="pnav-nav-"))
+    worlds = with_model(worlds, robot, logs / "worlds")
     before: list[dict[str, Any]] = []
     if args.compare is not None:
         try:
@@ -260,7 +285,6 @@ def run(args: argparse.Namespace) -> int:
         except (OSError, ValueError, KeyError) as exc:
             raise UsageError(f"--compare {args.compare}: not a bench nav JSON ({exc})") from None
     monolith = load_monolith() if args.monolith else None
-    logs = args.report / "logs" if args.report else Path(tempfile.mkdtemp(prefix="pnav-nav-"))
     plan = Plan(worlds, combos, args.runs, logs, args.report, monolith, pacing=args.pacing)
     total = len(worlds) * len(combos) * args.runs * (2 if monolith else 1)
     print(f"{total} episodes; logs in {logs}", file=sys.stderr)
@@ -289,6 +313,8 @@ def run(args: argparse.Namespace) -> int:
         "wall_s": round(time.monotonic() - progress.started, 1),
         "machine": machine(),
         "suite": str(args.suite),
+        "model": getattr(args, "model", None) or "the world's own",
+        "goal_tolerance_m": sorted({w.goal_tolerance_m for w in worlds}),
         "worlds": [w.name for w in worlds],
         "combos": [c.label for c in combos],
         "runs_per_world": args.runs,

@@ -117,6 +117,8 @@ class BenchmarkWorld:
     generator: dict[str, Any]
     # in the world file but not on the map: only the lidar sees them (the sim's `obstacles`)
     obstacles: tuple[ObstacleSpec, ...] = ()
+    protocol: str = "default"  # or "barn": obstacles only in the sim world (barnfile.py)
+    model: str = ""  # the robot model the world was made for ("": the Burger, before models)
 
     @property
     def inflation_m(self) -> float:
@@ -196,6 +198,8 @@ def read_benchmark(path: str | Path) -> BenchmarkWorld:
         generator=generator if isinstance(generator, dict) else {},
         # parsed (and checked) as the sim parses them; only then is the map loaded twice
         obstacles=load_world(path).obstacles if doc.get("obstacles") else (),
+        protocol=str(bench.get("protocol", "default")),
+        model=str(bench.get("model", "")),
     )
 
 

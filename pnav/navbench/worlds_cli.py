@@ -1,10 +1,12 @@
 """``pnav worlds generate``: write a suite of BARN-style benchmark worlds.
 
     pnav worlds generate --out DIR [--count N] [--seed S] [--levels easy,medium,hard] [--png]
+                         [--protocol default|barn] [--model NAME]
 
 writes N worlds per level (world i of a level drawn with seed S * 1000 + i) as DIR/NAME.yaml
 plus DIR/maps/NAME.{yaml,pgm}, with --png a preview DIR/preview/NAME.png of each, and
-DIR/SUITE.md (the command, the levels, a table of the worlds); prints the same table. This
+DIR/SUITE.md (the command, the levels, a table of the worlds); prints the same table.
+``--protocol barn`` writes BARN-protocol worlds for ``--model`` (``pnav.navbench.barn``). This
 module imports nothing heavy at load time: ``pnav``'s parser is built on every command.
 """
 
@@ -14,14 +16,32 @@ import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from common.errors import UsageError
 
 if TYPE_CHECKING:
+    from pnav.navbench.difficulty import Difficulty
     from pnav.navbench.generator import GeneratedWorld
+    from pnav.navbench.search import ReferencePath
+
+
+class SuiteWorld(Protocol):
+    """What the per-level means need of a generated world, of either protocol."""
+
+    @property
+    def level(self) -> str: ...
+    @property
+    def fill_ratio(self) -> float: ...
+    @property
+    def reference(self) -> ReferencePath: ...
+    @property
+    def difficulty(self) -> Difficulty: ...
+
 
 DEFAULT_LEVELS = "easy,medium,hard"
+PROTOCOLS = ("default", "barn")
+BARN_DEFAULT_MODEL = "jackal"  # the BARN Challenge's robot
 COLUMNS = ("world", "level", "seed", "tries", "fill", "L_ref m", "OT s", "limit s")
 METRIC_COLUMNS = ("closest m", "visib m", "dispers", "char m", "tortuos")
 
@@ -38,6 +58,17 @@ def add_worlds_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentPa
         "--levels", default=DEFAULT_LEVELS, help=f"comma-separated levels ({DEFAULT_LEVELS})"
     )
     gen.add_argument("--png", action="store_true", help="also write preview/NAME.png per world")
+    gen.add_argument(
+        "--protocol",
+        choices=PROTOCOLS,
+        default="default",
+        help="default: the obstacles are in the map, for the Burger; barn: BARN's protocol "
+        "(obstacles only in the sim world, goal 10 m ahead, success within 1 m, BARN's time "
+        "limit), for --model (jackal)",
+    )
+    gen.add_argument(
+        "--model", help="robot model the worlds are made for (--protocol barn; default jackal)"
+    )
 
 
 def command_line(args: argparse.Namespace) -> str:
@@ -46,6 +77,8 @@ def command_line(args: argparse.Namespace) -> str:
         f"pnav worlds generate --out {args.out} --count {args.count} --seed {args.seed} "
         f"--levels {args.levels}"
     )
+    if getattr(args, "protocol", "default") == "barn":
+        line += f" --protocol barn --model {args.model or BARN_DEFAULT_MODEL}"
     return line + (" --png" if args.png else "")
 
 
@@ -76,7 +109,7 @@ def table_rows(worlds: Sequence[GeneratedWorld]) -> list[list[str]]:
     return rows
 
 
-def level_means(worlds: Sequence[GeneratedWorld]) -> list[list[str]]:
+def level_means(worlds: Sequence[SuiteWorld]) -> list[list[str]]:
     """Per level: the mean fill, reference length and difficulty metrics."""
     rows = []
     for level in dict.fromkeys(w.level for w in worlds):
@@ -168,21 +201,33 @@ def world_header(command: str) -> str:
     )
 
 
-def generate(args: argparse.Namespace) -> int:
-    from pnav.navbench.generator import LEVELS, generate_suite
-    from pnav.navbench.render import draw_generated, write_world_png
-    from pnav.navbench.worldfile import is_benchmark_world, write_world
-
+def checked_levels(args: argparse.Namespace, known: Sequence[str]) -> list[str]:
+    """``--levels``, ``--count`` and ``--seed`` checked (UsageError); the levels."""
     levels = [lv.strip() for lv in str(args.levels).split(",") if lv.strip()]
-    unknown = [lv for lv in levels if lv not in LEVELS]
+    unknown = [lv for lv in levels if lv not in known]
     if not levels or unknown:
         raise UsageError(
-            f"--levels: unknown {', '.join(unknown) or '(none)'}; known: {', '.join(LEVELS)}"
+            f"--levels: unknown {', '.join(unknown) or '(none)'}; known: {', '.join(known)}"
         )
     if not 1 <= args.count <= 1000:
         raise UsageError(f"--count must be within 1..1000, got {args.count}")
     if args.seed < 0:
         raise UsageError(f"--seed must not be negative, got {args.seed}")
+    return levels
+
+
+def generate(args: argparse.Namespace) -> int:
+    from pnav.navbench.generator import LEVELS, generate_suite
+    from pnav.navbench.render import draw_generated, write_world_png
+    from pnav.navbench.worldfile import write_world
+
+    if getattr(args, "protocol", "default") == "barn":
+        return generate_barn(args)
+    if getattr(args, "model", None):
+        raise UsageError(
+            "--model needs --protocol barn (the default protocol's worlds are for the Burger)"
+        )
+    levels = checked_levels(args, list(LEVELS))
     command = command_line(args)
     worlds = generate_suite(levels, args.count, args.seed)
     out: Path = args.out
@@ -195,8 +240,43 @@ def generate(args: argparse.Namespace) -> int:
     print(text_table((*COLUMNS, *METRIC_COLUMNS), table_rows(worlds)))
     print()
     print(text_table(MEAN_COLUMNS, level_means(worlds)))
-    print(f"\nwrote {len(worlds)} world{'s' if len(worlds) != 1 else ''} to {out}")
-    written = {w.name for w in worlds}
+    return finish(out, [w.name for w in worlds])
+
+
+def generate_barn(args: argparse.Namespace) -> int:
+    """``--protocol barn``: the same files, the obstacles as world obstacles (barnfile.py)."""
+    from pnav.navbench import barnfile
+    from pnav.navbench.barn import LEVELS, generate_barn_suite
+    from pnav.navbench.robots import resolve_model
+
+    levels = checked_levels(args, list(LEVELS))
+    robot = resolve_model(args.model or BARN_DEFAULT_MODEL)
+    command = command_line(args)
+    worlds = generate_barn_suite(levels, args.count, args.seed, robot)
+    out: Path = args.out
+    header = (
+        f"BARN-protocol benchmark world, written by `{command}`.\n"
+        "Generated: do not edit (the reference path is computed for this map and these "
+        "obstacles). Fields: docs/NAVBENCH.md."
+    )
+    for world in worlds:
+        barnfile.write_barn_world(world, out, header=header)
+        if args.png:
+            barnfile.write_preview(out / "preview" / f"{world.name}.png", world)
+    (out / "SUITE.md").write_text(barnfile.barn_suite_markdown(worlds, command))
+    print(text_table((*barnfile.COLUMNS, *METRIC_COLUMNS), barnfile.table_rows(worlds)))
+    print()
+    print(text_table(MEAN_COLUMNS, level_means(worlds)))
+    return finish(out, [w.name for w in worlds])
+
+
+def finish(out: Path, written_names: Sequence[str]) -> int:
+    """Say what was written, and warn of other benchmark worlds in the folder."""
+    from pnav.navbench.worldfile import is_benchmark_world
+
+    count = len(written_names)
+    print(f"\nwrote {count} world{'s' if count != 1 else ''} to {out}")
+    written = set(written_names)
     stale = [p.name for p in sorted(out.glob("*.yaml")) if p.stem not in written]
     stale = [n for n in stale if is_benchmark_world(out / n)]
     if stale:
