@@ -51,8 +51,11 @@ async def test_up_goal_strategy_cancel_status_down(tmp_path: Path) -> None:
         "up",
         "--world",
         "open_room",
+        # real time, and a goal 4.2 m away: the goal must still be live for `status` and
+        # `cancel` after four CLI runs (at rate 5 a 2.8 m goal was reached in about 3 s of
+        # wall time, a race the CLI won only while the machine was slow)
         "--rate",
-        "5",
+        "1",
         "--zenoh-port",
         str(free_port()),
         "--log-dir",
@@ -67,8 +70,8 @@ async def test_up_goal_strategy_cancel_status_down(tmp_path: Path) -> None:
         children = psutil.Process(up.pid).children(recursive=True)
         assert len(children) >= 6  # sim, bridge, strategy, planner, controller, decision
 
-        code, out = await pnav("goal", "3.0", "3.0", env=env)
-        assert code == 0 and "goal 1 set to (3.0, 3.0)" in out, out
+        code, out = await pnav("goal", "4.0", "4.0", env=env)
+        assert code == 0 and "goal 1 set to (4.0, 4.0)" in out, out
 
         code, out = await pnav("strategy", "GOTO_DIRECT", env=env)
         assert code == 0 and "r1: accepted" in out, out
@@ -76,7 +79,7 @@ async def test_up_goal_strategy_cancel_status_down(tmp_path: Path) -> None:
         assert code == 2 and "unknown strategy 'NO_SUCH_THING'" in out, out
 
         code, out = await pnav("status", "--once", env=env)
-        assert code == 0 and "GOTO_DIRECT" in out and "(3.0,3.0)" in out, out
+        assert code == 0 and "GOTO_DIRECT" in out and "(4.0,4.0)" in out, out
 
         code, out = await pnav("cancel", env=env)
         assert code == 0 and "goal 1 cancelled" in out, out
