@@ -12,14 +12,14 @@ import functools
 import json
 import logging
 import time
-from collections.abc import AsyncIterator, Mapping
+from collections.abc import AsyncIterator, Mapping, Sequence
 from contextlib import asynccontextmanager
 from typing import Any
 
 import asyncpg
 
 from common.bus import Notifier
-from common.errors import ConnectionFailure
+from common.errors import ConnectionFailure, InternalError, UsageError
 from common.outage import DatabaseUnavailable, Outage, is_connection_error, outage_for
 
 log = logging.getLogger(__name__)
@@ -177,6 +177,39 @@ class Database:
         row = {**image, "id": row_id} if image is not None and row_id is not None else None
         self.notifier.notify(table, robot, row_id, row)
         return value
+
+    async def write_rows(
+        self,
+        table: str,
+        sql: str,
+        *args: Any,
+        images: Sequence[tuple[str, Mapping[str, Any]]],
+    ) -> list[int]:
+        """Run one statement (autocommit) that inserts one row per robot of ``images`` and
+        returns ``(id, robot_id)`` per row; then notify ``table`` for each robot with its
+        id and its image (the row's contract columns as written). One commit and one round
+        trip for all the robots: batching across robots (DESIGN.md section 7).
+
+        The robots of ``images`` must be distinct: RETURNING's rows are paired with the
+        images by robot, whatever order they come in. The ids, in the order of ``images``.
+        """
+        robots = [robot for robot, _ in images]
+        if len(set(robots)) != len(robots):
+            raise UsageError(f"write_rows on {table}: one row per robot, got {robots}")
+        async with self.pool.acquire() as conn:
+            records = await conn.fetch(sql, *args)
+        ids = {record[1]: record[0] for record in records}
+        notify = self.notifier.notify
+        for robot, image in images:
+            row_id = ids.get(robot)
+            if row_id is not None:
+                notify(table, robot, row_id, {**image, "id": row_id})
+        missing = [robot for robot in robots if robot not in ids]
+        if missing or len(records) != len(robots):
+            raise InternalError(
+                f"write_rows on {table}: {len(records)} rows returned for robots {robots}"
+            )
+        return [ids[robot] for robot in robots]
 
     @asynccontextmanager
     async def transaction(self) -> AsyncIterator[Changes]:

@@ -13,6 +13,14 @@ server's superuser only to set the database up; every service then connects as i
 a Unix socket in a directory only this OS user can open; on it the superuser ``postgres``
 keeps ``trust`` (pgserver's own tooling and restarts use it), every other role must give its
 password (scram-sha-256).
+
+Zenoh between the local processes (:class:`LocalZenoh`, ``PNAV_LOCAL_ZENOH``): by default
+each process is a *peer* that connects to the launcher's router and learns the other peers'
+loopback endpoints from it (gossip scouting), then sends to them directly; the router stays
+the rendezvous and the endpoint for clients (the CLI, a foreign service, the dashboard).
+A message then crosses one TCP link instead of two and the launcher forwards none of it
+(docs/BENCHMARKS.md, "Peer-to-peer Zenoh"). ``PNAV_LOCAL_ZENOH=client`` routes everything
+through the router, as compose does (deploy/docker-compose.yml keeps the router).
 """
 
 from __future__ import annotations
@@ -22,7 +30,7 @@ import contextlib
 import logging
 import os
 import secrets
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -34,8 +42,36 @@ from common.config import ZenohSettings
 from common.contract.grants import LOGIN_ROLES, role_name
 from common.contract.migrate import apply_migrations
 from common.contract.roles import bootstrap, is_superuser, role_url
+from common.errors import ConfigError
 from common.postmaster import Keeper, Lifeline, start_lifeline
 from common.testing import EmbeddedPostgres, free_port
+
+# Every local peer listens on loopback only, on a port of the kernel's choosing: the router
+# tells the others where (gossip), so nothing needs a fixed port but the router.
+PEER_LISTEN: tuple[str, ...] = ("tcp/127.0.0.1:0",)
+
+
+@dataclass(frozen=True)
+class LocalZenoh:
+    """How the processes of a local stack reach each other over Zenoh."""
+
+    # peer: directly, the router as rendezvous; client: every message through the router
+    mode: str = "peer"
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("peer", "client"):
+            raise ConfigError(f"PNAV_LOCAL_ZENOH={self.mode!r} must be peer or client")
+
+    @classmethod
+    def from_env(cls, env: Mapping[str, str] | None = None) -> LocalZenoh:
+        env = os.environ if env is None else env
+        return cls(mode=env.get("PNAV_LOCAL_ZENOH", "").strip().lower() or cls.mode)
+
+    def settings(self, router: str) -> ZenohSettings:
+        """The Zenoh settings of a local process, given the router's endpoint."""
+        if self.mode == "client":
+            return ZenohSettings(mode="client", connect=(router,))
+        return ZenohSettings(mode="peer", connect=(router,), listen=PEER_LISTEN, multicast=False)
 
 
 @dataclass
@@ -89,9 +125,13 @@ def _require_passwords(data_dir: Path) -> None:
 
 @contextlib.asynccontextmanager
 async def local_stack(
-    data_dir: Path | None = None, zenoh_port: int | None = None
+    data_dir: Path | None = None,
+    zenoh_port: int | None = None,
+    local_zenoh: LocalZenoh | None = None,
 ) -> AsyncIterator[LocalStack]:
-    """Start Postgres (embedded unless PNAV_DATABASE_URL is set) and a router; migrate."""
+    """Start Postgres (embedded unless PNAV_DATABASE_URL is set) and a router; migrate.
+    ``local_zenoh``: how the stack's processes use Zenoh (default: PNAV_LOCAL_ZENOH)."""
+    local_zenoh = local_zenoh if local_zenoh is not None else LocalZenoh.from_env()
     postgres: EmbeddedPostgres | None = None
     lifeline: Lifeline | None = None
     keeper: Keeper | None = None
@@ -125,7 +165,7 @@ async def local_stack(
                 await conn.close()
             if keeper is not None:
                 keeping = asyncio.create_task(keeper.run(stop_keeper), name="postgres-keeper")
-            zenoh = ZenohSettings(mode="client", connect=(endpoint,))
+            zenoh = local_zenoh.settings(endpoint)
             yield LocalStack(url, zenoh, router, postgres, keeper, role_urls)
         finally:
             stop_keeper.set()

@@ -10,7 +10,7 @@ the service does, bookkeeping included.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from datetime import UTC, datetime
 
 from common.contract import keys
@@ -56,19 +56,16 @@ class MemoryDecisionSource:
                 )
         return out
 
+    async def write_robot_commands(self, ds: Sequence[RobotDecision]) -> list[int | None]:
+        """As WRITE_COMMANDS2ROBOT_SQL: every row and its ``treated_by`` first (one
+        statement commits them together), then one notification per robot."""
+        written = [self._insert(keys.COMMAND2ROBOT, _command_row(d), d.considered_ids) for d in ds]
+        for row_id, row in written:
+            self.contract.changed(keys.COMMAND2ROBOT, row["robot_id"], row_id, row)
+        return [row_id for row_id, _ in written]
+
     async def write_robot_command(self, d: RobotDecision) -> int:
-        row = {
-            "robot_id": d.robot_id,
-            "stamp": d.stamp,
-            "linear_mps": d.linear_mps,
-            "angular_rps": d.angular_rps,
-            "recommendation_id": d.recommendation_id,
-            "source": d.source,
-            "considered_ids": list(d.considered_ids),
-            "reason": d.reason,
-            "created_at": datetime.now(UTC),
-        }
-        return self._commit(keys.COMMAND2ROBOT, row, d.considered_ids)
+        return self._commit(keys.COMMAND2ROBOT, _command_row(d), d.considered_ids)
 
     async def write_system_command(self, d: SystemDecision) -> int:
         row = {
@@ -88,14 +85,32 @@ class MemoryDecisionSource:
     def _commit(self, table: str, row: Row, considered: tuple[int, ...]) -> int:
         """The decision row and ``treated_by`` of what it considered, then the notification
         (as the statement's CTE commits both before ``Database.write`` notifies)."""
+        row_id, row = self._insert(table, row, considered)
+        self.contract.changed(table, row["robot_id"], row_id, row)
+        return row_id
+
+    def _insert(self, table: str, row: Row, considered: tuple[int, ...]) -> tuple[int, Row]:
         row_id = self.contract.insert(table, row, notify=False)
         by_id = self.contract[keys.COMMAND_RECOMMENDATION].by_id
         for rec_id in considered:
             rec = by_id.get(rec_id)
             if rec is not None:  # UPDATE ... WHERE id = ANY(...) skips a missing row too
                 rec["treated_by"] = row_id
-        self.contract.changed(table, row["robot_id"], row_id, row)
-        return row_id
+        return row_id, row
+
+
+def _command_row(d: RobotDecision) -> Row:
+    return {
+        "robot_id": d.robot_id,
+        "stamp": d.stamp,
+        "linear_mps": d.linear_mps,
+        "angular_rps": d.angular_rps,
+        "recommendation_id": d.recommendation_id,
+        "source": d.source,
+        "considered_ids": list(d.considered_ids),
+        "reason": d.reason,
+        "created_at": datetime.now(UTC),
+    }
 
 
 def _everyone(_robot_id: str) -> bool:

@@ -8,9 +8,10 @@ and, as a fallback, every period F (which also drives the 0.1 s re-issue). Each 
    re-issue is due; every robot after the store read the table): the store keeps them from
    the rows' images and reads the table only as its fallback;
 2. per robot, :func:`decide_robot` and :func:`decide_system` say what is due;
-3. a target rule is created per row to write (:class:`IssueRobotCommand`,
-   :class:`IssueSystemCommand`), and the engine is hurried for that robot so they run in the
-   very next activation rather than F later.
+3. target rules are created for what is to be written: one :class:`IssueRobotCommand` with
+   the velocity commands of every robot decided (one statement, one commit for all of
+   them), one :class:`IssueSystemCommand` per system command; the engine is hurried for each
+   robot decided so they run in the very next activation rather than F later.
 
 The target rules sit ahead of this rule's clone in the queue, so the next look at the table
 already sees what they wrote (``treated_by``, the last command issued): nothing is decided
@@ -28,7 +29,12 @@ from collections.abc import Callable, Iterable
 
 from common.contract import keys
 from common.engine import Engine, Rule
-from services.decision.arbitration import Recommendation, decide_robot, decide_system
+from services.decision.arbitration import (
+    Recommendation,
+    RobotDecision,
+    decide_robot,
+    decide_system,
+)
 from services.decision.robot_command import IssueRobotCommand
 from services.decision.system_command import IssueSystemCommand
 from services.decision.view import DecisionView
@@ -62,21 +68,23 @@ class MetaDecision(Rule):
         return self.clock_started
 
     def actions(self) -> None:
+        commands: list[RobotDecision] = []
+        systems: list[Rule] = []
         for robot_id in sorted(self.live):
             recs = self.live[robot_id]
             robot_recs = [r for r in recs if r.kind == "robot"]
             system_recs = [r for r in recs if r.kind == "system"]
-            last = self.store.issued(robot_id)
-            targets: list[Rule] = []
-            command = decide_robot(robot_id, robot_recs, last, self.now)
+            command = decide_robot(robot_id, robot_recs, self.store.issued(robot_id), self.now)
             if command is not None:
-                targets.append(IssueRobotCommand(self.store, command))
+                commands.append(command)
             system = decide_system(robot_id, system_recs, self.now)
             if system is not None:
-                targets.append(IssueSystemCommand(self.store, system))
-            if targets:
-                self.targets += targets
+                systems.append(IssueSystemCommand(self.store, system))
+            if command is not None or system is not None:
                 self.hurry(robot_id)
+        if commands:  # every robot's command in one write (one statement, one commit)
+            self.targets.append(IssueRobotCommand(self.store, commands))
+        self.targets += systems
 
     def rule_generation(self) -> Iterable[Rule]:
         return [*self.targets, self.clone()]

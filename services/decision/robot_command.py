@@ -1,13 +1,16 @@
-"""Target rule: write one decided velocity command to command2robot.
+"""Target rule: write the velocity commands decided in one activation to command2robot.
 
-Created by the meta-decision rule with the decision already made; this rule only writes it
-(the command2robot row and ``treated_by`` of the rows considered, in one statement), then
-notifies command2robot so the bridge sends it at once.
+Created by the meta-decision rule with the decisions already made (one per robot, every
+robot it decided for in that activation); this rule only writes them: one command2robot row
+per robot and ``treated_by`` of the rows each considered, all in ONE statement and one
+commit (batching across robots: at 10 robots a command's cost is mostly its commit), then
+one notification per robot, with its row's image, so the bridge sends each at once.
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 
 from common import log
 from common.engine import Rule
@@ -20,29 +23,38 @@ logger = logging.getLogger("pnav.decision")
 class IssueRobotCommand(Rule):
     scenario = "decision"
 
-    def __init__(self, store: DecisionView, decision: RobotDecision) -> None:
+    def __init__(self, store: DecisionView, decisions: Sequence[RobotDecision]) -> None:
         self.store = store
-        self.decision = decision
-        self.robot_id = decision.robot_id  # a wake or hurry for this robot runs it
+        self.decisions = tuple(decisions)
+        robots = {d.robot_id for d in self.decisions}
+        # a wake or hurry for its one robot runs it; a batch of several robots' commands is
+        # no one robot's and runs in whichever activation comes next
+        self.robot_id = next(iter(robots)) if len(robots) == 1 else None
 
     async def actions(self) -> None:
-        d = self.decision
-        previous = self.store.issued(d.robot_id)
-        row_id = await self.store.write_robot_command(d)  # the store remembers it as issued
-        # A re-issue of the same winner happens 10 times a sim second: only a change of
-        # source (or a stop) is worth a line at INFO.
-        changed = previous is None or previous.source != d.source
-        log.event(
-            logger,
-            logging.INFO if changed else logging.DEBUG,
-            "command2robot",
-            robot=d.robot_id,
-            id=row_id,
-            stamp=round(d.stamp, 3),
-            source=d.source,
-            linear=d.linear_mps,
-            angular=d.angular_rps,
-            recommendation_id=d.recommendation_id,
-            considered=len(d.considered_ids),
-            reason=d.reason,
-        )
+        store = self.store
+        previous = [store.issued(d.robot_id) for d in self.decisions]
+        ids = await store.write_robot_commands(self.decisions)  # remembered as issued
+        for d, before, row_id in zip(self.decisions, previous, ids, strict=True):
+            if row_id is None:
+                continue  # refused by the database: the source logged why
+            # A re-issue of the same winner happens 10 times a sim second: only a change of
+            # source (or a stop) is worth a line at INFO.
+            changed = before is None or before.source != d.source
+            level = logging.INFO if changed else logging.DEBUG
+            if not logger.isEnabledFor(level):
+                continue
+            log.event(
+                logger,
+                level,
+                "command2robot",
+                robot=d.robot_id,
+                id=row_id,
+                stamp=round(d.stamp, 3),
+                source=d.source,
+                linear=d.linear_mps,
+                angular=d.angular_rps,
+                recommendation_id=d.recommendation_id,
+                considered=len(d.considered_ids),
+                reason=d.reason,
+            )

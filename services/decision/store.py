@@ -1,9 +1,9 @@
-"""The decision service's one data path: its SQL, its source Protocol, and its store.
+"""The decision service's one data path: its source and its store.
 
-- :class:`DecisionSource`: the raw typed reads and writes (one read of every live
-  recommendation, the newest command per robot, and the two writes);
-  :class:`PgDecisionSource` is its Postgres implementation (pnav.monolith.decision has the
-  in-memory one).
+- :class:`~services.decision.source.DecisionSource`: the raw typed reads and writes, with
+  their SQL (services/decision/source.py; re-exported here with
+  :class:`~services.decision.source.PgDecisionSource`, its Postgres implementation);
+  pnav.monolith.decision has the in-memory one.
 - :class:`DecisionStore`: the one object the service holds. It keeps the last command issued
   per robot (read from the table on the first look and for robots regained from another
   replica) and the live recommendations (from the rows' images, CONTRACT.md "Row images";
@@ -12,8 +12,9 @@
 
 Each write is a single statement (a data-modifying CTE): the decision row and the
 ``treated_by`` of the rows it considered commit together, in one round trip, which keeps
-the decision's latency to one query out (and, with images, none in); each notification
-carries the row's image.
+the decision's latency to one query out (and, with images, none in); the commands of every
+robot decided in one activation go in one statement; each notification carries its row's
+image.
 """
 
 from __future__ import annotations
@@ -21,14 +22,12 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections import defaultdict
-from collections.abc import Callable
-from typing import Any, Final, Protocol
+from collections.abc import Callable, Sequence
+from typing import Final
 
 from common import log
 from common.bus import Notification
 from common.contract import keys
-from common.db import Database
 from common.freshness import Sequences
 from services.decision.arbitration import (
     Issued,
@@ -38,169 +37,15 @@ from services.decision.arbitration import (
     reissue_due,
 )
 from services.decision.live import LiveRecommendations, recommendation_of
+from services.decision.source import DecisionSource, PgDecisionSource
+
+__all__ = ["REREAD_S", "DecisionSource", "DecisionStore", "PgDecisionSource"]
 
 logger = logging.getLogger("pnav.decision")
 
 # The period fallback (store clock s): the live recommendations are read from the table at
 # least this often even while every notification carried its image, in case one was lost.
 REREAD_S: Final = 0.25
-
-# Every robot, with each of its live recommendations (none: one row of NULLs). The table is
-# append-only and grows all run long, so each robot must be served by the
-# (robot_id, kind, expires_stamp) index: `OFFSET 0` keeps the planner from flattening the
-# lateral subquery into one hash join over the whole table (a sequential scan, measured at
-# 20 ms for 200k rows against 0.1 ms this way).
-LIVE_SQL: Final = """
-SELECT r.robot_id, c.id, c.kind, c.source, c.priority, c.linear_mps, c.angular_rps,
-       c.system_command, c.reason, c.treated_by, c.expires_stamp
-FROM robot r
-LEFT JOIN LATERAL (
-    SELECT id, kind, source, priority, linear_mps, angular_rps, system_command, reason,
-           treated_by, expires_stamp
-    FROM command_recommendation c
-    WHERE c.robot_id = r.robot_id AND c.kind IN ('robot', 'system') AND c.expires_stamp > $1
-    OFFSET 0
-) c ON true
-"""
-
-LAST_ISSUED_SQL: Final = """
-SELECT r.robot_id, c.id, c.stamp, c.linear_mps, c.angular_rps, c.recommendation_id, c.source
-FROM robot r
-CROSS JOIN LATERAL (
-    SELECT id, stamp, linear_mps, angular_rps, recommendation_id, source
-    FROM command2robot c WHERE c.robot_id = r.robot_id ORDER BY id DESC LIMIT 1
-) c
-"""
-
-WRITE_COMMAND2ROBOT_SQL: Final = """
-WITH decision AS (
-    INSERT INTO command2robot (robot_id, stamp, linear_mps, angular_rps, recommendation_id,
-                               source, considered_ids, reason)
-    VALUES ($1, $2, $3, $4, $5, $6, $7::bigint[], $8)
-    RETURNING id
-), treated AS (
-    UPDATE command_recommendation SET treated_by = decision.id
-    FROM decision WHERE command_recommendation.id = ANY($7::bigint[])
-)
-SELECT id FROM decision
-"""
-
-WRITE_SYSTEM_COMMAND_SQL: Final = """
-WITH decision AS (
-    INSERT INTO system_command (robot_id, command, recommendation_id, considered_ids, reason,
-                                status, stamp)
-    VALUES ($1, $2, $3, $4::bigint[], $5, 'pending', $6)
-    RETURNING id
-), treated AS (
-    UPDATE command_recommendation SET treated_by = decision.id
-    FROM decision WHERE command_recommendation.id = ANY($4::bigint[])
-)
-SELECT id FROM decision
-"""
-
-
-async def live_recommendations(db: Any, now: float) -> dict[str, list[Recommendation]]:
-    """Robot id -> its live recommendations (every robot present, maybe with none)."""
-    out: dict[str, list[Recommendation]] = defaultdict(list)
-    for row in await db.fetch(LIVE_SQL, now):
-        robot_id = row["robot_id"]
-        if row["id"] is None:
-            out[robot_id] = []
-            continue
-        out[robot_id].append(Recommendation.of_row(row))
-    return dict(out)
-
-
-async def last_issued(db: Any) -> dict[str, Issued]:
-    """Robot id -> its newest command2robot row (robots that never had one are absent)."""
-    return {
-        row["robot_id"]: Issued(
-            row["id"],
-            row["stamp"],
-            row["linear_mps"],
-            row["angular_rps"],
-            row["recommendation_id"],
-            row["source"],
-        )
-        for row in await db.fetch(LAST_ISSUED_SQL)
-    }
-
-
-async def write_robot_command(db: Database, d: RobotDecision) -> int:
-    """Insert the command2robot row, mark what it considered, then notify command2robot
-    with the row's image (the bridge sends it without reading the table)."""
-    value = await db.write(
-        keys.COMMAND2ROBOT,
-        d.robot_id,
-        WRITE_COMMAND2ROBOT_SQL,
-        d.robot_id,
-        d.stamp,
-        d.linear_mps,
-        d.angular_rps,
-        d.recommendation_id,
-        d.source,
-        list(d.considered_ids),
-        d.reason,
-        image=d.image(),
-    )
-    return int(value)
-
-
-async def write_system_command(db: Database, d: SystemDecision) -> int:
-    """Insert the pending system_command row, mark what it considered, then notify with
-    the row's image."""
-    value = await db.write(
-        keys.SYSTEM_COMMAND,
-        d.robot_id,
-        WRITE_SYSTEM_COMMAND_SQL,
-        d.robot_id,
-        d.command,
-        d.recommendation_id,
-        list(d.considered_ids),
-        d.reason,
-        d.stamp,
-        image=d.image(),
-    )
-    return int(value)
-
-
-class DecisionSource(Protocol):
-    """The decision service's reads and writes of the contract, typed."""
-
-    async def live_recommendations(self, now: float) -> dict[str, list[Recommendation]]:
-        """Robot id -> its live robot and system recommendations (every robot present)."""
-        ...
-
-    async def last_issued(self) -> dict[str, Issued]:
-        """Robot id -> its newest command2robot row (robots never commanded are absent)."""
-        ...
-
-    async def write_robot_command(self, d: RobotDecision) -> int:
-        """Insert the command2robot row and mark ``treated_by``; then notify. Its id."""
-        ...
-
-    async def write_system_command(self, d: SystemDecision) -> int:
-        """Insert the pending system_command row and mark ``treated_by``; then notify."""
-        ...
-
-
-class PgDecisionSource:
-    """:class:`DecisionSource` on Postgres (pool reads, ``Database.write`` for the writes)."""
-
-    def __init__(self, db: Database) -> None:
-        self.db = db
-
-    async def live_recommendations(self, now: float) -> dict[str, list[Recommendation]]:
-        return await live_recommendations(self.db.pool, now)
-
-    async def last_issued(self) -> dict[str, Issued]:
-        return await last_issued(self.db.pool)
-
-    async def write_robot_command(self, d: RobotDecision) -> int:
-        return await write_robot_command(self.db, d)
-
-    async def write_system_command(self, d: SystemDecision) -> int:
-        return await write_system_command(self.db, d)
 
 
 def _everyone(_robot_id: str) -> bool:
@@ -279,13 +124,16 @@ class DecisionStore:
     def issued(self, robot_id: str) -> Issued | None:
         return self._issued.get(robot_id)
 
-    async def write_robot_command(self, d: RobotDecision) -> int:
-        row_id = await self.source.write_robot_command(d)
-        self._issued[d.robot_id] = Issued(
-            row_id, d.stamp, d.linear_mps, d.angular_rps, d.recommendation_id, d.source
-        )
-        self._live.treated(d.robot_id, d.considered_ids, row_id)
-        return row_id
+    async def write_robot_commands(self, ds: Sequence[RobotDecision]) -> list[int | None]:
+        ids = await self.source.write_robot_commands(ds)
+        for d, row_id in zip(ds, ids, strict=True):
+            if row_id is None:
+                continue  # refused: the robot's last issued command stays what it was
+            self._issued[d.robot_id] = Issued(
+                row_id, d.stamp, d.linear_mps, d.angular_rps, d.recommendation_id, d.source
+            )
+            self._live.treated(d.robot_id, d.considered_ids, row_id)
+        return ids
 
     async def write_system_command(self, d: SystemDecision) -> int:
         row_id = await self.source.write_system_command(d)

@@ -7,6 +7,7 @@ with anything. The rules import this module and the pure ``arbitration`` only.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Protocol
 
 from services.decision.arbitration import Issued, Recommendation, RobotDecision, SystemDecision
@@ -28,6 +29,9 @@ class DecisionView(Protocol):
         """The newest command2robot row of ``robot_id`` (None: none to carry on from)."""
         ...
 
-    async def write_robot_command(self, d: RobotDecision) -> int: ...
+    async def write_robot_commands(self, ds: Sequence[RobotDecision]) -> list[int | None]:
+        """One command2robot row per decision (one robot each), in one commit; the ids in
+        order (None: the row was refused). The store remembers each as issued."""
+        ...
 
     async def write_system_command(self, d: SystemDecision) -> int: ...

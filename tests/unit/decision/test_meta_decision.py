@@ -21,6 +21,7 @@ from common.engine import Engine
 from pnav.monolith.contract import MemoryContract
 from pnav.monolith.decision import MemoryDecisionSource, decision_engine
 from services.decision.arbitration import REISSUE_PERIOD_S, RobotDecision
+from services.decision.robot_command import IssueRobotCommand
 from services.decision.store import REREAD_S
 
 Command = tuple[Any, ...]
@@ -124,7 +125,8 @@ class Bench:
         return self.contract.insert(keys.COMMAND_RECOMMENDATION, row)
 
     def rows(self, table: str) -> list[dict[str, Any]]:
-        return list(self.contract[table].all_rows())
+        """In the order written (the in-memory table lists them robot by robot)."""
+        return sorted(self.contract[table].all_rows(), key=lambda r: int(r["id"]))
 
     def treated_by(self, *ids: int) -> list[int | None]:
         by_id = self.contract[keys.COMMAND_RECOMMENDATION].by_id
@@ -317,3 +319,32 @@ async def test_only_the_robots_that_changed_or_are_due_are_decided_and_hurried()
     assert await bench.tick(10.05) == Seen([(10.05, "turn_then_move", 0.1, 0.0, two, (two,))])
     assert await bench.tick(10.1) == Seen([], [], True)  # r1's re-issue is due, not r2's
     assert bench.engine.hurried_for == ["r1"]
+
+
+async def test_robots_decided_in_one_activation_are_written_by_one_rule() -> None:
+    bench = Bench(robots=("r1", "r2", "r3"))
+    a = bench.recommend("turn_then_move", 10, 0.2, 0.0, robot_id="r1")
+    b = bench.recommend("avoid_left", 50, 0.05, 0.8, robot_id="r2")
+    b_low = bench.recommend("turn_then_move", 10, 0.2, 0.1, robot_id="r2")
+    ran = bench.engine.stats_for(IssueRobotCommand).executed
+    #                     written this activation                                  hurried
+    assert await bench.tick(10.0) == Seen([], [], True)  # r1 and r2 decided; r3 has nothing
+    assert sorted(bench.engine.hurried_for, key=str) == ["r1", "r2"]
+    assert await bench.tick(10.0) == Seen(
+        [
+            (10.0, "turn_then_move", 0.2, 0.0, a, (a,)),  # r1's row
+            (10.0, "avoid_left", 0.05, 0.8, b, (b, b_low)),  # r2's row, its own provenance
+        ]
+    )
+    assert bench.engine.stats_for(IssueRobotCommand).executed == ran + 1  # one rule, two rows
+    r1, r2 = bench.rows(keys.COMMAND2ROBOT)
+    assert (r1["robot_id"], r2["robot_id"]) == ("r1", "r2")
+    assert bench.treated_by(a, b, b_low) == [r1["id"], r2["id"], r2["id"]]
+    assert await bench.tick(10.05) == Seen()  # both issued: within REISSUE_PERIOD_S, silence
+    assert await bench.tick(10.1) == Seen([], [], True)  # both due again
+    assert await bench.tick(10.1) == Seen(
+        [
+            (10.1, "turn_then_move", 0.2, 0.0, a, (a,)),
+            (10.1, "avoid_left", 0.05, 0.8, b, (b, b_low)),
+        ]
+    )

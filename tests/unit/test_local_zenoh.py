@@ -1,0 +1,80 @@
+"""Zenoh between the processes of a local stack (common.stack.LocalZenoh), on loopback.
+
+By default every local process is a peer: it connects to the launcher's router, learns the
+other peers' endpoints from it (gossip scouting) and then sends to them directly, so a
+notification crosses one link instead of two and the router forwards none of it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+
+import pytest
+
+from common import bus
+from common.bus import Notification, Notifier
+from common.config import ZenohSettings
+from common.contract import keys
+from common.errors import ConfigError
+from common.stack import PEER_LISTEN, LocalZenoh
+from common.testing import eventually, loopback_zenoh
+
+
+def test_local_processes_are_peers_unless_told_otherwise() -> None:
+    assert LocalZenoh.from_env({}).mode == "peer"
+    assert LocalZenoh.from_env({"PNAV_LOCAL_ZENOH": "client"}).mode == "client"
+    router = "tcp/127.0.0.1:7447"
+    assert LocalZenoh().settings(router) == ZenohSettings(
+        mode="peer", connect=(router,), listen=PEER_LISTEN, multicast=False
+    )
+    assert LocalZenoh("client").settings(router) == ZenohSettings(mode="client", connect=(router,))
+    with pytest.raises(ConfigError, match="PNAV_LOCAL_ZENOH='router' must be peer or client"):
+        LocalZenoh.from_env({"PNAV_LOCAL_ZENOH": "router"})
+
+
+async def test_peers_deliver_notifications_directly_once_the_router_introduced_them() -> None:
+    heard: list[Notification] = []
+    lock = threading.Lock()
+
+    def on(key: str, payload: bytes) -> None:
+        with lock:
+            heard.append(Notification.decode(key, payload))
+
+    def count() -> int:
+        with lock:
+            return len(heard)
+
+    with loopback_zenoh() as client_settings:
+        settings = LocalZenoh("peer").settings(client_settings.connect[0])
+        writer = await asyncio.to_thread(bus.open_session, settings)
+        reader = await asyncio.to_thread(bus.open_session, settings)
+        sub = bus.subscribe_threaded(reader, keys.notify_watch(keys.GOAL), on)
+        notifier = Notifier(writer)
+
+        def introduced() -> bool:
+            # the router told each about the other: they hold a session of their own
+            return reader.info.zid() in list(writer.info.peers_zid())
+
+        await eventually(introduced, what="the two peers connected to each other")
+
+        def first_heard() -> bool:
+            notifier.notify(keys.GOAL, "r1", 1, {"id": 1, "robot_id": "r1"})
+            return count() > 0
+
+        # a subscription takes a moment to reach the other peer: put until one arrives
+        await eventually(first_heard, what="a notification from one peer at the other")
+    # The router is closed now: what follows can only go from peer to peer.
+    try:
+        before = count()
+        for row_id in range(2, 22):
+            notifier.notify(keys.GOAL, "r1", row_id, {"id": row_id, "robot_id": "r1"})
+        await eventually(lambda: count() >= before + 20, what="20 notifications, no router")
+        with lock:
+            tail = heard[before:]
+        assert [n.id for n in tail] == list(range(2, 22))  # every one, once, in order
+        assert all(n.row == {"id": n.id, "robot_id": "r1"} for n in tail)
+    finally:
+        sub.undeclare()
+        writer.close()
+        reader.close()
