@@ -146,9 +146,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="navigation: success, SPL and BARN score of every strategy/planner combo per world",
         description="Runs the whole stack (sim at --rate max, in lockstep with it) in every "
         "world of a suite with every shipped strategy/planner combination, one episode per "
-        "world, combo and run. The whole shipped suite is 60 worlds x 4 combos = 240 "
-        "episodes, about 42 min on 2 cores (times --runs, twice with --monolith): --levels "
-        "and --worlds run a subset.",
+        "world, combo and run. The shipped suite with the first 4 combos (GOTO_AVOID, "
+        "GOTO_DIRECT) is 240 episodes, about 42 min on 2 cores; the 6 combos with GOTO_FAST, "
+        "about 1 h (times --runs, twice with --monolith): --levels, --worlds and --combos "
+        "run a subset.",
     )
     nav.add_argument(
         "--suite", type=Path, default=Path("worlds/barn"), help="suite folder (worlds/barn)"

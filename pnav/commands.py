@@ -19,7 +19,7 @@ from typing import Any
 import asyncpg
 
 from common.config import ServiceConfig
-from common.contract import keys, limits
+from common.contract import limits, people
 from common.errors import ContractError, UsageError
 from common.runtime import Runtime
 from pnav import stackfile
@@ -83,48 +83,18 @@ async def set_goal(
 
     A value the goal table would refuse raises ContractError before anything is written."""
     limits.check_goal(x, y, tolerance)
-    async with rt.database.transaction() as tx:
-        await tx.conn.execute(
-            "UPDATE goal SET status = 'superseded', reason = 'replaced by a new goal' "
-            "WHERE robot_id = $1 AND status = 'active'",
-            robot,
-        )
-        goal_id = await tx.conn.fetchval(
-            "INSERT INTO goal (robot_id, x, y, tolerance_m) "
-            "VALUES ($1, $2, $3, coalesce($4, 0.15)) RETURNING id",
-            robot,
-            x,
-            y,
-            tolerance,
-        )
-        tx.changed(keys.GOAL, robot, goal_id)
-    return int(goal_id)
+    return await people.set_goal(rt.database, robot, x, y, tolerance)
 
 
 async def cancel_goal(rt: Runtime, robot: str) -> int | None:
-    async with rt.database.transaction() as tx:
-        goal_id = await tx.conn.fetchval(
-            "UPDATE goal SET status = 'cancelled', reason = 'cancelled by user' "
-            "WHERE robot_id = $1 AND status = 'active' RETURNING id",
-            robot,
-        )
-        if goal_id is not None:
-            tx.changed(keys.GOAL, robot, goal_id)
-    return None if goal_id is None else int(goal_id)
+    return await people.cancel_goal(rt.database, robot)
 
 
 async def send_user_command(
     rt: Runtime, robot: str, command: str, argument: str | None, wait_s: float = 5.0
 ) -> tuple[str, str]:
     """Insert a user_command and wait for the strategy service's verdict (status, reason)."""
-    command_id = await rt.database.write(
-        keys.USER_COMMAND,
-        robot,
-        "INSERT INTO user_command (robot_id, command, argument) VALUES ($1, $2, $3) RETURNING id",
-        robot,
-        command,
-        argument,
-    )
+    command_id = await people.user_command(rt.database, robot, command, argument)
     deadline = time.monotonic() + wait_s
     while time.monotonic() < deadline:
         row = await rt.database.pool.fetchrow(

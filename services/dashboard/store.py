@@ -20,7 +20,7 @@ from typing import Any, Final, Protocol
 import asyncpg
 
 from common.bus import Notification
-from common.contract import keys
+from common.contract import keys, people
 from common.db import Database
 from services.dashboard import scene
 from services.dashboard.fleet import Fleet
@@ -127,46 +127,13 @@ class PgDashboardSource:
         return list(await self.db.pool.fetch(sql, list(ids)))
 
     async def set_goal(self, robot: str, x: float, y: float, tolerance: float | None) -> int:
-        """Supersede the robot's active goal and set a new one, in one transaction."""
-        async with self.db.transaction() as tx:
-            await tx.conn.execute(
-                "UPDATE goal SET status = 'superseded', reason = 'replaced by a new goal' "
-                "WHERE robot_id = $1 AND status = 'active'",
-                robot,
-            )
-            goal_id = await tx.conn.fetchval(
-                "INSERT INTO goal (robot_id, x, y, tolerance_m) "
-                "VALUES ($1, $2, $3, coalesce($4, 0.15)) RETURNING id",
-                robot,
-                x,
-                y,
-                tolerance,
-            )
-            tx.changed(keys.GOAL, robot, goal_id)
-        return int(goal_id)
+        return await people.set_goal(self.db, robot, x, y, tolerance)
 
     async def cancel_goal(self, robot: str) -> int | None:
-        async with self.db.transaction() as tx:
-            goal_id = await tx.conn.fetchval(
-                "UPDATE goal SET status = 'cancelled', reason = 'cancelled by user' "
-                "WHERE robot_id = $1 AND status = 'active' RETURNING id",
-                robot,
-            )
-            if goal_id is not None:
-                tx.changed(keys.GOAL, robot, goal_id)
-        return None if goal_id is None else int(goal_id)
+        return await people.cancel_goal(self.db, robot)
 
     async def user_command(self, robot: str, command: str, argument: str | None) -> int:
-        value = await self.db.write(
-            keys.USER_COMMAND,
-            robot,
-            "INSERT INTO user_command (robot_id, command, argument) "
-            "VALUES ($1, $2, $3) RETURNING id",
-            robot,
-            command,
-            argument,
-        )
-        return int(value)
+        return await people.user_command(self.db, robot, command, argument)
 
     async def add_strategy(self, request: NewStrategy) -> None:
         try:

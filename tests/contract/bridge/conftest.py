@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import time
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterable
 from typing import Any
 
 import asyncpg
@@ -157,6 +157,22 @@ async def bridge_with_world(
     bridge = await start_bridge(settings)
     await eventually(lambda: bridge.counters.worlds_applied >= 1, what="the world")
     return bridge
+
+
+async def subscribers_known(bridge: Bridge, key_exprs: Iterable[str], within: float = 20) -> None:
+    """Wait until the bridge's Zenoh session sees a matching subscriber on each key: until
+    then the router has no route for the bridge's puts there, and a notification put is
+    dropped (a fixed sleep was not enough on a loaded machine)."""
+    publishers = [bridge.runtime.zenoh.declare_publisher(key) for key in key_exprs]
+    try:
+        await eventually(
+            lambda: all(p.matching_status.matching for p in publishers),
+            what="the subscribers known to the bridge",
+            within=within,
+        )
+    finally:
+        for publisher in publishers:
+            publisher.undeclare()
 
 
 async def count(conn: asyncpg.Connection, table: str) -> int:

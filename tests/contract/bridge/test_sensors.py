@@ -16,6 +16,7 @@ from tests.contract.bridge.conftest import (
     FakeSim,
     bridge_with_world,
     count,
+    subscribers_known,
 )
 from tests.unit.bridge import payloads
 
@@ -25,12 +26,12 @@ pytestmark = pytest.mark.timeout(60)
 async def test_each_sensor_topic_becomes_its_row_and_notification(
     start_bridge: BridgeFactory, sim: FakeSim, conn: asyncpg.Connection
 ) -> None:
-    await bridge_with_world(start_bridge, sim, payloads.world())
+    bridge = await bridge_with_world(start_bridge, sim, payloads.world())
     notes = {
         table: sim.listen(keys.notify_watch(table))
         for table in (keys.ODOMETRY, keys.LASER_SCAN, keys.BATTERY, keys.COLLISION_EVENT)
     }
-    await asyncio.sleep(SETTLE_S)  # let the listeners' declarations reach the router
+    await subscribers_known(bridge, [keys.notify_key(table, "r1") for table in notes])
     sent = {
         keys.ODOMETRY: (keys.ODOM, payloads.odom(seq=4, stamp=12.5)),
         keys.LASER_SCAN: (keys.SCAN, payloads.scan(seq=2, stamp=12.4)),
