@@ -234,7 +234,8 @@ def test_payloads_follow_the_contract_and_cmd_vel_moves_the_robot(
         # the contract working, not breaking
         seqs = [m["seq"] for m in msgs]
         assert seqs[0] == 0 and seqs == sorted(set(seqs)), key  # rising, no repeat
-        assert len(seqs) >= 0.9 * (seqs[-1] + 1), key
+        sent = seqs[-1] + 1
+        assert sent - len(seqs) <= max(2, 0.1 * sent), key  # a short stream may lose one
     scan = listener.of(scan_key)[0]
     assert len(scan["ranges"]) == 360
     assert all(isinstance(r, float) for r in scan["ranges"])
