@@ -67,6 +67,15 @@ def path_in_robot_frame(path: PlannedPath, odom: Odometry) -> tr.FloatArray:
     return np.column_stack([c * dx + s * dy, -s * dx + c * dy])
 
 
+def stopping_speed(gap_m: float, lookahead_s: float, accel: float) -> float:
+    """The fastest speed v with v x lookahead_s + v^2 / (2 accel) <= gap_m: what still
+    stops within the gap after the lookahead (safety_stop's reach, services/controller)."""
+    if accel <= 0.0:
+        return gap_m / lookahead_s if lookahead_s > 0 else math.inf
+    t = lookahead_s
+    return accel * (math.sqrt(t * t + 2.0 * gap_m / accel) - t)
+
+
 def choose(
     scan: LaserScan, odom: Odometry, robot: Robot, path: PlannedPath, p: DwaParams
 ) -> Choice | None:
@@ -80,11 +89,12 @@ def choose(
     reach = p.obstacle_range_m or (top * (p.horizon_s + p.delay_s) + radius + 0.5)
     points = obstacles(scan, reach)
     accel = robot.max_linear_accel_mps2
-    # stop at the path's end, and stay below safety_stop's reach straight ahead
+    # stop at the path's end, and stay below safety_stop's reach straight ahead: its
+    # lookahead and the braking distance (v T + v^2 / 2a within the gap), or safety_stop
+    # stops the robot, and from a standstill the window's best may be a loop
     v_cap = math.sqrt(2.0 * accel * max(0.0, local.remaining_m)) * 0.8
-    straight = tr.straight_gap(points, radius) - radius - p.safety_margin_m
-    if p.safety_lookahead_s > 0:
-        v_cap = min(v_cap, max(0.0, straight) / p.safety_lookahead_s)
+    straight = max(0.0, tr.straight_gap(points, radius) - radius - p.safety_margin_m)
+    v_cap = min(v_cap, stopping_speed(straight, p.safety_lookahead_s, accel))
     win = tr.window(
         odom.linear_mps,
         odom.angular_rps,

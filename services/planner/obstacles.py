@@ -4,6 +4,12 @@ Nav2 calls this an obstacle layer: hits of the newest scan that are farther than
 from every obstacle of the map are placed in the world with the robot's pose at the scan's
 stamp (interpolated between the odometry rows around it), and the route is planned around
 them (routes.py) rather than through a pallet or a crate for the controllers to fight over.
+
+Obstacles are remembered for SEEN_MEMORY_S after the lidar last saw them, and forgotten
+sooner when a beam of a newer scan passes beyond them (the place is free: the obstacle
+moved, or was a pose error). Without the memory, a lidar that does not see all round (the
+Jackal's 270 degrees) made whatever lay behind the robot look free: the planner re-planned
+through it, the robot turned, saw it, and re-planned back, circling on the spot.
 """
 
 from __future__ import annotations
@@ -22,7 +28,10 @@ if TYPE_CHECKING:
 
 SEEN_RANGE_M = 2.5  # lidar hits farther than this are not used (pose error grows with range)
 UNMAPPED_M = 0.15  # a hit farther than this from every mapped obstacle is an unmapped one
-SEEN_MAX_AGE_S = 1.0  # sim s: older obstacles are not planned around
+SEEN_MAX_AGE_S = 1.0  # sim s: with no scan this recent, no obstacle is planned around
+SEEN_MEMORY_S = 5.0  # sim s: an obstacle no beam has seen since then is forgotten
+CLEAR_MARGIN_M = 0.1  # a beam this much beyond a remembered obstacle clears it
+MAX_REMEMBERED = 4000  # points kept per robot at most (the newest)
 POSE_MATCH_S = 0.05  # the scan's pose: odometry within this (sim s) of the scan's stamp
 POSES_KEPT = 90  # odometry poses remembered per robot (3 s at 30 Hz)
 OBSTACLE_BUCKET_M = 0.1  # obstacles within about this of one planned around are not new
@@ -35,12 +44,14 @@ NO_POINTS: Points = np.zeros((0, 2))
 
 @dataclass(frozen=True)
 class Seen:
-    """The unmapped obstacles of one laser scan: its hits farther than UNMAPPED_M from every
-    obstacle of the map, in the world frame (an (n, 2) array)."""
+    """The unmapped obstacles known after one laser scan: its hits farther than UNMAPPED_M
+    from every obstacle of the map, and those remembered from earlier scans, in the world
+    frame (an (n, 2) array; ``seen_at``: when the lidar last saw each, sim s)."""
 
     scan_id: int
     stamp: float
     points: Points
+    seen_at: np.ndarray[Any, np.dtype[np.float64]] = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass
@@ -101,7 +112,49 @@ def see(world: World, state: RobotState, scan: records.LaserScan) -> None:
         cols, rows, inside = grid.cells_of(hits)  # hits off the map are dropped
         mapped = grid.clearance[rows[inside], cols[inside]] <= UNMAPPED_M
         hits = hits[inside][~mapped]
-    state.seen = Seen(scan.id, scan.stamp, hits)
+    kept, kept_at = remembered(state.seen, scan, (x, y, yaw), hits)
+    points = np.concatenate((hits, kept)) if len(kept) else hits
+    seen_at = np.concatenate((np.full(len(hits), scan.stamp), kept_at))
+    state.seen = Seen(scan.id, scan.stamp, points[:MAX_REMEMBERED], seen_at[:MAX_REMEMBERED])
+
+
+def _bucket_keys(points: Points) -> np.ndarray[Any, np.dtype[np.int64]]:
+    cells = np.floor(points / OBSTACLE_BUCKET_M).astype(np.int64)
+    return cells[:, 0] * 1_000_003 + cells[:, 1]
+
+
+def remembered(
+    before: Seen | None,
+    scan: records.LaserScan,
+    pose: tuple[float, float, float],
+    hits: Points,
+) -> tuple[Points, np.ndarray[Any, np.dtype[np.float64]]]:
+    """The obstacles of ``before`` still worth planning around after ``scan``, and when each
+    was last seen: seen within SEEN_MEMORY_S, not where a new hit is (that one is newer), and
+    not cleared by ``scan``: a beam towards it, within SEEN_RANGE_M, reaching CLEAR_MARGIN_M
+    past it. An obstacle outside the lidar's field of view is kept: unseen is not free."""
+    if before is None or not len(before.points) or before.stamp > scan.stamp:
+        return NO_POINTS, np.zeros(0)  # nothing yet, or sim time went back: a new run
+    keep = scan.stamp - before.seen_at <= SEEN_MEMORY_S
+    points = before.points
+    if len(hits):
+        keep &= ~np.isin(_bucket_keys(points), _bucket_keys(hits))
+    x, y, yaw = pose
+    dx, dy = points[:, 0] - x, points[:, 1] - y
+    dist = np.hypot(dx, dy)
+    bearing = np.arctan2(dy, dx) - yaw - scan.angle_min
+    bearing = np.mod(bearing, 2.0 * math.pi)
+    n = len(scan.ranges)
+    beam = np.rint(bearing / scan.angle_increment).astype(np.int64) if n else bearing
+    in_view = (beam >= 0) & (beam < n) & (dist <= SEEN_RANGE_M)
+    if in_view.any():
+        ranges = np.asarray(scan.ranges, dtype=np.float64)
+        reach = np.where(in_view, ranges[np.clip(beam, 0, max(n - 1, 0))], np.nan)
+        with np.errstate(invalid="ignore"):
+            # inf: the beam met nothing; NaN (no reading) clears nothing
+            cleared = in_view & (np.isposinf(reach) | (reach > dist + CLEAR_MARGIN_M))
+        keep &= ~cleared
+    return points[keep], before.seen_at[keep]
 
 
 def recent(seen: Seen | None, now: float | None) -> Points:

@@ -40,12 +40,17 @@ STOP_VALIDITY_S = 0.5
 EVAL_PERIOD_S = 0.1  # sim s between two steps: a recommendation each, well inside VALIDITY_S
 REAR_MARGIN_M = 0.1  # beyond the footprint and the distance to back up
 FREER_HORIZON_M = 1.0  # how far the freer side is judged
+REAR_CONE_RAD = math.radians(30)  # beams this close to straight back see the rear
 
 
 def surroundings(
     scan: records.LaserScan, footprint_m: float, back_up_m: float
 ) -> tuple[bool, bool]:
-    """(nothing seen behind within the back-up's reach, the left half is the freer one)."""
+    """(nothing seen behind within the back-up's reach, the left half is the freer one).
+
+    A lidar with no beams behind (the Jackal's 270 degrees) cannot say the rear is clear:
+    it is not, and recovery rotates instead of backing up blind (safety_stop would stop
+    every blind reverse anyway)."""
     ranges = scan.ranges.astype(np.float64)
     angles = scan.angles()
     valid = np.isfinite(ranges) & (ranges >= scan.range_min - 1e-4)
@@ -53,11 +58,12 @@ def surroundings(
     x, y = finite * np.cos(angles), finite * np.sin(angles)
     behind = valid & (x < 0) & (np.abs(y) < footprint_m + 0.05)
     behind &= -x < footprint_m + back_up_m + REAR_MARGIN_M
+    sees_back = bool((np.abs(angles) >= math.pi - REAR_CONE_RAD).any())
     capped = np.where(valid, np.minimum(ranges, FREER_HORIZON_M), FREER_HORIZON_M)
     left, right = angles > 0, angles < 0
     left_open = float(capped[left].mean()) if left.any() else 0.0
     right_open = float(capped[right].mean()) if right.any() else 0.0
-    return not bool(behind.any()), left_open >= right_open
+    return sees_back and not bool(behind.any()), left_open >= right_open
 
 
 class Recovery(TargetRule):

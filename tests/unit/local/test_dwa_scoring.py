@@ -12,7 +12,7 @@ import pytest
 import pnav_local.trajectories as tr
 from common.contract.planned_path import PlannedPath
 from common.contract.records import Odometry, Robot
-from pnav_local.dwa import choose, command_for
+from pnav_local.dwa import choose, command_for, stopping_speed
 from pnav_local.params import DwaParams
 from tests.unit.controller.scans import BURGER, scan
 
@@ -196,3 +196,14 @@ def test_params_out_of_range_take_their_defaults() -> None:
     p = DwaParams.read({"dwa_horizon_s": -1, "dwa_linear_samples": 5, "dwa_speed_weight": "x"})
     assert p.horizon_s == DwaParams().horizon_s and p.linear_samples == 5
     assert p.weights.speed == DwaParams().weights.speed
+
+
+@pytest.mark.parametrize(
+    ("gap", "lookahead", "accel"), [(1.0, 0.2, 10.0), (0.3, 0.2, 2.5), (2.0, 0.0, 2.5)]
+)
+def test_the_speed_cap_stops_within_the_gap_after_safety_stops_lookahead(
+    gap: float, lookahead: float, accel: float
+) -> None:
+    v = stopping_speed(gap, lookahead, accel)
+    assert v * lookahead + v * v / (2 * accel) == pytest.approx(gap)  # safety_stop's reach
+    assert stopping_speed(0.0, lookahead, accel) == 0.0

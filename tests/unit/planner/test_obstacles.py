@@ -3,13 +3,15 @@ the scan's stamp, and the new plan they call for (no database, no engine)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
+from collections.abc import Callable
 
 import numpy as np
 import pytest
 
-from common.contract.records import Odometry
+from common.contract.records import LaserScan, Odometry
 from services.planner.obstacles import see
 from services.planner.routes import Router, Target
 from services.planner.world import MapData, RobotInfo, RobotState, World
@@ -83,3 +85,54 @@ def test_a_new_obstacle_on_the_route_calls_for_one_new_plan() -> None:
     see(router.world, robot, lidar(truth, 0.5, 1.5, 0.0, 3.0))
     router.route_for(robot, 0.5, 1.5, target, 3.0)
     assert robot.route is again  # ...once: the same crate is not new any more
+
+
+def front_lidar(truth: np.ndarray, x: float, y: float, yaw: float, stamp: float) -> LaserScan:
+    """A 270-degree lidar (the Jackal's): the 360-beam sweep's beams from -135 to +134 deg."""
+    full = lidar(truth, x, y, yaw, stamp)
+    ranges = np.concatenate((full.ranges[225:], full.ranges[:135]))
+    return dataclasses.replace(full, angle_min=-math.radians(135), ranges=ranges)
+
+
+def near_crate(robot: RobotState) -> int:
+    """How many known obstacles are at the crate at (2.5, 1.5)."""
+    assert robot.seen is not None
+    points = robot.seen.points
+    return int(np.sum((np.abs(points[:, 0] - 2.5) < 0.25) & (np.abs(points[:, 1] - 1.5) < 0.25)))
+
+
+def test_an_obstacle_out_of_the_lidars_view_is_remembered_until_a_beam_passes_or_it_is_old() -> (
+    None
+):
+    occupied = room()
+    router, robot = planner(occupied)
+    truth = occupied.copy()
+    truth[26:34, 46:54] = True  # a crate at (2.5, 1.5), 1 m ahead of the robot at first
+
+    def at(stamp: float, yaw: float, scan: Callable[..., LaserScan], world: np.ndarray) -> int:
+        robot.note_pose(odom(stamp, 1.5, 1.5, yaw))
+        see(router.world, robot, scan(world, 1.5, 1.5, yaw, stamp))
+        return near_crate(robot)
+
+    assert at(5.0, 0.0, front_lidar, truth) > 5  # seen ahead
+    seen = near_crate(robot)
+    assert at(5.2, math.pi, front_lidar, truth) == seen  # turned round: behind, out of view, kept
+    assert at(9.9, math.pi, front_lidar, truth) == seen  # 4.9 s unseen: still kept
+    assert at(10.1, math.pi, front_lidar, truth) == 0  # 5.1 s unseen: forgotten
+
+    assert at(11.0, 0.0, front_lidar, truth) > 5  # seen again
+    assert at(11.2, math.pi, lidar, occupied) == 0  # the crate went: a 360-degree beam passes
+
+
+def test_an_obstacle_seen_again_is_not_remembered_twice() -> None:
+    occupied = room()
+    router, robot = planner(occupied)
+    truth = occupied.copy()
+    truth[26:34, 46:54] = True
+    counts = []
+    for step in range(5):  # standing still, the same crate every 0.2 s
+        stamp = 5.0 + 0.2 * step
+        robot.note_pose(odom(stamp, 1.5, 1.5, 0.0))
+        see(router.world, robot, lidar(truth, 1.5, 1.5, 0.0, stamp))
+        counts.append(near_crate(robot))
+    assert counts == [counts[0]] * 5  # the newest scan's hits replace the remembered ones

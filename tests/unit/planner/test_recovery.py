@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from common.contract import keys
+from common.contract.records import LaserScan
 from services.planner.recovery import (
     BACK_UP,
     FAILED,
@@ -144,3 +145,14 @@ async def test_strategies_without_the_param_get_no_recovery_rule() -> None:
     p.goal(3.0, 0.0)
     await p.tick()
     assert set(p.running()) == {"move", "battery"}
+
+
+def test_a_lidar_with_no_beams_behind_never_calls_the_rear_clear() -> None:
+    from services.planner.recovery_rule import surroundings
+
+    def sweep(first_deg: float, beams: int) -> LaserScan:
+        ranges = np.full(beams, np.inf, dtype=np.float32)
+        return LaserScan(1, "r1", 1.0, math.radians(first_deg), math.radians(1), 0.1, 30.0, ranges)
+
+    assert surroundings(sweep(0.0, 360), 0.22, 0.3)[0]  # all round and nothing near: clear
+    assert not surroundings(sweep(-135.0, 270), 0.22, 0.3)[0]  # the Jackal's: blind behind
