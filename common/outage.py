@@ -53,6 +53,9 @@ _CONNECTION_ERRORS: tuple[type[BaseException], ...] = (
     asyncpg.AdminShutdownError,
     asyncpg.CrashShutdownError,
     ConnectionFailure,  # ours, e.g. the lease connection could not be opened
+    # a connection the server ended while it was idle: asyncpg sees the FATAL late and the
+    # next query fails with "cannot switch to state ..." (MagicStack/asyncpg#1069, #784)
+    asyncpg.InternalClientError,
 )
 
 

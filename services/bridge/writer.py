@@ -66,6 +66,7 @@ _CONNECTION_LOST = (
     asyncpg.InterfaceError,
     asyncpg.PostgresConnectionError,
     asyncpg.exceptions.OperatorInterventionError,  # admin shutdown, crash, cannot connect now
+    asyncpg.InternalClientError,  # a connection the server ended while idle (common.outage)
     ConnectionFailure,
 )
 

@@ -28,6 +28,12 @@ def lines(caplog: pytest.LogCaptureFixture) -> list[str]:
 def test_connection_errors_are_told_from_other_errors() -> None:
     assert is_connection_error(ConnectionRefusedError(111, "refused"))
     assert is_connection_error(asyncpg.ConnectionDoesNotExistError("closed"))
+    # the server ended an idle connection; asyncpg notices on the next query (asyncpg#1069)
+    assert is_connection_error(
+        asyncpg.InternalClientError(
+            "cannot switch to state 15; another operation (2) is in progress"
+        )
+    )
     wrapped = ConnectionFailure("cannot open the lease connection")
     wrapped.__cause__ = ConnectionRefusedError(111, "refused")
     assert is_connection_error(wrapped)
