@@ -11,6 +11,7 @@ ledger nothing is counted.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import json
 import logging
 import secrets
@@ -49,8 +50,12 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
         config.insert_json5("connect/endpoints", json.dumps(list(settings.connect)))
     if settings.listen:
         config.insert_json5("listen/endpoints", json.dumps(list(settings.listen)))
+    auth: dict[str, str] = {}
     if settings.user and settings.password:
         auth = {"user": settings.user, "password": settings.password}
+    if settings.users_file:
+        auth["dictionary_file"] = settings.users_file
+    if auth:
         config.insert_json5("transport/auth/usrpwd", json.dumps(auth))
     return config
 
@@ -68,9 +73,15 @@ def open_session(settings: ZenohSettings) -> zenoh.Session:
         ) from exc
 
 
-def start_router(listen: tuple[str, ...]) -> zenoh.Session:
-    """Run a Zenoh router inside this process, listening on ``listen`` endpoints."""
-    return open_session(ZenohSettings(mode="router", connect=(), listen=listen))
+def start_router(listen: tuple[str, ...], auth: ZenohSettings | None = None) -> zenoh.Session:
+    """Run a Zenoh router inside this process, listening on ``listen`` endpoints; with
+    ``auth``, it accepts only sessions whose user/password is in ``auth.users_file``."""
+    settings = ZenohSettings(mode="router", connect=(), listen=listen)
+    if auth is not None:
+        settings = dataclasses.replace(
+            settings, user=auth.user, password=auth.password, users_file=auth.users_file
+        )
+    return open_session(settings)
 
 
 def subscribe(

@@ -18,6 +18,9 @@ PNAV_ZENOH_CONFIG          path of a Zenoh JSON5 config file,    (none)
 PNAV_ZENOH_USER            user name this process authenticates  (none: no authentication)
                            as to the router (compose: its service)
 PNAV_ZENOH_PASSWORD        that user's password                  (none)
+PNAV_ZENOH_USERS_FILE      user:password lines this process      (none: accepts anyone)
+                           checks whoever links to it against
+                           (a local stack's router and peers)
 PNAV_ENGINE_PERIOD_MS      F: activation period and bound        50
 PNAV_ENGINE_MAX_RULES      N: most rules run per activation      1000
 PNAV_ENGINE_PAUSE_MS       P: least pause between activations    0
@@ -99,6 +102,9 @@ class ZenohSettings:
     # user/password authentication to the router (docs/DEPLOY.md, "Zenoh access control")
     user: str | None = None
     password: str | None = field(default=None, repr=False)
+    # the user/password dictionary a router or peer checks the sessions that link to it
+    # against (a local stack: common.stack); None accepts any session
+    users_file: str | None = None
 
     def __post_init__(self) -> None:
         if self.mode not in ("client", "peer", "router"):
@@ -117,6 +123,7 @@ class ZenohSettings:
             config_file=env.get("PNAV_ZENOH_CONFIG") or None,
             user=env.get("PNAV_ZENOH_USER", "").strip() or None,
             password=env.get("PNAV_ZENOH_PASSWORD") or None,
+            users_file=env.get("PNAV_ZENOH_USERS_FILE") or None,
         )
 
     def to_env(self) -> dict[str, str]:
@@ -132,6 +139,8 @@ class ZenohSettings:
         if self.user and self.password:
             out["PNAV_ZENOH_USER"] = self.user
             out["PNAV_ZENOH_PASSWORD"] = self.password
+        if self.users_file:
+            out["PNAV_ZENOH_USERS_FILE"] = self.users_file
         return out
 
 

@@ -12,7 +12,7 @@ import functools
 import json
 import logging
 import time
-from collections.abc import AsyncIterator, Mapping, Sequence
+from collections.abc import AsyncIterator, Awaitable, Callable, Mapping, Sequence
 from contextlib import asynccontextmanager
 from typing import Any
 
@@ -28,6 +28,13 @@ log = logging.getLogger(__name__)
 async def _init_connection(conn: asyncpg.Connection) -> None:
     await conn.set_type_codec("jsonb", encoder=json.dumps, decoder=json.loads, schema="pg_catalog")
     await conn.set_type_codec("json", encoder=json.dumps, decoder=json.loads, schema="pg_catalog")
+
+
+async def _init_then(
+    on_connect: Callable[[asyncpg.Connection], Awaitable[None]], conn: asyncpg.Connection
+) -> None:
+    await _init_connection(conn)
+    await on_connect(conn)
 
 
 async def _keep_session(conn: asyncpg.Connection) -> None:
@@ -66,6 +73,7 @@ async def create_pool(
     wait_s: float = 10.0,
     server_settings: dict[str, str] | None = None,
     max_inactive_connection_lifetime: float = 300.0,
+    on_connect: Callable[[asyncpg.Connection], Awaitable[None]] | None = None,
 ) -> asyncpg.Pool:
     """Open a pool, retrying for ``wait_s`` while Postgres is still starting up.
 
@@ -74,8 +82,13 @@ async def create_pool(
     few hundred milliseconds if Postgres itself crashes).
 
     The pool reconnects by itself when Postgres comes back (after a restart, say); while it
-    is down, connecting backs off (common.outage).
+    is down, connecting backs off (common.outage). ``on_connect`` runs on every new
+    connection, after the contract's codecs are set (the bridge's sensor writer learns from
+    it that its connections were renewed).
     """
+    init: Callable[[asyncpg.Connection], Awaitable[None]] = _init_connection
+    if on_connect is not None:
+        init = functools.partial(_init_then, on_connect)
     deadline = time.monotonic() + wait_s
     while True:
         try:
@@ -83,7 +96,7 @@ async def create_pool(
                 url,
                 min_size=min_size,
                 max_size=max_size,
-                init=_init_connection,
+                init=init,
                 reset=_keep_session,
                 server_settings=server_settings,
                 max_inactive_connection_lifetime=max_inactive_connection_lifetime,

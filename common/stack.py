@@ -21,6 +21,14 @@ the rendezvous and the endpoint for clients (the CLI, a foreign service, the das
 A message then crosses one TCP link instead of two and the launcher forwards none of it
 (docs/BENCHMARKS.md, "Peer-to-peer Zenoh"). ``PNAV_LOCAL_ZENOH=client`` routes everything
 through the router, as compose does (deploy/docker-compose.yml keeps the router).
+
+Zenoh authentication (:class:`BusCredentials`): as Postgres's roles get passwords made for
+the run, so does every identity on the bus (the sim, each service, ``user`` for people's
+tools). The router and every peer check whoever links to them against a user/password file
+only this OS user can read, so a process not given a password can neither join through the
+router nor link to a peer directly: it cannot publish sensors or notifications. The trust
+boundary is the OS user, as for the Postgres socket; compose adds the router's access
+control per identity (common.contract.acl), which peers linked directly would bypass.
 """
 
 from __future__ import annotations
@@ -30,8 +38,10 @@ import contextlib
 import logging
 import os
 import secrets
+import shutil
+import tempfile
 from collections.abc import AsyncIterator, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import asyncpg
@@ -39,7 +49,7 @@ from zenoh import Session
 
 from common.bus import start_router
 from common.config import ZenohSettings
-from common.contract.grants import LOGIN_ROLES, role_name
+from common.contract.grants import BUS_IDENTITIES, LOGIN_ROLES, USER, role_name
 from common.contract.migrate import apply_migrations
 from common.contract.roles import bootstrap, is_superuser, role_url
 from common.errors import ConfigError
@@ -74,6 +84,48 @@ class LocalZenoh:
         return ZenohSettings(mode="peer", connect=(router,), listen=PEER_LISTEN, multicast=False)
 
 
+ROUTER_USER = "router"  # the launcher's router, when it links to a peer
+
+
+@dataclass(frozen=True)
+class BusCredentials:
+    """This run's Zenoh users: one per identity on the bus, with a fresh password each, and
+    the ``user:password`` file the router and the peers check a linking session against."""
+
+    users_file: Path
+    passwords: Mapping[str, str] = field(repr=False)
+
+    @classmethod
+    def create(cls, directory: Path) -> BusCredentials:
+        """Make the passwords and write the file (mode 0600) in ``directory``."""
+        passwords = {who: secrets.token_hex(16) for who in (*BUS_IDENTITIES, ROUTER_USER)}
+        path = directory / "zenoh-users.txt"
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(fd, "w") as out:
+            out.writelines(f"{who}:{pw}\n" for who, pw in passwords.items())
+        return cls(path, passwords)
+
+    def identity(self, name: str) -> str:
+        """The bus identity of a process: a service's own (a replica's or replacement's is
+        its service's: ``planner-2`` is ``planner``), else ``user`` (the CLI, the
+        dashboard, the recorder, tests and benchmarks act for people)."""
+        if name in self.passwords:
+            return name
+        base = name.rsplit("-", 1)[0]
+        return base if base in self.passwords and base != ROUTER_USER else USER
+
+    def people_and_services(self) -> dict[str, str]:
+        """Every identity's password but the router's own (for the stack file)."""
+        return {who: pw for who, pw in self.passwords.items() if who != ROUTER_USER}
+
+    def apply(self, settings: ZenohSettings, name: str) -> ZenohSettings:
+        """``settings`` authenticated as ``name``'s identity, checking others with the file."""
+        who = self.identity(name)
+        return replace(
+            settings, user=who, password=self.passwords[who], users_file=str(self.users_file)
+        )
+
+
 @dataclass
 class LocalStack:
     database_url: str
@@ -84,6 +136,7 @@ class LocalStack:
     # role (short name: "planner", "user") -> the DSN to connect as it; empty when the
     # server's account given could not set roles up (every process then uses database_url)
     role_urls: dict[str, str] = field(default_factory=dict)
+    bus: BusCredentials | None = None  # None: the router and peers accept anyone
 
     def env(self) -> dict[str, str]:
         """The variables a process needs to join this stack (as the setup account: tests and
@@ -93,6 +146,11 @@ class LocalStack:
     def url_for(self, role: str) -> str:
         """The DSN of ``role`` (a service's name, or ``user`` for people)."""
         return self.role_urls.get(role, self.database_url)
+
+    def zenoh_for(self, name: str) -> ZenohSettings:
+        """The Zenoh settings of process ``name`` (a service, or anything acting for people:
+        ``zenoh``, which :meth:`env` gives, is ``user``'s)."""
+        return self.zenoh if self.bus is None else self.bus.apply(self.zenoh, name)
 
 
 _PASSWORD_HBA = """\
@@ -128,9 +186,11 @@ async def local_stack(
     data_dir: Path | None = None,
     zenoh_port: int | None = None,
     local_zenoh: LocalZenoh | None = None,
+    bus: BusCredentials | None = None,
 ) -> AsyncIterator[LocalStack]:
     """Start Postgres (embedded unless PNAV_DATABASE_URL is set) and a router; migrate.
-    ``local_zenoh``: how the stack's processes use Zenoh (default: PNAV_LOCAL_ZENOH)."""
+    ``local_zenoh``: how the stack's processes use Zenoh (default: PNAV_LOCAL_ZENOH);
+    ``bus``: the Zenoh users to use (made for this run, and removed after it, if None)."""
     local_zenoh = local_zenoh if local_zenoh is not None else LocalZenoh.from_env()
     postgres: EmbeddedPostgres | None = None
     lifeline: Lifeline | None = None
@@ -152,9 +212,13 @@ async def local_stack(
         keeper = Keeper(postgres)
     stop_keeper = asyncio.Event()
     keeping: asyncio.Task[None] | None = None
+    secret_dir: Path | None = None
     try:
+        if bus is None:
+            secret_dir = Path(tempfile.mkdtemp(prefix="pnav-bus-"))  # 0700: this OS user's
+            bus = BusCredentials.create(secret_dir)
         endpoint = f"tcp/127.0.0.1:{zenoh_port or free_port()}"
-        router = start_router((endpoint,))
+        router = start_router((endpoint,), bus.apply(ZenohSettings(), ROUTER_USER))
         try:
             conn = await asyncpg.connect(url)
             try:
@@ -165,14 +229,16 @@ async def local_stack(
                 await conn.close()
             if keeper is not None:
                 keeping = asyncio.create_task(keeper.run(stop_keeper), name="postgres-keeper")
-            zenoh = local_zenoh.settings(endpoint)
-            yield LocalStack(url, zenoh, router, postgres, keeper, role_urls)
+            zenoh = bus.apply(local_zenoh.settings(endpoint), USER)
+            yield LocalStack(url, zenoh, router, postgres, keeper, role_urls, bus)
         finally:
             stop_keeper.set()
             if keeping is not None:
                 await keeping  # a restart under way ends before the server is stopped
             router.close()
     finally:
+        if secret_dir is not None:
+            shutil.rmtree(secret_dir, ignore_errors=True)
         if postgres is not None:
             postgres.stop()
         if lifeline is not None:

@@ -55,18 +55,23 @@ def loopback_zenoh() -> Iterator[ZenohSettings]:
 
 
 _ROUTER = (
-    "import sys, time\n"
+    "import os, sys, time\n"
     "from common.bus import start_router\n"
-    "router = start_router((sys.argv[1],))\n"
+    "from common.config import ZenohSettings\n"
+    "auth = ZenohSettings.from_env() if os.environ.get('PNAV_ZENOH_USERS_FILE') else None\n"
+    "router = start_router((sys.argv[1],), auth)\n"
     "print('up', flush=True)\n"
     "time.sleep(1e6)\n"
 )
 
 
 @contextlib.contextmanager
-def router_process() -> Iterator[tuple[subprocess.Popen[str], ZenohSettings]]:
+def router_process(
+    auth: ZenohSettings | None = None,
+) -> Iterator[tuple[subprocess.Popen[str], ZenohSettings]]:
     """A loopback Zenoh router in a process of its own, so that it alone can be frozen
-    (SIGSTOP/SIGCONT) or killed; yield the process and the settings clients use."""
+    (SIGSTOP/SIGCONT) or killed; yield the process and the settings clients use. With
+    ``auth`` (user, password, users_file) it accepts only sessions of a user in the file."""
     import signal
     import sys
 
@@ -77,7 +82,7 @@ def router_process() -> Iterator[tuple[subprocess.Popen[str], ZenohSettings]]:
         cwd=root,
         stdout=subprocess.PIPE,
         text=True,
-        env={**os.environ, "PYTHONPATH": str(root)},
+        env={**os.environ, **(auth.to_env() if auth else {}), "PYTHONPATH": str(root)},
     )
     try:
         if proc.stdout is None or proc.stdout.readline().strip() != "up":

@@ -89,6 +89,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     commands.add_parser("down", help="stop the stack started by `pnav up`")
 
+    env = commands.add_parser(
+        "env",
+        help="print the exports that join the running stack as ROLE "
+        '(eval "$(pnav env controller)")',
+    )
+    env.add_argument("role", nargs="?", default="user", help="a service's name, or user (default)")
+
     migrate = commands.add_parser(
         "migrate", help="apply the contract to PNAV_DATABASE_URL (waits for the server)"
     )
@@ -221,6 +228,8 @@ def dispatch(args: argparse.Namespace) -> int:
         return _up(args)
     if args.command == "down":
         return commands.down()
+    if args.command == "env":
+        return commands.env(args.role)
     if args.command == "migrate":
         return uvloop.run(commands.migrate(args.wait, roles=args.roles))
     if args.command == "secrets":

@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import math
 import os
+import shlex
 import signal
 import sys
 import time
@@ -214,6 +215,17 @@ async def status(once: bool, interval_s: float = 1.0) -> int:
             await asyncio.sleep(interval_s)
     finally:
         await rt.close()
+
+
+def env(role: str) -> int:
+    """Print ``export`` lines that make a process started by hand join the running stack as
+    ``role``: its Postgres role's DSN and its Zenoh user (both with this run's passwords)."""
+    info = stackfile.read()
+    if info is None:
+        raise UsageError("no running stack: start one with `pnav up`")
+    for name, value in info.env_for(role).items():
+        print(f"export {name}={shlex.quote(value)}")
+    return 0
 
 
 def down(wait_s: float = 20.0) -> int:

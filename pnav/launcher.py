@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from common.errors import UsageError
-from common.stack import LocalStack, local_stack
+from common.stack import BusCredentials, LocalStack, local_stack
 from common.testing import free_port
 from pnav import stackfile
 from pnav.supervisor import ProcessSpec, Supervisor
@@ -78,6 +78,9 @@ class StackOptions:
     echo: bool = False
     services: tuple[str, ...] = ("sim", "bridge", *SCENARIO_SERVICES)
     extra_env: dict[str, str] = field(default_factory=dict)
+    # the Zenoh users of the run (made for it if None); given when extra_env points the
+    # stack at a router of the caller's that checks the same users (pnav bench faults)
+    bus: BusCredentials | None = None
     # processes per scenario service (default 1): replicas split the robots (common.lease)
     replicas: dict[str, int] = field(default_factory=dict)
     # service -> the command run in its place (another implementation, docs/SWAP.md)
@@ -205,7 +208,12 @@ def service_specs(local: LocalStack, options: StackOptions, world: Path) -> list
     keeps the plain name, and the supervisor gives it instance ``name-1``)."""
     specs = []
     for name in options.services:
-        env = {**local.env(), **service_database(local, name), **options.extra_env}
+        env = {
+            **local.env(),
+            **local.zenoh_for(name).to_env(),  # a replacement acts as the service it replaces
+            **service_database(local, name),
+            **options.extra_env,
+        }
         argv = options.replace.get(name) or [sys.executable, "-m", f"services.{name}"]
         if name == "sim":
             argv += ["--world", str(world), "--rate", options.rate]
@@ -278,7 +286,7 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
     if "sim" in options.services and "sim" not in options.replace:
         check_world(world, options.model)
     log_dir = options.log_dir or Path(tempfile.mkdtemp(prefix="pnav-logs-"))
-    async with local_stack(options.data_dir, options.zenoh_port) as local:
+    async with local_stack(options.data_dir, options.zenoh_port, bus=options.bus) as local:
         specs = recorder_spec(local, options) + service_specs(local, options, world)
         supervisor = Supervisor(specs, log_dir, echo=options.echo)
         running = RunningStack(local, supervisor, options, world, log_dir)
@@ -293,6 +301,7 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
                 postgres_dir=str(local.postgres.data_dir) if local.postgres else "",
                 postgres_temporary=local.postgres is not None and local.postgres.temporary,
                 role_urls=dict(local.role_urls),
+                zenoh_passwords=local.bus.people_and_services() if local.bus else {},
             )
         )
         # Supervision runs for as long as the stack does: a crashed service is restarted

@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from common.config import ZenohSettings
+from common.contract.grants import USER
 from common.errors import UsageError
 
 
@@ -44,9 +45,30 @@ class StackInfo:
     # each role's DSN (common.contract.roles): a service started by hand next to the stack
     # connects as its own role, `url_for("controller")`; database_url is people's (pnav_user)
     role_urls: dict[str, str] = field(default_factory=dict)
+    # each bus identity's Zenoh password for this run (common.stack.BusCredentials); the
+    # router refuses a session without one
+    zenoh_passwords: dict[str, str] = field(default_factory=dict)
 
-    def zenoh(self) -> ZenohSettings:
-        return ZenohSettings(mode="client", connect=(self.zenoh_connect,))
+    def zenoh(self, identity: str = USER) -> ZenohSettings:
+        """A client of the stack's router, authenticated as ``identity`` (default: people)."""
+        password = self.zenoh_passwords.get(identity)
+        if self.zenoh_passwords and password is None:
+            known = ", ".join(sorted(self.zenoh_passwords))
+            raise UsageError(f"no Zenoh identity {identity!r} in this stack (known: {known})")
+        return ZenohSettings(
+            mode="client",
+            connect=(self.zenoh_connect,),
+            user=identity if password else None,
+            password=password,
+        )
+
+    def env_for(self, identity: str) -> dict[str, str]:
+        """The variables a process started by hand needs to join this stack as ``identity``
+        (a service's name, or ``user``): its database role and its Zenoh user."""
+        if self.role_urls and identity not in self.role_urls:
+            known = ", ".join(sorted(self.role_urls))
+            raise UsageError(f"no role {identity!r} in this stack (known: {known})")
+        return {"PNAV_DATABASE_URL": self.url_for(identity), **self.zenoh(identity).to_env()}
 
     def url_for(self, role: str) -> str:
         """The DSN of ``role`` (a service's name, or ``user``)."""

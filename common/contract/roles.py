@@ -131,7 +131,11 @@ async def apply_grants(conn: asyncpg.Connection, grants: tuple[Grant, ...] | Non
         statements.append(grant.sql())
         if grant.privilege == "INSERT":
             for (sequence,) in await conn.fetch(_SEQUENCES_OF, grant.name):
-                statements.append(f"GRANT USAGE ON SEQUENCE {sequence} TO {role_name(grant.role)}")
+                # UPDATE: setval, for a writer that restores its own rows after a crash
+                # with their ids (services/bridge/replay.py)
+                statements.append(
+                    f"GRANT USAGE, UPDATE ON SEQUENCE {sequence} TO {role_name(grant.role)}"
+                )
     async with conn.transaction():
         for sql in statements:
             try:

@@ -27,6 +27,8 @@ class Counters:
     malformed: Counter[tuple[str, str]] = field(default_factory=Counter)  # (topic, reason)
     rejected_by_db: Counter[str] = field(default_factory=Counter)  # rows Postgres refused
     dropped: Counter[str] = field(default_factory=Counter)  # rows lost (db down, overflow)
+    # rows a Postgres crash lost after their commit, written again (replay.py)
+    rows_restored: Counter[str] = field(default_factory=Counter)
     rows_pruned: int = 0
     commands_out: int = 0
     commands_from_images: int = 0  # command2robot notifications sent on their image alone
@@ -55,6 +57,7 @@ class Counters:
             "malformed": {f"{t}/{r}": n for (t, r), n in sorted(self.malformed.items())},
             "rejected_by_db": dict(self.rejected_by_db),
             "dropped": dict(self.dropped),
+            "rows_restored": dict(self.rows_restored),
             "rows_pruned": self.rows_pruned,
             "commands_out": self.commands_out,
             "commands_from_images": self.commands_from_images,

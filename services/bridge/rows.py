@@ -51,6 +51,35 @@ SELECT * FROM unnest($1::text[], $2::float8[], $3::float8[], $4::float8[], $5::f
                      $6::bool[], $7::float8[])
 RETURNING id, robot_id"""
 
+# The same rows again with the ids they were given, after a Postgres crash may have lost them
+# (replay.py): the ids come last, so the arguments are the INSERT's plus one array.
+_ODOMETRY_REPLAY_SQL = f"""
+INSERT INTO {keys.ODOMETRY} (robot_id, stamp, seq, x, y, yaw, linear_mps, angular_rps, id)
+SELECT * FROM unnest($1::text[], $2::float8[], $3::int8[], $4::float8[], $5::float8[],
+                     $6::float8[], $7::float8[], $8::float8[], $9::int8[])
+ON CONFLICT (id) DO NOTHING
+RETURNING id"""
+
+_LASER_SCAN_REPLAY_SQL = f"""
+INSERT INTO {keys.LASER_SCAN} (robot_id, stamp, seq, angle_min, angle_increment,
+                               range_min, range_max, ranges, id)
+SELECT u.robot_id, u.stamp, u.seq, u.angle_min, u.angle_increment, u.range_min, u.range_max,
+       ($8::real[])[u.first:u.last], u.id
+FROM unnest($1::text[], $2::float8[], $3::int8[], $4::float8[], $5::float8[], $6::float8[],
+            $7::float8[], $9::int4[], $10::int4[], $11::int8[])
+     AS u(robot_id, stamp, seq, angle_min, angle_increment, range_min, range_max, first, last,
+          id)
+ON CONFLICT (id) DO NOTHING
+RETURNING id"""
+
+_BATTERY_REPLAY_SQL = f"""
+INSERT INTO {keys.BATTERY} (robot_id, stamp, energy_wh, capacity_wh, percentage, charging,
+                            power_w, id)
+SELECT * FROM unnest($1::text[], $2::float8[], $3::float8[], $4::float8[], $5::float8[],
+                     $6::bool[], $7::float8[], $8::int8[])
+ON CONFLICT (id) DO NOTHING
+RETURNING id"""
+
 # A resent event (CONTRACT.md, "Robot and sim") finds its row there and adds none; RETURNING
 # then gives fewer rows than the batch, and the writer sends no image (a plain hint).
 _COLLISION_SQL = f"""
@@ -191,12 +220,29 @@ class SensorTable:
     # committed with synchronous_commit on: the robot forgets an event once it is
     # acknowledged, so its row must survive a Postgres crash (writer.py)
     durable: bool = False
+    # the other tables commit asynchronously, and the writer restores what a crash lost
+    # with this INSERT (replay.py)
+    replay_sql: str | None = None
 
 
 SENSOR_TABLES: dict[type, SensorTable] = {
-    Odometry: SensorTable(keys.ODOMETRY, _ODOMETRY_SQL, _odometry_args, _odometry_image),
-    LaserScan: SensorTable(keys.LASER_SCAN, _LASER_SCAN_SQL, _laser_scan_args, _laser_scan_image),
-    BatteryState: SensorTable(keys.BATTERY, _BATTERY_SQL, _battery_args, _battery_image),
+    Odometry: SensorTable(
+        keys.ODOMETRY,
+        _ODOMETRY_SQL,
+        _odometry_args,
+        _odometry_image,
+        replay_sql=_ODOMETRY_REPLAY_SQL,
+    ),
+    LaserScan: SensorTable(
+        keys.LASER_SCAN,
+        _LASER_SCAN_SQL,
+        _laser_scan_args,
+        _laser_scan_image,
+        replay_sql=_LASER_SCAN_REPLAY_SQL,
+    ),
+    BatteryState: SensorTable(
+        keys.BATTERY, _BATTERY_SQL, _battery_args, _battery_image, replay_sql=_BATTERY_REPLAY_SQL
+    ),
     Collision: SensorTable(
         keys.COLLISION_EVENT, _COLLISION_SQL, _collision_args, _collision_image, durable=True
     ),

@@ -15,13 +15,12 @@ that pairing (same length, same robot at each position) and sends no image if it
 The writer has its own small pool whose sessions run with ``synchronous_commit = off``:
 a commit returns, and its rows are visible to every reader, without waiting for the WAL to
 reach the disk. That fsync was most of the sensor-to-row latency (1-4 ms of the ~2-5 ms
-measured with it on). The price: if Postgres itself crashes, the last few hundred
-milliseconds of sensor rows may be lost (never corrupted), which is harmless for data that
-is stale a moment later anyway (``pnav bench faults`` sees it: a row or two of odometry lost
-to a kill -9 of the postmaster). Collision events are the exception: the robot forgets an
-event once its row is acknowledged (acks.py), so their batches commit with
-``synchronous_commit`` on, in a transaction of their own. Commands and the world use the
-service's normal pool.
+measured with it on). A crash of Postgres itself can then lose the last few hundred
+milliseconds of committed rows; the writer keeps what it wrote in the last seconds and
+writes it again, ids and all, once its connections come back (replay.py), so no committed
+row stays lost. Collision events are the exception: the robot forgets an event once its
+row is acknowledged (acks.py), so their batches commit with ``synchronous_commit`` on, in a
+transaction of their own. Commands and the world use the service's normal pool.
 """
 
 from __future__ import annotations
@@ -39,6 +38,7 @@ from common.errors import ConnectionFailure
 from common.tasks import cancel_and_wait
 from services.bridge.counters import Counters, RateLimitedLog
 from services.bridge.messages import SensorRecord
+from services.bridge.replay import Replay
 from services.bridge.rows import SENSOR_TABLES, SensorTable, newest_per_robot
 
 logger = logging.getLogger("pnav.bridge.writer")
@@ -99,6 +99,8 @@ class SensorWriter:
         # with a row the database refused for its values: the collision acks (acks.py)
         self.on_committed: Callable[[list[SensorRecord]], None] | None = None
         self._tables = {spec.name: _Table(spec) for spec in SENSOR_TABLES.values()}
+        self.replay = Replay(list(SENSOR_TABLES.values()))
+        self._started = False  # connections made from now on are renewals (replay.py)
 
     async def start(self) -> None:
         try:
@@ -111,16 +113,24 @@ class SensorWriter:
                 min_size=size,
                 max_size=size,
                 max_inactive_connection_lifetime=0,
+                on_connect=self._connected,
                 server_settings={
                     "synchronous_commit": "off",
                     "application_name": "pnav-bridge-sensors",
                 },
             )
             await self._warm_up(self.pool, size)
+            async with self.pool.acquire() as conn:
+                await self.replay.read_window(conn)
         except (OSError, asyncpg.PostgresError, asyncpg.InterfaceError) as exc:
             raise ConnectionFailure(f"cannot open the bridge's sensor pool: {exc}") from exc
+        self._started = True
         for table in self._tables.values():
             table.task = asyncio.create_task(self._run(table), name=f"write-{table.name}")
+
+    async def _connected(self, conn: asyncpg.Connection) -> None:
+        if self._started:
+            self.replay.connections_renewed()
 
     async def _warm_up(self, pool: asyncpg.Pool, size: int) -> None:
         """Prepare every INSERT on every connection by running it on empty arrays."""
@@ -190,7 +200,9 @@ class SensorWriter:
             rows = await self._insert(table, batch)
         except _CONNECTION_LOST as exc:
             # Postgres away or restarting: drop this batch (sensor data goes stale in
-            # milliseconds anyway), back off a little, and carry on with newer data.
+            # milliseconds anyway), back off a little, and carry on with newer data, once
+            # what a crash may have taken is back.
+            self.replay.connections_renewed()
             self.counters.dropped[table.name] += len(batch)
             self._alerts.warning(
                 ("db_error", table.name), "sensor write failed", table=table.name, error=exc
@@ -211,6 +223,7 @@ class SensorWriter:
             self._committed(batch)
             return
         self.counters.rows_written[table.name] += len(rows)
+        self.replay.written(table.name, [row_id for row_id, _ in rows], batch)
         notify = self.notifier.notify
         for robot_id, row_id, image in newest_per_robot(
             table.spec, batch, rows, images=self.notifier.images
@@ -236,6 +249,10 @@ class SensorWriter:
         if self.pool is None:
             raise ConnectionFailure("the sensor writer is not started")
         async with self.pool.acquire() as conn:
+            if self.replay.pending(table.name):
+                self.counters.rows_restored[table.name] += await self.replay.restore(
+                    conn, table.name
+                )
             if table.spec.durable:
                 async with conn.transaction():
                     await conn.execute("SET LOCAL synchronous_commit TO on")

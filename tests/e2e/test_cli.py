@@ -105,6 +105,13 @@ async def test_up_goal_strategy_cancel_status_down(tmp_path: Path) -> None:
 
         code, out = await pnav("cancel", env=env)
         assert code == 0 and "goal 1 cancelled" in out, out
+
+        # a process started by hand joins as a service: its role and Zenoh user
+        code, out = await pnav("env", "controller", env=env)
+        assert code == 0 and "export PNAV_ZENOH_USER=controller" in out, out
+        assert "pnav_controller" in out and "PNAV_ZENOH_PASSWORD=" in out, out
+        code, out = await pnav("env", "nobody", env=env)
+        assert code == 2 and "no role 'nobody'" in out, out
         code, out = await pnav("goal", "1", "1", "--robot", "nobody", env=env)
         assert code == 2 and "no robot 'nobody'" in out, out
 

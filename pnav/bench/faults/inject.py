@@ -11,8 +11,9 @@ What each kind means here:
   points every service at it, so the router alone is frozen.
 - ``cut``: SIGSTOP, then SIGCONT, of one service's process: its links to the router and to
   Postgres are cut (sockets open, nothing moves) as a pulled cable would, and come back.
-- ``spoof``: a rogue Zenoh client publishes odometry for r1 at its goal (seq from 10^9, so
-  its rows can be told apart afterwards).
+- ``spoof``: a rogue Zenoh client, a process not given this run's Zenoh password, tries to
+  publish odometry for r1 at its goal (seq from 10^9, so its rows, if any got in, can be
+  told apart afterwards).
 - ``rogue``: a rogue writer inserts a full-speed recommendation at priority 1000 (the safety
   band: refused by the database unless it is a stop), then at 99, every 0.1 s.
 - ``cli``: ``pnav goal`` with a value the door must refuse (exit 2, one line).
@@ -23,6 +24,7 @@ What each kind means here:
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import os
 import signal
 import subprocess
@@ -37,6 +39,7 @@ import zenoh
 from common import bus
 from common.config import ZenohSettings
 from common.contract import keys
+from common.errors import ConnectionFailure
 from common.postmaster import postmaster_pid
 from common.runtime import Runtime
 from pnav.bench.faults.catalogue import Fault
@@ -167,7 +170,12 @@ async def _cut(fault: Fault, ctx: Context) -> Injection:
 
 
 async def _spoof(fault: Fault, ctx: Context) -> Injection:
-    rogue = await asyncio.to_thread(bus.open_session, ctx.zenoh)
+    # a process on the machine that was not given a password (common.stack.BusCredentials)
+    outsider = dataclasses.replace(ctx.zenoh, user=None, password=None, users_file=None)
+    try:
+        rogue = await asyncio.to_thread(bus.open_session, outsider)
+    except ConnectionFailure as exc:
+        return Injection(notes=[f"the router refused the spoofer's session: {exc}"])
     try:
         key = keys.robot_key(ROBOT, keys.ODOM)
         x, y = ctx.goal

@@ -1,0 +1,126 @@
+"""A local stack's Zenoh users (common.stack.BusCredentials): a process that was not given
+this run's password can neither join through the router nor link to a peer directly."""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import os
+import stat
+import threading
+from pathlib import Path
+
+import pytest
+
+from common import bus
+from common.config import ZenohSettings
+from common.errors import ConnectionFailure, UsageError
+from common.stack import ROUTER_USER, BusCredentials, local_stack
+from common.testing import eventually, free_port
+from pnav.stackfile import StackInfo
+
+pytestmark = pytest.mark.timeout(60)
+
+
+def test_every_identity_gets_its_own_password_in_a_file_only_its_owner_reads(
+    tmp_path: Path,
+) -> None:
+    creds = BusCredentials.create(tmp_path)
+    mode = stat.S_IMODE(os.stat(creds.users_file).st_mode)
+    assert mode == 0o600
+    lines = creds.users_file.read_text().splitlines()
+    assert sorted(line.split(":")[0] for line in lines) == sorted(creds.passwords)
+    assert len(set(creds.passwords.values())) == len(creds.passwords)
+    assert ROUTER_USER not in creds.people_and_services()
+
+
+def test_a_process_acts_as_its_service_and_anything_else_as_people(tmp_path: Path) -> None:
+    creds = BusCredentials.create(tmp_path)
+    assert creds.identity("planner") == "planner"
+    assert creds.identity("planner-2") == "planner"  # a replica
+    assert creds.identity("sim") == "sim"
+    assert creds.identity("dashboard") == "user"
+    assert creds.identity("recorder") == "user"
+    assert creds.identity("router-1") == "user"  # nobody else speaks as the router
+    settings = creds.apply(ZenohSettings(mode="peer"), "bridge")
+    assert settings.user == "bridge" and settings.password == creds.passwords["bridge"]
+    assert settings.users_file == str(creds.users_file)
+
+
+async def test_the_routers_door_is_shut_to_a_session_without_this_runs_password(
+    db_url: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("PNAV_DATABASE_URL", db_url)
+    async with local_stack() as stack:
+        member = await asyncio.to_thread(bus.open_session, stack.zenoh_for("controller"))
+        member.close()
+        outsider = dataclasses.replace(stack.zenoh, mode="client", user=None, password=None)
+        with pytest.raises(ConnectionFailure):
+            await asyncio.to_thread(bus.open_session, outsider)
+        wrong = dataclasses.replace(stack.zenoh, mode="client", password="not-the-password")
+        with pytest.raises(ConnectionFailure):
+            await asyncio.to_thread(bus.open_session, wrong)
+        assert not stack.bus is None and stack.bus.users_file.exists()
+        users_file = stack.bus.users_file
+    assert not users_file.exists()  # this run's passwords go with it
+
+
+async def test_a_peer_takes_no_direct_link_from_a_process_without_the_password(
+    db_url: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("PNAV_DATABASE_URL", db_url)
+    heard: list[str] = []
+    lock = threading.Lock()
+
+    def on(key: str, payload: bytes) -> None:
+        with lock:
+            heard.append(key)
+
+    async with local_stack() as stack:
+        # the sim's peer, on an endpoint the outsider knows (a scan of loopback finds it)
+        endpoint = f"tcp/127.0.0.1:{free_port()}"
+        sim_settings = dataclasses.replace(stack.zenoh_for("sim"), listen=(endpoint,))
+        sim = await asyncio.to_thread(bus.open_session, sim_settings)
+        reader = await asyncio.to_thread(bus.open_session, stack.zenoh_for("bridge"))
+        sub = bus.subscribe_threaded(reader, "pnav/robot/r1/**", on)
+        outsider_settings = ZenohSettings(mode="peer", connect=(endpoint,), multicast=False)
+        outsider = await asyncio.to_thread(bus.open_session, outsider_settings)
+        try:
+            await asyncio.sleep(1.0)  # time for any link to form
+            for _ in range(20):
+                outsider.put("pnav/robot/r1/odom", b"spoofed")
+                sim.put("pnav/robot/r1/scan", b"real")
+                await asyncio.sleep(0.05)
+
+            def got_real() -> bool:
+                with lock:
+                    return "pnav/robot/r1/scan" in heard
+
+            await eventually(got_real, what="the sim's messages")
+            with lock:
+                assert "pnav/robot/r1/odom" not in heard
+            assert sim.info.zid() not in list(outsider.info.peers_zid())
+        finally:
+            sub.undeclare()
+            for session in (outsider, reader, sim):
+                session.close()
+
+
+def test_the_stack_file_gives_a_process_started_by_hand_its_identity() -> None:
+    info = StackInfo(
+        pid=1,
+        database_url="postgresql://pnav_user@/db",
+        zenoh_connect="tcp/127.0.0.1:7447",
+        world="w",
+        rate="1",
+        log_dir="/tmp",
+        role_urls={"controller": "postgresql://pnav_controller@/db", "user": "u"},
+        zenoh_passwords={"controller": "c-pw", "user": "u-pw"},
+    )
+    assert info.zenoh().user == "user" and info.zenoh().password == "u-pw"
+    env = info.env_for("controller")
+    assert env["PNAV_DATABASE_URL"] == "postgresql://pnav_controller@/db"
+    assert env["PNAV_ZENOH_USER"] == "controller" and env["PNAV_ZENOH_PASSWORD"] == "c-pw"
+    assert env["PNAV_ZENOH_MODE"] == "client"
+    with pytest.raises(UsageError, match="no role 'nobody' in this stack"):
+        info.env_for("nobody")
