@@ -60,7 +60,7 @@ async def test_the_routers_door_is_shut_to_a_session_without_this_runs_password(
         wrong = dataclasses.replace(stack.zenoh, mode="client", password="not-the-password")
         with pytest.raises(ConnectionFailure):
             await asyncio.to_thread(bus.open_session, wrong)
-        assert not stack.bus is None and stack.bus.users_file.exists()
+        assert stack.bus is not None and stack.bus.users_file.exists()
         users_file = stack.bus.users_file
     assert not users_file.exists()  # this run's passwords go with it
 
