@@ -16,13 +16,15 @@ import re
 import shutil
 import tempfile
 import time
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from common.config import ServiceConfig, ZenohSettings
 from common.contract import keys
 from common.contract.grants import USER
+from common.outage import is_connection_error
 from common.runtime import Runtime
 from common.stack import ROUTER_USER, BusCredentials
 from common.testing import router_process
@@ -32,6 +34,8 @@ from pnav.bench.faults.catalogue import Fault
 from pnav.bench.faults.inject import ROBOT, SPOOF_SEQ, Context, inject
 from pnav.launcher import StackOptions, launched
 from pnav.mission import GoalEnded, MissionMonitor
+
+T = TypeVar("T")
 
 INJECT_AFTER_M = 1.0
 START_LIMIT_S = 120.0  # stack up to r1 under way
@@ -64,15 +68,35 @@ async def _newest(rt: Runtime, table: str) -> int:
     return int(value)
 
 
+async def _reachable(rt: Runtime, query: Callable[[], Awaitable[T]]) -> T:
+    """``query()``, retried while the bench's own pool is still backing off from the fault
+    (a Postgres the launcher just restarted: common.outage), for RECOVERY_LIMIT_S."""
+    deadline = time.monotonic() + RECOVERY_LIMIT_S
+    while True:
+        try:
+            return await query()
+        except Exception as exc:
+            if not is_connection_error(exc) or time.monotonic() > deadline:
+                raise
+            await asyncio.sleep(0.2)
+
+
 async def _recovered(rt: Runtime, since: float) -> float | None:
     """Wall seconds from ``since`` until odometry and then a decision are written anew."""
-    odom = await _newest(rt, keys.ODOMETRY)
-    cmd = await _newest(rt, keys.COMMAND2ROBOT)
+    odom = await _reachable(rt, lambda: _newest(rt, keys.ODOMETRY))
+    cmd = await _reachable(rt, lambda: _newest(rt, keys.COMMAND2ROBOT))
     while time.monotonic() < since + RECOVERY_LIMIT_S:
-        if await _newest(rt, keys.ODOMETRY) > odom and await _newest(rt, keys.COMMAND2ROBOT) > cmd:
+        new_odom = await _reachable(rt, lambda: _newest(rt, keys.ODOMETRY))
+        new_cmd = await _reachable(rt, lambda: _newest(rt, keys.COMMAND2ROBOT))
+        if new_odom > odom and new_cmd > cmd:
             return round(time.monotonic() - since, 2)
         await asyncio.sleep(0.1)
     return None
+
+
+async def _rows_lost(rt: Runtime, snapshot: rows.Snapshot) -> dict[str, int]:
+    async with rt.database.pool.acquire() as conn:
+        return await rows.lost(conn, snapshot)
 
 
 def sim_figures(sim_log: Path) -> dict[str, float]:
@@ -183,8 +207,7 @@ async def _mission(fault: Fault, ctx: Context, result: Result) -> None:
     result.restart_s = injection.restart_s
     result.notes += [n for n in injection.notes if n]
     result.recovered_s = await _recovered(rt, ended)
-    async with rt.database.pool.acquire() as conn:
-        result.rows_lost = await rows.lost(conn, snapshot)
+    result.rows_lost = await _reachable(rt, lambda: _rows_lost(rt, snapshot))
     result.rows_checked = snapshot.rows
     if result.rows_lost and set(result.rows_lost) <= ASYNC_COMMIT:
         result.notes.append(
