@@ -145,7 +145,27 @@ async def run_trial(
     secrets_dir = Path(tempfile.mkdtemp(prefix="pnav-bus-"))
     bus = BusCredentials.create(secrets_dir)
     try:
-        await _trial(fault, world, goal, bad_goals, rate, log_dir, bus, result)
+        with router_process(bus.apply(ZenohSettings(), ROUTER_USER)) as (router, plain):
+            zenoh = bus.apply(plain, USER)
+            options = StackOptions(
+                world=str(world),
+                rate=rate,
+                robots=1,
+                zenoh_port=None,
+                log_dir=log_dir,
+                extra_env=plain.to_env(),  # the router process; each service keeps its user
+                bus=bus,
+            )
+            async with launched(options) as stack:
+                config = ServiceConfig(
+                    service="faults", database_url=stack.local.database_url, zenoh=zenoh
+                )
+                rt = await Runtime.open(config)
+                try:
+                    ctx = Context(stack, router, zenoh, rt, goal, 0, bad_goals)
+                    await _mission(fault, ctx, result)
+                finally:
+                    await rt.close()
     finally:
         shutil.rmtree(secrets_dir, ignore_errors=True)
     figures = sim_figures(log_dir / "sim.log")
@@ -153,37 +173,6 @@ async def run_trial(
     result.max_after_command_m = figures.get("max_after_command_m")
     result.wall_s = round(time.monotonic() - started, 1)
     return result
-
-
-async def _trial(
-    fault: Fault,
-    world: Path,
-    goal: tuple[float, float],
-    bad_goals: dict[str, tuple[float, float]],
-    rate: str,
-    log_dir: Path,
-    bus: BusCredentials,
-    result: Result,
-) -> None:
-    with router_process(bus.apply(ZenohSettings(), ROUTER_USER)) as (router, plain):
-        zenoh = bus.apply(plain, USER)
-        options = StackOptions(
-            world=str(world),
-            rate=rate,
-            robots=1,
-            zenoh_port=None,
-            log_dir=log_dir,
-            extra_env=plain.to_env(),  # the router process; each service keeps its user
-            bus=bus,
-        )
-        async with launched(options) as stack:
-            rt = await Runtime.open(
-                ServiceConfig(service="faults", database_url=stack.local.database_url, zenoh=zenoh)
-            )
-            try:
-                await _mission(fault, Context(stack, router, zenoh, rt, goal, 0, bad_goals), result)
-            finally:
-                await rt.close()
 
 
 async def _mission(fault: Fault, ctx: Context, result: Result) -> None:

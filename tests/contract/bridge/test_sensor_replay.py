@@ -26,6 +26,18 @@ _CUT = (
 )
 
 
+async def _odometry(sim: FakeSim, seqs: range) -> None:
+    for seq in seqs:
+        sim.sensor("r1", keys.ODOM, payloads.odom(seq=seq))
+        await asyncio.sleep(0.02)
+
+
+async def _until_seq(conn: asyncpg.Connection, seq: int) -> None:
+    await eventually(
+        lambda: conn.fetchval("SELECT max(seq) = $1 FROM odometry", seq), what=f"seq {seq}"
+    )
+
+
 async def _rows(conn: asyncpg.Connection) -> dict[int, int]:
     """seq -> id of r1's odometry rows."""
     return {r["seq"]: r["id"] for r in await conn.fetch("SELECT seq, id FROM odometry")}
@@ -35,10 +47,8 @@ async def test_rows_a_crash_took_return_with_their_ids_before_newer_ones(
     start_bridge: BridgeFactory, sim: FakeSim, conn: asyncpg.Connection
 ) -> None:
     bridge = await bridge_with_world(start_bridge, sim, payloads.world())
-    for seq in range(10):
-        sim.sensor("r1", keys.ODOM, payloads.odom(seq=seq))
-        await asyncio.sleep(0.02)
-    await eventually(lambda: bridge.counters.rows_written[keys.ODOMETRY] == 10, what="10 rows")
+    await _odometry(sim, range(10))
+    await _until_seq(conn, 9)
     before = await _rows(conn)
 
     # the crash: seq 6-9 were committed but never reached the disk, nor did the sequence's
@@ -48,12 +58,8 @@ async def test_rows_a_crash_took_return_with_their_ids_before_newer_ones(
     await conn.execute("SELECT setval(pg_get_serial_sequence('odometry', 'id'), $1)", before[5])
     assert await conn.fetchval(_CUT) >= 1
 
-    for seq in range(10, 40):  # the first write after the cut fails; later ones reconnect
-        sim.sensor("r1", keys.ODOM, payloads.odom(seq=seq))
-        await asyncio.sleep(0.02)
-    await eventually(
-        lambda: conn.fetchval("SELECT max(seq) = 39 FROM odometry"), what="rows after the cut"
-    )
+    await _odometry(sim, range(10, 40))  # the first write after the cut fails, later reconnect
+    await _until_seq(conn, 39)
 
     after = await _rows(conn)
     assert {seq: after.get(seq) for seq in lost} == lost  # back, under the same ids
@@ -67,18 +73,12 @@ async def test_a_cut_without_a_crash_restores_nothing_and_loses_nothing(
     start_bridge: BridgeFactory, sim: FakeSim, conn: asyncpg.Connection
 ) -> None:
     bridge = await bridge_with_world(start_bridge, sim, payloads.world())
-    for seq in range(5):
-        sim.sensor("r1", keys.ODOM, payloads.odom(seq=seq))
-        await asyncio.sleep(0.02)
-    await eventually(lambda: bridge.counters.rows_written[keys.ODOMETRY] == 5, what="5 rows")
+    await _odometry(sim, range(5))
+    await _until_seq(conn, 4)
     before = await _rows(conn)
     assert await conn.fetchval(_CUT) >= 1
-    for seq in range(5, 30):
-        sim.sensor("r1", keys.ODOM, payloads.odom(seq=seq))
-        await asyncio.sleep(0.02)
-    await eventually(
-        lambda: conn.fetchval("SELECT max(seq) = 29 FROM odometry"), what="rows after the cut"
-    )
+    await _odometry(sim, range(5, 30))
+    await _until_seq(conn, 29)
     after = await _rows(conn)
     assert set(before.items()) <= set(after.items())
     assert bridge.counters.rows_restored[keys.ODOMETRY] == 0
