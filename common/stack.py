@@ -15,20 +15,21 @@ keeps ``trust`` (pgserver's own tooling and restarts use it), every other role m
 password (scram-sha-256).
 
 Zenoh between the local processes (:class:`LocalZenoh`, ``PNAV_LOCAL_ZENOH``): by default
-each process is a *peer* that connects to the launcher's router and learns the other peers'
-loopback endpoints from it (gossip scouting), then sends to them directly; the router stays
-the rendezvous and the endpoint for clients (the CLI, a foreign service, the dashboard).
-A message then crosses one TCP link instead of two and the launcher forwards none of it
-(docs/BENCHMARKS.md, "Peer-to-peer Zenoh"). ``PNAV_LOCAL_ZENOH=client`` routes everything
-through the router, as compose does (deploy/docker-compose.yml keeps the router).
+each process is a *client* of the launcher's router, as in compose, and the router is the
+one door: it checks every session's user and password (:class:`BusCredentials`). As
+Postgres's roles get passwords made for the run, so does every identity on the bus (the sim,
+each service, ``user`` for people's tools), in a user/password file only this OS user can
+read, so a process not given a password cannot join: it can publish neither sensors nor
+notifications. The trust boundary is the OS user, as for the Postgres socket; compose adds
+the router's access control per identity (common.contract.acl).
 
-Zenoh authentication (:class:`BusCredentials`): as Postgres's roles get passwords made for
-the run, so does every identity on the bus (the sim, each service, ``user`` for people's
-tools). The router and every peer check whoever links to them against a user/password file
-only this OS user can read, so a process not given a password can neither join through the
-router nor link to a peer directly: it cannot publish sensors or notifications. The trust
-boundary is the OS user, as for the Postgres socket; compose adds the router's access
-control per identity (common.contract.acl), which peers linked directly would bypass.
+``PNAV_LOCAL_ZENOH=peer`` makes each process a *peer* that learns the others' loopback
+endpoints from the router (gossip) and sends to them directly: one TCP link instead of two
+(docs/BENCHMARKS.md, "Peer-to-peer Zenoh"). It runs WITHOUT authentication: with user and
+password on every peer, zenoh 1.x sometimes never completes a gossiped peer-to-peer link
+while the machine is busy (2 of 14 pairs never linked with both cores loaded, silently;
+0 of 12 without authentication, 0 of 12 as clients of an authenticating router), which
+left a service deaf to the sim. The launcher says so in its log.
 """
 
 from __future__ import annotations
@@ -65,8 +66,9 @@ PEER_LISTEN: tuple[str, ...] = ("tcp/127.0.0.1:0",)
 class LocalZenoh:
     """How the processes of a local stack reach each other over Zenoh."""
 
-    # peer: directly, the router as rendezvous; client: every message through the router
-    mode: str = "peer"
+    # client: every message through the router, which authenticates each session; peer:
+    # directly, the router as rendezvous, without authentication (see the module docstring)
+    mode: str = "client"
 
     def __post_init__(self) -> None:
         if self.mode not in ("peer", "client"):
@@ -76,6 +78,11 @@ class LocalZenoh:
     def from_env(cls, env: Mapping[str, str] | None = None) -> LocalZenoh:
         env = os.environ if env is None else env
         return cls(mode=env.get("PNAV_LOCAL_ZENOH", "").strip().lower() or cls.mode)
+
+    @property
+    def authenticated(self) -> bool:
+        """Whether the stack's router checks users and passwords in this mode."""
+        return self.mode == "client"
 
     def settings(self, router: str) -> ZenohSettings:
         """The Zenoh settings of a local process, given the router's endpoint."""
@@ -190,7 +197,8 @@ async def local_stack(
 ) -> AsyncIterator[LocalStack]:
     """Start Postgres (embedded unless PNAV_DATABASE_URL is set) and a router; migrate.
     ``local_zenoh``: how the stack's processes use Zenoh (default: PNAV_LOCAL_ZENOH);
-    ``bus``: the Zenoh users to use (made for this run, and removed after it, if None)."""
+    ``bus``: the Zenoh users to use (if None: made for this run and removed after it, or
+    none at all in peer mode)."""
     local_zenoh = local_zenoh if local_zenoh is not None else LocalZenoh.from_env()
     postgres: EmbeddedPostgres | None = None
     lifeline: Lifeline | None = None
@@ -214,11 +222,17 @@ async def local_stack(
     keeping: asyncio.Task[None] | None = None
     secret_dir: Path | None = None
     try:
-        if bus is None:
+        if bus is None and local_zenoh.authenticated:
             secret_dir = Path(tempfile.mkdtemp(prefix="pnav-bus-"))  # 0700: this OS user's
             bus = BusCredentials.create(secret_dir)
+        elif bus is None:
+            logging.getLogger("pnav.stack").warning(
+                "PNAV_LOCAL_ZENOH=peer: the local Zenoh runs without authentication "
+                "(any process on this machine may join it; docs/DEPLOY.md)"
+            )
         endpoint = f"tcp/127.0.0.1:{zenoh_port or free_port()}"
-        router = start_router((endpoint,), bus.apply(ZenohSettings(), ROUTER_USER))
+        auth = bus.apply(ZenohSettings(), ROUTER_USER) if bus is not None else None
+        router = start_router((endpoint,), auth)
         try:
             conn = await asyncpg.connect(url)
             try:
@@ -229,7 +243,8 @@ async def local_stack(
                 await conn.close()
             if keeper is not None:
                 keeping = asyncio.create_task(keeper.run(stop_keeper), name="postgres-keeper")
-            zenoh = bus.apply(local_zenoh.settings(endpoint), USER)
+            zenoh = local_zenoh.settings(endpoint)
+            zenoh = bus.apply(zenoh, USER) if bus is not None else zenoh
             yield LocalStack(url, zenoh, router, postgres, keeper, role_urls, bus)
         finally:
             stop_keeper.set()

@@ -1,8 +1,10 @@
 """Zenoh between the processes of a local stack (common.stack.LocalZenoh), on loopback.
 
-By default every local process is a peer: it connects to the launcher's router, learns the
-other peers' endpoints from it (gossip scouting) and then sends to them directly, so a
-notification crosses one link instead of two and the router forwards none of it.
+By default every local process is a client of the launcher's router, which checks its user
+and password (tests/unit/test_bus_credentials.py). With ``PNAV_LOCAL_ZENOH=peer`` it
+connects to the router, learns the other peers' endpoints from it (gossip scouting) and then
+sends to them directly, so a notification crosses one link instead of two and the router
+forwards none of it.
 """
 
 from __future__ import annotations
@@ -21,14 +23,15 @@ from common.stack import PEER_LISTEN, LocalZenoh
 from common.testing import eventually, loopback_zenoh
 
 
-def test_local_processes_are_peers_unless_told_otherwise() -> None:
-    assert LocalZenoh.from_env({}).mode == "peer"
-    assert LocalZenoh.from_env({"PNAV_LOCAL_ZENOH": "client"}).mode == "client"
+def test_local_processes_are_authenticated_clients_unless_told_to_be_peers() -> None:
+    assert LocalZenoh.from_env({}).mode == "client"
+    assert LocalZenoh.from_env({"PNAV_LOCAL_ZENOH": "peer"}).mode == "peer"
     router = "tcp/127.0.0.1:7447"
-    assert LocalZenoh().settings(router) == ZenohSettings(
+    assert LocalZenoh("peer").settings(router) == ZenohSettings(
         mode="peer", connect=(router,), listen=PEER_LISTEN, multicast=False
     )
-    assert LocalZenoh("client").settings(router) == ZenohSettings(mode="client", connect=(router,))
+    assert LocalZenoh().settings(router) == ZenohSettings(mode="client", connect=(router,))
+    assert LocalZenoh().authenticated and not LocalZenoh("peer").authenticated
     with pytest.raises(ConfigError, match="PNAV_LOCAL_ZENOH='router' must be peer or client"):
         LocalZenoh.from_env({"PNAV_LOCAL_ZENOH": "router"})
 

@@ -231,9 +231,11 @@ def test_payloads_follow_the_contract_and_cmd_vel_moves_the_robot(
             check(msg, schema)
         # seq counts the stream's messages from 0; a sensor stream drops rather than stalls
         # the sim under congestion (CONTRACT.md), so a gap or two on a loaded machine is
-        # the contract working, not breaking
+        # the contract working, not breaking. The very first messages can go before the
+        # listener's subscription has reached the sim's session (Zenoh filters at the
+        # writer until it knows a route): the first seen is among the first few.
         seqs = [m["seq"] for m in msgs]
-        assert seqs[0] == 0 and seqs == sorted(set(seqs)), key  # rising, no repeat
+        assert seqs[0] <= 2 and seqs == sorted(set(seqs)), key  # rising, no repeat
         sent = seqs[-1] + 1
         assert sent - len(seqs) <= max(2, 0.1 * sent), key  # a short stream may lose one
     scan = listener.of(scan_key)[0]
