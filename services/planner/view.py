@@ -72,7 +72,9 @@ class Contract(Clocks, Protocol):
         ttl_s: float,
         reason: str,
         inputs: dict[str, Any],
-    ) -> int: ...
+    ) -> int | None:
+        """Recommend a velocity (written at the end of the activation: the id is then
+        None)."""
 
     async def recommend_system(
         self,

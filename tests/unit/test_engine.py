@@ -514,3 +514,44 @@ async def test_a_plugged_trigger_and_clock_decide_when_activations_start() -> No
     assert e.counters.woken_by_notification == 1
     e.stop()
     await asyncio.wait_for(task, 2)
+
+
+async def test_after_activation_work_runs_once_after_the_last_rule_of_each_activation(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    journal: list[str] = []
+    engine = Engine(EngineSettings(max_rules=2))
+
+    async def flush() -> None:
+        journal.append("flush")
+
+    async def broken() -> None:
+        journal.append("broken")
+        raise RuntimeError("batch refused")
+
+    engine.after_activation(flush)
+    engine.after_activation(broken)
+    for tag in ("a", "b", "c"):
+        engine.add(Probe(tag, journal))
+    # current: [a, b, c]; N = 2
+    await engine.activation()
+    assert [j for j in journal if ":act" in j or j in ("flush", "broken")] == [
+        "a:act",
+        "b:act",
+        "flush",  # after the last rule the cap let run, not per rule
+        "broken",  # an error there does not stop the engine
+    ]
+    journal.clear()
+    # current: [c]
+    with caplog.at_level(logging.ERROR, logger="pnav.engine"):
+        await engine.activation()
+        await engine.activation()  # current: []: the work still runs (nothing queued)
+    assert [j for j in journal if ":act" in j or j in ("flush", "broken")] == [
+        "c:act",
+        "flush",
+        "broken",
+        "flush",
+        "broken",
+    ]
+    errors = [r for r in caplog.records if "batch refused" in r.getMessage()]
+    assert len(errors) == 1  # logged once per distinct error, counted after
