@@ -14,11 +14,6 @@ Our additions to the thesis:
 
 - A meta rule (``Rule.meta``) discarded because of an error is re-seeded from the factory
   given to :meth:`Engine.add_meta`, logged and counted.
-- Work that ends an activation (:meth:`Engine.after_activation`): a store that queued the
-  writes of the activation's rules writes them together, in one statement for every robot
-  (DESIGN.md section 7, batching across robots), before the activation counts as done, so a
-  lockstep run still sees every write of the activation before the sim steps. An error
-  there is counted and logged once per distinct error, like a rule's.
 - Per-robot wake-ups. ``wake(robot)`` and ``hurry(robot)`` record the robot they are about
   (None: anything). An activation started only by wakes and hurries that all named robots
   is *focused* on those robots: it runs, in queue order, the rules whose ``Rule.robot_id``
@@ -34,11 +29,10 @@ Our additions to the thesis:
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import time
 from collections import deque
-from collections.abc import Awaitable, Callable, Iterable
+from collections.abc import Callable, Iterable
 
 from common.config import EngineSettings
 from common.engine.errorlog import ErrorLog
@@ -83,7 +77,6 @@ class Engine(StepRunner):
         # The last activation was cut by N or F: the next one is full, so what the cut left
         # runs first, as in the thesis (a meta rule never overtakes the targets it made).
         self.cut = False
-        self._after: list[Callable[[], Awaitable[None]]] = []
 
     # -- putting rules in ------------------------------------------------------------------
     def add(self, rule: Rule) -> None:
@@ -100,11 +93,6 @@ class Engine(StepRunner):
         self._meta_factories[type(rule)] = factory
         self.add(rule)
         return rule
-
-    def after_activation(self, callback: Callable[[], Awaitable[None]]) -> None:
-        """Await ``callback()`` at the end of every activation, after its last rule (a
-        store's queued writes: see the module's docstring)."""
-        self._after.append(callback)
 
     @property
     def watched_tables(self) -> tuple[str, ...]:
@@ -129,29 +117,12 @@ class Engine(StepRunner):
             self.counters.out_of_focus += passed_over
         if not passed_over:
             self.full_started = started
-        for callback in self._after:
-            await self._end_activation(callback)
         self.current.extend(self.next)
         self.next.clear()
         self.counters.activations += 1
         self.counters.rules_run += ran
         self.error_log.flush()
         return ran
-
-    async def _end_activation(self, callback: Callable[[], Awaitable[None]]) -> None:
-        try:
-            await callback()
-        except asyncio.CancelledError:
-            raise
-        except Exception as exc:
-            name = getattr(callback, "__qualname__", repr(callback))
-            self.error_log.report(
-                (type(callback), "after activation", type(exc).__qualname__, str(exc)),
-                logging.ERROR,
-                f"error after the activation in {name}: {exc!r}",
-                {"engine": self.name},
-                exc_info=exc,
-            )
 
     async def _run_all(self, deadline: float) -> int:
         """The thesis' activation: rules from the head of ``current`` until N or F."""

@@ -106,9 +106,6 @@ class MemoryControllerSource:
         # inserted, then announced to the contract's listeners, as Database.write does
         return self.contract.insert(keys.COMMAND_RECOMMENDATION, row)
 
-    async def flush(self) -> None:
-        """Nothing queued: every row is in memory at once (a statement costs nothing here)."""
-
 
 def controller_engine(
     contract: MemoryContract,

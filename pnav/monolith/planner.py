@@ -163,9 +163,6 @@ class MemoryPlannerSource:
         }
         return self.contract.insert(keys.COMMAND_RECOMMENDATION, row)
 
-    async def flush(self) -> None:
-        """Nothing queued: every row is in memory at once."""
-
     async def publish_path(self, path: PathRow) -> int:
         return self.contract.insert(keys.PLANNED_PATH, dict(path))
 

@@ -113,8 +113,7 @@ class Host(Protocol):
     def last_recommended_scan(self, robot_id: str, source: str) -> int | None:
         """The newest scan ``source`` recommended on for the robot (this tenure), if any."""
 
-    async def recommend(self, recommendation: Recommendation) -> int | None:
-        """Write (or queue, for the end of the activation) a recommendation."""
+    async def recommend(self, recommendation: Recommendation) -> int: ...
 
 
 class ControllerScenario(Supervised[Key, ScenarioSpec]):

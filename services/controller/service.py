@@ -13,10 +13,11 @@ import time
 
 from common import log
 from common.bus import Notification
+from common.db import Database
 from common.runtime import Runtime
 from common.service import ScenarioService
 from services.controller.meta import seed_controller
-from services.controller.scenario import installed_scenarios
+from services.controller.scenario import Recommendation, installed_scenarios
 from services.controller.store import ControllerStore, PgControllerSource
 
 logger = logging.getLogger("pnav.controller")
@@ -41,8 +42,6 @@ class ControllerService(ScenarioService):
         scenarios = installed_scenarios()
         log.event(logger, logging.INFO, "controller scenarios", names=",".join(sorted(scenarios)))
         seed_controller(self.engine, self.store, scenarios, owns=self.owns)
-        # the activation's recommendations, every robot's, in one statement at its end
-        self.engine.after_activation(self.store.flush)
 
     def on_notification(self, note: Notification) -> None:
         self.store.note(note)
@@ -53,3 +52,9 @@ class ControllerService(ScenarioService):
         # forgotten (another replica served it meanwhile).
         self.store.forget(gained | lost)
         super().on_ownership_change(gained, lost)
+
+
+async def store_recommendation(db: Database, recommendation: Recommendation) -> int:
+    """Transitional: pnav/monolith/stack.py imports this until it builds the controller with
+    ``pnav.monolith.controller.controller_engine``; delete it with that import."""
+    return await PgControllerSource(db).recommend(recommendation)

@@ -1,8 +1,6 @@
 """Every read and write of the contract the controller does, and what it keeps of them.
 
-- :class:`ControllerSource`: the raw typed reads and the one write, as a Protocol (in
-  Postgres the write is queued and flushed at the end of each activation, every robot's
-  recommendations in one statement);
+- :class:`ControllerSource`: the raw typed reads and the one write, as a Protocol;
 - :class:`PgControllerSource`: them in Postgres (through ``common.contract.records``);
   pnav/monolith/controller.py has them in memory;
 - :class:`ControllerStore`: the one object the service holds. It implements the rules'
@@ -29,7 +27,6 @@ from common import log
 from common.bus import Notification
 from common.contract import keys, records
 from common.contract.planned_path import PlannedPath, newest_planned_path, planned_path_of
-from common.contract.recommendations import RecommendationBatch, VelocityRow
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
 from common.db import Database
 from common.freshness import FreshCache, Sequences
@@ -65,22 +62,15 @@ class ControllerSource(Protocol):
     async def newest_planned_path(self, robot_id: str) -> PlannedPath | None:
         """The path in force for the robot (the planner's newest planned_path row)."""
 
-    async def recommend(self, recommendation: Recommendation) -> int | None:
-        """Write a command_recommendation row (notified after commit) and return its id, or
-        queue it for :meth:`flush` and return None."""
-
-    async def flush(self) -> None:
-        """Write what :meth:`recommend` queued (the end of every activation)."""
+    async def recommend(self, recommendation: Recommendation) -> int:
+        """Write a command_recommendation row (notified after commit); its id."""
 
 
 class PgControllerSource:
-    """:class:`ControllerSource` in Postgres: the recommendations of one activation are
-    queued and written together at its end, every robot's in one statement
-    (common.contract.recommendations)."""
+    """:class:`ControllerSource` in Postgres."""
 
     def __init__(self, db: Database) -> None:
         self.db = db
-        self.batch = RecommendationBatch(db)
 
     async def robots(self) -> list[Robot]:
         return await records.robots(self.db.pool)
@@ -97,17 +87,20 @@ class PgControllerSource:
     async def newest_planned_path(self, robot_id: str) -> PlannedPath | None:
         return await newest_planned_path(self.db.pool, robot_id)
 
-    async def recommend(self, recommendation: Recommendation) -> int | None:
+    async def recommend(self, recommendation: Recommendation) -> int:
         r = recommendation
-        row = VelocityRow(
-            r.robot_id, r.source, r.priority, r.linear, r.angular, r.stamp, r.ttl_s,
-            r.reason, r.inputs,
-        )  # fmt: skip
-        self.batch.add(row)
-        return None
-
-    async def flush(self) -> None:
-        await self.batch.flush()
+        return await records.recommend_velocity(
+            self.db,
+            r.robot_id,
+            source=r.source,
+            priority=r.priority,
+            linear=r.linear,
+            angular=r.angular,
+            stamp=r.stamp,
+            ttl_s=r.ttl_s,
+            reason=r.reason,
+            inputs=r.inputs,
+        )
 
 
 def _scan_id(pair: ScanAndOdometry) -> int | None:
@@ -304,8 +297,7 @@ class ControllerStore:
     def last_recommended_scan(self, robot_id: str, source: str) -> int | None:
         return self._recommended.get((robot_id, source))
 
-    async def recommend(self, recommendation: Recommendation) -> int | None:
-        """Recommend (queued until :meth:`flush` in Postgres: the id is then None)."""
+    async def recommend(self, recommendation: Recommendation) -> int:
         r = recommendation
         row_id = await self.source.recommend(r)
         if r.scan_id is not None:
@@ -322,10 +314,6 @@ class ControllerStore:
             reason=r.reason,
         )
         return row_id
-
-    async def flush(self) -> None:
-        """Write the activation's recommendations (``Engine.after_activation``)."""
-        await self.source.flush()
 
     async def _read_tables(self) -> Tables:
         return await self.source.robots(), await self.source.active_strategies()

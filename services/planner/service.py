@@ -36,8 +36,6 @@ class PlannerService(ScenarioService):
     def seed(self) -> None:
         # the move scenarios installed now: a new one needs a restart, no edit here
         self.rules = meta.seed(self.engine, self.store, meta.move_scenarios(), owns=self.owns)
-        # the activation's velocity recommendations, every robot's, in one statement at its end
-        self.engine.after_activation(self.store.flush)
 
     def on_ownership_change(self, gained: frozenset[str], lost: frozenset[str]) -> None:
         # A robot given up or taken over starts from a blank state (route, charger, poses,

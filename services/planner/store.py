@@ -30,9 +30,7 @@ import services.planner.chargers as chargers
 import services.planner.obstacles as obstacles
 from common.bus import Notification
 from common.contract import keys, planned_path, records
-from common.contract.recommendations import RecommendationBatch, VelocityRow
 from common.db import Database
-from common.errors import InternalError
 from common.freshness import FreshCache, Sequences
 from services.planner.paths import PathRow
 from services.planner.recommendation import Recommendation
@@ -104,26 +102,18 @@ class PlannerSource(Protocol):
     async def live_system(self, robot_id: str, command: str, now: float) -> float | None:
         """The newest expiry after ``now`` of the robot's ``command`` recommendations."""
 
-    async def recommend(self, rec: Recommendation) -> int | None:
-        """Write a command_recommendation row and notify, and return its id; or queue a
-        velocity one for :meth:`flush` and return None."""
-
-    async def flush(self) -> None:
-        """Write what :meth:`recommend` queued (the end of every activation)."""
+    async def recommend(self, rec: Recommendation) -> int:
+        """Write a command_recommendation row and notify; its id."""
 
     async def publish_path(self, path: PathRow) -> int:
         """Write a planned_path row (``path``: its contract columns) and notify; its id."""
 
 
 class PgPlannerSource:
-    """:class:`PlannerSource` on Postgres: ``Database.write`` notifies after each write. The
-    velocity recommendations of one activation are queued and written together at its end,
-    every robot's in one statement (common.contract.recommendations); a system one (rare, and
-    read back by ``live_system``) is written at once."""
+    """:class:`PlannerSource` on Postgres: ``Database.write`` notifies after each write."""
 
     def __init__(self, db: Database) -> None:
         self.db = db
-        self.batch = RecommendationBatch(db)
 
     async def robots(self) -> list[RobotInfo]:
         return [RobotInfo(**dict(r)) for r in await self.db.pool.fetch(ROBOTS_SQL)]
@@ -170,14 +160,7 @@ class PgPlannerSource:
         value = await self.db.pool.fetchval(LIVE_SYSTEM_SQL, robot_id, command, now)
         return float(value) if value is not None else None
 
-    async def recommend(self, rec: Recommendation) -> int | None:
-        if rec.command is None:
-            row = VelocityRow(
-                rec.robot_id, rec.source, rec.priority, rec.linear, rec.angular, rec.stamp,
-                rec.ttl_s, rec.reason, rec.inputs,
-            )  # fmt: skip
-            self.batch.add(row)
-            return None
+    async def recommend(self, rec: Recommendation) -> int:
         fields: dict[str, Any] = {
             "source": rec.source,
             "priority": rec.priority,
@@ -186,10 +169,11 @@ class PgPlannerSource:
             "reason": rec.reason,
             "inputs": rec.inputs,
         }
+        if rec.command is None:
+            return await records.recommend_velocity(
+                self.db, rec.robot_id, linear=rec.linear, angular=rec.angular, **fields
+            )
         return await records.recommend_system(self.db, rec.robot_id, command=rec.command, **fields)
-
-    async def flush(self) -> None:
-        await self.batch.flush()
 
     async def publish_path(self, path: PathRow) -> int:
         return await planned_path.write_planned_path(self.db, path)
@@ -354,16 +338,12 @@ class PlannerStore:
         ttl_s: float,
         reason: str,
         inputs: dict[str, Any],
-    ) -> int | None:
+    ) -> int:
         return await self.source.recommend(
             Recommendation(
                 robot_id, source, priority, stamp, ttl_s, reason, inputs, linear, angular
             )
         )
-
-    async def flush(self) -> None:
-        """Write the activation's velocity recommendations (``Engine.after_activation``)."""
-        await self.source.flush()
 
     async def recommend_system(
         self,
@@ -377,14 +357,11 @@ class PlannerStore:
         reason: str,
         inputs: dict[str, Any],
     ) -> int:
-        row_id = await self.source.recommend(
+        return await self.source.recommend(
             Recommendation(
                 robot_id, source, priority, stamp, ttl_s, reason, inputs, command=command
             )
         )
-        if row_id is None:
-            raise InternalError("a system recommendation is written at once, never queued")
-        return row_id
 
     async def publish_path(self, path: PathRow) -> int:
         return await self.source.publish_path(path)

@@ -72,9 +72,7 @@ class Contract(Clocks, Protocol):
         ttl_s: float,
         reason: str,
         inputs: dict[str, Any],
-    ) -> int | None:
-        """Recommend a velocity (written at the end of the activation: the id is then
-        None)."""
+    ) -> int: ...
 
     async def recommend_system(
         self,
