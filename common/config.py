@@ -20,7 +20,7 @@ PNAV_ZENOH_USER            user name this process authenticates  (none: no authe
 PNAV_ZENOH_PASSWORD        that user's password                  (none)
 PNAV_ZENOH_USERS_FILE      user:password lines this process      (none: accepts anyone)
                            checks whoever links to it against
-                           (a local stack's router and peers)
+                           (a local stack's router)
 PNAV_ENGINE_PERIOD_MS      F: activation period and bound        50
 PNAV_ENGINE_MAX_RULES      N: most rules run per activation      1000
 PNAV_ENGINE_PAUSE_MS       P: least pause between activations    0

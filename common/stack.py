@@ -97,7 +97,7 @@ ROUTER_USER = "router"  # the launcher's router, when it links to a peer
 @dataclass(frozen=True)
 class BusCredentials:
     """This run's Zenoh users: one per identity on the bus, with a fresh password each, and
-    the ``user:password`` file the router and the peers check a linking session against."""
+    the ``user:password`` file the router checks every session against."""
 
     users_file: Path
     passwords: Mapping[str, str] = field(repr=False)
@@ -143,7 +143,7 @@ class LocalStack:
     # role (short name: "planner", "user") -> the DSN to connect as it; empty when the
     # server's account given could not set roles up (every process then uses database_url)
     role_urls: dict[str, str] = field(default_factory=dict)
-    bus: BusCredentials | None = None  # None: the router and peers accept anyone
+    bus: BusCredentials | None = None  # None: the router accepts anyone (peer mode)
 
     def env(self) -> dict[str, str]:
         """The variables a process needs to join this stack (as the setup account: tests and
