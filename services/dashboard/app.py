@@ -24,9 +24,9 @@ from starlette.routing import BaseRoute, Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
+import services.dashboard.provenance as provenance
 from common.contract import keys
 from common.errors import ConnectionFailure
-from services.dashboard import provenance
 from services.dashboard.hub import Hub
 from services.dashboard.orders import Orders
 from services.dashboard.requests import (

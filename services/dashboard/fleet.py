@@ -14,9 +14,9 @@ from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Final
 
+import services.dashboard.scene as scene
 from common.bus import Notification
 from common.contract import keys
-from services.dashboard import scene
 
 Row = Mapping[str, Any]
 FetchRecommendations = Callable[[Sequence[int]], Awaitable[list[Row]]]

@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from datetime import datetime
 from typing import Any
 
-from services.dashboard import scene
+import services.dashboard.scene as scene
 from services.dashboard.requests import Refused
 from services.dashboard.store import DECISION_TABLES, PROVENANCE_TABLES, DashboardSource
 

@@ -19,10 +19,10 @@ from typing import Any, Final, Protocol
 
 import asyncpg
 
+import services.dashboard.scene as scene
 from common.bus import Notification
 from common.contract import keys, people
 from common.db import Database
-from services.dashboard import scene
 from services.dashboard.fleet import Fleet
 from services.dashboard.requests import NewStrategy, Refused
 from services.dashboard.timeline import Timeline, command_event, goal_event, strategy_event
