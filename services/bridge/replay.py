@@ -78,13 +78,21 @@ class Replay:
         if delay_ms is not None:
             self.window_s = max(self.window_s, WAL_WRITER_PERIODS * float(delay_ms) / 1000.0)
 
-    def written(self, table: str, ids: Sequence[int], batch: list[SensorRecord]) -> None:
-        """Remember a committed batch (``ids[i]`` is ``batch[i]``'s)."""
+    def written(
+        self, table: str, rows: Sequence[tuple[int, str]], batch: list[SensorRecord]
+    ) -> None:
+        """Remember a committed batch: ``rows`` are RETURNING's (id, robot) in the order
+        unnest fed ``batch``, which is checked as the notifications check it (same length,
+        same robot at each position); a batch that does not pair is not remembered, so a
+        restore never puts one robot's reading under another's id."""
         memory = self._written.get(table)
-        if memory is None or len(ids) != len(batch):
+        paired = len(rows) == len(batch) and all(
+            robot == record.robot_id for (_, robot), record in zip(rows, batch, strict=True)
+        )
+        if memory is None or not paired:
             return
         now = self.clock()
-        memory.batches.append((now, list(ids), batch))
+        memory.batches.append((now, [row_id for row_id, _ in rows], batch))
         while memory.batches and memory.batches[0][0] < now - self.window_s:
             memory.batches.popleft()
 

@@ -223,7 +223,7 @@ class SensorWriter:
             self._committed(batch)
             return
         self.counters.rows_written[table.name] += len(rows)
-        self.replay.written(table.name, [row_id for row_id, _ in rows], batch)
+        self.replay.written(table.name, rows, batch)
         notify = self.notifier.notify
         for robot_id, row_id, image in newest_per_robot(
             table.spec, batch, rows, images=self.notifier.images

@@ -23,13 +23,13 @@ def _odom(seq: int) -> Odometry:
 def test_rows_are_remembered_for_the_window_of_the_writers_own_writes() -> None:
     clock = Clock()
     replay = Replay(list(SENSOR_TABLES.values()), window_s=2.0, clock=clock)
-    replay.written(keys.ODOMETRY, [1, 2], [_odom(1), _odom(2)])
+    replay.written(keys.ODOMETRY, [(1, "r1"), (2, "r1")], [_odom(1), _odom(2)])
     assert replay.remembered(keys.ODOMETRY) == [1, 2]
     clock.now += 1.5
-    replay.written(keys.ODOMETRY, [3], [_odom(3)])
+    replay.written(keys.ODOMETRY, [(3, "r1")], [_odom(3)])
     assert replay.remembered(keys.ODOMETRY) == [1, 2, 3]  # 1.5 s old: within the window
     clock.now += 1.0
-    replay.written(keys.ODOMETRY, [4], [_odom(4)])
+    replay.written(keys.ODOMETRY, [(4, "r1")], [_odom(4)])
     assert replay.remembered(keys.ODOMETRY) == [3, 4]  # the first batch is 2.5 s old
     clock.now += 60.0  # an outage: nothing is written, so nothing is forgotten
     assert replay.remembered(keys.ODOMETRY) == [3, 4]
@@ -37,7 +37,7 @@ def test_rows_are_remembered_for_the_window_of_the_writers_own_writes() -> None:
 
 def test_only_renewed_connections_make_a_table_restore() -> None:
     replay = Replay(list(SENSOR_TABLES.values()), clock=Clock())
-    replay.written(keys.ODOMETRY, [1], [_odom(1)])
+    replay.written(keys.ODOMETRY, [(1, "r1")], [_odom(1)])
     assert not replay.pending(keys.ODOMETRY)  # written and connected: nothing to restore
     replay.connections_renewed()
     assert replay.pending(keys.ODOMETRY)
@@ -47,7 +47,7 @@ def test_only_renewed_connections_make_a_table_restore() -> None:
 def test_durable_collision_events_are_not_remembered() -> None:
     replay = Replay(list(SENSOR_TABLES.values()), clock=Clock())
     event = Collision("r1", 1.0, seq=1, other="wall", x=0.0, y=0.0, run="run")
-    replay.written(keys.COLLISION_EVENT, [1], [event])
+    replay.written(keys.COLLISION_EVENT, [(1, "r1")], [event])
     replay.connections_renewed()
     assert replay.remembered(keys.COLLISION_EVENT) == []
     assert not replay.pending(keys.COLLISION_EVENT)  # committed synchronously: never lost
@@ -55,5 +55,6 @@ def test_durable_collision_events_are_not_remembered() -> None:
 
 def test_a_batch_whose_ids_do_not_pair_with_its_records_is_not_remembered() -> None:
     replay = Replay(list(SENSOR_TABLES.values()), clock=Clock())
-    replay.written(keys.ODOMETRY, [1], [_odom(1), _odom(2)])
+    replay.written(keys.ODOMETRY, [(1, "r1")], [_odom(1), _odom(2)])  # a row short
+    replay.written(keys.ODOMETRY, [(1, "r2"), (2, "r1")], [_odom(1), _odom(2)])  # swapped
     assert replay.remembered(keys.ODOMETRY) == []
