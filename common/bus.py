@@ -11,7 +11,6 @@ ledger nothing is counted.
 from __future__ import annotations
 
 import asyncio
-import dataclasses
 import json
 import logging
 import secrets
@@ -73,15 +72,12 @@ def open_session(settings: ZenohSettings) -> zenoh.Session:
         ) from exc
 
 
-def start_router(listen: tuple[str, ...], auth: ZenohSettings | None = None) -> zenoh.Session:
+def start_router(listen: tuple[str, ...], users_file: str | None = None) -> zenoh.Session:
     """Run a Zenoh router inside this process, listening on ``listen`` endpoints; with
-    ``auth``, it accepts only sessions whose user/password is in ``auth.users_file``."""
-    settings = ZenohSettings(mode="router", connect=(), listen=listen)
-    if auth is not None:
-        settings = dataclasses.replace(
-            settings, user=auth.user, password=auth.password, users_file=auth.users_file
-        )
-    return open_session(settings)
+    ``users_file``, it accepts only sessions whose user/password is in that file."""
+    return open_session(
+        ZenohSettings(mode="router", connect=(), listen=listen, users_file=users_file)
+    )
 
 
 def subscribe(

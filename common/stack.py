@@ -91,9 +91,6 @@ class LocalZenoh:
         return ZenohSettings(mode="peer", connect=(router,), listen=PEER_LISTEN, multicast=False)
 
 
-ROUTER_USER = "router"  # the launcher's router, when it links to a peer
-
-
 @dataclass(frozen=True)
 class BusCredentials:
     """This run's Zenoh users: one per identity on the bus, with a fresh password each, and
@@ -105,7 +102,7 @@ class BusCredentials:
     @classmethod
     def create(cls, directory: Path) -> BusCredentials:
         """Make the passwords and write the file (mode 0600) in ``directory``."""
-        passwords = {who: secrets.token_hex(16) for who in (*BUS_IDENTITIES, ROUTER_USER)}
+        passwords = {who: secrets.token_hex(16) for who in BUS_IDENTITIES}
         path = directory / "zenoh-users.txt"
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
         with os.fdopen(fd, "w") as out:
@@ -119,18 +116,12 @@ class BusCredentials:
         if name in self.passwords:
             return name
         base = name.rsplit("-", 1)[0]
-        return base if base in self.passwords and base != ROUTER_USER else USER
-
-    def people_and_services(self) -> dict[str, str]:
-        """Every identity's password but the router's own (for the stack file)."""
-        return {who: pw for who, pw in self.passwords.items() if who != ROUTER_USER}
+        return base if base in self.passwords else USER
 
     def apply(self, settings: ZenohSettings, name: str) -> ZenohSettings:
-        """``settings`` authenticated as ``name``'s identity, checking others with the file."""
+        """``settings`` authenticated as ``name``'s identity."""
         who = self.identity(name)
-        return replace(
-            settings, user=who, password=self.passwords[who], users_file=str(self.users_file)
-        )
+        return replace(settings, user=who, password=self.passwords[who])
 
 
 @dataclass
@@ -231,8 +222,7 @@ async def local_stack(
                 "(any process on this machine may join it; docs/DEPLOY.md)"
             )
         endpoint = f"tcp/127.0.0.1:{zenoh_port or free_port()}"
-        auth = bus.apply(ZenohSettings(), ROUTER_USER) if bus is not None else None
-        router = start_router((endpoint,), auth)
+        router = start_router((endpoint,), str(bus.users_file) if bus is not None else None)
         try:
             conn = await asyncpg.connect(url)
             try:

@@ -57,9 +57,7 @@ def loopback_zenoh() -> Iterator[ZenohSettings]:
 _ROUTER = (
     "import os, sys, time\n"
     "from common.bus import start_router\n"
-    "from common.config import ZenohSettings\n"
-    "auth = ZenohSettings.from_env() if os.environ.get('PNAV_ZENOH_USERS_FILE') else None\n"
-    "router = start_router((sys.argv[1],), auth)\n"
+    "router = start_router((sys.argv[1],), os.environ.get('PNAV_ZENOH_USERS_FILE') or None)\n"
     "print('up', flush=True)\n"
     "time.sleep(1e6)\n"
 )
@@ -67,11 +65,11 @@ _ROUTER = (
 
 @contextlib.contextmanager
 def router_process(
-    auth: ZenohSettings | None = None,
+    users_file: str | Path | None = None,
 ) -> Iterator[tuple[subprocess.Popen[str], ZenohSettings]]:
     """A loopback Zenoh router in a process of its own, so that it alone can be frozen
     (SIGSTOP/SIGCONT) or killed; yield the process and the settings clients use. With
-    ``auth`` (user, password, users_file) it accepts only sessions of a user in the file."""
+    ``users_file`` it accepts only sessions of a user/password in that file."""
     import signal
     import sys
 
@@ -82,7 +80,11 @@ def router_process(
         cwd=root,
         stdout=subprocess.PIPE,
         text=True,
-        env={**os.environ, **(auth.to_env() if auth else {}), "PYTHONPATH": str(root)},
+        env={
+            **os.environ,
+            "PNAV_ZENOH_USERS_FILE": str(users_file or ""),
+            "PYTHONPATH": str(root),
+        },
     )
     try:
         if proc.stdout is None or proc.stdout.readline().strip() != "up":

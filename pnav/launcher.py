@@ -301,7 +301,7 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
                 postgres_dir=str(local.postgres.data_dir) if local.postgres else "",
                 postgres_temporary=local.postgres is not None and local.postgres.temporary,
                 role_urls=dict(local.role_urls),
-                zenoh_passwords=local.bus.people_and_services() if local.bus else {},
+                zenoh_passwords=dict(local.bus.passwords) if local.bus else {},
             )
         )
         # Supervision runs for as long as the stack does: a crashed service is restarted

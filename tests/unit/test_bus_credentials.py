@@ -16,7 +16,7 @@ import pytest
 from common import bus
 from common.config import ZenohSettings
 from common.errors import ConnectionFailure, UsageError
-from common.stack import ROUTER_USER, BusCredentials, LocalZenoh, local_stack
+from common.stack import BusCredentials, LocalZenoh, local_stack
 from common.testing import eventually
 from pnav.stackfile import StackInfo
 
@@ -32,7 +32,6 @@ def test_every_identity_gets_its_own_password_in_a_file_only_its_owner_reads(
     lines = creds.users_file.read_text().splitlines()
     assert sorted(line.split(":")[0] for line in lines) == sorted(creds.passwords)
     assert len(set(creds.passwords.values())) == len(creds.passwords)
-    assert ROUTER_USER not in creds.people_and_services()
 
 
 def test_a_process_acts_as_its_service_and_anything_else_as_people(tmp_path: Path) -> None:
@@ -42,10 +41,9 @@ def test_a_process_acts_as_its_service_and_anything_else_as_people(tmp_path: Pat
     assert creds.identity("sim") == "sim"
     assert creds.identity("dashboard") == "user"
     assert creds.identity("recorder") == "user"
-    assert creds.identity("router-1") == "user"  # nobody else speaks as the router
     settings = creds.apply(ZenohSettings(mode="peer"), "bridge")
     assert settings.user == "bridge" and settings.password == creds.passwords["bridge"]
-    assert settings.users_file == str(creds.users_file)
+    assert settings.users_file is None  # only the router checks the file
 
 
 async def test_the_routers_door_is_shut_to_a_session_without_this_runs_password(

@@ -21,12 +21,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
-from common.config import ServiceConfig, ZenohSettings
+from common.config import ServiceConfig
 from common.contract import keys
 from common.contract.grants import USER
 from common.outage import is_connection_error
 from common.runtime import Runtime
-from common.stack import ROUTER_USER, BusCredentials
+from common.stack import BusCredentials
 from common.testing import router_process
 from pnav import commands
 from pnav.bench.faults import rows
@@ -145,7 +145,7 @@ async def run_trial(
     secrets_dir = Path(tempfile.mkdtemp(prefix="pnav-bus-"))
     bus = BusCredentials.create(secrets_dir)
     try:
-        with router_process(bus.apply(ZenohSettings(), ROUTER_USER)) as (router, plain):
+        with router_process(bus.users_file) as (router, plain):
             zenoh = bus.apply(plain, USER)
             options = StackOptions(
                 world=str(world),
