@@ -139,8 +139,20 @@ async def as_service_role(db_url: str, service: str) -> str:
     return role_url(db_url, role_name(service), None)
 
 
+# A cluster made for one run and removed after it does not fsync. fsync protects a commit
+# against the *machine* losing power, after which such a cluster is of no use to anyone; a
+# crash of Postgres itself loses no committed row without it, because a commit still hands
+# its WAL to the operating system before it returns (synchronous_commit stays on: the
+# contract's "no committed row lost", checked by tests/unit/test_embedded_postgres.py). It
+# takes the fdatasync (0.75 ms p50 on this project's machine, tens of ms in its tail) off
+# every synchronous commit, two per sense-to-act sample (docs/BENCHMARKS.md). A cluster in
+# a directory the caller chose (`pnav up --data-dir`) and any PNAV_DATABASE_URL keep fsync.
+_THROWAWAY_SETTINGS = "ALTER SYSTEM SET fsync = off;\nSELECT pg_reload_conf();\n"
+
+
 class EmbeddedPostgres:
-    """A real Postgres server in a private directory, started with ``pgserver``."""
+    """A real Postgres server in a private directory, started with ``pgserver``. A
+    temporary one (no ``data_dir`` given) runs without fsync (see _THROWAWAY_SETTINGS)."""
 
     def __init__(self, data_dir: str | Path | None = None, *, persistent: bool = False) -> None:
         self._owns_dir = data_dir is None
@@ -158,8 +170,16 @@ class EmbeddedPostgres:
         self._server = pgserver.get_server(  # type: ignore[attr-defined]
             self.data_dir, cleanup_mode=None if self.persistent else "stop"
         )
+        if self.temporary:
+            self._server.psql(_THROWAWAY_SETTINGS)
         uri: str = self._server.get_uri()
         return uri
+
+    def setting(self, name: str) -> str:
+        """A server setting as ``SHOW`` gives it (e.g. ``fsync``)."""
+        out: str = self._server.psql(f"SHOW {name};")
+        lines = [line.strip() for line in out.splitlines() if line.strip()]
+        return lines[2]  # header, rule, value
 
     @property
     def temporary(self) -> bool:
