@@ -85,6 +85,11 @@ class Barrier:
         self._own = _Participant(Status(0, {}, [(CMD_VEL_WATCH, self.cmd_received)]), 0.0)
         self._participants: dict[str, _Participant] = {}
         self._matches: dict[tuple[str, str], bool] = {}
+        # every key ever sent, in the order first seen; per key expression, how many of
+        # them it was tested against and those it matches (_matching)
+        self._keys: list[str] = []
+        self._keys_seen: set[str] = set()
+        self._matched: dict[str, tuple[int, list[str]]] = {}
         self._cond = threading.Condition()
         self.waits = 0
         self.timeouts = 0
@@ -149,7 +154,24 @@ class Barrier:
         for p in self._participants.values():
             for key, n in p.status.sent.items():
                 totals[key] = totals.get(key, 0) + n
+        if len(totals) > len(self._keys_seen):
+            self._keys.extend(key for key in totals if key not in self._keys_seen)
+            self._keys_seen.update(totals)
         return totals
+
+    def _matching(self, key_expr: str) -> list[str]:
+        """Every key sent so far that ``key_expr`` matches. The check runs after every
+        status, for every subscription of every participant: testing each sent key
+        against each expression there was most of the sim's CPU in lockstep, so each
+        expression keeps its list and tests only the keys that are new since."""
+        known = self._matched.get(key_expr)
+        if known is None:
+            known = self._matched[key_expr] = (0, [])
+        tested, matched = known
+        if tested < len(self._keys):
+            matched.extend(k for k in self._keys[tested:] if self._matches_key(key_expr, k))
+            self._matched[key_expr] = (len(self._keys), matched)
+        return matched
 
     def _matches_key(self, key_expr: str, key: str) -> bool:
         found = self._matches.get((key_expr, key))
@@ -162,9 +184,8 @@ class Barrier:
         """(subscription, key, receipts short) of what ``p`` has not handled yet."""
         short: list[tuple[int, str, int]] = []
         for index, (key_expr, counts) in enumerate(p.status.subs):
-            for key, n in totals.items():
-                if not self._matches_key(key_expr, key):
-                    continue
+            for key in self._matching(key_expr):
+                n = totals.get(key, 0)
                 got = counts.get(key, 0)
                 offset = p.offsets.get((index, key), 0)
                 if offset < 0 and got - offset > n:
