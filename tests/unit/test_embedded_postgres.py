@@ -4,7 +4,6 @@ when Postgres crashes; a cluster in a directory the caller chose keeps fsync."""
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import asyncpg
@@ -18,16 +17,6 @@ pytestmark = pytest.mark.timeout(120)
 ROWS = 300
 
 
-@pytest.fixture
-def throwaway() -> Iterator[EmbeddedPostgres]:
-    server = EmbeddedPostgres()
-    server.start()
-    try:
-        yield server
-    finally:
-        server.stop()
-
-
 def settled(server: EmbeddedPostgres, name: str, want: str, within_s: float = 10.0) -> str:
     """The setting once it reads ``want`` (a reload is asynchronous), or its last value."""
     deadline = time.monotonic() + within_s
@@ -38,10 +27,10 @@ def settled(server: EmbeddedPostgres, name: str, want: str, within_s: float = 10
     return value
 
 
-def test_a_cluster_made_for_the_run_does_not_fsync(throwaway: EmbeddedPostgres) -> None:
-    assert throwaway.temporary
-    assert settled(throwaway, "fsync", "off") == "off"
-    assert throwaway.setting("synchronous_commit") == "on"  # a commit still waits for its WAL
+def test_a_cluster_made_for_the_run_does_not_fsync(pg: EmbeddedPostgres) -> None:
+    assert pg.temporary  # the test session's own server, made as `pnav up` makes one
+    assert settled(pg, "fsync", "off") == "off"
+    assert pg.setting("synchronous_commit") == "on"  # a commit still waits for its WAL
 
 
 def test_a_cluster_in_a_chosen_directory_keeps_fsync(tmp_path: Path) -> None:
@@ -54,9 +43,16 @@ def test_a_cluster_in_a_chosen_directory_keeps_fsync(tmp_path: Path) -> None:
         server.stop()
 
 
-async def test_every_committed_row_survives_a_postgres_crash_without_fsync(
-    throwaway: EmbeddedPostgres,
-) -> None:
+async def test_every_committed_row_survives_a_postgres_crash_without_fsync() -> None:
+    throwaway = EmbeddedPostgres()  # its own: the test kills it
+    throwaway.start()
+    try:
+        await _commit_crash_and_count(throwaway)
+    finally:
+        throwaway.stop()
+
+
+async def _commit_crash_and_count(throwaway: EmbeddedPostgres) -> None:
     assert settled(throwaway, "fsync", "off") == "off"
     url = throwaway.dsn()
     conn = await asyncpg.connect(url)
