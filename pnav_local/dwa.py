@@ -128,11 +128,13 @@ def choose(
         delay_s=p.delay_s,
         horizon_s=p.horizon_s,
     )
-    if p.min_travel_m > 0:
-        # a slow arc clear for the horizon only (a few centimetres) let the robot creep ever
-        # slower toward a corner it could not pass, never stuck long enough for recovery
+    if p.min_travel_s > 0:
+        # a slow arc clear for the horizon only (a few centimetres) let the Jackal creep ever
+        # slower toward a corner it could not pass, never stuck long enough for recovery;
+        # counted at the robot's top speed, so a slow robot (the Burger) is hardly touched
         limit = min(radius + p.margin_m, start_gap - 0.005)
-        ok &= tr.clear_for(win, start, points, p.min_travel_m, p.horizon_s, p.steps, limit)
+        travel = p.min_travel_s * top
+        ok &= tr.clear_for(win, start, points, travel, p.horizon_s, p.steps, limit)
     if not ok.any():
         return Choice(win, ok, None, None, local, v_cap)
     weights = p.weights

@@ -13,8 +13,9 @@ delay during which the robot keeps its measured velocity):
   slowest speed only (the brake), if it can stop before the first pose that does not
   (``v^2 / 2a`` plus the delay's travel); a robot already closer than that may still take
   any arc that does not bring it closer (turning in place always qualifies); an arc too
-  slow to cover ``min_travel`` within the horizon must also stay clear followed on that far
-  (or half a turn), so the robot cannot creep ever slower toward what it cannot pass;
+  slow to cover ``min_travel`` (``dwa_min_travel_s`` at top speed) within the horizon must
+  also stay clear followed on that far (or half a turn), so the robot cannot creep ever
+  slower toward what it cannot pass;
 - **progress**: how much nearer the arc's end is to the carrot (the point ``lookahead`` m
   along the path ahead of the robot) than its start, as a share of the most the robot could
   cover in the horizon;

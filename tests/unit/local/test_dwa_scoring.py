@@ -247,3 +247,25 @@ def test_the_heading_counts_along_the_whole_arc() -> None:
                  weights=tr.Weights())  # fmt: skip
     assert s.heading[0] == pytest.approx(0.0)
     assert s.heading[1] == pytest.approx(0.25)  # 90 degrees (0.5 of pi) for half the arc
+
+
+def test_the_minimum_travel_counts_at_the_robots_top_speed() -> None:
+    # a crate 0.35 m ahead of a robot crawling at 0.05 m/s, facing its path: the Jackal
+    # (0.2 s x 2 m/s = 0.4 m) may not creep on straight toward it; the Burger (0.044 m,
+    # less than its own horizon covers) is judged on the horizon alone and may
+    crate = scan((-3.0, 3.0, 0.35 + 0.22))
+    jackal = choose(crate, odom(0.05), JACKAL, straight_path(), DwaParams())
+    assert jackal is not None
+    win = jackal.window
+    slow = (win.w == 0.0) & (win.v > 0.0) & (win.v * 1.2 < 0.4)
+    assert slow.any() and not jackal.ok[slow].any()
+    horizon_only = choose(
+        crate, odom(0.05), JACKAL, straight_path(), DwaParams.read({"dwa_min_travel_s": 0})
+    )
+    assert horizon_only is not None and horizon_only.ok[slow].any()
+    burger = choose(
+        scan((-3.0, 3.0, 0.35 + 0.105)), odom(0.05), BURGER, straight_path(), DwaParams()
+    )
+    assert burger is not None
+    straight = (burger.window.w == 0.0) & (burger.window.v > 0.0) & (burger.window.v < 0.1)
+    assert straight.any() and burger.ok[straight].all()
