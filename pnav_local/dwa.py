@@ -95,6 +95,9 @@ def choose(
     v_cap = math.sqrt(2.0 * accel * max(0.0, local.remaining_m)) * 0.8
     straight = max(0.0, tr.straight_gap(points, radius) - radius - p.safety_margin_m)
     v_cap = min(v_cap, stopping_speed(straight, p.safety_lookahead_s, accel))
+    # the turn rate that faces the carrot at the horizon's end: a robot a few degrees off
+    # could otherwise only overshoot (the grid's steps are coarse) and stood still instead
+    align = math.atan2(local.carrot[1], local.carrot[0]) / p.horizon_s
     win = tr.window(
         odom.linear_mps,
         odom.angular_rps,
@@ -106,6 +109,7 @@ def choose(
         v_samples=p.linear_samples,
         w_samples=p.angular_samples,
         v_cap=v_cap,
+        extra_w=align,
     )
     start = tr.start_pose(odom.linear_mps, odom.angular_rps, p.delay_s)
     # only what this window's arcs can come near matters to them
@@ -124,6 +128,13 @@ def choose(
         delay_s=p.delay_s,
         horizon_s=p.horizon_s,
     )
+    if p.min_travel_s > 0:
+        # a slow arc clear for the horizon only (a few centimetres) let the Jackal creep ever
+        # slower toward a corner it could not pass, never stuck long enough for recovery;
+        # counted at the robot's top speed, so a slow robot (the Burger) is hardly touched
+        limit = min(radius + p.margin_m, start_gap - 0.005)
+        travel = p.min_travel_s * top
+        ok &= tr.clear_for(win, start, points, travel, p.horizon_s, p.steps, limit)
     if not ok.any():
         return Choice(win, ok, None, None, local, v_cap)
     weights = p.weights

@@ -26,6 +26,9 @@ class DwaParams:
     delay_s: float = 0.1  # scan to wheels: the robot keeps its velocity meanwhile
     margin_m: float = 0.05  # kept beyond the footprint radius
     lookahead_m: float = 0.0  # the carrot along the path; 0: beyond what the horizon reaches
+    # a slow arc must stay clear as far as the robot goes in this long at top speed, not
+    # only for the horizon (the Jackal: 0.4 m; the Burger: 4 cm, nearly the horizon alone)
+    min_travel_s: float = 0.2
     clearance_cap_m: float = 0.5  # gaps beyond this score no better
     blocked_path_factor: float = 0.2  # the path weight while the path runs into a hit
     obstacle_range_m: float = 0.0  # hits farther than this are ignored; 0: what the horizon reaches
@@ -50,6 +53,7 @@ class DwaParams:
             delay_s=get("dwa_delay_s", d.delay_s, 0.0, 2.0),
             margin_m=get("dwa_margin_m", d.margin_m, 0.0, 2.0),
             lookahead_m=get("dwa_lookahead_m", d.lookahead_m, 0.0, 20.0),
+            min_travel_s=get("dwa_min_travel_s", d.min_travel_s, 0.0, 10.0),
             clearance_cap_m=get("dwa_clearance_cap_m", d.clearance_cap_m, 0.01, 10.0),
             blocked_path_factor=get("dwa_blocked_path_factor", d.blocked_path_factor, 0.0, 1.0),
             obstacle_range_m=get("dwa_obstacle_range_m", d.obstacle_range_m, 0.0, 100.0),

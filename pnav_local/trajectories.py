@@ -12,13 +12,16 @@ delay during which the robot keeps its measured velocity):
   every lidar hit along it over the whole horizon (as Nav2's DWB), or, for the window's
   slowest speed only (the brake), if it can stop before the first pose that does not
   (``v^2 / 2a`` plus the delay's travel); a robot already closer than that may still take
-  any arc that does not bring it closer (turning in place always qualifies);
+  any arc that does not bring it closer (turning in place always qualifies); an arc too
+  slow to cover ``min_travel`` (``dwa_min_travel_s`` at top speed) within the horizon must
+  also stay clear followed on that far (or half a turn), so the robot cannot creep ever
+  slower toward what it cannot pass;
 - **progress**: how much nearer the arc's end is to the carrot (the point ``lookahead`` m
   along the path ahead of the robot) than its start, as a share of the most the robot could
   cover in the horizon;
 - **path**: the arc end's distance from the path ahead, in the same unit;
-- **heading**: the angle between the arc's final heading and the direction to the carrot
-  from its end, as a share of pi;
+- **heading**: the angle between the robot's heading and the direction to the carrot, as a
+  share of pi, averaged over the arc's poses (not its end only);
 - **clearance**: the smallest gap along it (beyond the footprint), capped, as a share of the
   cap, times the speed share (room matters where the robot goes: standing still earns none);
 - **speed**: ``v / max_linear``.
@@ -73,11 +76,13 @@ def window(
     v_samples: int,
     w_samples: int,
     v_cap: float | None = None,
+    extra_w: float | None = None,
 ) -> Window:
     """The dynamic window around the measured (v0, w0): what ``dt`` of acceleration reaches,
     within the robot's limits (forward only: backing up is recovery's), as a grid. ``v_cap``
     lowers the top speed (the path's end is near). The slowest speed reachable and
-    ``w = 0`` are always among the samples, so there is a brake and a straight line."""
+    ``w = 0`` are always among the samples, so there is a brake and a straight line, and
+    ``extra_w`` (within reach) too: the turn rate that faces the carrot."""
     top = max_v if v_cap is None else max(0.0, min(max_v, v_cap))
     v_low = min(max(0.0, v0 - accel_v * dt), top)
     v_high = min(top, max(0.0, v0) + accel_v * dt)
@@ -87,6 +92,8 @@ def window(
     ws = np.linspace(min(w_low, w_high), max(w_low, w_high), max(1, w_samples))
     if w_low <= 0.0 <= w_high and not np.any(ws == 0.0):
         ws = np.sort(np.append(ws, 0.0))
+    if extra_w is not None and w_low <= extra_w <= w_high and not np.any(ws == extra_w):
+        ws = np.sort(np.append(ws, extra_w))
     grid_v, grid_w = np.meshgrid(np.unique(vs), ws, indexing="ij")
     return Window(grid_v.ravel(), grid_w.ravel())
 
@@ -278,16 +285,20 @@ def score(
 ) -> Scores:
     """Every term of every trajectory (see the module's docstring)."""
     xs, ys, yaws = poses
-    ex, ey, eyaw = xs[:, -1], ys[:, -1], yaws[:, -1]
+    ex, ey = xs[:, -1], ys[:, -1]
     cx, cy = local.carrot
     reach = max(max_v * horizon_s, 1e-6)
     before = math.hypot(cx - start[0], cy - start[1])
     progress = (before - np.hypot(cx - ex, cy - ey)) / reach
     path = to_path(ex, ey, local.points) / reach
-    bearing = np.arctan2(cy - ey, cx - ex) - eyaw
-    heading = np.abs(np.arctan2(np.sin(bearing), np.cos(bearing))) / math.pi
+    # the heading along the whole arc, not at its end only: a loop that swings far off
+    # and comes back facing the carrot is no better than it is; a turn in place toward the
+    # carrot is better than standing still, even if it overshoots a little
+    bearing = np.arctan2(cy - ys, cx - xs) - yaws
+    along = np.abs(np.arctan2(np.sin(bearing), np.cos(bearing))) / math.pi
     # close to the carrot the bearing means little (the carrot is the path's end)
-    heading = np.where(np.hypot(cx - ex, cy - ey) < 0.1 * reach, 0.0, heading)
+    along = np.where(np.hypot(cx - xs, cy - ys) < 0.1 * reach, 0.0, along)
+    heading = along.mean(axis=1)
     speed = win.v / max(max_v, 1e-6)
     # room counts where the robot goes: weighted by the speed share, so that standing
     # still (all the room it has now, no progress) never wins on clearance alone
@@ -300,6 +311,40 @@ def score(
         + weights.speed * speed
     )
     return Scores(progress, path, heading, gap, speed, total)
+
+
+def clear_for(
+    win: Window,
+    start: tuple[float, float, float],
+    obstacles: FloatArray,
+    travel_m: float,
+    horizon_s: float,
+    steps: int,
+    limit_m: float,
+) -> BoolArray:
+    """Per trajectory: whether its arc, followed on until it has covered ``travel_m`` (or
+    turned half a circle, or for the horizon if that is longer), keeps ``limit_m`` from every
+    obstacle. Arcs that cover ``travel_m`` within the horizon and turns in place pass
+    (``admissible`` judged them); slower ones are rolled out further."""
+    out: BoolArray = np.ones(len(win.v), dtype=np.bool_)
+    v = np.abs(win.v)
+    slow = (v * horizon_s < travel_m) & (v > 1e-6)
+    if not slow.any() or len(obstacles) == 0:
+        return out
+    vs, ws = win.v[slow], win.w[slow]
+    turn_s = np.where(np.abs(ws) > 1e-6, math.pi / np.maximum(np.abs(ws), 1e-6), np.inf)
+    end_s = np.maximum(np.minimum(travel_m / v[slow], turn_s), horizon_s)
+    t = end_s[:, None] * np.linspace(1.0 / steps, 1.0, steps)[None, :]
+    w = ws[:, None]
+    straight = np.abs(w) < 1e-6
+    safe_w = np.where(straight, 1.0, w)
+    x = np.where(straight, vs[:, None] * t, vs[:, None] / safe_w * np.sin(w * t))
+    y = np.where(straight, 0.0, vs[:, None] / safe_w * (1.0 - np.cos(w * t)))
+    sx, sy, syaw = start
+    c, s = math.cos(syaw), math.sin(syaw)
+    gaps = distances(sx + c * x - s * y, sy + s * x + c * y, obstacles)
+    out[np.flatnonzero(slow)] = gaps.min(axis=1) >= limit_m
+    return out
 
 
 def straight_gap(obstacles: FloatArray, radius_m: float) -> float:

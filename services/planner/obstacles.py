@@ -9,7 +9,16 @@ Obstacles are remembered for SEEN_MEMORY_S after the lidar last saw them, and fo
 sooner when a beam of a newer scan passes beyond them (the place is free: the obstacle
 moved, or was a pose error). Without the memory, a lidar that does not see all round (the
 Jackal's 270 degrees) made whatever lay behind the robot look free: the planner re-planned
-through it, the robot turned, saw it, and re-planned back, circling on the spot.
+through it, the robot turned, saw it, and re-planned back, circling on the spot. The memory
+is long (the field seen so far, not the last few seconds) and reaches SEEN_RANGE_M: with a
+few seconds and 2.5 m, in a cluttered field the planner forgot the dead end it had just
+left and planned back into it (the BARN-protocol hard worlds).
+
+A hit is the surface of something beyond it: it is placed half a planning cell farther
+along its beam (SURFACE_PUSH_CELLS), in the cell behind the surface. Placed where measured,
+a hit on a surface lying on a cell boundary fell into the free cell in front of it half the
+time, and the inflation grown from that cell's centre closed gaps the robot fits through
+(a 0.6 m gap for a 0.27 m inflation).
 """
 
 from __future__ import annotations
@@ -26,12 +35,13 @@ from common.contract import records
 if TYPE_CHECKING:
     from services.planner.world import RobotState, World
 
-SEEN_RANGE_M = 2.5  # lidar hits farther than this are not used (pose error grows with range)
+SEEN_RANGE_M = 4.0  # lidar hits farther than this are not used (pose error grows with range)
 UNMAPPED_M = 0.15  # a hit farther than this from every mapped obstacle is an unmapped one
 SEEN_MAX_AGE_S = 1.0  # sim s: with no scan this recent, no obstacle is planned around
-SEEN_MEMORY_S = 5.0  # sim s: an obstacle no beam has seen since then is forgotten
+SEEN_MEMORY_S = 120.0  # sim s: an obstacle no beam has seen since then is forgotten
 CLEAR_MARGIN_M = 0.1  # a beam this much beyond a remembered obstacle clears it
-MAX_REMEMBERED = 4000  # points kept per robot at most (the newest)
+MAX_REMEMBERED = 20000  # points kept per robot at most (the newest), one per planning cell
+SURFACE_PUSH_CELLS = 0.5  # a hit is placed this many planning cells beyond the measured range
 POSE_MATCH_S = 0.05  # the scan's pose: odometry within this (sim s) of the scan's stamp
 POSES_KEPT = 90  # odometry poses remembered per robot (3 s at 30 Hz)
 OBSTACLE_BUCKET_M = 0.1  # obstacles within about this of one planned around are not new
@@ -106,16 +116,29 @@ def see(world: World, state: RobotState, scan: records.LaserScan) -> None:
     with np.errstate(invalid="ignore"):
         valid = (ranges >= scan.range_min - 1e-4) & (ranges <= SEEN_RANGE_M)
     angles = scan.angles()[valid] + yaw
-    hits = np.column_stack((x + ranges[valid] * np.cos(angles), y + ranges[valid] * np.sin(angles)))
     grid = data.grid(state.info.footprint_radius_m)
+    reach = ranges[valid] + SURFACE_PUSH_CELLS * grid.resolution
+    hits = np.column_stack((x + reach * np.cos(angles), y + reach * np.sin(angles)))
     if grid.clearance is not None and len(hits):
         cols, rows, inside = grid.cells_of(hits)  # hits off the map are dropped
         mapped = grid.clearance[rows[inside], cols[inside]] <= UNMAPPED_M
         hits = hits[inside][~mapped]
+    hits = one_per_cell(hits, grid.resolution)
     kept, kept_at = remembered(state.seen, scan, (x, y, yaw), hits)
     points = np.concatenate((hits, kept)) if len(kept) else hits
     seen_at = np.concatenate((np.full(len(hits), scan.stamp), kept_at))
     state.seen = Seen(scan.id, scan.stamp, points[:MAX_REMEMBERED], seen_at[:MAX_REMEMBERED])
+
+
+def one_per_cell(points: Points, cell_m: float) -> Points:
+    """The first of ``points`` in each ``cell_m`` square: the planner blocks cells, and a
+    long memory of every beam's hit would fill MAX_REMEMBERED with duplicates."""
+    if len(points) < 2:
+        return points
+    cells = np.floor(points / cell_m).astype(np.int64)
+    _, first = np.unique(cells[:, 0] * 1_000_003 + cells[:, 1], return_index=True)
+    kept: Points = points[np.sort(first)]
+    return kept
 
 
 def _bucket_keys(points: Points) -> np.ndarray[Any, np.dtype[np.int64]]:

@@ -126,24 +126,17 @@ def test_decisions_tick_by_tick_as_the_world_ahead_changes() -> None:
     assert (c.window.v[c.best], c.window.w[c.best]) == pytest.approx((0.22, 0.0))
     # tick 2: something on the path 0.35 m ahead (0 to +10 deg): the path runs into it
     # (the planner has not re-planned yet). The Burger's motors reach any turn rate within
-    # the window (31.25 rad/s^2), so the 17 default samples are 0.355 rad/s apart and none
-    # rounds it well: it slows to the fastest sampled speed whose 1.2 s arc (after 0.1 s
-    # at 0.22 m/s) stays 0.155 m short of it, 0.1375 m/s, straight on
+    # the window (31.25 rad/s^2), so the 17 default samples are 0.355 rad/s apart; with the
+    # path weighing 0.2 x as much while it is blocked and the heading judged along the whole
+    # arc, rounding it on its free side, right, at full speed wins: w = -1.065 rad/s
     c = choose(scan((0.0, 10.0, 0.35)), odom(0.22), BURGER, path, p)
     assert c is not None and c.best is not None and c.blocked
-    assert (c.window.v[c.best], c.window.w[c.best]) == pytest.approx((0.1375, 0.0))
-    # with 21 samples (0.284 rad/s apart) and the path weighing 0.2 x as much while it is
-    # blocked, rounding it on its free side, right, at full speed wins: w = -0.852 rad/s
+    assert (c.window.v[c.best], c.window.w[c.best]) == pytest.approx((0.22, -1.065))
+    # with 21 samples (0.284 rad/s apart) the rounding is tighter: w = -0.852 rad/s
     fine = DwaParams.read({"dwa_angular_samples": 21})
     c = choose(scan((0.0, 10.0, 0.35)), odom(0.22), BURGER, path, fine)
     assert c is not None and c.best is not None
     assert (c.window.v[c.best], c.window.w[c.best]) == pytest.approx((0.22, -0.852))
-    # ...and with the path weighing its whole (dwa_blocked_path_factor 1) it keeps to the
-    # path and slows instead
-    whole = DwaParams.read({"dwa_angular_samples": 21, "dwa_blocked_path_factor": 1.0})
-    c = choose(scan((0.0, 10.0, 0.35)), odom(0.22), BURGER, path, whole)
-    assert c is not None and c.best is not None
-    assert (c.window.v[c.best], c.window.w[c.best]) == pytest.approx((0.1375, 0.0))
     # tick 2b: the path turns left 0.3 m ahead: it curves left, still driving
     bend = PlannedPath(8, "r1", 10.0, 1, "goal", 0.3, 2.0, (0.0, 0.3, 0.3), (0.0, 0.0, 2.0), 2.3)
     c = choose(scan(), odom(0.22), BURGER, bend, p)
@@ -207,3 +200,72 @@ def test_the_speed_cap_stops_within_the_gap_after_safety_stops_lookahead(
     v = stopping_speed(gap, lookahead, accel)
     assert v * lookahead + v * v / (2 * accel) == pytest.approx(gap)  # safety_stop's reach
     assert stopping_speed(0.0, lookahead, accel) == 0.0
+
+
+def test_a_slow_arc_must_stay_clear_for_the_minimum_travel_not_only_the_horizon() -> None:
+    # 0.05 m/s straight at a crate 0.3 m ahead: clear for the 1.2 s horizon (6 cm), so the
+    # horizon alone admits it, and the robot would creep ever slower toward it; followed on
+    # for 0.4 m it meets the crate: refused. Turning tight at that speed (radius 2.5 cm,
+    # half a turn) and turning in place stay clear.
+    win = tr.Window(np.array([0.05, 0.05, 0.0]), np.array([0.0, 2.0, 1.0]))
+    crate = np.array([[0.3, 0.0]])
+    poses = tr.rollout(win, (0.0, 0.0, 0.0), 1.2, 10)
+    gaps = tr.distances(poses[0], poses[1], crate)
+    ok = tr.admissible(win, gaps, 0.3, radius_m=0.105, margin_m=0.05, accel_v=2.5,
+                       delay_s=0.1, horizon_s=1.2)  # fmt: skip
+    assert ok.tolist() == [True, True, True]
+    clear = tr.clear_for(win, (0.0, 0.0, 0.0), crate, 0.4, 1.2, 10, 0.155)
+    assert clear.tolist() == [False, True, True]
+    # a fast arc covers 0.4 m within the horizon: admissible() judged it, nothing more
+    fast = tr.Window(np.array([0.5]), np.array([0.0]))
+    assert tr.clear_for(fast, (0.0, 0.0, 0.0), crate, 0.4, 1.2, 10, 0.155).tolist() == [True]
+
+
+def test_the_turn_rate_that_faces_the_carrot_is_sampled() -> None:
+    # the Burger 0.15 rad left of its path: 17 samples 0.355 rad/s apart would overshoot
+    # the carrot (0.8 m ahead); the window also holds -0.15 / 1.2 = -0.125 rad/s, and with
+    # nothing in the way it drives on at full speed with that turn
+    win = tr.window(0.0, 0.0, max_v=0.22, max_w=2.84, accel_v=2.5, accel_w=31.25, dt=0.3,
+                    v_samples=9, w_samples=17, extra_w=-0.125)  # fmt: skip
+    assert np.any(np.isclose(win.w, -0.125))
+    c = choose(scan(), odom(yaw=0.15), BURGER, straight_path(), DwaParams())
+    assert c is not None and c.best is not None
+    assert (c.window.v[c.best], c.window.w[c.best]) == pytest.approx((0.22, -0.125))
+
+
+def test_the_heading_counts_along_the_whole_arc() -> None:
+    # two arcs ending at the same pose facing the carrot: one straight, one swinging 90
+    # degrees off and back (poses given by hand): the swing scores a worse heading
+    local = tr.localise(np.array([[0.0, 0.0], [5.0, 0.0]]), 3.0)
+    assert local is not None
+    xs = np.array([[0.5, 1.0], [0.5, 1.0]])
+    ys = np.zeros((2, 2))
+    yaws = np.array([[0.0, 0.0], [math.pi / 2, 0.0]])
+    win = tr.Window(np.array([1.0, 1.0]), np.array([0.0, 0.0]))
+    s = tr.score(win, (xs, ys, yaws), np.full((2, 2), 9.0), local, start=(0.0, 0.0, 0.0),
+                 radius_m=0.1, max_v=1.0, horizon_s=1.0, clearance_cap_m=0.5,
+                 weights=tr.Weights())  # fmt: skip
+    assert s.heading[0] == pytest.approx(0.0)
+    assert s.heading[1] == pytest.approx(0.25)  # 90 degrees (0.5 of pi) for half the arc
+
+
+def test_the_minimum_travel_counts_at_the_robots_top_speed() -> None:
+    # a crate 0.35 m ahead of a robot crawling at 0.05 m/s, facing its path: the Jackal
+    # (0.2 s x 2 m/s = 0.4 m) may not creep on straight toward it; the Burger (0.044 m,
+    # less than its own horizon covers) is judged on the horizon alone and may
+    crate = scan((-3.0, 3.0, 0.35 + 0.22))
+    jackal = choose(crate, odom(0.05), JACKAL, straight_path(), DwaParams())
+    assert jackal is not None
+    win = jackal.window
+    slow = (win.w == 0.0) & (win.v > 0.0) & (win.v * 1.2 < 0.4)
+    assert slow.any() and not jackal.ok[slow].any()
+    horizon_only = choose(
+        crate, odom(0.05), JACKAL, straight_path(), DwaParams.read({"dwa_min_travel_s": 0})
+    )
+    assert horizon_only is not None and horizon_only.ok[slow].any()
+    burger = choose(
+        scan((-3.0, 3.0, 0.35 + 0.105)), odom(0.05), BURGER, straight_path(), DwaParams()
+    )
+    assert burger is not None
+    straight = (burger.window.w == 0.0) & (burger.window.v > 0.0) & (burger.window.v < 0.1)
+    assert straight.any() and burger.ok[straight].all()

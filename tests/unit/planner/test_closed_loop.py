@@ -98,7 +98,7 @@ def test_a_crate_the_map_does_not_show_is_planned_around_once_the_lidar_sees_it(
     occupied = np.zeros((60, 140), dtype=bool)  # 7 x 3 m, walls all round
     occupied[0, :] = occupied[-1, :] = occupied[:, 0] = occupied[:, -1] = True
     truth = occupied.copy()
-    truth[26:34, 76:84] = True  # a 0.4 m crate at (4.0, 1.5), on the straight line
+    truth[26:34, 96:104] = True  # a 0.4 m crate at (5.0, 1.5), on the straight line, out of sight
     crate_x, crate_y = (
         np.nonzero(truth & ~occupied)[1] * RES,
         np.nonzero(truth & ~occupied)[0] * RES,

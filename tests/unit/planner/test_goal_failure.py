@@ -94,7 +94,9 @@ async def test_a_goal_boxed_in_only_by_what_the_lidar_sees_stays_active() -> Non
     for _ in range(12):
         await p.tick(0.1)
     robot = p.store.robot("r1")
-    assert robot is not None and robot.seen is not None and len(robot.seen.points) > 100
+    assert (
+        robot is not None and robot.seen is not None and len(robot.seen.points) > 30
+    )  # one per 5 cm cell of the ring
     assert p.goal_row(goal_id)["status"] == "active"
     moving = [r for r in p.recommendations() if r["linear_mps"] or r["angular_rps"]]
     assert moving and "failed" not in moving[-1]["reason"]

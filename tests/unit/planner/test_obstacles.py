@@ -117,11 +117,32 @@ def test_an_obstacle_out_of_the_lidars_view_is_remembered_until_a_beam_passes_or
     assert at(5.0, 0.0, front_lidar, truth) > 5  # seen ahead
     seen = near_crate(robot)
     assert at(5.2, math.pi, front_lidar, truth) == seen  # turned round: behind, out of view, kept
-    assert at(9.9, math.pi, front_lidar, truth) == seen  # 4.9 s unseen: still kept
-    assert at(10.1, math.pi, front_lidar, truth) == 0  # 5.1 s unseen: forgotten
+    assert at(124.9, math.pi, front_lidar, truth) == seen  # 119.9 s unseen: still kept
+    assert at(125.1, math.pi, front_lidar, truth) == 0  # 120.1 s unseen: forgotten
 
-    assert at(11.0, 0.0, front_lidar, truth) > 5  # seen again
-    assert at(11.2, math.pi, lidar, occupied) == 0  # the crate went: a 360-degree beam passes
+    assert at(126.0, 0.0, front_lidar, truth) > 5  # seen again
+    assert at(126.2, math.pi, lidar, occupied) == 0  # the crate went: a 360-degree beam passes
+
+
+def test_a_hit_is_placed_in_the_cell_behind_the_surface_it_measured() -> None:
+    occupied = room()
+    router, robot = planner(occupied)
+    truth = occupied.copy()
+    truth[20:40, 50:60] = True  # a crate whose west face is the cell boundary x = 2.5
+    robot.note_pose(odom(5.0, 1.5, 1.5, 0.0))
+    # 41 beams at the face 1 m ahead, each reading 1 mm short (the lidar's noise)
+    angles = np.linspace(-0.2, 0.2, 41)
+    ranges = ((1.0 - 0.001) / np.cos(angles)).astype(np.float32)
+    scan = LaserScan(50, "r1", 5.0, -0.2, 0.01, 0.12, 3.5, ranges)
+    see(router.world, robot, scan)
+    assert robot.seen is not None
+    points = robot.seen.points
+    assert len(points) > 5
+    # in the crate's cells (x >= 2.5), not the free ones in front: the inflation grows from
+    # the crate's own cells; one point per 5 cm cell
+    assert np.all(points[:, 0] >= 2.5) and np.all(points[:, 0] < 2.55)
+    cells = {(math.floor(x / RES), math.floor(y / RES)) for x, y in points}
+    assert len(cells) == len(points) < 41
 
 
 def test_an_obstacle_seen_again_is_not_remembered_twice() -> None:
