@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import time
 from pathlib import Path
 
 import numpy as np
@@ -242,17 +241,17 @@ def test_extra_obstacles_are_blocked_and_costed_like_the_map() -> None:
     assert plan_path(with_obstacles(grid, wall), (0.5, 1.0), (2.5, 1.0)) is None
 
 
-def test_planning_on_the_shipped_warehouse_map_is_quick_and_keeps_clear() -> None:
+def test_planning_on_the_shipped_warehouse_map_keeps_clear() -> None:
+    # How fast it plans is a benchmark's figure (the planner's rule times in `pnav bench
+    # latency` and `pnav bench nav`), not this test's: a wall-clock bound here failed on a
+    # loaded machine with nothing wrong.
     from services.sim.mapserver import load_map  # the map files the sim serves
 
     shipped = load_map(Path(__file__).resolve().parents[3] / "worlds/maps/warehouse.yaml")
     occupied = shipped.cells >= OCCUPIED_AT
     grid = plan_grid(occupied, shipped.resolution, shipped.origin, 0.155)
-    plan_path(grid, (1.0, 2.5), (3.7, 2.5))  # warm the cached lists
-    started = time.perf_counter()
     points = plan_path(grid, (1.0, 2.5), (8.8, 6.6))
-    elapsed = time.perf_counter() - started
-    assert points is not None and elapsed < 0.25  # ~15 ms on an idle core
+    assert points is not None
     rows, cols = np.nonzero(occupied)
     ox, oy, _ = shipped.origin
     walls = np.column_stack((ox + (cols + 0.5) * 0.05, oy + (rows + 0.5) * 0.05))
