@@ -353,10 +353,15 @@ def test_commands_every_tenth_of_a_second_of_sim_time_keep_the_robot_going(
         x = node.sim.robots[0].x
     assert gate.timeouts == 0 and last - first >= 2.5
     assert stops == 0
-    # it drove all along: the first command landed within a few steps of `first` (the sim
-    # runs at real time until a first decision), and it never stood still since
-    assert x == pytest.approx(1.0 + 0.2 * (last - first), abs=0.2 * 0.05)
-    driving = [m for m in listener.of(odom_key) if first + 0.1 <= m["stamp"] <= last]
+    # it drove all along, from the first odometry that shows it moving: no further than
+    # 0.2 m/s for all of it, no shorter than that from then on less the ramp up at the
+    # model's acceleration. (Not from `first`: the sim runs at real time until the first
+    # decision, and how long that takes to arrive is the machine's, not the sim's.)
+    odom = listener.of(odom_key)
+    moving = min(m["stamp"] for m in odom if m["linear"] > 0)
+    ramp_m = 0.2**2 / (2 * BURGER.max_linear_accel_mps2)
+    assert 0.2 * (last - moving) - ramp_m - 0.002 <= x - 1.0 <= 0.2 * (last - first) + 1e-9
+    driving = [m for m in odom if first + 0.1 <= m["stamp"] <= last]
     # flat out, a few odometry messages may be dropped (congestion control DROP)
     assert len(driving) >= 30 and all(m["linear"] == pytest.approx(0.2) for m in driving)
 
