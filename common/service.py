@@ -160,6 +160,7 @@ class ScenarioService(ABC):
             self.config.instance,
             settings,
             on_change=self.on_ownership_change,
+            under_way=self.engine.under_way,
             notify=self.runtime.database.notifier.notify,
             connect_wait_s=self.config.db_wait_s,
         )

@@ -29,6 +29,7 @@ Our additions to the thesis:
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import time
 from collections import deque
@@ -77,6 +78,8 @@ class Engine(StepRunner):
         # The last activation was cut by N or F: the next one is full, so what the cut left
         # runs first, as in the thesis (a meta rule never overtakes the targets it made).
         self.cut = False
+        # Resolved when the activation under way ends (None: none is): see under_way().
+        self._ending: asyncio.Future[None] | None = None
 
     # -- putting rules in ------------------------------------------------------------------
     def add(self, rule: Rule) -> None:
@@ -107,14 +110,19 @@ class Engine(StepRunner):
         started = self.clock()
         deadline = started + self.settings.period_s
         self.cut = False
-        if focus is None:
-            ran = await self._run_all(deadline)
-            passed_over = 0
-            self.counters.full_activations += 1
-        else:
-            ran, passed_over = await self._run_focused(focus, deadline)
-            self.counters.focused_activations += 1
-            self.counters.out_of_focus += passed_over
+        ending = self._ending = asyncio.get_running_loop().create_future()
+        try:
+            if focus is None:
+                ran = await self._run_all(deadline)
+                passed_over = 0
+                self.counters.full_activations += 1
+            else:
+                ran, passed_over = await self._run_focused(focus, deadline)
+                self.counters.focused_activations += 1
+                self.counters.out_of_focus += passed_over
+        finally:
+            self._ending = None
+            ending.set_result(None)
         if not passed_over:
             self.full_started = started
         self.current.extend(self.next)
@@ -123,6 +131,16 @@ class Engine(StepRunner):
         self.counters.rules_run += ran
         self.error_log.flush()
         return ran
+
+    def under_way(self) -> asyncio.Future[None] | None:
+        """A future resolved when the activation under way ends, or None when none is.
+
+        Whoever stops acting for a robot (robot leases, common.lease) waits on it before
+        telling anyone else: a rule that looked at ``owns`` before may still be writing
+        for the robot until its activation ends. Rules of later activations see the robot
+        as not owned when they look.
+        """
+        return self._ending
 
     async def _run_all(self, deadline: float) -> int:
         """The thesis' activation: rules from the head of ``current`` until N or F."""

@@ -48,14 +48,17 @@ monotonic clock, the newcomer on its own from a moment no earlier than ``A``; ra
 by parts per million.)
 
 Only unclean losses wait, told apart by the history: a live replica that gives a robot back
-(``rebalance``, ``shutdown``, ``robot gone``) has stopped acting for it *before* its
-``robot_lease_release`` closes the row and then unlocks, so the next holder may act at
-once. A replica that finds its own connection lost closes its old rows as
-``connection lost`` only after it has dropped every robot, so those are clean too. Only
-a row closed as ``holder gone`` by ``robot_lease_acquire`` means the holder vanished without
-saying so. The wait is computed by the server after each acquisition as ``valid_s`` after
-the newest ``holder gone`` release of that robot (so a robot passed on cleanly by a replica
-that was still waiting for it keeps the first wait), and measured from the answer.
+(``rebalance``, ``shutdown``, ``robot gone``) has stopped acting for it, and waited for the
+engine's activation under way then to end (the *hand-over*, :mod:`~common.lease.cycle`: a
+rule of that activation may have looked at ``owns`` before and still be writing for the
+robot), *before* its ``robot_lease_release`` closes the row and then unlocks, so the next
+holder may act at once and reads every row the last one wrote. A replica that finds its own
+connection lost closes its old rows as ``connection lost`` only after it has dropped every
+robot, so those are clean too. Only a row closed as ``holder gone`` by
+``robot_lease_acquire`` means the holder vanished without saying so. The wait is computed by
+the server after each acquisition as ``valid_s`` after the newest ``holder gone`` release of
+that robot (so a robot passed on cleanly by a replica that was still waiting for it keeps
+the first wait), and measured from the answer.
 All replicas of a service must run with the same ``timeout_s``.
 
 :class:`~common.service.ScenarioService` starts a :class:`LeaseManager` before the engine's

@@ -15,7 +15,7 @@ from common import log
 from common.config import LeaseSettings
 from common.contract import keys
 from common.errors import ConnectionFailure
-from common.lease.cycle import Cycle, LeaseCounters
+from common.lease.cycle import Cycle, LeaseCounters, UnderWay
 from common.lease.holdings import Holdings
 from common.lease.session import LockSession, open_session, statement_timeout
 from common.lease.sql import SHUTDOWN
@@ -35,7 +35,10 @@ class LeaseManager:
 
     ``on_change(gained, lost)`` runs on the loop whenever the robots it acts for change: a
     lost robot is reported *before* its lock is given back (stop acting first), a gained one
-    once its lock is held and any takeover wait is over. ``notify(table, robot, id)``
+    once its lock is held and any takeover wait is over. ``under_way()`` gives the work under
+    way (the engine's activation, :meth:`Engine.under_way`): a robot given back keeps its
+    lock until that work has ended (the hand-over, common.lease.cycle), so its next owner
+    reads every row it wrote. ``notify(table, robot, id)``
     announces robot_lease writes (the contract's change notification). Use :meth:`start` /
     :meth:`stop`, or ``async with``.
     """
@@ -48,6 +51,7 @@ class LeaseManager:
         settings: LeaseSettings | None = None,
         *,
         on_change: OwnershipListener | None = None,
+        under_way: UnderWay | None = None,
         notify: Notify | None = None,
         connect_wait_s: float = 10.0,
         settle_cycles: int = 2,
@@ -73,6 +77,8 @@ class LeaseManager:
             self._notify,
             settle_cycles=settle_cycles,
             takeover_wait_s=self.valid_s,
+            under_way=under_way,
+            wake=self.poke,
         )
         self._confirmed_at = 0.0  # monotonic start of the last cycle that saw our locks
         self._poke = asyncio.Event()
@@ -97,6 +103,11 @@ class LeaseManager:
     def waiting(self) -> frozenset[str]:
         """Robots taken over from a holder that vanished, not acted on yet."""
         return frozenset(self._held.waiting)
+
+    @property
+    def handing_over(self) -> frozenset[str]:
+        """Robots given back whose lock waits for the work under way to end."""
+        return frozenset(self._cycle.handing)
 
     @property
     def replicas(self) -> int:
@@ -214,10 +225,11 @@ class LeaseManager:
             self._lost("the lock connection closed")
 
     def _forget_all(self) -> frozenset[str]:
-        """Stop acting for every robot (reported lost); return the robots whose lock we held."""
+        """Stop acting for every robot (reported lost); return the robots whose lock we held
+        (handed over or not)."""
         self._confirmed_at = 0.0
         self._cycle.pending = 0
-        return self._held.clear()
+        return self._held.clear() | self._cycle.forget_handovers()
 
     def _lost(self, why: str) -> None:
         """The lock connection is gone or unusable: stop acting for every robot at once, close

@@ -424,6 +424,47 @@ async def test_stop_lets_the_activation_under_way_finish() -> None:
     assert journal[0] == "finished" and "after:act" in journal
 
 
+async def test_under_way_names_the_activation_running_and_resolves_when_it_ends() -> None:
+    e = engine()
+    assert e.under_way() is None  # idle: nothing to wait for
+    release = asyncio.Event()
+    seen: list[asyncio.Future[None] | None] = []
+
+    class Writing(Rule):
+        async def actions(self) -> None:
+            seen.append(e.under_way())
+            await release.wait()  # a write in flight
+
+    e.add(Writing())
+    activation = asyncio.create_task(e.activation())
+    await asyncio.sleep(0.01)
+    during = e.under_way()
+    assert during is not None and seen == [during]  # the one future of this activation
+    assert not during.done()  # the write is still in flight
+    release.set()
+    await activation
+    assert during.done()  # resolved with the activation's end
+    assert e.under_way() is None
+
+
+async def test_under_way_resolves_even_when_the_activation_is_cancelled() -> None:
+    e = engine()
+
+    class Hung(Rule):
+        async def actions(self) -> None:
+            await asyncio.Event().wait()
+
+    e.add(Hung())
+    activation = asyncio.create_task(e.activation())
+    await asyncio.sleep(0.01)
+    during = e.under_way()
+    assert during is not None and not during.done()
+    activation.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await activation
+    assert during.done() and e.under_way() is None
+
+
 async def test_the_engine_runs_under_uvloop() -> None:
     import uvloop
 

@@ -345,3 +345,66 @@ async def test_two_replicas_split_the_robots_and_decide_each_once(
         assert [r["recommendation_id"] for r in rows].count(rec) == 1, (robot, rows)
         assert len(rows) == 2, (robot, rows)
     assert sorted(len(share) for share in shares) == [2, 2]
+
+
+async def test_a_robot_handed_over_mid_write_is_not_decided_again_by_its_next_owner(
+    client: Runtime, clock: ClockPlayer, service_config: ServiceConfig
+) -> None:
+    """The lease hand-over race, made certain: replica a's write of the robots' commands is
+    held back (the test locks command2robot against inserts) while replica b joins and a
+    gives one robot back. b must not read the table before a's row is in, or it issues the
+    same command a second time (docs/REPLICAS.md, "The hand-over")."""
+    robots = ["r1", "r2"]
+    for robot in robots:
+        await add_robot(client, robot)
+    leases = LeaseSettings(period_s=0.2, timeout_s=2.0)
+    a_config = replace(service_config, leases=leases, instance="decision-a")
+    b_config = replace(service_config, leases=leases, instance="decision-b")
+    pool = client.database.pool
+
+    async def inserts_waiting() -> int:
+        return int(
+            await pool.fetchval(
+                "SELECT count(*) FROM pg_locks "
+                "WHERE relation = 'command2robot'::regclass AND NOT granted"
+            )
+        )
+
+    async with running_service(DecisionService, a_config) as a:
+        await clock_at(a, 10.0)
+        async with pool.acquire() as blocker:
+            tx = blocker.transaction()
+            await tx.start()
+            held = True
+            try:
+                await blocker.execute("LOCK TABLE command2robot IN SHARE MODE")
+                ids = await recommend(
+                    client, *(velocity("goto", 10, 0.1, 0.0, robot_id=r) for r in robots)
+                )
+                await eventually(inserts_waiting, what="a's write of both commands in flight")
+                async with running_service(DecisionService, b_config) as b:
+                    assert a.leases is not None and b.leases is not None
+                    await eventually(
+                        lambda: len(a.owned_robots() or ()) == 1, what="a gives a robot back"
+                    )
+                    b_cycles = b.leases.counters.cycles
+
+                    async def b_had_its_chance() -> bool:
+                        # b has looked often enough to take the robot if a had let it go,
+                        # and (had it taken it) to have tried to write its command
+                        if b.leases is None or b.leases.counters.cycles < b_cycles + 5:
+                            return False
+                        return not b.owned_robots() or await inserts_waiting() >= 2
+
+                    await eventually(b_had_its_chance, what="b's lease cycles")
+                    await tx.rollback()  # a's write goes in
+                    held = False
+                    await split_between([a, b], robots)
+                    await more_activations(b, 5)
+                    await more_activations(a, 5)
+            finally:
+                if held:
+                    await tx.rollback()
+    for robot, rec in zip(robots, ids, strict=True):
+        rows = await commands(client, robot)
+        assert [r["recommendation_id"] for r in rows] == [rec], (robot, rows)
