@@ -112,6 +112,15 @@ def decide_turn(view: ScanView, p: AvoidParams) -> Turn | None:
     return None
 
 
+def turn_for(view: ScanView, p: AvoidParams) -> Turn | None:
+    """:func:`decide_turn`, once per scan and params: avoid_left and avoid_right both ask."""
+    key = (decide_turn, p)
+    if key not in view.memo:
+        view.memo[key] = decide_turn(view, p)
+    turn: Turn | None = view.memo[key]  # type: ignore[assignment]
+    return turn
+
+
 class AvoidScenario(ControllerScenario):
     """avoid_left or avoid_right: recommends only when :func:`decide_turn` picks its side."""
 
@@ -123,7 +132,7 @@ class AvoidScenario(ControllerScenario):
         cls, scan: LaserScan, odom: Odometry | None, robot: Robot, params: Mapping[str, Any]
     ) -> Command | None:
         p = AvoidParams.read(params, robot.footprint_radius_m)
-        turn = decide_turn(ScanView(scan), p)
+        turn = turn_for(ScanView.of(scan), p)
         if turn is None or turn.side != cls.side:
             return None
         close = turn.hit.range_m < p.stop_distance_m

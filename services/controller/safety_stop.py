@@ -69,7 +69,7 @@ class SafetyStop(ControllerScenario):
         cls, scan: LaserScan, odom: Odometry | None, robot: Robot, params: Mapping[str, Any]
     ) -> Command | None:
         p = SafetyParams.read(params)
-        view = ScanView(scan)
+        view = ScanView.of(scan)
         stop_m = robot.footprint_radius_m + p.margin_m
         linear = odom.linear_mps if odom is not None else 0.0
         if abs(linear) <= MOVING_MPS:

@@ -16,6 +16,7 @@ never prefers an unseen side to a seen one, so no scenario steers into what it c
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,8 +62,61 @@ class Hit:
 NOTHING = Hit(math.inf, 0.0)
 
 
+class _Geometry:
+    """What every scan of one lidar shares: its beams' angles, their sines and cosines, and
+    the beams in each sector asked about (worked out once per lidar, not per scan)."""
+
+    def __init__(self, angles: FloatArray) -> None:
+        self.angles = angles
+        self.sin: FloatArray = np.sin(angles)
+        self.cos: FloatArray = np.cos(angles)
+        self._masks: dict[Sector, npt.NDArray[np.bool_]] = {}
+
+    def mask(self, sector: Sector) -> npt.NDArray[np.bool_]:
+        mask = self._masks.get(sector)
+        if mask is None:
+            low, high = sector
+            centre, half = (low + high) / 2.0, (high - low) / 2.0
+            delta = (self.angles - centre + math.pi) % (2.0 * math.pi) - math.pi  # wrapped
+            mask = np.asarray(np.abs(delta) <= half + 1e-9)
+            mask.flags.writeable = False
+            if len(self._masks) < _MASKS_KEPT:
+                self._masks[sector] = mask
+        return mask
+
+
+# Sectors kept per lidar: the shipped scenarios ask about a dozen; params that change every
+# scan must not grow the cache without bound.
+_MASKS_KEPT = 256
+
+
+_geometries: dict[tuple[float, float, int], _Geometry] = {}
+_GEOMETRIES_KEPT = 16  # lidars in one process: one per robot model, in practice
+
+
+def _geometry(scan: LaserScan) -> _Geometry:
+    key = (scan.angle_min, scan.angle_increment, len(scan.ranges))
+    geometry = _geometries.get(key)
+    if geometry is None:
+        if len(_geometries) >= _GEOMETRIES_KEPT:
+            _geometries.clear()
+        geometry = _geometries[key] = _Geometry(scan.angles())
+    return geometry
+
+
+# The views of the last scans: every scenario of a robot decides on the same scan object
+# (the store's), so the scan is prepared once for all of them. Keyed by the object's id, the
+# scan held beside its view so that the id cannot be reused while the entry lives.
+_VIEWS_KEPT = 64
+_views: OrderedDict[int, tuple[LaserScan, ScanView]] = OrderedDict()
+
+
 class ScanView:
-    """One scan prepared once (angles, invalid beams) for any number of sector queries."""
+    """One scan prepared once (angles, invalid beams) for any number of sector queries.
+
+    :meth:`of` gives the view of a scan, made once however many scenarios ask; a view is
+    read-only after it is made, so sharing it cannot change what any of them decides.
+    """
 
     def __init__(self, scan: LaserScan) -> None:
         ranges = np.asarray(scan.ranges, dtype=np.float64)
@@ -70,14 +124,36 @@ class ScanView:
         # inf already means "nothing within range_max".
         valid = ranges >= scan.range_min - _RANGE_TOLERANCE_M
         self.ranges: FloatArray = np.where(valid, ranges, np.inf)
-        self.angles: FloatArray = scan.angles()
+        self._geometry = _geometry(scan)
+        self.angles: FloatArray = self._geometry.angles
         self.range_max = float(scan.range_max)
+        self._lateral: FloatArray | None = None
+        self.memo: dict[object, object] = {}  # what callers worked out from this scan
+
+    @classmethod
+    def of(cls, scan: LaserScan) -> ScanView:
+        """The view of ``scan``, shared by every caller that asks about the same object."""
+        key = id(scan)
+        held = _views.get(key)
+        if held is not None and held[0] is scan:
+            _views.move_to_end(key)
+            return held[1]
+        view = cls(scan)
+        _views[key] = (scan, view)
+        if len(_views) > _VIEWS_KEPT:
+            _views.popitem(last=False)
+        return view
 
     def _mask(self, sector: Sector) -> npt.NDArray[np.bool_]:
-        low, high = sector
-        centre, half = (low + high) / 2.0, (high - low) / 2.0
-        delta = (self.angles - centre + math.pi) % (2.0 * math.pi) - math.pi  # wrapped
-        return np.asarray(np.abs(delta) <= half + 1e-9)
+        return self._geometry.mask(sector)
+
+    def _lateral_m(self) -> FloatArray:
+        """Each beam's offset from the line of travel, range x |sin angle| (nan for an empty
+        beam straight ahead or behind: never below a bound)."""
+        if self._lateral is None:
+            with np.errstate(invalid="ignore"):  # inf * sin(0) is nan: never a hit
+                self._lateral = np.abs(self.ranges * self._geometry.sin)
+        return self._lateral
 
     def _closest(self, mask: npt.NDArray[np.bool_]) -> Hit:
         if not mask.any():
@@ -95,9 +171,8 @@ class ScanView:
         travel (range x |sin angle|) is below that (NOTHING if there is none)."""
         mask = self._mask(sector)
         if math.isfinite(within_m) or math.isfinite(lateral_m):
-            with np.errstate(invalid="ignore"):  # inf * sin(0) is nan: never a hit
-                lateral = np.abs(self.ranges * np.sin(self.angles))
-            mask = mask & (self.ranges < within_m) & (lateral < lateral_m)
+            with np.errstate(invalid="ignore"):  # nan lateral offsets compare false
+                mask = mask & (self.ranges < within_m) & (self._lateral_m() < lateral_m)
         return self._closest(np.asarray(mask))
 
     def sees(self, sector: Sector) -> bool:
@@ -117,8 +192,8 @@ class ScanView:
         """The closest obstacle the body (a disc of radius ``half_width_m``) would hit moving
         straight ahead (``direction`` +1) or back (-1) within ``reach_m`` of its centre."""
         with np.errstate(invalid="ignore"):  # inf * cos(pi/2) is nan: never a hit
-            along = direction * self.ranges * np.cos(self.angles)
-            lateral = np.abs(self.ranges * np.sin(self.angles))
+            along = direction * self.ranges * self._geometry.cos
+            lateral = self._lateral_m()
             mask = (self.ranges <= reach_m) & (along > 0.0) & (lateral <= half_width_m)
         return self._closest(np.asarray(mask))
 

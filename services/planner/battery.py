@@ -108,7 +108,7 @@ class _BatteryRule(TargetRule):
         self.sim_now = view.now()
         self.battery = await view.newest_battery(self.robot_id)
         self.odom = await view.newest_odometry(self.robot_id)
-        self.goal = await view.current_goal(self.robot_id)
+        self.goal = await view.active_goal(self.robot)
         return True
 
     def _fresh(self, stamp: float, max_age: float) -> bool:

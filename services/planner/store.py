@@ -16,6 +16,9 @@ odometry row (30 Hz per robot) and reads neither the world nor the strategies fo
 Row images (CONTRACT.md "Row images"): an odometry notification's image becomes the robot's
 newest odometry without a query; the table is read instead when the newest notification had
 no image or followed a ``seq`` gap, or none came for FAST_REFRESH_S (the period fallback).
+A battery notification's image becomes the robot's newest battery row the same way, with
+REFRESH_S as its period fallback (the battery is reported at 1 Hz: a shorter one would read
+the table between every two reports).
 """
 
 from __future__ import annotations
@@ -208,8 +211,10 @@ class PlannerStore:
         # per robot: the newest odometry image and the store clock when it came (None: the
         # newest notification could not stand in for the table)
         self._odometry: dict[str, tuple[records.Odometry, float] | None] = {}
+        self._battery: dict[str, tuple[records.Battery, float] | None] = {}  # the same
         self._seqs = Sequences()
         self.odometry_reads = 0  # odometry read from the table (tests, benchmarks)
+        self.battery_reads = 0  # battery rows read from the table (tests, benchmarks)
 
     # -- clocks ------------------------------------------------------------------------------
     def now(self) -> float:
@@ -236,22 +241,32 @@ class PlannerStore:
                 self._goals.announce(note.robot)
         elif note.table == keys.ODOMETRY and note.robot is not None:
             self._odometry_notes[note.robot] = self._odometry_notes.get(note.robot, 0) + 1
-            self._odometry_image(note.robot, note)
+            self._image(self._odometry, records.odometry_of, note.robot, note)
+        elif note.table == keys.BATTERY and note.robot is not None:
+            self._image(self._battery, records.battery_of, note.robot, note)
 
-    def _odometry_image(self, robot_id: str, note: Notification) -> None:
+    def _image(
+        self,
+        held: dict[str, Any],
+        parse: Callable[[Any], Any],
+        robot_id: str,
+        note: Notification,
+    ) -> None:
+        """Keep ``note``'s image as the robot's newest row of its table in ``held`` (with the
+        store clock when it came), or None when it cannot stand in for the table."""
         gap = self._seqs.gap(f"{note.table}/{robot_id}", note.src, note.seq)
-        odometry = None
+        row = None
         if note.row is not None and not gap:
             try:
-                odometry = records.odometry_of(note.row)
+                row = parse(note.row)
             except (KeyError, TypeError, ValueError):
-                odometry = None  # not the contract's image: read the table
-        if odometry is None:
-            self._odometry[robot_id] = None
+                row = None  # not the contract's image: read the table
+        if row is None:
+            held[robot_id] = None
             return
-        held = self._odometry.get(robot_id)
-        if held is None or odometry.id > held[0].id:
-            self._odometry[robot_id] = (odometry, self._clock())
+        newest = held.get(robot_id)
+        if newest is None or row.id > newest[0].id:
+            held[robot_id] = (row, self._clock())
 
     def forget(self, robot_ids: Iterable[str]) -> None:
         """Drop what is kept in memory about these robots (replicas: ownership changed)."""
@@ -259,6 +274,7 @@ class PlannerStore:
             self.world.forget(robot_id)
             self._goals.forget(robot_id)
             self._odometry.pop(robot_id, None)
+            self._battery.pop(robot_id, None)
 
     # -- the meta-planner's view -------------------------------------------------------------
     async def refresh(self) -> None:
@@ -300,9 +316,6 @@ class PlannerStore:
         robot_id = robot.info.robot_id
         return await self._goals.get(robot_id, lambda: self.source.active_goal(robot_id))
 
-    async def current_goal(self, robot_id: str) -> records.Goal | None:
-        return await self.source.active_goal(robot_id)
-
     async def newest_odometry(self, robot_id: str) -> records.Odometry | None:
         image = self._odometry.get(robot_id)
         if image is not None and self._clock() - image[1] < FAST_REFRESH_S:
@@ -314,6 +327,10 @@ class PlannerStore:
         return await self.source.newest_scan(robot_id)
 
     async def newest_battery(self, robot_id: str) -> records.Battery | None:
+        image = self._battery.get(robot_id)
+        if image is not None and self._clock() - image[1] < REFRESH_S:
+            return image[0]  # the newest row, as its notification carried it
+        self.battery_reads += 1
         return await self.source.newest_battery(robot_id)
 
     # -- writes ------------------------------------------------------------------------------

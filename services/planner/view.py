@@ -42,9 +42,6 @@ class Contract(Clocks, Protocol):
         """The robot's active goal, read again only after a goal notification for it (or
         FAST_REFRESH_S after the last read)."""
 
-    async def current_goal(self, robot_id: str) -> records.Goal | None:
-        """The robot's active goal, read now."""
-
     async def newest_odometry(self, robot_id: str) -> records.Odometry | None: ...
 
     async def newest_scan(self, robot_id: str) -> records.LaserScan | None: ...

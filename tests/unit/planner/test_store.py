@@ -134,3 +134,35 @@ async def test_an_odometry_image_stands_in_for_the_query_until_fast_refresh_s() 
     p.t += FAST_REFRESH_S  # nothing heard for the period: read the table
     await store.newest_odometry(ROBOT)
     assert store.odometry_reads == 3
+
+
+def battery_note(p: Planner, seq: int) -> Notification:
+    """The newest battery row's notification with its image, numbered ``seq``."""
+    row = p.contract[keys.BATTERY].newest(ROBOT)
+    assert row is not None
+    return Notification(keys.BATTERY, ROBOT, row["id"], dict(row), "test", seq)
+
+
+async def test_a_battery_image_stands_in_for_the_query_until_refresh_s() -> None:
+    p = Planner()
+    store, source = p.store, MemoryPlannerSource(p.contract)
+    p.sense(0.05)
+    store.note(battery_note(p, 1))
+    newest = await store.newest_battery(ROBOT)
+    assert newest is not None and newest == await source.newest_battery(ROBOT)
+    assert store.battery_reads == 0  # the image stood in for the query
+    p.t += FAST_REFRESH_S  # longer than odometry's fallback: the battery reports at 1 Hz
+    assert await store.newest_battery(ROBOT) == newest
+    assert store.battery_reads == 0
+    p.sense(0.05)  # a bare hint (the harness's listener): the table is read
+    assert await store.newest_battery(ROBOT) == await source.newest_battery(ROBOT)
+    assert store.battery_reads == 1
+    store.note(battery_note(p, 3))  # seq 2 never came: a gap, read the table
+    await store.newest_battery(ROBOT)
+    assert store.battery_reads == 2
+    store.note(battery_note(p, 4))
+    await store.newest_battery(ROBOT)
+    assert store.battery_reads == 2
+    p.t += REFRESH_S  # nothing heard for the period: read the table
+    await store.newest_battery(ROBOT)
+    assert store.battery_reads == 3
