@@ -165,7 +165,9 @@ class Cycle:
             return view
         holders = dict(view.holders)
         for robot in list(self.handing):
-            if holders.get(robot) == view.me:
+            if robot not in holders:
+                continue  # its row is gone: its lock is still ours until the hand-over ends
+            if holders[robot] == view.me:
                 holders[robot] = HANDING_OVER
             else:
                 # its lock is not ours any more (cannot happen while the connection lives)

@@ -16,7 +16,7 @@ import pytest
 
 import common.lease.cycle as cycle
 from common.config import LeaseSettings
-from common.lease import REBALANCE, LeaseManager, history_overlaps, ownership
+from common.lease import REBALANCE, LeaseManager, history_overlaps, lease_key, ownership
 from common.testing import eventually
 
 SERVICE = "decision"
@@ -135,3 +135,33 @@ async def test_a_clean_stop_during_a_hand_over_releases_the_robot(
         await a.stop()
     assert await ownership(conn, SERVICE) == dict.fromkeys(ROBOTS)
     assert await history_overlaps(conn, SERVICE) == []
+
+
+async def test_a_robot_removed_during_its_hand_over_is_still_released_when_the_work_ends(
+    conn: asyncpg.Connection, db_url: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    await add_robots(conn, ROBOTS)
+    pending: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+    a = LeaseManager(db_url, SERVICE, "a", FAST, under_way=lambda: pending)
+    b = LeaseManager(db_url, SERVICE, "b", FAST)
+    await a.start()
+    await b.start()
+    try:
+        await eventually(lambda: a.handing_over, within=10, what="a hand-over under way")
+        (given,) = a.handing_over
+        await conn.execute("DELETE FROM robot WHERE robot_id = $1", given)
+        await cycles(a, 3)
+        assert a.handing_over == frozenset({given})  # still ours until the work ends
+        pending.set_result(None)
+        await eventually(lambda: not a.handing_over, within=10, what="the lock released")
+        held = await conn.fetchval(
+            "SELECT count(*) FROM pg_locks WHERE locktype = 'advisory' AND objsubid = 2 "
+            "AND objid = $1::bigint::oid AND pid = $2",
+            lease_key(given),
+            a.backend_pid,
+        )
+        assert held == 0
+        assert "lock not held any more" not in caplog.text
+    finally:
+        await b.stop()
+        await a.stop()
