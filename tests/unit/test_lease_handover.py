@@ -9,7 +9,8 @@ anyone else's, in Postgres (the lock) or in the other replica's view (``owns``).
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Iterable
+import contextlib
+from collections.abc import AsyncIterator, Callable, Iterable
 
 import asyncpg
 import pytest
@@ -33,6 +34,25 @@ async def cycles(manager: LeaseManager, n: int) -> None:
     await eventually(
         lambda: manager.counters.cycles >= start + n, within=10, what=f"{n} more lease cycles"
     )
+
+
+@contextlib.asynccontextmanager
+async def replicas(
+    db_url: str, under_way: Callable[[], asyncio.Future[None] | None]
+) -> AsyncIterator[tuple[LeaseManager, LeaseManager]]:
+    """Replica a (its work under way given by ``under_way``) alone with every robot, then b
+    joining; both stopped (b first) on the way out."""
+    a = LeaseManager(db_url, SERVICE, "a", FAST, under_way=under_way)
+    b = LeaseManager(db_url, SERVICE, "b", FAST)
+    await a.start()
+    try:
+        await b.start()
+        try:
+            yield a, b
+        finally:
+            await b.stop()
+    finally:
+        await a.stop()
 
 
 async def test_a_robot_given_back_stays_locked_until_the_activation_under_way_ends(
@@ -85,16 +105,9 @@ async def test_with_no_activation_under_way_a_robot_is_given_back_in_the_same_cy
     conn: asyncpg.Connection, db_url: str
 ) -> None:
     await add_robots(conn, ROBOTS)
-    a = LeaseManager(db_url, SERVICE, "a", FAST, under_way=lambda: None)
-    b = LeaseManager(db_url, SERVICE, "b", FAST)
-    await a.start()
-    await b.start()
-    try:
+    async with replicas(db_url, lambda: None) as (a, b):
         await eventually(lambda: len(a.owned) == len(b.owned) == 1, within=10, what="1/1")
         assert a.counters.handovers_waited == 0
-    finally:
-        await b.stop()
-        await a.stop()
 
 
 async def test_a_stuck_activation_does_not_keep_the_robot_for_ever(
@@ -103,17 +116,10 @@ async def test_a_stuck_activation_does_not_keep_the_robot_for_ever(
     monkeypatch.setattr(cycle, "HANDOVER_LIMIT_S", 0.5)
     await add_robots(conn, ROBOTS)
     stuck: asyncio.Future[None] = asyncio.get_running_loop().create_future()
-    a = LeaseManager(db_url, SERVICE, "a", FAST, under_way=lambda: stuck)
-    b = LeaseManager(db_url, SERVICE, "b", FAST)
-    await a.start()
-    await b.start()
-    try:
+    async with replicas(db_url, lambda: stuck) as (a, b):
         await eventually(lambda: len(b.owned) == 1, within=10, what="b gets its share anyway")
         assert a.counters.handovers_expired == 1 and a.handing_over == frozenset()
         assert not stuck.done()
-    finally:
-        await b.stop()
-        await a.stop()
     assert await history_overlaps(conn, SERVICE) == []
 
 
@@ -122,17 +128,10 @@ async def test_a_clean_stop_during_a_hand_over_releases_the_robot(
 ) -> None:
     await add_robots(conn, ROBOTS)
     pending: asyncio.Future[None] = asyncio.get_running_loop().create_future()
-    a = LeaseManager(db_url, SERVICE, "a", FAST, under_way=lambda: pending)
-    b = LeaseManager(db_url, SERVICE, "b", FAST)
-    await a.start()
-    await b.start()
-    try:
+    async with replicas(db_url, lambda: pending) as (a, b):
         await eventually(lambda: a.handing_over, within=10, what="a hand-over under way")
         await a.stop()  # its engine has drained (a service stops leases after it)
         await eventually(lambda: len(b.owned) == 2, within=10, what="b owns both")
-    finally:
-        await b.stop()
-        await a.stop()
     assert await ownership(conn, SERVICE) == dict.fromkeys(ROBOTS)
     assert await history_overlaps(conn, SERVICE) == []
 
@@ -142,11 +141,7 @@ async def test_a_robot_removed_during_its_hand_over_is_still_released_when_the_w
 ) -> None:
     await add_robots(conn, ROBOTS)
     pending: asyncio.Future[None] = asyncio.get_running_loop().create_future()
-    a = LeaseManager(db_url, SERVICE, "a", FAST, under_way=lambda: pending)
-    b = LeaseManager(db_url, SERVICE, "b", FAST)
-    await a.start()
-    await b.start()
-    try:
+    async with replicas(db_url, lambda: pending) as (a, _b):
         await eventually(lambda: a.handing_over, within=10, what="a hand-over under way")
         (given,) = a.handing_over
         await conn.execute("DELETE FROM robot WHERE robot_id = $1", given)
@@ -162,6 +157,3 @@ async def test_a_robot_removed_during_its_hand_over_is_still_released_when_the_w
         )
         assert held == 0
         assert "lock not held any more" not in caplog.text
-    finally:
-        await b.stop()
-        await a.stop()
