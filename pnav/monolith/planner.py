@@ -2,7 +2,7 @@
 service seeds it.
 
 :class:`MemoryPlannerSource` answers the planner's reads and writes
-(``services.planner.store.PlannerSource``) from :class:`MemoryContract`'s rows, each as
+(``services.planner.source.PlannerSource``) from :class:`MemoryContract`'s rows, each as
 Postgres would answer the statement ``PgPlannerSource`` sends (the same rows, in the same
 order, as the same records); a write inserts or updates the row, then notifies, as
 ``Database.write`` does after its commit. :func:`planner_engine` builds the real

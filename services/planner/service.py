@@ -16,7 +16,8 @@ from common.bus import Notification
 from common.runtime import Runtime
 from common.service import ScenarioService
 from services.planner.meta import PlannerRules
-from services.planner.store import PgPlannerSource, PlannerStore
+from services.planner.source import PgPlannerSource
+from services.planner.store import PlannerStore
 
 
 class PlannerService(ScenarioService):

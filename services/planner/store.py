@@ -1,7 +1,8 @@
 """Every read and write of the contract the planner does, and what notifications told it.
 
-- :class:`PlannerSource`: the raw typed reads and writes (a Protocol);
-- :class:`PgPlannerSource`: them in SQL, on an asyncpg pool (the planner's only SQL);
+- :class:`~services.planner.source.PlannerSource` (services/planner/source.py): the raw
+  typed reads and writes (a Protocol), and :class:`~services.planner.source.PgPlannerSource`,
+  them in SQL on an asyncpg pool (the planner's only SQL);
 - :class:`PlannerStore`: the one object the planner service holds. It takes a source and a
   clock, keeps the caches (the world, the active strategies, each robot's active goal, on
   ``common.freshness.FreshCache``), counts each robot's odometry notifications, and gives the
@@ -25,161 +26,28 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
-from typing import Any, Protocol
-
-import numpy as np
+from typing import Any
 
 import services.planner.chargers as chargers
 import services.planner.obstacles as obstacles
 from common.bus import Notification
-from common.contract import keys, planned_path, records
-from common.db import Database
+from common.contract import keys, records
 from common.freshness import FreshCache, Sequences
 from services.planner.paths import PathRow
 from services.planner.recommendation import Recommendation
 from services.planner.routes import Router, Target
+from services.planner.source import PlannerSource
 from services.planner.tracking import Progress
-from services.planner.world import MapData, MapRow, RobotInfo, RobotState, Station, World
+from services.planner.world import MapData, RobotInfo, RobotState, Station, World
 
 REFRESH_S = 2.0  # re-read robots, maps and stations at least this often (store clock)
 # Re-read the active strategies, and each robot's active goal, when a notification says they
 # changed, and at least this often (store clock) in case one was lost.
 FAST_REFRESH_S = 0.5
 
-ROBOTS_SQL = (
-    "SELECT robot_id, world, max_linear_mps, max_angular_rps, footprint_radius_m FROM robot"
-)
-MAP_VERSIONS_SQL = "SELECT map_id, loaded_at FROM map"
-MAP_SQL = (
-    "SELECT resolution_m, origin_x, origin_y, origin_yaw, width, height, grid "
-    "FROM map WHERE map_id = $1"
-)
-STATIONS_SQL = "SELECT station_id, map_id, x, y, radius_m FROM charging_station ORDER BY station_id"
-MARK_REACHED_SQL = (
-    "UPDATE goal SET status = 'reached', finished_stamp = $2 "
-    "WHERE id = $1 AND status = 'active' RETURNING id"
-)
-MARK_FAILED_SQL = (
-    "UPDATE goal SET status = 'failed', reason = $3, finished_stamp = $2 "
-    "WHERE id = $1 AND status = 'active' RETURNING id"
-)
-LIVE_SYSTEM_SQL = (
-    "SELECT max(expires_stamp) FROM command_recommendation WHERE robot_id = $1 "
-    "AND kind = 'system' AND system_command = $2 AND expires_stamp > $3"
-)
-
 _WORLD_TABLES = (keys.ROBOT, keys.MAP, keys.CHARGING_STATION)
 _STRATEGY_TABLES = (keys.ACTIVE_STRATEGY, keys.STRATEGY)
 _WORLD, _ACTIVE = "world", "active"  # the keys of the two whole-table caches
-
-
-class PlannerSource(Protocol):
-    """The planner's reads and writes of the contract, typed (CONTRACT.md has the tables)."""
-
-    async def robots(self) -> list[RobotInfo]: ...
-
-    async def map_versions(self) -> dict[str, str]:
-        """map_id -> its version (loaded_at, as text)."""
-
-    async def map(self, map_id: str, version: str) -> MapRow | None: ...
-
-    async def stations(self) -> list[Station]:
-        """By station id."""
-
-    async def active_strategies(self) -> dict[str, records.ActiveStrategy]: ...
-
-    async def active_goal(self, robot_id: str) -> records.Goal | None: ...
-
-    async def newest_odometry(self, robot_id: str) -> records.Odometry | None: ...
-
-    async def newest_scan(self, robot_id: str) -> records.LaserScan | None: ...
-
-    async def newest_battery(self, robot_id: str) -> records.Battery | None: ...
-
-    async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
-        """Set the goal 'reached' if it is still active, and notify; whether it was."""
-
-    async def mark_failed(self, goal_id: int, robot_id: str, reason: str, stamp: float) -> bool:
-        """Set the goal 'failed' with ``reason`` if it is still active, and notify."""
-
-    async def live_system(self, robot_id: str, command: str, now: float) -> float | None:
-        """The newest expiry after ``now`` of the robot's ``command`` recommendations."""
-
-    async def recommend(self, rec: Recommendation) -> int:
-        """Write a command_recommendation row and notify; its id."""
-
-    async def publish_path(self, path: PathRow) -> int:
-        """Write a planned_path row (``path``: its contract columns) and notify; its id."""
-
-
-class PgPlannerSource:
-    """:class:`PlannerSource` on Postgres: ``Database.write`` notifies after each write."""
-
-    def __init__(self, db: Database) -> None:
-        self.db = db
-
-    async def robots(self) -> list[RobotInfo]:
-        return [RobotInfo(**dict(r)) for r in await self.db.pool.fetch(ROBOTS_SQL)]
-
-    async def map_versions(self) -> dict[str, str]:
-        rows = await self.db.pool.fetch(MAP_VERSIONS_SQL)
-        return {r["map_id"]: str(r["loaded_at"]) for r in rows}
-
-    async def map(self, map_id: str, version: str) -> MapRow | None:
-        row = await self.db.pool.fetchrow(MAP_SQL, map_id)
-        if row is None:
-            return None
-        cells = np.frombuffer(row["grid"], dtype=np.uint8).reshape(row["height"], row["width"])
-        origin = (row["origin_x"], row["origin_y"], row["origin_yaw"])
-        return MapRow(map_id, version, cells, row["resolution_m"], origin)
-
-    async def stations(self) -> list[Station]:
-        return [Station(**dict(r)) for r in await self.db.pool.fetch(STATIONS_SQL)]
-
-    async def active_strategies(self) -> dict[str, records.ActiveStrategy]:
-        return await records.active_strategies(self.db.pool)
-
-    async def active_goal(self, robot_id: str) -> records.Goal | None:
-        return await records.active_goal(self.db.pool, robot_id)
-
-    async def newest_odometry(self, robot_id: str) -> records.Odometry | None:
-        return await records.newest_odometry(self.db.pool, robot_id)
-
-    async def newest_scan(self, robot_id: str) -> records.LaserScan | None:
-        return await records.newest_scan(self.db.pool, robot_id)
-
-    async def newest_battery(self, robot_id: str) -> records.Battery | None:
-        return await records.newest_battery(self.db.pool, robot_id)
-
-    async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
-        updated = await self.db.write(keys.GOAL, robot_id, MARK_REACHED_SQL, goal_id, stamp)
-        return updated is not None
-
-    async def mark_failed(self, goal_id: int, robot_id: str, reason: str, stamp: float) -> bool:
-        sql, args = MARK_FAILED_SQL, (goal_id, stamp, reason)
-        return await self.db.write(keys.GOAL, robot_id, sql, *args) is not None
-
-    async def live_system(self, robot_id: str, command: str, now: float) -> float | None:
-        value = await self.db.pool.fetchval(LIVE_SYSTEM_SQL, robot_id, command, now)
-        return float(value) if value is not None else None
-
-    async def recommend(self, rec: Recommendation) -> int:
-        fields: dict[str, Any] = {
-            "source": rec.source,
-            "priority": rec.priority,
-            "stamp": rec.stamp,
-            "ttl_s": rec.ttl_s,
-            "reason": rec.reason,
-            "inputs": rec.inputs,
-        }
-        if rec.command is None:
-            return await records.recommend_velocity(
-                self.db, rec.robot_id, linear=rec.linear, angular=rec.angular, **fields
-            )
-        return await records.recommend_system(self.db, rec.robot_id, command=rec.command, **fields)
-
-    async def publish_path(self, path: PathRow) -> int:
-        return await planned_path.write_planned_path(self.db, path)
 
 
 class PlannerStore:

@@ -1,0 +1,147 @@
+"""The planner's raw reads and writes of the contract: :class:`PlannerSource` (a Protocol)
+and :class:`PgPlannerSource`, them in SQL on an asyncpg pool, the planner's only SQL.
+pnav.monolith.planner has the in-memory source; services/planner/store.py keeps what
+notifications told the service and gives the rules their view."""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+import numpy as np
+
+from common.contract import keys, planned_path, records
+from common.db import Database
+from services.planner.paths import PathRow
+from services.planner.recommendation import Recommendation
+from services.planner.world import MapRow, RobotInfo, Station
+
+ROBOTS_SQL = (
+    "SELECT robot_id, world, max_linear_mps, max_angular_rps, footprint_radius_m FROM robot"
+)
+MAP_VERSIONS_SQL = "SELECT map_id, loaded_at FROM map"
+MAP_SQL = (
+    "SELECT resolution_m, origin_x, origin_y, origin_yaw, width, height, grid "
+    "FROM map WHERE map_id = $1"
+)
+STATIONS_SQL = "SELECT station_id, map_id, x, y, radius_m FROM charging_station ORDER BY station_id"
+MARK_REACHED_SQL = (
+    "UPDATE goal SET status = 'reached', finished_stamp = $2 "
+    "WHERE id = $1 AND status = 'active' RETURNING id"
+)
+MARK_FAILED_SQL = (
+    "UPDATE goal SET status = 'failed', reason = $3, finished_stamp = $2 "
+    "WHERE id = $1 AND status = 'active' RETURNING id"
+)
+LIVE_SYSTEM_SQL = (
+    "SELECT max(expires_stamp) FROM command_recommendation WHERE robot_id = $1 "
+    "AND kind = 'system' AND system_command = $2 AND expires_stamp > $3"
+)
+
+
+class PlannerSource(Protocol):
+    """The planner's reads and writes of the contract, typed (CONTRACT.md has the tables)."""
+
+    async def robots(self) -> list[RobotInfo]: ...
+
+    async def map_versions(self) -> dict[str, str]:
+        """map_id -> its version (loaded_at, as text)."""
+
+    async def map(self, map_id: str, version: str) -> MapRow | None: ...
+
+    async def stations(self) -> list[Station]:
+        """By station id."""
+
+    async def active_strategies(self) -> dict[str, records.ActiveStrategy]: ...
+
+    async def active_goal(self, robot_id: str) -> records.Goal | None: ...
+
+    async def newest_odometry(self, robot_id: str) -> records.Odometry | None: ...
+
+    async def newest_scan(self, robot_id: str) -> records.LaserScan | None: ...
+
+    async def newest_battery(self, robot_id: str) -> records.Battery | None: ...
+
+    async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
+        """Set the goal 'reached' if it is still active, and notify; whether it was."""
+
+    async def mark_failed(self, goal_id: int, robot_id: str, reason: str, stamp: float) -> bool:
+        """Set the goal 'failed' with ``reason`` if it is still active, and notify."""
+
+    async def live_system(self, robot_id: str, command: str, now: float) -> float | None:
+        """The newest expiry after ``now`` of the robot's ``command`` recommendations."""
+
+    async def recommend(self, rec: Recommendation) -> int:
+        """Write a command_recommendation row and notify; its id."""
+
+    async def publish_path(self, path: PathRow) -> int:
+        """Write a planned_path row (``path``: its contract columns) and notify; its id."""
+
+
+class PgPlannerSource:
+    """:class:`PlannerSource` on Postgres: ``Database.write`` notifies after each write."""
+
+    def __init__(self, db: Database) -> None:
+        self.db = db
+
+    async def robots(self) -> list[RobotInfo]:
+        return [RobotInfo(**dict(r)) for r in await self.db.pool.fetch(ROBOTS_SQL)]
+
+    async def map_versions(self) -> dict[str, str]:
+        rows = await self.db.pool.fetch(MAP_VERSIONS_SQL)
+        return {r["map_id"]: str(r["loaded_at"]) for r in rows}
+
+    async def map(self, map_id: str, version: str) -> MapRow | None:
+        row = await self.db.pool.fetchrow(MAP_SQL, map_id)
+        if row is None:
+            return None
+        cells = np.frombuffer(row["grid"], dtype=np.uint8).reshape(row["height"], row["width"])
+        origin = (row["origin_x"], row["origin_y"], row["origin_yaw"])
+        return MapRow(map_id, version, cells, row["resolution_m"], origin)
+
+    async def stations(self) -> list[Station]:
+        return [Station(**dict(r)) for r in await self.db.pool.fetch(STATIONS_SQL)]
+
+    async def active_strategies(self) -> dict[str, records.ActiveStrategy]:
+        return await records.active_strategies(self.db.pool)
+
+    async def active_goal(self, robot_id: str) -> records.Goal | None:
+        return await records.active_goal(self.db.pool, robot_id)
+
+    async def newest_odometry(self, robot_id: str) -> records.Odometry | None:
+        return await records.newest_odometry(self.db.pool, robot_id)
+
+    async def newest_scan(self, robot_id: str) -> records.LaserScan | None:
+        return await records.newest_scan(self.db.pool, robot_id)
+
+    async def newest_battery(self, robot_id: str) -> records.Battery | None:
+        return await records.newest_battery(self.db.pool, robot_id)
+
+    async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
+        updated = await self.db.write(keys.GOAL, robot_id, MARK_REACHED_SQL, goal_id, stamp)
+        return updated is not None
+
+    async def mark_failed(self, goal_id: int, robot_id: str, reason: str, stamp: float) -> bool:
+        sql, args = MARK_FAILED_SQL, (goal_id, stamp, reason)
+        return await self.db.write(keys.GOAL, robot_id, sql, *args) is not None
+
+    async def live_system(self, robot_id: str, command: str, now: float) -> float | None:
+        value = await self.db.pool.fetchval(LIVE_SYSTEM_SQL, robot_id, command, now)
+        return float(value) if value is not None else None
+
+    async def recommend(self, rec: Recommendation) -> int:
+        fields: dict[str, Any] = {
+            "source": rec.source,
+            "priority": rec.priority,
+            "stamp": rec.stamp,
+            "ttl_s": rec.ttl_s,
+            "reason": rec.reason,
+            "inputs": rec.inputs,
+        }
+        if rec.command is None:
+            return await records.recommend_velocity(
+                self.db, rec.robot_id, linear=rec.linear, angular=rec.angular, **fields
+            )
+        return await records.recommend_system(self.db, rec.robot_id, command=rec.command, **fields)
+
+    async def publish_path(self, path: PathRow) -> int:
+        return await planned_path.write_planned_path(self.db, path)
