@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import Any
+from typing import Any, cast
 
 import zenoh
 
@@ -101,6 +101,7 @@ class SimNode:
         self._queryable = session.declare_queryable(keys.SIM_WORLD, self._on_world_query)
         self._token = session.liveliness().declare_token(keys.alive_key(SERVICE, instance))
         self.commands_received = 0
+        self._matching_checked = False  # _check_matching ran
         # paced by the stack, the sim time of the next clock the gate owes (_pass_gate)
         self._next_gate_clock = 0.0
 
@@ -194,6 +195,7 @@ class SimNode:
                 self.publish_clock()
                 next_clock = now + clock_period
             if now >= next_world:
+                self._check_matching()  # a world period after the start, once
                 self.publish_world()
                 next_world = now + WORLD_PERIOD_S
             if now >= next_resend:
@@ -329,11 +331,32 @@ class SimNode:
         listeners that were there all along. Nobody listening: start anyway."""
         deadline = time.monotonic() + LISTENERS_WAIT_S
         while not stop.is_set() and time.monotonic() < deadline:
-            # the stubs say bool; zenoh 1.x returns a MatchingStatus with .matching
-            statuses: list[Any] = [pub.matching_status for pub in self._publishers.values()]
-            if any(status.matching for status in statuses):
+            if len(self.unmatched()) < len(self._publishers):
                 return
             stop.wait(0.01)
+
+    def unmatched(self) -> list[str]:
+        """Keys of the sensor publishers Zenoh knows no subscriber for: what is put on them
+        is dropped at the sim (a client's publisher filters on the router's answer)."""
+        # the stubs say bool; zenoh 1.x returns a MatchingStatus with .matching
+        return sorted(
+            keys.robot_key(robot, topic)
+            for (robot, topic), pub in self._publishers.items()
+            if not cast(Any, pub.matching_status).matching
+        )
+
+    def _check_matching(self) -> None:
+        """Once, a world period after the start: warn if some sensor publishers found a
+        subscriber and some did not. Every shipped stack hears all of a robot's topics (the
+        bridge), and a stream that never flows is otherwise silent (a fault trial once saw
+        no scan for 20 s while odometry and battery flowed)."""
+        if self._matching_checked:
+            return
+        self._matching_checked = True
+        unmatched = self.unmatched()
+        if unmatched and len(unmatched) < len(self._publishers):
+            message = "sensor publishers without a subscriber: their readings are dropped"
+            event(log, logging.WARNING, message, keys=",".join(unmatched))
 
     def gate_figures(self) -> dict[str, Any]:
         """How often and how long the sim waited for the stack (empty without a gate)."""

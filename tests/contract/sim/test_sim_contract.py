@@ -450,6 +450,31 @@ def test_paced_by_the_stack_the_sim_keeps_real_time_until_a_first_decision(
     assert gate.timeouts == 0
 
 
+def test_a_sensor_stream_nobody_hears_while_the_others_are_heard_is_named_in_a_warning(
+    zenoh_settings: ZenohSettings, caplog: pytest.LogCaptureFixture
+) -> None:
+    odom_only = open_session(zenoh_settings)
+    heard: list[bytes] = []
+    sub = odom_only.declare_subscriber(
+        keys.robot_key("r1", keys.ODOM), lambda sample: heard.append(sample.payload.to_bytes())
+    )
+    try:
+        with (
+            caplog.at_level("WARNING", logger="services.sim.node"),
+            running_sim(zenoh_settings, 1.0),
+        ):
+            deadline = time.monotonic() + 10
+            while "without a subscriber" not in caplog.text and time.monotonic() < deadline:
+                time.sleep(0.05)
+    finally:
+        sub.undeclare()
+        odom_only.close()
+    assert heard  # odometry flowed
+    warning = next(r for r in caplog.records if "without a subscriber" in r.getMessage())
+    named = str(warning.keys).split(",")  # type: ignore[attr-defined]  # the event's field
+    assert keys.robot_key("r1", keys.SCAN) in named and keys.robot_key("r1", keys.ODOM) not in named
+
+
 def test_cli_reads_the_environment_and_stops_on_sigterm(
     zenoh_settings: ZenohSettings, listener: Listener
 ) -> None:
