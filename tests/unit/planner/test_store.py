@@ -105,11 +105,11 @@ async def test_odometry_notifications_are_counted_per_robot() -> None:
     assert p.store.odometry_notes("r9") == 0
 
 
-def image_note(p: Planner, seq: int) -> Notification:
-    """The newest odometry row's notification with its image, numbered ``seq``."""
-    row = p.contract[keys.ODOMETRY].newest(ROBOT)
+def image_note(p: Planner, seq: int, table: str = keys.ODOMETRY) -> Notification:
+    """The newest ``table`` row's notification with its image, numbered ``seq``."""
+    row = p.contract[table].newest(ROBOT)
     assert row is not None
-    return Notification(keys.ODOMETRY, ROBOT, row["id"], dict(row), "test", seq)
+    return Notification(table, ROBOT, row["id"], dict(row), "test", seq)
 
 
 async def test_an_odometry_image_stands_in_for_the_query_until_fast_refresh_s() -> None:
@@ -136,18 +136,11 @@ async def test_an_odometry_image_stands_in_for_the_query_until_fast_refresh_s() 
     assert store.odometry_reads == 3
 
 
-def battery_note(p: Planner, seq: int) -> Notification:
-    """The newest battery row's notification with its image, numbered ``seq``."""
-    row = p.contract[keys.BATTERY].newest(ROBOT)
-    assert row is not None
-    return Notification(keys.BATTERY, ROBOT, row["id"], dict(row), "test", seq)
-
-
 async def test_a_battery_image_stands_in_for_the_query_until_refresh_s() -> None:
     p = Planner()
     store, source = p.store, MemoryPlannerSource(p.contract)
     p.sense(0.05)
-    store.note(battery_note(p, 1))
+    store.note(image_note(p, 1, keys.BATTERY))
     newest = await store.newest_battery(ROBOT)
     assert newest is not None and newest == await source.newest_battery(ROBOT)
     assert store.battery_reads == 0  # the image stood in for the query
@@ -157,10 +150,10 @@ async def test_a_battery_image_stands_in_for_the_query_until_refresh_s() -> None
     p.sense(0.05)  # a bare hint (the harness's listener): the table is read
     assert await store.newest_battery(ROBOT) == await source.newest_battery(ROBOT)
     assert store.battery_reads == 1
-    store.note(battery_note(p, 3))  # seq 2 never came: a gap, read the table
+    store.note(image_note(p, 3, keys.BATTERY))  # seq 2 never came: a gap, read the table
     await store.newest_battery(ROBOT)
     assert store.battery_reads == 2
-    store.note(battery_note(p, 4))
+    store.note(image_note(p, 4, keys.BATTERY))
     await store.newest_battery(ROBOT)
     assert store.battery_reads == 2
     p.t += REFRESH_S  # nothing heard for the period: read the table
