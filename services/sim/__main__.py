@@ -13,16 +13,13 @@ it cleanly.
 from __future__ import annotations
 
 import argparse
-import faulthandler
 import logging
 import os
-import signal
 import sys
 import threading
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from types import FrameType
 
 from common.bus import open_session
 from common.config import ZenohSettings, default_instance, lockstep_from_env
@@ -31,12 +28,11 @@ from common.lifeline import die_with_parent
 from common.log import event, setup
 from services.sim.bench import report, run_bench
 from services.sim.clock import parse_rate
+from services.sim.signals import SignalStop
 from services.sim.sim import CMD_TIMEOUT_S, SimConfig
 from services.sim.world import World, load_world
 
 log = logging.getLogger("services.sim")
-# after a SIGTERM or SIGINT, how long the sim may take to stop before its stacks are dumped
-STOP_DUMP_S = 5.0
 
 WORLDS_DIR = Path(__file__).resolve().parents[2] / "worlds"
 BENCH_WORLD = WORLDS_DIR / "warehouse.yaml"
@@ -214,40 +210,31 @@ def serve(
     from services.sim.trace import Tracer
 
     stop = threading.Event()
-
-    def on_signal(signum: int, _frame: FrameType | None) -> None:
-        event(log, logging.INFO, "stopping", signal=signal.Signals(signum).name)
-        # A stop that hangs writes every thread's stack to the log before the launcher's
-        # SIGKILL (8 s): one fault trial in about twenty saw the sim not stop, and nothing
-        # said where it was.
-        faulthandler.dump_traceback_later(STOP_DUMP_S, exit=False)
-        stop.set()
-
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
-    settings = ZenohSettings.from_env()
-    session = open_session(settings)
+    signals = SignalStop(stop)  # SIGINT and SIGTERM set ``stop`` (signals.py says how)
     try:
-        instance = _env("PNAV_INSTANCE") or default_instance()
-        tracer = Tracer(Path(trace)) if trace else None
-        gate = Gate(max_lag) if max_lag is not None else None
-        node = SimNode(
-            world,
-            config,
-            session,
-            rate=rate,
-            instance=instance,
-            tracer=tracer,
-            gate=gate,
-            lockstep=lockstep,
-        )
+        session = open_session(ZenohSettings.from_env())
         try:
-            node.run(stop)
+            instance = _env("PNAV_INSTANCE") or default_instance()
+            tracer = Tracer(Path(trace)) if trace else None
+            gate = Gate(max_lag) if max_lag is not None else None
+            node = SimNode(
+                world,
+                config,
+                session,
+                rate=rate,
+                instance=instance,
+                tracer=tracer,
+                gate=gate,
+                lockstep=lockstep,
+            )
+            try:
+                node.run(stop)
+            finally:
+                node.close()
         finally:
-            node.close()
+            session.close()
     finally:
-        session.close()
-        faulthandler.cancel_dump_traceback_later()  # stopped in time: nothing to say
+        signals.close()  # stopped in time: no stack dump
     return 0
 
 
