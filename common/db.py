@@ -20,6 +20,7 @@ import asyncpg
 
 from common.bus import Notifier
 from common.errors import ConnectionFailure, InternalError, UsageError
+from common.lane import Lane
 from common.outage import DatabaseUnavailable, Outage, is_connection_error, outage_for
 
 log = logging.getLogger(__name__)
@@ -164,11 +165,33 @@ class Changes:
 
 
 class Database:
-    """A service's pool plus its notifier."""
+    """A service's pool plus its notifier.
+
+    Its single statements (:meth:`fetch`, :meth:`fetchrow`, :meth:`fetchval`,
+    :meth:`execute`, :meth:`write`, :meth:`write_rows`) run on a :class:`~common.lane.Lane`,
+    one connection held between them, which saves the pool's checkout (about half the
+    client's CPU of a statement); transactions and anything else needing a connection of its
+    own go through ``pool.acquire()``. The store of a service passes the ``Database`` itself
+    to ``common.contract.records`` as the executor. Close it with :meth:`close`, which
+    gives the lane's connection back first: ``pool.close()`` alone would wait for it.
+    """
 
     def __init__(self, pool: asyncpg.Pool, notifier: Notifier) -> None:
         self.pool = pool
         self.notifier = notifier
+        self.lane = Lane(pool)
+
+    async def fetch(self, sql: str, *args: Any) -> list[asyncpg.Record]:
+        return await self.lane.fetch(sql, *args)
+
+    async def fetchrow(self, sql: str, *args: Any) -> asyncpg.Record | None:
+        return await self.lane.fetchrow(sql, *args)
+
+    async def fetchval(self, sql: str, *args: Any) -> Any:
+        return await self.lane.fetchval(sql, *args)
+
+    async def execute(self, sql: str, *args: Any) -> str:
+        return await self.lane.execute(sql, *args)
 
     async def write(
         self,
@@ -184,8 +207,7 @@ class Database:
         the return value; ``image``, the row's contract columns as written, then goes with
         the notification (with that ``id``), so readers may skip their query.
         """
-        async with self.pool.acquire() as conn:
-            value = await conn.fetchval(sql, *args)
+        value = await self.lane.fetchval(sql, *args)
         row_id = value if isinstance(value, int) else None
         row = {**image, "id": row_id} if image is not None and row_id is not None else None
         self.notifier.notify(table, robot, row_id, row)
@@ -209,8 +231,7 @@ class Database:
         robots = [robot for robot, _ in images]
         if len(set(robots)) != len(robots):
             raise UsageError(f"write_rows on {table}: one row per robot, got {robots}")
-        async with self.pool.acquire() as conn:
-            records = await conn.fetch(sql, *args)
+        records = await self.lane.fetch(sql, *args)
         ids = {record[1]: record[0] for record in records}
         notify = self.notifier.notify
         for robot, image in images:
@@ -238,6 +259,7 @@ class Database:
 
     async def close(self, timeout_s: float = 5.0) -> None:
         try:
+            await asyncio.wait_for(self.lane.close(), timeout_s)  # the pool waits for it
             await asyncio.wait_for(self.pool.close(), timeout_s)
         except TimeoutError:
             log.warning("pool did not close in time; terminating connections")

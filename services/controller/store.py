@@ -73,19 +73,19 @@ class PgControllerSource:
         self.db = db
 
     async def robots(self) -> list[Robot]:
-        return await records.robots(self.db.pool)
+        return await records.robots(self.db)
 
     async def active_strategies(self) -> dict[str, ActiveStrategy]:
-        return await records.active_strategies(self.db.pool)
+        return await records.active_strategies(self.db)
 
     async def newest_scan_and_odometry(self, robot_id: str) -> ScanAndOdometry:
-        return await records.newest_scan_and_odometry(self.db.pool, robot_id)
+        return await records.newest_scan_and_odometry(self.db, robot_id)
 
     async def newest_odometry(self, robot_id: str) -> Odometry | None:
-        return await records.newest_odometry(self.db.pool, robot_id)
+        return await records.newest_odometry(self.db, robot_id)
 
     async def newest_planned_path(self, robot_id: str) -> PlannedPath | None:
-        return await newest_planned_path(self.db.pool, robot_id)
+        return await newest_planned_path(self.db, robot_id)
 
     async def recommend(self, recommendation: Recommendation) -> int:
         r = recommendation

@@ -255,10 +255,10 @@ class PgDecisionSource:
         self.db = db
 
     async def live_recommendations(self, now: float) -> dict[str, list[Recommendation]]:
-        return await live_recommendations(self.db.pool, now)
+        return await live_recommendations(self.db, now)
 
     async def last_issued(self) -> dict[str, Issued]:
-        return await last_issued(self.db.pool)
+        return await last_issued(self.db)
 
     async def write_robot_command(self, d: RobotDecision) -> int:
         return await write_robot_command(self.db, d)

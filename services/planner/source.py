@@ -84,14 +84,14 @@ class PgPlannerSource:
         self.db = db
 
     async def robots(self) -> list[RobotInfo]:
-        return [RobotInfo(**dict(r)) for r in await self.db.pool.fetch(ROBOTS_SQL)]
+        return [RobotInfo(**dict(r)) for r in await self.db.fetch(ROBOTS_SQL)]
 
     async def map_versions(self) -> dict[str, str]:
-        rows = await self.db.pool.fetch(MAP_VERSIONS_SQL)
+        rows = await self.db.fetch(MAP_VERSIONS_SQL)
         return {r["map_id"]: str(r["loaded_at"]) for r in rows}
 
     async def map(self, map_id: str, version: str) -> MapRow | None:
-        row = await self.db.pool.fetchrow(MAP_SQL, map_id)
+        row = await self.db.fetchrow(MAP_SQL, map_id)
         if row is None:
             return None
         cells = np.frombuffer(row["grid"], dtype=np.uint8).reshape(row["height"], row["width"])
@@ -99,22 +99,22 @@ class PgPlannerSource:
         return MapRow(map_id, version, cells, row["resolution_m"], origin)
 
     async def stations(self) -> list[Station]:
-        return [Station(**dict(r)) for r in await self.db.pool.fetch(STATIONS_SQL)]
+        return [Station(**dict(r)) for r in await self.db.fetch(STATIONS_SQL)]
 
     async def active_strategies(self) -> dict[str, records.ActiveStrategy]:
-        return await records.active_strategies(self.db.pool)
+        return await records.active_strategies(self.db)
 
     async def active_goal(self, robot_id: str) -> records.Goal | None:
-        return await records.active_goal(self.db.pool, robot_id)
+        return await records.active_goal(self.db, robot_id)
 
     async def newest_odometry(self, robot_id: str) -> records.Odometry | None:
-        return await records.newest_odometry(self.db.pool, robot_id)
+        return await records.newest_odometry(self.db, robot_id)
 
     async def newest_scan(self, robot_id: str) -> records.LaserScan | None:
-        return await records.newest_scan(self.db.pool, robot_id)
+        return await records.newest_scan(self.db, robot_id)
 
     async def newest_battery(self, robot_id: str) -> records.Battery | None:
-        return await records.newest_battery(self.db.pool, robot_id)
+        return await records.newest_battery(self.db, robot_id)
 
     async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
         updated = await self.db.write(keys.GOAL, robot_id, MARK_REACHED_SQL, goal_id, stamp)
@@ -125,7 +125,7 @@ class PgPlannerSource:
         return await self.db.write(keys.GOAL, robot_id, sql, *args) is not None
 
     async def live_system(self, robot_id: str, command: str, now: float) -> float | None:
-        value = await self.db.pool.fetchval(LIVE_SYSTEM_SQL, robot_id, command, now)
+        value = await self.db.fetchval(LIVE_SYSTEM_SQL, robot_id, command, now)
         return float(value) if value is not None else None
 
     async def recommend(self, rec: Recommendation) -> int:

@@ -147,7 +147,7 @@ class PgStrategySource:
         self.db = db
 
     async def scan(self) -> list[Pending]:
-        rows = await self.db.pool.fetch(SCAN_SQL)
+        rows = await self.db.fetch(SCAN_SQL)
         return [
             Pending(
                 r["tbl"], r["id"], r["robot_id"], r["created_at"], r["has_active"], r["known_robot"]
@@ -156,7 +156,7 @@ class PgStrategySource:
         ]
 
     async def snapshot(self, table: CommandTable, command_id: int) -> CommandSnapshot | None:
-        row = await self.db.pool.fetchrow(table.snapshot_sql, command_id)
+        row = await self.db.fetchrow(table.snapshot_sql, command_id)
         if row is None:
             return None
         fields = dict(row)
@@ -191,7 +191,7 @@ class PgStrategySource:
             tx.changed(keys.ACTIVE_STRATEGY, robot_id)
 
     async def strategy_exists(self, code: str) -> bool:
-        return bool(await self.db.pool.fetchval(STRATEGY_EXISTS_SQL, code))
+        return bool(await self.db.fetchval(STRATEGY_EXISTS_SQL, code))
 
     async def set_default(self, robot_id: str, code: str, stamp: float | None) -> bool:
         async with self.db.transaction() as tx:

@@ -65,6 +65,8 @@ async def test_a_write_with_an_image_notifies_it_with_the_committed_id(
         assert first.src != second.src  # two notifiers, two publishers
     finally:
         sub.undeclare()
+        await plain.lane.close()  # each Database holds a pool connection between statements
+        await imaged.lane.close()
         await pool.close()
         session.close()
 

@@ -183,7 +183,7 @@ async def world(db_url: str, zenoh_settings: ZenohSettings) -> AsyncIterator[Wor
     finally:
         await w.stop()
         db.notifier.close()
-        await pool.close()
+        await db.close()  # its lane, then the pool
         session.close()
 
 
