@@ -63,9 +63,7 @@ class MemoryPlannerSource:
         row = next((r for r in self.contract[keys.MAP].all_rows() if r["map_id"] == map_id), None)
         if row is None:
             return None
-        cells = np.frombuffer(row["grid"], dtype=np.uint8).reshape(row["height"], row["width"])
-        origin = (row["origin_x"], row["origin_y"], row["origin_yaw"])
-        return MapRow(map_id, version, cells, row["resolution_m"], origin)
+        return MapRow.of(map_id, version, row)
 
     async def stations(self) -> list[Station]:
         rows = sorted(

@@ -7,8 +7,6 @@ from __future__ import annotations
 
 from typing import Any, Protocol
 
-import numpy as np
-
 from common.contract import keys, planned_path, records
 from common.db import Database
 from services.planner.paths import PathRow
@@ -94,9 +92,7 @@ class PgPlannerSource:
         row = await self.db.fetchrow(MAP_SQL, map_id)
         if row is None:
             return None
-        cells = np.frombuffer(row["grid"], dtype=np.uint8).reshape(row["height"], row["width"])
-        origin = (row["origin_x"], row["origin_y"], row["origin_yaw"])
-        return MapRow(map_id, version, cells, row["resolution_m"], origin)
+        return MapRow.of(map_id, version, row)
 
     async def stations(self) -> list[Station]:
         return [Station(**dict(r)) for r in await self.db.fetch(STATIONS_SQL)]

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -60,6 +60,13 @@ class MapRow:
     cells: np.ndarray[Any, np.dtype[np.uint8]]
     resolution: float
     origin: tuple[float, float, float]
+
+    @classmethod
+    def of(cls, map_id: str, version: str, row: Mapping[str, Any]) -> MapRow:
+        """Map ``map_id``'s row (its grid bytes, height x width) as the planner keeps it."""
+        cells = np.frombuffer(row["grid"], dtype=np.uint8).reshape(row["height"], row["width"])
+        origin = (row["origin_x"], row["origin_y"], row["origin_yaw"])
+        return cls(map_id, version, cells, row["resolution_m"], origin)
 
 
 class MapData:
