@@ -33,9 +33,16 @@ class IssueRobotCommand(Rule):
 
     async def actions(self) -> None:
         store = self.store
-        previous = [store.issued(d.robot_id) for d in self.decisions]
-        ids = await store.write_robot_commands(self.decisions)  # remembered as issued
-        for d, before, row_id in zip(self.decisions, previous, ids, strict=True):
+        # Decided in the last activation, written in this one: a robot given back to the
+        # lease in between is its next owner's to decide now, and writing it here would
+        # decide it twice (the hand-over waits for the activation under way, not for one
+        # still to come: docs/REPLICAS.md).
+        decisions = [d for d in self.decisions if store.owns(d.robot_id)]
+        if not decisions:
+            return
+        previous = [store.issued(d.robot_id) for d in decisions]
+        ids = await store.write_robot_commands(decisions)  # remembered as issued
+        for d, before, row_id in zip(decisions, previous, ids, strict=True):
             if row_id is None:
                 continue  # refused by the database: the source logged why
             # A re-issue of the same winner happens 10 times a sim second: only a change of

@@ -159,6 +159,9 @@ class DecisionStore:
             return
         self._live.add(rec)
 
+    def owns(self, robot_id: str) -> bool:
+        return self._owns(robot_id)
+
     def on_ownership_change(self, gained: frozenset[str], lost: frozenset[str]) -> None:
         """Drop what is kept for the ``lost`` robots; read the ``gained`` ones' again."""
         for robot_id in lost:

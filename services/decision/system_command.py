@@ -27,6 +27,8 @@ class IssueSystemCommand(Rule):
 
     async def actions(self) -> None:
         d = self.decision
+        if not self.store.owns(d.robot_id):
+            return  # given back since the decision: the next owner decides (robot_command.py)
         row_id = await self.store.write_system_command(d)
         log.event(
             logger,

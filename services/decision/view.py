@@ -25,6 +25,10 @@ class DecisionView(Protocol):
         (their recommendations changed, or their re-issue is due), by robot id."""
         ...
 
+    def owns(self, robot_id: str) -> bool:
+        """Whether this replica acts for ``robot_id`` now (always, without replicas)."""
+        ...
+
     def issued(self, robot_id: str) -> Issued | None:
         """The newest command2robot row of ``robot_id`` (None: none to carry on from)."""
         ...

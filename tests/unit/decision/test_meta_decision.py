@@ -260,6 +260,30 @@ async def test_a_robot_regained_from_another_replica_carries_on_from_the_table()
     assert await bench.tick(10.2) == Seen()  # given up: nothing more from this replica
 
 
+async def test_a_robot_given_back_between_its_decision_and_the_write_is_not_written() -> None:
+    bench = Bench(robots=("r1", "r2"))
+    one = bench.recommend("turn_then_move", 10, 0.2, 0.0, robot_id="r1")
+    two = bench.recommend("turn_then_move", 10, 0.3, 0.0, robot_id="r2")
+    assert await bench.tick(10.0) == Seen([], [], True)  # both decided; written next activation
+    # the lease cycle gives r1 back between the two activations: no activation is under way,
+    # so the hand-over does not wait, and r1's next owner decides it from the table
+    bench.owned = {"r2"}
+    bench.store.on_ownership_change(frozenset(), frozenset({"r1"}))
+    assert await bench.tick(10.0) == Seen([(10.0, "turn_then_move", 0.3, 0.0, two, (two,))])
+    assert [r["robot_id"] for r in bench.rows(keys.COMMAND2ROBOT)] == ["r2"]  # not r1's
+    assert bench.treated_by(one) == [None]  # left for its next owner to consider
+
+
+async def test_a_system_command_for_a_robot_given_back_before_its_write_is_not_written() -> None:
+    bench = Bench()
+    bench.recommend("battery_check", 50, command="CMD_CHARGE")
+    assert await bench.tick(10.0) == Seen([], [], True)  # decided; written next activation
+    bench.owned = set()
+    bench.store.on_ownership_change(frozenset(), frozenset({"r1"}))
+    assert await bench.tick(10.0) == Seen()  # given back: nothing written
+    assert bench.rows(keys.SYSTEM_COMMAND) == []
+
+
 async def test_nothing_is_decided_before_the_sim_clock_and_the_wait_is_logged_once(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
