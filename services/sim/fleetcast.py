@@ -1,36 +1,36 @@
-"""The lidar of every robot that scans in a physics step, cast in one batched call, with
-exactly the ranges each robot's own cast (``physics.Scene.cast_from``) gives, bit for bit.
+"""The lidar of every robot that scans in a physics step: the walls and obstacles in one
+batched Bullet ray cast, the other robots met exactly, as the cylinders they are.
 
 A robot's beams start at its centre, inside its own body, so its body must be out of the way
 of its own beams yet in place for every other robot's. pybullet cannot leave a body out per
-ray (see ``Scene.cast_from``), so the cast takes two passes:
+ray (see ``Scene.cast_from``), and a ray tested against a robot's cylinder costs Bullet an
+iterative convex cast, several times a ray against the walls' mesh. So the cast takes two steps:
 
 1. Every robot within reach of a scanning robot is lowered out of the beams' plane, and all
    the beams of all the scanning robots go in one ``rayTestBatch``: each beam's first hit on
-   the walls and obstacles. That is the cheap part: a ray tested against a robot's cylinder
-   costs several times a ray against the walls' mesh, and most beams meet no robot.
-2. A beam whose line passes within a robot's radius (plus a margin) of another robot, nearer
-   than its first static hit, may meet that robot first: it is cast again with those robots
-   in place and its own robot lowered. The scanning robots whose beams need each other in
-   place go in separate calls; usually one call serves them all.
+   the walls and obstacles (the static scene), exactly as Bullet gives it.
+2. The other robots are met in closed form. A robot's body is an upright cylinder and a beam
+   is a horizontal ray, so a beam meets it where the ray enters the body's disc, if the beam's
+   height is within the body's. Only the beams within a robot's angular extent, seen from the
+   scanner, are tested; the nearest robot met before the static hit replaces that hit.
 
-Why it is exact: pybullet reports the closest hit, the smallest of the fractions at which the
-ray meets each body, and each body's fraction depends only on the ray and that body (the
-closest-hit bookkeeping only skips bodies that are farther). A body that cannot be met before
-the closest hit thus changes nothing, present or not. A beam that is not cast again meets no
-robot before its static hit; a beam cast again has every robot it may meet first in place.
+Why not Bullet for the robots too: besides the cost (most of the sim's lidar with 50 robots
+in a hall, docs/BENCHMARKS.md), Bullet's convex cast against a cylinder is approximate. Against
+the exact entry point it reads 0.1 mm short at the median, 1.4 mm short for one beam in twenty
+and 3.5 mm for one in a hundred, and it reports hits on beams that pass up to a few mm outside
+the body (tests/unit/sim/test_fleetcast.py measures both). The closed form is the cylinder the
+world file describes. The static scene stays Bullet's: the walls' mesh is tested exactly.
 """
 
 from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from common.robotmodel import LidarModel
 from services.sim.lidar import FloatArray, Lidar
 from services.sim.physics import Scene
 
@@ -38,27 +38,15 @@ Pose = tuple[float, float, float]
 Cast = tuple[npt.NDArray[np.bool_], npt.NDArray[np.float64]]
 IntArray = npt.NDArray[np.intp]
 
-# how far beyond a robot's radius a beam counts as maybe meeting it: pybullet's ray test
-# against a cylinder stops within 1 mm of its surface (the GJK cast's tolerance), so a beam
-# that close may report a hit; 1 cm is ten times that
-GRAZE_M = 0.01
 # beams of slack each side of a robot's angular extent, against rounding in the angles (the
 # beams within are then tested exactly)
 SLACK_BEAMS = 0.5
 
 
-@dataclass
-class _Recast:
-    """The scanning robots whose flagged beams one call casts again."""
-
-    owners: set[int] = field(default_factory=set)  # robot indices, lowered for the call
-    needs: set[int] = field(default_factory=set)  # robots that must stand in place
-    rays: list[IntArray] = field(default_factory=list)  # indices into the batch
-
-
 @dataclass(frozen=True)
 class _Pairs:
-    """Every (scanning robot, other robot) pair within reach of each other's beams."""
+    """Every (scanning robot, other robot) pair within reach of the scanner's beams, the other
+    robot's body standing in the beams' plane."""
 
     k: IntArray  # the scanning robot's position in ``scanning``
     j: IntArray  # the other robot's index
@@ -70,8 +58,8 @@ def cast_fleet(
     scene: Scene, lidars: Sequence[Lidar], poses: Sequence[Pose], scanning: Sequence[int]
 ) -> list[Cast]:
     """(hit, fraction) per beam of each robot in ``scanning`` (indices into ``poses`` and
-    ``lidars``, robot i's lidar; the scene has every robot), in that order, as
-    ``scene.cast_from`` gives each. Robots may carry different lidars (several models)."""
+    ``lidars``, robot i's lidar; the scene has every robot), in that order. Robots may carry
+    different lidars (several models)."""
     if not scanning:
         return []
     mine = [lidars[i] for i in scanning]
@@ -81,66 +69,70 @@ def cast_fleet(
         starts = np.concatenate([s for s, _ in rays])
         ends = np.concatenate([e for _, e in rays])
     first = np.cumsum([0, *(lidar.params.beams for lidar in mine)])  # each one's first ray
-    radii = np.array([scene.radius[b] for b in scene.robot_bodies]) + GRAZE_M
     range_max = np.array([lidar.params.range_max_m for lidar in mine])
-    reach = range_max + scene.max_radius + GRAZE_M
-    within, pairs = _reach(poses, scanning, reach, [lidar.params for lidar in mine])
-    range_max = np.repeat(range_max, np.diff(first))
+    within, pairs = _reach(scene, poses, scanning, range_max + scene.max_radius, mine)
+    # 1: the static scene (a robot out of every beam's reach can stay where it is)
+    scene.hide(within)
     try:
-        # pass 1: the walls and obstacles only (a robot out of every beam's reach can stay)
-        scene.hide(within)
         hit, fraction = scene.cast(starts, ends)
-        flagged = _flag(pairs, radii, fraction * range_max, mine, first)
-        # pass 2: the flagged beams, with the robots they may meet in place
-        for recast in _group(scanning, flagged):
-            scene.show(recast.needs)
-            scene.hide(recast.owners)
-            index = np.concatenate(recast.rays)
-            hit[index], fraction[index] = scene.cast(starts[index], ends[index])
     finally:
         scene.show(list(scene.hidden))
+    # 2: the robots, nearer than the static hit
+    ray, entry = _robot_hits(scene, pairs, mine, first)
+    if len(ray):
+        nearest = np.full(len(fraction), np.inf)
+        np.minimum.at(nearest, ray, entry)
+        nearest /= np.repeat(range_max, np.diff(first))
+        met = nearest < fraction
+        hit[met] = True
+        fraction[met] = nearest[met]
     return [(hit[a:b], fraction[a:b]) for a, b in itertools.pairwise(first.tolist())]
 
 
 def _reach(
+    scene: Scene,
     poses: Sequence[Pose],
     scanning: Sequence[int],
     reach: FloatArray,
-    params: Sequence[LidarModel],
+    lidars: Sequence[Lidar],
 ) -> tuple[list[int], _Pairs]:
     """The robots within ``reach`` (per scanning robot) of a scanning robot (the scanning
-    robots too), and the pairs of a scanning robot and another robot within its reach."""
+    robots too), and the pairs of a scanning robot and another robot within its reach whose
+    body rises to the scanner's beams."""
     xy = np.array([(x, y) for x, y, _ in poses])
     offsets = xy[None, :, :] - xy[np.asarray(scanning)][:, None, :]
     dist = np.hypot(offsets[..., 0], offsets[..., 1])
     near = dist <= reach[:, None]
     within = np.flatnonzero(near.any(axis=0)).tolist()
     near[np.arange(len(scanning)), np.asarray(scanning)] = False  # not its own body
+    # a body lower than a lidar is below its beams' plane (as in Bullet's scene: a body
+    # spans the floor to its height, the beams run at the lidar's height)
+    tops = np.array([scene.height[b] for b in scene.robot_bodies])
+    beam_z = np.array([lidar.height for lidar in lidars])
+    near &= beam_z[:, None] <= tops[None, :]
     k, j = np.nonzero(near)
     yaw = np.array([poses[i][2] for i in scanning])[k]
-    angle_min = np.array([lidar.angle_min_rad for lidar in params])[k]
+    angle_min = np.array([lidar.params.angle_min_rad for lidar in lidars])[k]
     bearing = np.arctan2(offsets[k, j, 1], offsets[k, j, 0]) - yaw - angle_min
     return within, _Pairs(k, j, dist[k, j], bearing)
 
 
-def _flag(
-    pairs: _Pairs,
-    radii: FloatArray,
-    static: FloatArray,
-    lidars: Sequence[Lidar],
-    first: IntArray,
-) -> dict[int, tuple[IntArray, set[int]]]:
-    """Per scanning robot (position in ``scanning``): its beams (indices into the batch, its
-    own starting at ``first[k]``) that may meet a disc of ``radii[j]`` round another robot j
-    before their static hit (``static``, m), and the robots they may meet.
+def _robot_hits(
+    scene: Scene, pairs: _Pairs, lidars: Sequence[Lidar], first: IntArray
+) -> tuple[IntArray, FloatArray]:
+    """Every (beam, robot) meeting of the pairs: the beam (an index into the batch, scanner
+    k's own starting at ``first[k]``) and how far along it the beam enters the robot's body,
+    m (0 for a beam that starts inside it).
 
-    A beam from the centre meets a disc whose centre lies D away only if its bearing is
-    within asin(radius / D) of the disc's; of those, the beams whose line passes within
-    the radius of the centre and enters the disc before the static hit."""
+    A beam from the scanner's centre meets a disc of radius r whose centre lies D away only if
+    its bearing is within asin(r / D) of the disc's; of those, the beams whose line passes
+    within r of the centre, where they enter the disc at D cos(off) - sqrt(r^2 - across^2)."""
     if len(pairs.k) == 0:
-        return {}  # alone within reach: nothing to cast again
+        return np.empty(0, dtype=np.intp), np.empty(0)
+    radii = np.array([scene.radius[b] for b in scene.robot_bodies])
     beams = np.array([lidar.params.beams for lidar in lidars])
     increments = np.array([lidar.params.angle_increment for lidar in lidars])
+    reach = np.array([lidar.params.range_max_m for lidar in lidars])
     full = np.array([lidar.params.full_turn for lidar in lidars])[pairs.k]
     # A full turn's beams wrap round (index mod beams). A partial field of view's beams span
     # [0, fov] from beam 0: the disc's bearing is taken in [0, 2 pi) and looked for one turn
@@ -153,7 +145,7 @@ def _flag(
     k, n, inc = pairs.k[src], beams[pairs.k[src]], increments[pairs.k[src]]
     radius, dist = radii[pairs.j[src]], pairs.dist[src]
     # a disc round the beams' origin (robots never overlap so far) would meet them all
-    wide = np.arcsin(np.minimum(1.0, radius / dist)) / inc
+    wide = np.arcsin(np.minimum(1.0, radius / np.maximum(dist, 1e-12))) / inc
     half = np.where(dist > radius, wide, n) + SLACK_BEAMS
     centre = bearing / inc  # in beams
     lo = np.ceil(centre - half).astype(np.intp)
@@ -164,36 +156,12 @@ def _flag(
     # beams past either end of a partial field of view do not exist
     exists = full[src[which]] | ((beam >= 0) & (beam < n[which]))
     which, beam = which[exists], beam[exists]
-    ray = first[k[which]] + beam % n[which]
     # the beam's line passes ``across`` from the disc's centre, and enters it ``entry`` along
     off = beam * inc[which] - bearing[which]
     d, r = dist[which], radius[which]
     across = d * np.abs(np.sin(off))
     entry = d * np.cos(off) - np.sqrt(np.maximum(0.0, r * r - across * across))
-    maybe = (across <= r) & (entry <= static[ray] + GRAZE_M)
-    owner = k[which]
-    other = pairs.j[src[which]]
-    out: dict[int, tuple[IntArray, set[int]]] = {}
-    for kk in np.unique(owner[maybe]).tolist():
-        mine = maybe & (owner == kk)
-        out[kk] = (np.unique(ray[mine]), set(other[mine].tolist()))
-    return out
-
-
-def _group(scanning: Sequence[int], flagged: dict[int, tuple[IntArray, set[int]]]) -> list[_Recast]:
-    """Calls for the flagged beams: a scanner joins the first call in which it need not stand
-    for anyone and no owner needs to stand for it."""
-    calls: list[_Recast] = []
-    for k in sorted(flagged):
-        rays, needs = flagged[k]
-        own = scanning[k]
-        for call in calls:
-            if own not in call.needs and not needs & call.owners:
-                break
-        else:
-            call = _Recast()
-            calls.append(call)
-        call.owners.add(own)
-        call.needs |= needs
-        call.rays.append(rays)
-    return calls
+    inside = d <= r
+    meets = inside | ((across <= r) & (entry >= 0.0) & (entry <= reach[k[which]]))
+    ray = first[k[which]] + beam % n[which]
+    return ray[meets], np.where(inside, 0.0, entry)[meets]

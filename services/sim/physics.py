@@ -78,7 +78,7 @@ class Scene:
         # per body: its model's footprint radius and height (robots of several models share a
         # world), the largest radius for the reach of contact and lidar tests
         self.radius: dict[int, float] = {}
-        self._height: dict[int, float] = {}
+        self.height: dict[int, float] = {}
         self.max_radius = max((r.model.footprint_radius_m for r in world.robots), default=0.0)
         shapes: dict[tuple[float, float], tuple[int, int]] = {}
         for spec in world.robots:
@@ -96,7 +96,7 @@ class Scene:
             )
             self.names[body] = spec.robot_id
             self.robot_bodies.append(body)
-            self.radius[body], self._height[body] = radius, height
+            self.radius[body], self.height[body] = radius, height
             # placed once more as every later move places it, so a body's transform is always
             # the one _place gives for its pose: a hidden robot put back is bit for bit the same
             self._place(body, spec.x, spec.y, spec.yaw)
@@ -238,7 +238,7 @@ class Scene:
         self._poses[body] = (x, y, yaw)
         p.resetBasePositionAndOrientation(
             body,
-            [x, y, self._height[body] / 2.0],
+            [x, y, self.height[body] / 2.0],
             [0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0)],
             physicsClientId=self.client,
         )
