@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 import msgpack
 import zenoh
 
-from common.config import ZenohSettings
+from common.config import DATA_QUEUE_BATCHES, ZenohSettings
 from common.contract import keys
 from common.errors import ConfigError, ConnectionFailure
 
@@ -56,6 +56,7 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
         auth["dictionary_file"] = settings.users_file
     if auth:
         config.insert_json5("transport/auth/usrpwd", json.dumps(auth))
+    config.insert_json5("transport/link/tx/queue/size/data", json.dumps(settings.data_queue))
     return config
 
 
@@ -72,11 +73,19 @@ def open_session(settings: ZenohSettings) -> zenoh.Session:
         ) from exc
 
 
-def start_router(listen: tuple[str, ...], users_file: str | None = None) -> zenoh.Session:
+def start_router(
+    listen: tuple[str, ...], users_file: str | None = None, *, data_queue: int = DATA_QUEUE_BATCHES
+) -> zenoh.Session:
     """Run a Zenoh router inside this process, listening on ``listen`` endpoints; with
     ``users_file``, it accepts only sessions whose user/password is in that file."""
     return open_session(
-        ZenohSettings(mode="router", connect=(), listen=listen, users_file=users_file)
+        ZenohSettings(
+            mode="router",
+            connect=(),
+            listen=listen,
+            users_file=users_file,
+            data_queue=data_queue,
+        )
     )
 
 

@@ -92,6 +92,16 @@ def _list(env: Env, name: str, default: tuple[str, ...]) -> tuple[str, ...]:
     return tuple(part.strip() for part in raw.split(",") if part.strip())
 
 
+# Batches a Zenoh link may hold waiting for its socket at the data priority (Zenoh's own
+# default: 2; its maximum: 16). A notification is an express put, one batch to itself, so with
+# two a link is full as soon as its writer thread misses a turn on a busy core, and a put that
+# finds it full for 1 ms (``wait_before_drop``) is dropped: 2 to 3 % of them on two busy cores
+# (docs/BENCHMARKS.md, sixth round). More room drops none there and waits no longer: a link
+# to a frozen peer fills as before, then drops after the same 1 ms.
+DATA_QUEUE_BATCHES = 16
+DATA_QUEUE_MAX = 16
+
+
 @dataclass(frozen=True)
 class ZenohSettings:
     mode: str = "client"
@@ -105,10 +115,15 @@ class ZenohSettings:
     # the user/password dictionary a router or peer checks the sessions that link to it
     # against (a local stack: common.stack); None accepts any session
     users_file: str | None = None
+    data_queue: int = DATA_QUEUE_BATCHES  # transport/link/tx/queue/size/data of every link
 
     def __post_init__(self) -> None:
         if self.mode not in ("client", "peer", "router"):
             raise ConfigError(f"PNAV_ZENOH_MODE={self.mode!r} must be client, peer or router")
+        if not 1 <= self.data_queue <= DATA_QUEUE_MAX:
+            raise ConfigError(
+                f"PNAV_ZENOH_DATA_QUEUE={self.data_queue} must be 1 to {DATA_QUEUE_MAX} batches"
+            )
         if bool(self.user) != bool(self.password):
             raise ConfigError("PNAV_ZENOH_USER and PNAV_ZENOH_PASSWORD go together: set both")
 
@@ -124,6 +139,7 @@ class ZenohSettings:
             user=env.get("PNAV_ZENOH_USER", "").strip() or None,
             password=env.get("PNAV_ZENOH_PASSWORD") or None,
             users_file=env.get("PNAV_ZENOH_USERS_FILE") or None,
+            data_queue=_int(env, "PNAV_ZENOH_DATA_QUEUE", cls.data_queue, minimum=1),
         )
 
     def to_env(self) -> dict[str, str]:
@@ -133,6 +149,7 @@ class ZenohSettings:
             "PNAV_ZENOH_CONNECT": ",".join(self.connect),
             "PNAV_ZENOH_LISTEN": ",".join(self.listen),
             "PNAV_ZENOH_MULTICAST": "true" if self.multicast else "false",
+            "PNAV_ZENOH_DATA_QUEUE": str(self.data_queue),
         }
         if self.config_file:
             out["PNAV_ZENOH_CONFIG"] = self.config_file

@@ -49,7 +49,7 @@ import asyncpg
 from zenoh import Session
 
 from common.bus import start_router
-from common.config import ZenohSettings
+from common.config import DATA_QUEUE_BATCHES, ZenohSettings
 from common.contract.grants import BUS_IDENTITIES, LOGIN_ROLES, USER, role_name
 from common.contract.migrate import apply_migrations
 from common.contract.roles import bootstrap, is_superuser, role_url
@@ -69,6 +69,8 @@ class LocalZenoh:
     # client: every message through the router, which authenticates each session; peer:
     # directly, the router as rendezvous, without authentication (see the module docstring)
     mode: str = "client"
+    # every link's data queue, the router's included (PNAV_ZENOH_DATA_QUEUE, common.config)
+    data_queue: int = DATA_QUEUE_BATCHES
 
     def __post_init__(self) -> None:
         if self.mode not in ("peer", "client"):
@@ -77,7 +79,10 @@ class LocalZenoh:
     @classmethod
     def from_env(cls, env: Mapping[str, str] | None = None) -> LocalZenoh:
         env = os.environ if env is None else env
-        return cls(mode=env.get("PNAV_LOCAL_ZENOH", "").strip().lower() or cls.mode)
+        return cls(
+            mode=env.get("PNAV_LOCAL_ZENOH", "").strip().lower() or cls.mode,
+            data_queue=ZenohSettings.from_env(env).data_queue,
+        )
 
     @property
     def authenticated(self) -> bool:
@@ -87,8 +92,14 @@ class LocalZenoh:
     def settings(self, router: str) -> ZenohSettings:
         """The Zenoh settings of a local process, given the router's endpoint."""
         if self.mode == "client":
-            return ZenohSettings(mode="client", connect=(router,))
-        return ZenohSettings(mode="peer", connect=(router,), listen=PEER_LISTEN, multicast=False)
+            return ZenohSettings(mode="client", connect=(router,), data_queue=self.data_queue)
+        return ZenohSettings(
+            mode="peer",
+            connect=(router,),
+            listen=PEER_LISTEN,
+            multicast=False,
+            data_queue=self.data_queue,
+        )
 
 
 @dataclass(frozen=True)
@@ -222,7 +233,11 @@ async def local_stack(
                 "(any process on this machine may join it; docs/DEPLOY.md)"
             )
         endpoint = f"tcp/127.0.0.1:{zenoh_port or free_port()}"
-        router = start_router((endpoint,), str(bus.users_file) if bus is not None else None)
+        router = start_router(
+            (endpoint,),
+            str(bus.users_file) if bus is not None else None,
+            data_queue=local_zenoh.data_queue,
+        )
         try:
             conn = await asyncpg.connect(url)
             try:

@@ -22,6 +22,7 @@ import json
 import sys
 from typing import Any
 
+from common.config import DATA_QUEUE_BATCHES
 from common.contract import keys
 from common.contract.grants import BUS_IDENTITIES, USER, written_tables
 
@@ -127,6 +128,9 @@ HEADER = """\
 //   session.
 // - access_control: deny by default; each user may put only its own keys (docs/DEPLOY.md,
 //   "Zenoh access control"); everyone may subscribe to and receive everything under pnav/.
+// - transport.link.tx.queue.size.data: room for 16 batches a link at the data priority, as
+//   every pnav session has (common/config.py DATA_QUEUE_BATCHES: with Zenoh's 2, a busy
+//   router drops notifications).
 // - No "plugins" section: the REST plugin (port 8000) and every other plugin stay off.
 """
 
@@ -136,7 +140,10 @@ def router_config() -> dict[str, Any]:
         "mode": "router",
         "listen": {"endpoints": ["tcp/0.0.0.0:7447"]},
         "scouting": {"multicast": {"enabled": False}},
-        "transport": {"auth": {"usrpwd": {"dictionary_file": DICTIONARY_FILE}}},
+        "transport": {
+            "auth": {"usrpwd": {"dictionary_file": DICTIONARY_FILE}},
+            "link": {"tx": {"queue": {"size": {"data": DATA_QUEUE_BATCHES}}}},
+        },
         "access_control": access_control(),
     }
 

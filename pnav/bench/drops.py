@@ -32,7 +32,9 @@ def _hog(stop: Event) -> None:
         sum(range(1000))
 
 
-def _config(mode: str, endpoint: str, wait_us: int | None = None) -> zenoh.Config:
+def _config(
+    mode: str, endpoint: str, wait_us: int | None = None, queue: int | None = None
+) -> zenoh.Config:
     config = zenoh.Config()
     config.insert_json5("mode", json.dumps(mode))
     config.insert_json5("scouting/multicast/enabled", "false")
@@ -41,18 +43,22 @@ def _config(mode: str, endpoint: str, wait_us: int | None = None) -> zenoh.Confi
     if wait_us is not None:
         key = "transport/link/tx/queue/congestion_control/drop/wait_before_drop"
         config.insert_json5(key, str(wait_us))
+    if queue is not None:
+        config.insert_json5("transport/link/tx/queue/size/data", str(queue))
     return config
 
 
-def measure(n: int, rate: float, hogs: int, wait_us: int | None, block: bool) -> dict[str, int]:
+def measure(
+    n: int, rate: float, hogs: int, wait_us: int | None, block: bool, queue: int | None = None
+) -> dict[str, int]:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     stop = mp.Event()
     busy = [mp.Process(target=_hog, args=(stop,), daemon=True) for _ in range(hogs)]
     for process in busy:
         process.start()
-    router = zenoh.open(_config("router", endpoint, wait_us))
-    listener = zenoh.open(_config("client", endpoint, wait_us))
-    publisher = zenoh.open(_config("client", endpoint, wait_us))
+    router = zenoh.open(_config("router", endpoint, wait_us, queue))
+    listener = zenoh.open(_config("client", endpoint, wait_us, queue))
+    publisher = zenoh.open(_config("client", endpoint, wait_us, queue))
     got = [0]
     subscriber = listener.declare_subscriber("drops/**", lambda _s: got.__setitem__(0, got[0] + 1))
     try:
@@ -82,9 +88,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--hogs", type=int, default=4, help="busy processes beside it (default 4)")
     ap.add_argument("--wait-us", type=int, help="wait_before_drop, us (Zenoh's default: 1000)")
     ap.add_argument("--block", action="store_true", help="congestion control BLOCK")
+    ap.add_argument("--queue", type=int, help="batches in each link's data queue (Zenoh's: 2)")
     args = ap.parse_args(argv)
-    figures = measure(args.n, args.rate, args.hogs, args.wait_us, args.block)
+    figures = measure(args.n, args.rate, args.hogs, args.wait_us, args.block, args.queue)
     how = "BLOCK" if args.block else f"DROP, wait_before_drop {args.wait_us or 'default'} us"
+    if args.queue is not None:
+        how += f", data queue {args.queue} batches"
     print(f"{how}: {json.dumps(figures)}")
     return 0
 

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from common.config import EngineSettings, ServiceConfig, ZenohSettings
+from common.bus import zenoh_config
+from common.config import DATA_QUEUE_BATCHES, EngineSettings, ServiceConfig, ZenohSettings
 from common.errors import ConfigError
 
 
@@ -47,6 +48,9 @@ def test_variables_are_read_by_name() -> None:
         ("PNAV_ENGINE_MAX_RULES", "0", "PNAV_ENGINE_MAX_RULES='0' must be at least 1"),
         ("PNAV_ZENOH_MULTICAST", "maybe", "PNAV_ZENOH_MULTICAST='maybe' is not a boolean"),
         ("PNAV_ZENOH_MODE", "server", "must be client, peer or router"),
+        ("PNAV_ZENOH_DATA_QUEUE", "0", "PNAV_ZENOH_DATA_QUEUE='0' must be at least 1"),
+        ("PNAV_ZENOH_DATA_QUEUE", "17", "PNAV_ZENOH_DATA_QUEUE=17 must be 1 to 16 batches"),
+        ("PNAV_ZENOH_DATA_QUEUE", "many", "PNAV_ZENOH_DATA_QUEUE='many' is not a whole number"),
     ],
 )
 def test_a_bad_value_names_its_variable(name: str, value: str, message: str) -> None:
@@ -57,6 +61,17 @@ def test_a_bad_value_names_its_variable(name: str, value: str, message: str) -> 
 def test_zenoh_settings_round_trip_through_the_environment() -> None:
     settings = ZenohSettings(mode="client", connect=("tcp/127.0.0.1:9999",), multicast=False)
     assert ZenohSettings.from_env(settings.to_env()) == settings
+    smaller = ZenohSettings(data_queue=2)
+    assert ZenohSettings.from_env(smaller.to_env()) == smaller
+
+
+def test_every_session_gets_room_for_sixteen_batches_a_link_unless_told_otherwise() -> None:
+    # Zenoh's own default is 2, with which a busy machine drops express notifications
+    queue = "transport/link/tx/queue/size/data"
+    assert ZenohSettings.from_env({}).data_queue == DATA_QUEUE_BATCHES == 16
+    assert zenoh_config(ZenohSettings()).get_json(queue) == "16"
+    told = ZenohSettings.from_env({"PNAV_ZENOH_DATA_QUEUE": "4"})
+    assert zenoh_config(told).get_json(queue) == "4"
 
 
 def test_the_sim_clock_ignores_reordering_but_follows_a_restarted_sim() -> None:

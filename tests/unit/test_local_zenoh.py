@@ -32,6 +32,10 @@ def test_local_processes_are_authenticated_clients_unless_told_to_be_peers() -> 
     )
     assert LocalZenoh().settings(router) == ZenohSettings(mode="client", connect=(router,))
     assert LocalZenoh().authenticated and not LocalZenoh("peer").authenticated
+    # the data queue the launcher is told is every local process's (and its router's)
+    told = LocalZenoh.from_env({"PNAV_ZENOH_DATA_QUEUE": "2"})
+    assert told.data_queue == 2 and told.settings(router).data_queue == 2
+    assert LocalZenoh.from_env({}).settings(router).data_queue == 16
     with pytest.raises(ConfigError, match="PNAV_LOCAL_ZENOH='router' must be peer or client"):
         LocalZenoh.from_env({"PNAV_LOCAL_ZENOH": "router"})
 
