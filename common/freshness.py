@@ -146,6 +146,9 @@ class Sequences:
 
     def __init__(self) -> None:
         self._last: dict[tuple[str, str], int] = {}
+        # notifications known lost: the numbers skipped (one arriving late after its
+        # successor is counted lost too, as its reader has read the table meanwhile)
+        self.lost = 0
 
     def gap(self, key: str, src: str | None, seq: int | None) -> bool:
         """Record this notification; whether one from the same publisher was skipped (a
@@ -154,4 +157,6 @@ class Sequences:
             return True
         last = self._last.get((key, src))
         self._last[(key, src)] = seq if last is None else max(last, seq)
+        if last is not None and seq > last + 1:
+            self.lost += seq - last - 1
         return last is not None and seq != last + 1

@@ -115,6 +115,12 @@ class ScenarioService(ABC):
     def seed(self) -> None:
         """Add this service's meta rules to ``self.engine`` with ``engine.add_meta``."""
 
+    def notifications_lost(self) -> int | None:
+        """How many change notifications from other processes never reached this one (a skip
+        in a publisher's ``seq``: its reader read the table instead), for the "engine
+        stopped" line; None for a service that does not follow the numbering."""
+        return None
+
     # -- robot ownership (replicas) ---------------------------------------------------------
     def owns(self, robot_id: str) -> bool:
         """Whether this replica handles ``robot_id`` now: act (recommend, decide, plan) for a
@@ -324,7 +330,11 @@ class ScenarioService(ABC):
                 except TimeoutError:
                     logger.error("engine did not drain in time; cancelled")
             await self.stop_leases()
-            log.event(logger, logging.INFO, "engine stopped", **self.engine.counters.as_dict())
+            lost = self.notifications_lost()
+            extra = {} if lost is None else {"notifications_lost": lost}
+            log.event(
+                logger, logging.INFO, "engine stopped", **self.engine.counters.as_dict(), **extra
+            )
             try:
                 await self.publish_stats()
             except Exception:

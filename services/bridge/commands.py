@@ -192,6 +192,7 @@ class CommandRelay:
             return
         # every notification counts toward the numbering, even one already acted on
         gap = self._sequences.gap(key, note.src, note.seq)
+        self.counters.command_notes_lost = self._sequences.lost
         if not gap and note.id is not None and note.id <= self.last_sent.get(robot, 0):
             return  # already sent
         command = None if gap else self._from_image(robot, note.row)

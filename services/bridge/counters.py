@@ -33,6 +33,8 @@ class Counters:
     commands_out: int = 0
     commands_from_images: int = 0  # command2robot notifications sent on their image alone
     command_reads: int = 0  # queries of command2robot (start, notifications, period)
+    # command2robot notifications that never arrived (a skip in their publisher's seq)
+    command_notes_lost: int = 0
     watchdog_stops: int = 0
     shutdown_stops: int = 0
     # the safety layer: commands it stopped, slowed, or could not check (no fresh scan)
@@ -62,6 +64,7 @@ class Counters:
             "commands_out": self.commands_out,
             "commands_from_images": self.commands_from_images,
             "command_reads": self.command_reads,
+            "command_notes_lost": self.command_notes_lost,
             "watchdog_stops": self.watchdog_stops,
             "shutdown_stops": self.shutdown_stops,
             "safety_stopped": self.safety_stopped,

@@ -38,6 +38,9 @@ class ControllerService(ScenarioService):
         clock = sim.now if runtime.ledger is not None else time.monotonic
         self.store = ControllerStore(PgControllerSource(runtime.database), clock, sim_now)
 
+    def notifications_lost(self) -> int | None:
+        return self.store.notifications_lost
+
     def seed(self) -> None:
         scenarios = installed_scenarios()
         log.event(logger, logging.INFO, "controller scenarios", names=",".join(sorted(scenarios)))

@@ -166,6 +166,11 @@ class ControllerStore:
         # restarted (or named again) never recommends twice on one scan
         self._recommended: dict[Key, int] = {}
 
+    @property
+    def notifications_lost(self) -> int:
+        """Notifications known lost on the way here (common.freshness.Sequences)."""
+        return self._seqs.lost
+
     # -- what the service tells it ---------------------------------------------------------
     def note(self, note: Notification) -> None:
         """A change notification (on the event loop, before the engine wakes, if it does)."""

@@ -40,6 +40,9 @@ class DecisionService(ScenarioService):
             clock=period_clock,
         )
 
+    def notifications_lost(self) -> int | None:
+        return self.store.notifications_lost
+
     def seed(self) -> None:
         meta.seed(self.engine, self.store)
 

@@ -95,6 +95,11 @@ class DecisionStore:
         self._seqs = Sequences()
         self.reads = 0  # reads of the live recommendations (tests, benchmarks)
 
+    @property
+    def notifications_lost(self) -> int:
+        """Notifications known lost on the way here (common.freshness.Sequences)."""
+        return self._seqs.lost
+
     # -- DecisionView ----------------------------------------------------------------------
     def sim_now(self) -> float | None:
         now = self._sim_now()

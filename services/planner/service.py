@@ -34,6 +34,9 @@ class PlannerService(ScenarioService):
         )
         self.rules: PlannerRules | None = None
 
+    def notifications_lost(self) -> int | None:
+        return self.store.notifications_lost
+
     def seed(self) -> None:
         # the move scenarios installed now: a new one needs a restart, no edit here
         self.rules = meta.seed(self.engine, self.store, meta.move_scenarios(), owns=self.owns)

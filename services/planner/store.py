@@ -84,6 +84,11 @@ class PlannerStore:
         self.odometry_reads = 0  # odometry read from the table (tests, benchmarks)
         self.battery_reads = 0  # battery rows read from the table (tests, benchmarks)
 
+    @property
+    def notifications_lost(self) -> int:
+        """Notifications known lost on the way here (common.freshness.Sequences)."""
+        return self._seqs.lost
+
     # -- clocks ------------------------------------------------------------------------------
     def now(self) -> float:
         return self._now()

@@ -41,6 +41,18 @@ def test_a_skipped_seq_from_one_publisher_is_a_gap_and_other_publishers_are_apar
     assert seqs.gap(GOAL_KEY, None, None)  # unnumbered: nothing can be known
 
 
+def test_the_notifications_skipped_are_counted_lost() -> None:
+    seqs = Sequences()
+    seqs.gap(GOAL_KEY, "a", 1)  # lost: 0 (the first heard from "a")
+    seqs.gap(GOAL_KEY, "a", 4)  # lost: 2 (2 and 3)
+    seqs.gap(GOAL_KEY, "b", 9)  # lost: 2 (the first from "b" says nothing of 1 to 8)
+    seqs.gap(GOAL_KEY, "a", 3)  # lost: 2 (late: already counted when 4 came)
+    seqs.gap(GOAL_KEY, "a", 5)  # lost: 2
+    seqs.gap(GOAL_KEY, None, None)  # lost: 2 (unnumbered: nothing to count)
+    seqs.gap(GOAL_KEY, "b", 12)  # lost: 4 (10 and 11)
+    assert seqs.lost == 4
+
+
 async def test_a_write_with_an_image_notifies_it_with_the_committed_id(
     db_url: str, zenoh_settings: ZenohSettings
 ) -> None:

@@ -106,6 +106,7 @@ async def test_a_seq_gap_sends_the_relay_to_the_table(
     publish(sim, third, image, seq=3)
     assert vel((await cmd_vel.next())[1]) == (0.2, 0.1, third)
     assert bridge.counters.command_reads == reads + 1  # the gap: read the table
+    assert bridge.counters.command_notes_lost == 1  # and counted
 
     fourth, image = await decided(conn, 0.0, 0.3)
     publish(sim, fourth, image, seq=4)  # numbered on from 3: trusted again

@@ -73,6 +73,7 @@ async def test_no_image_or_a_gap_reads_the_table() -> None:
     r.seqs[(keys.LASER_SCAN, "r1")] += 1  # a notification lost on the way
     third = r.new_scan()
     assert (await scan_id(r)) == third and store.scans.reads == 2
+    assert store.notifications_lost == 1  # what the "engine stopped" line reports
     fourth = r.new_scan()  # numbered on from the last: an image again
     assert (await scan_id(r)) == fourth and store.scans.reads == 2
 
