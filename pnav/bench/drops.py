@@ -8,7 +8,10 @@ through a router to a subscriber in another, while ``--hogs`` processes keep the
 and counts what arrived. ``--wait-us`` sets ``wait_before_drop`` on every session (the
 router forwards with its own queues, and drops as the publisher does);
 ``--block`` uses congestion control BLOCK instead (never dropped, but a put then waits as long
-as the queue is full).
+as the queue is full). ``--queue`` sets how many batches each link's data queue holds, in
+every session: Zenoh's default is 2, and an express put is a batch to itself, so the queue is
+full as soon as the link's writer misses a turn; pnav's sessions have 16
+(common/config.py ``DATA_QUEUE_BATCHES``). Without ``--queue`` the sessions have Zenoh's 2.
 """
 
 from __future__ import annotations
