@@ -99,6 +99,7 @@ def _list(env: Env, name: str, default: tuple[str, ...]) -> tuple[str, ...]:
 # (docs/BENCHMARKS.md, sixth round). More room drops none there and waits no longer: a link
 # to a frozen peer fills as before, then drops after the same 1 ms.
 DATA_QUEUE_BATCHES = 16
+# Zenoh takes more in its config, then panics as a link opens (its ring holds 16): refused here
 DATA_QUEUE_MAX = 16
 
 

@@ -14,8 +14,9 @@ iterative convex cast, several times a ray against the walls' mesh. So the cast 
    height is within the body's. Only the beams within a robot's angular extent, seen from the
    scanner, are tested; the nearest robot met before the static hit replaces that hit.
 
-Why not Bullet for the robots too: besides the cost (most of the sim's lidar with 50 robots
-in a hall, docs/BENCHMARKS.md), Bullet's convex cast against a cylinder is approximate. Against
+Why not Bullet for the robots too: besides the cost (with robots in each other's reach, most
+of the lidar's: docs/BENCHMARKS.md, sixth round), Bullet's convex cast against a cylinder is
+approximate. Against
 the exact entry point it reads 0.1 mm short at the median, 1.4 mm short for one beam in twenty
 and 3.5 mm for one in a hundred, and it reports hits on beams that pass up to a few mm outside
 the body (tests/unit/sim/test_fleetcast.py measures both). The closed form is the cylinder the

@@ -116,6 +116,17 @@ def crowd(rng: np.random.Generator, count: int) -> list[Pose]:
     return poses
 
 
+def crowds(scene: Scene, seed: int, count: int) -> Iterator[list[Pose]]:
+    """``count`` crowds (:func:`crowd`) of the scene's robots, each placed before it is
+    yielded."""
+    rng = np.random.default_rng(seed)
+    for _ in range(count):
+        poses = crowd(rng, len(scene.robot_bodies))
+        for i, pose in enumerate(poses):
+            scene.place(i, *pose)
+        yield poses
+
+
 @pytest.fixture
 def scene(make_world: MakeWorld) -> Iterator[Scene]:
     robots = [{"id": f"r{i}", "x": 0.5 + 0.4 * i, "y": 5.5} for i in range(ROBOTS)]
@@ -127,12 +138,8 @@ def scene(make_world: MakeWorld) -> Iterator[Scene]:
 
 def test_beams_read_the_static_scene_or_the_first_robot_body_they_enter(scene: Scene) -> None:
     lidars = [Lidar(BURGER.lidar)] * ROBOTS
-    rng = np.random.default_rng(11)
     met = 0
-    for _ in range(12):
-        poses = crowd(rng, ROBOTS)
-        for i, pose in enumerate(poses):
-            scene.place(i, *pose)
+    for poses in crowds(scene, seed=11, count=12):
         for scanning in (list(range(ROBOTS)), [0, 1], [3], list(range(0, ROBOTS, 3))):
             got = cast_fleet(scene, lidars, poses, scanning)
             assert not scene.hidden
@@ -151,12 +158,8 @@ def test_robots_are_met_where_bullet_meets_them_but_for_beams_grazing_an_edge(
     # the sim's lidar against Bullet's own cast of one robot's beams with the other robots
     # in place: the closed form models the same bodies, only more exactly
     lidars = [Lidar(BURGER.lidar)] * ROBOTS
-    rng = np.random.default_rng(7)
     compared = 0
-    for _ in range(6):
-        poses = crowd(rng, ROBOTS)
-        for i, pose in enumerate(poses):
-            scene.place(i, *pose)
+    for poses in crowds(scene, seed=7, count=6):
         got = cast_fleet(scene, lidars, poses, list(range(ROBOTS)))
         for i, (hit, fraction) in enumerate(got):
             bullet_hit, bullet_fraction = scene.cast_from(i, *lidars[i].rays(*poses[i]))
@@ -170,9 +173,7 @@ def test_robots_are_met_where_bullet_meets_them_but_for_beams_grazing_an_edge(
 
 def test_robots_are_back_in_place_after_the_cast(scene: Scene) -> None:
     lidar = Lidar(BURGER.lidar)
-    poses = crowd(np.random.default_rng(3), ROBOTS)
-    for i, pose in enumerate(poses):
-        scene.place(i, *pose)
+    poses = next(crowds(scene, seed=3, count=1))
     before = [
         p.getBasePositionAndOrientation(b, physicsClientId=scene.client) for b in scene.robot_bodies
     ]
