@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import re
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -38,6 +39,9 @@ from services.sim.trace import CMD_VEL, read_trace
 
 WARMUP_S = 3.0  # after every robot got its first command: let pools, caches and JITs settle
 SEQUENCES = ("odometry", "laser_scan", "battery", "command_recommendation", "command2robot")
+# a process's own count of the change notifications that never reached it: the services'
+# "engine stopped" line, the bridge's counters line (logged every 10 s and at exit)
+LOST = re.compile(r"\b(?:notifications_lost|command_notes_lost)=(\d+)")
 
 COMMANDS_SQL = """
 SELECT c.id, c.robot_id, c.recommendation_id,
@@ -204,6 +208,7 @@ async def measure(
         finally:
             with contextlib.suppress(Exception):
                 await rt.close()
+    lost = notifications_lost(work / "logs")
     events = read_trace(trace_path)
     published: dict[tuple[str, str, int], float] = {}
     arrivals: dict[int, float] = {}
@@ -230,5 +235,17 @@ async def measure(
         "rows_per_s": {t: round((seq1.get(t, 0) - seq0.get(t, 0)) / wall, 1) for t in SEQUENCES},
         "processes": usage.report(),
         "rules": rules,
+        "notifications_lost": lost,
         "work_dir": str(work),
     }
+
+
+def notifications_lost(log_dir: Path) -> dict[str, int]:
+    """Per process (its log's name), the change notifications it never got, over the whole
+    run: its last count in its log (processes that keep none are left out)."""
+    out: dict[str, int] = {}
+    for path in sorted(log_dir.glob("*.log")):
+        counts = LOST.findall(path.read_text(errors="replace"))
+        if counts:
+            out[path.stem] = int(counts[-1])
+    return out

@@ -99,6 +99,11 @@ def table(results: Sequence[dict[str, Any]]) -> list[str]:
         ]
         lines.append(f"  {r['robots']:>3} robots: " + ", ".join(parts))
     lines.append("")
+    lines.append("change notifications lost, whole run (each process's own count: a seq skipped)")
+    for r in results:
+        parts = [f"{name} {n}" for name, n in r.get("notifications_lost", {}).items()]
+        lines.append(f"  {r['robots']:>3} robots: " + (", ".join(parts) or "no count found"))
+    lines.append("")
     lines.append("rules: mean / max ms per run of the rule, its queries included (engine_stats)")
     for r in results:
         parts = [

@@ -8,6 +8,7 @@ import pytest
 
 from pnav.bench import provenance as prov
 from pnav.bench.hall import write_hall
+from pnav.bench.latency import notifications_lost
 from pnav.bench.latency_report import latency_figures, target_for
 from services.sim.trace import Tracer, read_trace
 from services.sim.world import load_world
@@ -134,3 +135,22 @@ def test_the_hall_holds_every_robot_in_its_own_lane(tmp_path: Path, robots: int)
     for lane in hall.lanes:
         for x, y in (lane.a, lane.b):
             assert world.blocked(x, y, world.default_model.footprint_radius_m + 0.1) is None
+
+
+def test_each_process_reports_the_notifications_it_lost_by_its_last_count(tmp_path: Path) -> None:
+    # the lines as the processes log them (docs/ENGINE.md, docs/BRIDGE.md)
+    (tmp_path / "controller.log").write_text(
+        "2026-11-25T07:41:04.061Z INFO controller engine stopped activations=7130"
+        " rules_run=47953 capped_by_n=0 meta_reseeded=0 notifications_lost=3\n"
+    )
+    (tmp_path / "bridge.log").write_text(
+        '2026-11-25T07:40:54.061Z INFO bridge bridge counters messages_in={"odom": 7041}'
+        " command_reads=12 command_notes_lost=5 watchdog_stops=0\n"
+        "2026-11-25T07:40:59.000Z WARNING bridge something else\n"
+        '2026-11-25T07:41:04.061Z INFO bridge bridge counters messages_in={"odom": 9000}'
+        " command_reads=14 command_notes_lost=8 watchdog_stops=0\n"
+    )
+    (tmp_path / "strategy.log").write_text(
+        "2026-11-25T07:41:04.061Z INFO strategy engine stopped activations=40\n"
+    )
+    assert notifications_lost(tmp_path) == {"bridge": 8, "controller": 3}
