@@ -87,6 +87,9 @@ class Simulation:
         shared: dict[object, Lidar] = {}
         self.lidars = [shared.setdefault(r.model.lidar, Lidar(r.model.lidar)) for r in world.robots]
         self.scene = Scene(world, gui=config.gui)
+        # the lidar's static pass casts in a scene of its own, the same walls and obstacles
+        # without the robots, so no robot has to be lowered out of the beams for it
+        self.static = Scene(replace(world, robots=()))
         self._touching: list[frozenset[str]] = [frozenset() for _ in self.robots]
         self._seq: dict[tuple[int, str], int] = {}
         # Each robot's sensors run on its own phase, i/N of a period after robot 0's, as the
@@ -160,6 +163,7 @@ class Simulation:
 
     def close(self) -> None:
         self.scene.close()
+        self.static.close()
 
     # -- internals -------------------------------------------------------------------------
     def _time_out_commands(self) -> None:
@@ -246,7 +250,11 @@ class Simulation:
         if scanning:
             poses = [(r.x, r.y, r.yaw) for r in self.robots]
             casts = dict(
-                zip(scanning, cast_fleet(self.scene, self.lidars, poses, scanning), strict=True)
+                zip(
+                    scanning,
+                    cast_fleet(self.scene, self.static, self.lidars, poses, scanning),
+                    strict=True,
+                )
             )
         for i, robot in enumerate(self.robots):
             due = self._schedule[i]

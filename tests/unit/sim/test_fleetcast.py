@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -18,7 +19,7 @@ from services.sim.lidar import Lidar
 from services.sim.physics import RAY_BATCH, Scene
 from services.sim.robot import BURGER
 from services.sim.sim import SimConfig, Simulation
-from services.sim.world import load_world
+from services.sim.world import World, load_world
 from tests.unit.sim.conftest import MakeWorld
 
 pytestmark = pytest.mark.timeout(60)
@@ -86,15 +87,15 @@ def grazing(scene: Scene, lidar: Lidar, poses: Sequence[Pose], i: int) -> np.nda
     return out
 
 
-def assert_cast_is_reference(got: Cast, want: Cast, static: Cast, robot: int) -> None:
+def assert_cast_is_reference(got: Cast, want: Cast, bare: Cast, robot: int) -> None:
     """The fleet cast of one robot against :func:`reference`: the same beams meet something,
     a beam that meets no robot reads the static scene bit for bit, one that meets a robot
     the same entry point to rounding."""
     (hit, fraction), (want_hit, want_fraction) = got, want
     np.testing.assert_array_equal(hit, want_hit, err_msg=f"robot {robot}")
-    robot_met = want_fraction < static[1]
-    np.testing.assert_array_equal(fraction < static[1], robot_met, err_msg=f"robot {robot}")
-    assert fraction[~robot_met].tobytes() == static[1][~robot_met].tobytes(), f"robot {robot}"
+    robot_met = want_fraction < bare[1]
+    np.testing.assert_array_equal(fraction < bare[1], robot_met, err_msg=f"robot {robot}")
+    assert fraction[~robot_met].tobytes() == bare[1][~robot_met].tobytes(), f"robot {robot}"
     np.testing.assert_allclose(
         fraction[robot_met], want_fraction[robot_met], rtol=0, atol=1e-12, err_msg=f"robot {robot}"
     )
@@ -128,39 +129,53 @@ def crowds(scene: Scene, seed: int, count: int) -> Iterator[list[Pose]]:
 
 
 @pytest.fixture
-def scene(make_world: MakeWorld) -> Iterator[Scene]:
+def world(make_world: MakeWorld) -> World:
     robots = [{"id": f"r{i}", "x": 0.5 + 0.4 * i, "y": 5.5} for i in range(ROBOTS)]
-    world = load_world(make_world(6.0, 6.0, WALLS, robots=robots, obstacles=OBSTACLES))
+    return load_world(make_world(6.0, 6.0, WALLS, robots=robots, obstacles=OBSTACLES))
+
+
+@pytest.fixture
+def scene(world: World) -> Iterator[Scene]:
     scene = Scene(world)
     yield scene
     scene.close()
 
 
-def test_beams_read_the_static_scene_or_the_first_robot_body_they_enter(scene: Scene) -> None:
+@pytest.fixture
+def static(world: World) -> Iterator[Scene]:
+    """The same walls and obstacles without the robots, as the sim's lidar casts them."""
+    static = Scene(replace(world, robots=()))
+    yield static
+    static.close()
+
+
+def test_beams_read_the_static_scene_or_the_first_robot_body_they_enter(
+    scene: Scene, static: Scene
+) -> None:
     lidars = [Lidar(BURGER.lidar)] * ROBOTS
     met = 0
     for poses in crowds(scene, seed=11, count=12):
         for scanning in (list(range(ROBOTS)), [0, 1], [3], list(range(0, ROBOTS, 3))):
-            got = cast_fleet(scene, lidars, poses, scanning)
+            got = cast_fleet(scene, static, lidars, poses, scanning)
             assert not scene.hidden
             for i, cast in zip(scanning, got, strict=True):
-                static = static_cast(scene, lidars[i], poses[i])
-                assert_cast_is_reference(cast, reference(scene, lidars, poses, i), static, i)
+                bare = static_cast(scene, lidars[i], poses[i])
+                assert_cast_is_reference(cast, reference(scene, lidars, poses, i), bare, i)
                 if len(scanning) == ROBOTS:
-                    met += int(np.sum(cast[1] < static[1]))
+                    met += int(np.sum(cast[1] < bare[1]))
     assert ROBOTS * 360 > RAY_BATCH
     assert met > 12 * ROBOTS * 20  # the scene really crowds: beams met other robots
 
 
 def test_robots_are_met_where_bullet_meets_them_but_for_beams_grazing_an_edge(
-    scene: Scene,
+    scene: Scene, static: Scene
 ) -> None:
     # the sim's lidar against Bullet's own cast of one robot's beams with the other robots
     # in place: the closed form models the same bodies, only more exactly
     lidars = [Lidar(BURGER.lidar)] * ROBOTS
     compared = 0
     for poses in crowds(scene, seed=7, count=6):
-        got = cast_fleet(scene, lidars, poses, list(range(ROBOTS)))
+        got = cast_fleet(scene, static, lidars, poses, list(range(ROBOTS)))
         for i, (hit, fraction) in enumerate(got):
             bullet_hit, bullet_fraction = scene.cast_from(i, *lidars[i].rays(*poses[i]))
             clear = ~grazing(scene, lidars[i], poses, i)
@@ -171,13 +186,13 @@ def test_robots_are_met_where_bullet_meets_them_but_for_beams_grazing_an_edge(
     assert compared > 6 * ROBOTS * 200
 
 
-def test_robots_are_back_in_place_after_the_cast(scene: Scene) -> None:
+def test_robots_are_back_in_place_after_the_cast(scene: Scene, static: Scene) -> None:
     lidar = Lidar(BURGER.lidar)
     poses = next(crowds(scene, seed=3, count=1))
     before = [
         p.getBasePositionAndOrientation(b, physicsClientId=scene.client) for b in scene.robot_bodies
     ]
-    cast_fleet(scene, [lidar] * len(poses), poses, list(range(0, ROBOTS, 2)))
+    cast_fleet(scene, static, [lidar] * len(poses), poses, list(range(0, ROBOTS, 2)))
     after = [
         p.getBasePositionAndOrientation(b, physicsClientId=scene.client) for b in scene.robot_bodies
     ]
@@ -213,7 +228,11 @@ def test_a_crowded_run_scans_as_the_reference_cast_per_robot(
         return scans
 
     def one_by_one(
-        scene: Scene, lidars: Sequence[Lidar], poses: Sequence[Pose], scanning: Sequence[int]
+        scene: Scene,
+        static: Scene,
+        lidars: Sequence[Lidar],
+        poses: Sequence[Pose],
+        scanning: Sequence[int],
     ) -> list[Cast]:
         return [reference(scene, lidars, poses, i) for i in scanning]
 
@@ -244,7 +263,7 @@ def test_a_fleet_of_mixed_models_sees_each_body_that_reaches_its_beams(
         if r["model"] is None:
             del r["model"]
     world = load_world(make_world(6.0, 6.0, WALLS, robots=robots, obstacles=OBSTACLES))
-    scene = Scene(world)
+    scene, static = Scene(world), Scene(replace(world, robots=()))
     try:
         shared: dict[object, Lidar] = {}
         lidars = [shared.setdefault(m.lidar, Lidar(m.lidar)) for m in world.models]
@@ -259,17 +278,18 @@ def test_a_fleet_of_mixed_models_sees_each_body_that_reaches_its_beams(
             for i, pose in enumerate(poses):
                 scene.place(i, *pose)
             for scanning in (list(range(len(robots))), [0, 2, 4], [2]):
-                got = cast_fleet(scene, lidars, poses, scanning)
+                got = cast_fleet(scene, static, lidars, poses, scanning)
                 for i, cast in zip(scanning, got, strict=True):
                     assert len(cast[0]) == world.models[i].lidar.beams
-                    static = static_cast(scene, lidars[i], poses[i])
-                    assert_cast_is_reference(cast, reference(scene, lidars, poses, i), static, i)
+                    bare = static_cast(scene, lidars[i], poses[i])
+                    assert_cast_is_reference(cast, reference(scene, lidars, poses, i), bare, i)
                     # and as Bullet sees the same bodies, heights included
                     bullet = scene.cast_from(i, *lidars[i].rays(*poses[i]))
                     clear = ~grazing(scene, lidars[i], poses, i)
                     np.testing.assert_array_equal(cast[0][clear], bullet[0][clear])
                     if len(scanning) == len(robots):
-                        met[world.models[i].name] += int(np.sum(cast[1] < static[1]))
+                        met[world.models[i].name] += int(np.sum(cast[1] < bare[1]))
         assert met["jackal"] > 50 and met["turtlebot3_burger"] > 50  # beams met other robots
     finally:
         scene.close()
+        static.close()
