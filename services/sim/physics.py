@@ -346,8 +346,9 @@ class Scene:
     def cast_from(
         self, index: int, starts: npt.NDArray[np.float64], ends: npt.NDArray[np.float64]
     ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.float64]]:
-        """Batch ray cast of robot ``index``'s beams alone, the reference the fleet's cast
-        (services/sim/fleetcast.py) must match bit for bit.
+        """Batch ray cast of robot ``index``'s beams alone, every other robot in place: Bullet's
+        own view of a robot's lidar, which the sim's (services/sim/fleetcast.py, the robots in
+        closed form) is tested against.
 
         The robot's own body is lowered out of the beams' plane for the cast, so the beams
         can start at its centre without hitting it. (pybullet has no per-call exclusion of a
