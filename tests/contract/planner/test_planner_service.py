@@ -346,6 +346,10 @@ async def test_two_replicas_split_the_robots_and_plan_for_each_once(
                 owners = [s for s, share in zip((a, b), shares, strict=True) if robot in share]
                 assert planned_by == owners, robot
             assert await split_between([a, b], robots) == shares
+            # Up to here both replicas ran; stopping one hands its robots to the other, which
+            # may then say again what the first said about the newest odometry row: a
+            # hand-over in turn, not two owners at once, so it is left out of the count.
+            until = await world.newest_id()
     finally:
         feed.cancel()
         with contextlib.suppress(asyncio.CancelledError):
@@ -353,8 +357,9 @@ async def test_two_replicas_split_the_robots_and_plan_for_each_once(
     # One replica never says the same thing twice about one odometry row; two would.
     twice = await db.pool.fetch(
         "SELECT robot_id, inputs->>'odometry' AS odometry, count(*) FROM command_recommendation"
-        " WHERE id > $1 AND kind = 'robot' GROUP BY 1, 2 HAVING count(*) > 1",
+        " WHERE id > $1 AND id <= $2 AND kind = 'robot' GROUP BY 1, 2 HAVING count(*) > 1",
         after,
+        until,
     )
     assert twice == []
     assert sorted(len(share) for share in shares) == [2, 2]
