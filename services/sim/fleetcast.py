@@ -1,16 +1,15 @@
 """The lidar of every robot that scans in a physics step: the walls and obstacles in one
 batched Bullet ray cast, the other robots met exactly, as the cylinders they are.
 
-A robot's beams start at its centre, inside its own body, so its body must be out of the way
-of its own beams yet in place for every other robot's. pybullet cannot leave a body out per
-ray (see ``Scene.cast_from``), and a ray tested against a robot's cylinder costs Bullet an
-iterative convex cast, several times a ray against the walls' mesh. So the cast takes two steps:
+A robot's beams start at its centre, inside its own body, and no robot's body may stand in
+the way of its own beams, while every other robot's must. pybullet cannot leave a body out
+per ray (see ``Scene.cast_from``), and a ray tested against a robot's cylinder costs Bullet an
+iterative convex cast, several times a ray against the walls' mesh. So the cast takes two
+steps:
 
 1. All the beams of all the scanning robots go in one ``rayTestBatch`` in a second pybullet
-   client holding the same walls and obstacles without the robots (the static scene, built
-   from the same world): each beam's first hit on them, exactly as Bullet gives it, with no
-   robot to lower out of the beams' plane first (lowering and raising them cost about 6 %
-   of the sim with 50 robots packed).
+   client holding the same walls and obstacles and no robot (the static scene, built from
+   the same world): each beam's first hit on them, exactly as Bullet gives it.
 2. The other robots are met in closed form. A robot's body is an upright cylinder and a beam
    is a horizontal ray, so a beam meets it where the ray enters the body's disc, if the beam's
    height is within the body's. Only the beams within a robot's angular extent, seen from the
@@ -18,11 +17,11 @@ iterative convex cast, several times a ray against the walls' mesh. So the cast 
 
 Why not Bullet for the robots too: besides the cost (with robots in each other's reach, most
 of the lidar's: docs/BENCHMARKS.md, sixth round), Bullet's convex cast against a cylinder is
-approximate. Against
-the exact entry point it reads 0.1 mm short at the median, 1.4 mm short for one beam in twenty
-and 3.5 mm for one in a hundred, and it reports hits on beams that pass up to a few mm outside
-the body (tests/unit/sim/test_fleetcast.py measures both). The closed form is the cylinder the
-world file describes. The static scene stays Bullet's: the walls' mesh is tested exactly.
+approximate. Against the exact entry point it reads 0.1 mm short at the median, 1.4 mm short
+for one beam in twenty and 3.5 mm for one in a hundred, and it reports hits on beams that
+pass up to a few mm outside the body (tests/unit/sim/test_fleetcast.py measures both). The
+closed form is the cylinder the world file describes; the static scene stays Bullet's (the
+walls' mesh is tested exactly).
 """
 
 from __future__ import annotations

@@ -227,17 +227,15 @@ def test_a_crowded_run_scans_as_the_reference_cast_per_robot(
             sim.close()
         return scans
 
-    def one_by_one(
-        scene: Scene,
-        static: Scene,
-        lidars: Sequence[Lidar],
-        poses: Sequence[Pose],
-        scanning: Sequence[int],
-    ) -> list[Cast]:
-        return [reference(scene, lidars, poses, i) for i in scanning]
-
     batched = run()
-    monkeypatch.setattr(sim_module, "cast_fleet", one_by_one)
+    # cast_fleet's stand-in: the reference, one robot at a time (the static scene unused)
+    monkeypatch.setattr(
+        sim_module,
+        "cast_fleet",
+        lambda scene, _static, lidars, poses, scanning: [
+            reference(scene, lidars, poses, i) for i in scanning
+        ],
+    )
     alone = run()
     assert len(batched) == 12 * 40
     assert [robot for robot, _ in batched] == [robot for robot, _ in alone]
