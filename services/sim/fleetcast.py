@@ -1,167 +1,195 @@
-"""The lidar of every robot that scans in a physics step: the walls and obstacles in one
-batched Bullet ray cast, the other robots met exactly, as the cylinders they are.
+"""The lidar of every robot that scans in a physics step, cast together in closed form: the
+walls and obstacles as the world's outline (services/sim/outline.py), the other robots as the
+upright cylinders they are.
 
-A robot's beams start at its centre, inside its own body, and no robot's body may stand in
-the way of its own beams, while every other robot's must. pybullet cannot leave a body out
-per ray (see ``Scene.cast_from``), and a ray tested against a robot's cylinder costs Bullet an
-iterative convex cast, several times a ray against the walls' mesh. So the cast takes two
-steps:
+A beam is a horizontal ray from its robot's centre at the lidar's height. It meets a body
+only if that height is within the body's (from the floor to its top), and then where it
+first crosses one of the body's faces or enters its disc. For each scanning robot and each
+face or disc within its reach that rises to its beams (and, for a face, is turned towards
+it), the beams within the shape's angular extent as seen from the robot are found, and only
+those are tested exactly; each beam keeps its nearest meeting. A robot's own body is never
+in the way of its own beams, and every other robot's is.
 
-1. All the beams of all the scanning robots go in one ``rayTestBatch`` in a second pybullet
-   client holding the same walls and obstacles and no robot (the static scene, built from
-   the same world): each beam's first hit on them, exactly as Bullet gives it.
-2. The other robots are met in closed form. A robot's body is an upright cylinder and a beam
-   is a horizontal ray, so a beam meets it where the ray enters the body's disc, if the beam's
-   height is within the body's. Only the beams within a robot's angular extent, seen from the
-   scanner, are tested; the nearest robot met before the static hit replaces that hit.
-
-Why not Bullet for the robots too: besides the cost (with robots in each other's reach, most
-of the lidar's: docs/BENCHMARKS.md, sixth round), Bullet's convex cast against a cylinder is
-approximate. Against the exact entry point it reads 0.1 mm short at the median, 1.4 mm short
-for one beam in twenty and 3.5 mm for one in a hundred, and it reports hits on beams that
-pass up to a few mm outside the body (tests/unit/sim/test_fleetcast.py measures both). The
-closed form is the cylinder the world file describes; the static scene stays Bullet's (the
-walls' mesh is tested exactly).
+Why not Bullet's ray test (the sim cast the walls and obstacles with it until 2026-11-25):
+a ray costs pybullet about 0.4 us in call overhead alone, whatever it meets, and the fleet
+casts hundreds of thousands a second (docs/BENCHMARKS.md, seventh round). Bullet stays the
+yardstick in the tests (tests/unit/sim/test_fleetcast.py): the walls' mesh agrees to
+rounding; its convex shapes (boxes, cylinders) only to a few mm near their edges, where its
+convex cast is approximate and this is exact.
 """
 
 from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
+from common.robotmodel import RobotModel
 from services.sim.lidar import FloatArray, Lidar
-from services.sim.physics import Scene
+from services.sim.outline import Outline, spans
 
 Pose = tuple[float, float, float]
 Cast = tuple[npt.NDArray[np.bool_], npt.NDArray[np.float64]]
 IntArray = npt.NDArray[np.intp]
+Meetings = tuple[IntArray, FloatArray]  # (ray, fraction along it) of each meeting
 
-# beams of slack each side of a robot's angular extent, against rounding in the angles (the
+# beams of slack each side of a shape's angular extent, against rounding in the angles (the
 # beams within are then tested exactly)
 SLACK_BEAMS = 0.5
+TWO_PI = 2.0 * np.pi
+# how far past a face's ends (a fraction of its length) a beam still meets it: a beam through
+# a corner meets the solid there, whichever face's rounding it falls on
+CORNER = 1e-9
 
 
-@dataclass(frozen=True)
-class _Pairs:
-    """Every (scanning robot, other robot) pair within reach of the scanner's beams, the other
-    robot's body standing in the beams' plane."""
+class FleetCast:
+    """Casts the lidars of a fleet (robot i: ``models[i]``'s body, ``lidars[i]``) in a world
+    whose static part is ``outline``."""
 
-    k: IntArray  # the scanning robot's position in ``scanning``
-    j: IntArray  # the other robot's index
-    dist: FloatArray  # between their centres, m
-    bearing: FloatArray  # of the other robot from the scanner's beam 0, rad
+    def __init__(
+        self, outline: Outline, models: Sequence[RobotModel], lidars: Sequence[Lidar]
+    ) -> None:
+        self.outline = outline
+        self.lidars = list(lidars)
+        n = len(models)
+        # every disc: the outline's, then one per robot (its owner's index; -1: static)
+        self.radius = np.concatenate([outline.radius, [m.footprint_radius_m for m in models]])
+        self.top = np.concatenate([outline.disc_top, [m.height_m for m in models]])
+        self.owner = np.concatenate([np.full(len(outline.radius), -1), np.arange(n)])
+        self._static_xy = outline.centre
+        self.beams = np.array([lidar.params.beams for lidar in lidars], dtype=np.intp)
+        inc = np.array([lidar.params.angle_increment for lidar in lidars])
+        # a one-beam partial lidar has no increment: any width stands in (windows only choose
+        # which beams to test; the test is exact)
+        self.increment = np.where(inc > 0.0, inc, TWO_PI)
+        self.range_max = np.array([lidar.params.range_max_m for lidar in lidars])
+        self.angle_min = np.array([lidar.params.angle_min_rad for lidar in lidars])
+        self.full = np.array([lidar.params.full_turn for lidar in lidars], dtype=bool)
+        self.beam_z = np.array([lidar.height for lidar in lidars])
+        self.face_e = outline.b - outline.a
+
+    def __call__(self, poses: Sequence[Pose], scanning: Sequence[int]) -> list[Cast]:
+        """(hit, fraction along the ray) per beam of each robot in ``scanning`` (indices into
+        ``poses``), in that order; fraction 1.0 where a beam meets nothing."""
+        if not scanning:
+            return []
+        index = np.asarray(scanning, dtype=np.intp)
+        rays = [self.lidars[i].rays(*poses[i]) for i in scanning]
+        starts = np.concatenate([s[:, :2] for s, _ in rays])
+        ends = np.concatenate([e[:, :2] for _, e in rays])
+        first = np.concatenate([[0], np.cumsum(self.beams[index])])  # each one's first ray
+        xy = np.array([(x, y) for x, y, _ in poses]).reshape(-1, 2)
+        yaw = np.array([poses[i][2] for i in scanning])
+        fraction = np.full(len(starts), np.inf)
+        for ray, along in (
+            self._faces(index, xy[index], yaw, first, starts, ends),
+            self._discs(index, xy, yaw, first),
+        ):
+            np.minimum.at(fraction, ray, along)
+        hit = fraction <= 1.0  # a meeting at the very end of a ray is one (as in Bullet)
+        fraction[~hit] = 1.0
+        return [(hit[a:b], fraction[a:b]) for a, b in itertools.pairwise(first.tolist())]
+
+    # -- the outline's faces ----------------------------------------------------------------
+    def _faces(
+        self,
+        index: IntArray,
+        origin: FloatArray,
+        yaw: FloatArray,
+        first: IntArray,
+        starts: FloatArray,
+        ends: FloatArray,
+    ) -> Meetings:
+        out = self.outline
+        k, f = out.near(origin, self.range_max[index])
+        rel = origin[k] - out.a[f]  # the scanner from each face's start
+        e = self.face_e[f]
+        # turned towards the scanner (it is on the free side, the face's left), within reach
+        facing = e[:, 0] * rel[:, 1] - e[:, 1] * rel[:, 0] > 0.0
+        t = np.clip(np.sum(rel * e, axis=1) / np.maximum(np.sum(e * e, axis=1), 1e-300), 0.0, 1.0)
+        gap = rel - t[:, None] * e
+        near = np.sum(gap * gap, axis=1) <= self.range_max[index[k]] ** 2
+        tall = self.beam_z[index[k]] <= out.face_top[f]
+        keep = facing & near & tall
+        k, f = k[keep], f[keep]
+        if len(k) == 0:
+            return _none()
+        # the face's angular extent from the scanner, under half a turn (it faces the scanner)
+        to_a, to_b = out.a[f] - origin[k], out.b[f] - origin[k]
+        phi_a = np.arctan2(to_a[:, 1], to_a[:, 0])
+        width = np.mod(np.arctan2(to_b[:, 1], to_b[:, 0]) - phi_a, TWO_PI)
+        bearing = phi_a + width / 2.0 - yaw[k] - self.angle_min[index[k]]
+        src, beam, _ = self._windows(index, k, bearing, width / 2.0)
+        ray = first[k[src]] + beam
+        # where the ray start + s (end - start) crosses the face a + u e, s and u in [0, 1]
+        d = ends[ray] - starts[ray]
+        w = out.a[f[src]] - starts[ray]
+        fe = self.face_e[f[src]]
+        denom = d[:, 0] * fe[:, 1] - d[:, 1] * fe[:, 0]
+        safe = np.where(denom > 0.0, denom, 1.0)
+        s = (w[:, 0] * fe[:, 1] - w[:, 1] * fe[:, 0]) / safe
+        u = (w[:, 0] * d[:, 1] - w[:, 1] * d[:, 0]) / safe
+        meets = (denom > 0.0) & (s >= 0.0) & (s < 1.0) & (u >= -CORNER) & (u <= 1.0 + CORNER)
+        return ray[meets], s[meets]
+
+    # -- discs: cylinder obstacles and the other robots ---------------------------------------
+    def _discs(self, index: IntArray, xy: FloatArray, yaw: FloatArray, first: IntArray) -> Meetings:
+        centres = np.concatenate([self._static_xy, xy])
+        offsets = centres[None, :, :] - xy[index][:, None, :]
+        dist = np.hypot(offsets[..., 0], offsets[..., 1])
+        near = dist <= (self.range_max[index][:, None] + self.radius[None, :])
+        near &= self.owner[None, :] != index[:, None]  # not its own body
+        near &= self.beam_z[index][:, None] <= self.top[None, :]
+        k, j = np.nonzero(near)
+        if len(k) == 0:
+            return _none()
+        radius, d = self.radius[j], dist[k, j]
+        bearing = np.arctan2(offsets[k, j, 1], offsets[k, j, 0]) - yaw[k] - self.angle_min[index[k]]
+        # a disc round the beams' origin (never so far: bodies do not overlap) meets them all
+        half = np.where(d > radius, np.arcsin(np.minimum(1.0, radius / np.maximum(d, 1e-12))), 4.0)
+        src, beam, off = self._windows(index, k, bearing, half)
+        # A beam from the scanner's centre meets a disc of radius r whose centre lies D away
+        # if its line passes within r of the centre, entering at D cos(off) - sqrt(r^2 -
+        # across^2) along it.
+        d, r, reach = d[src], radius[src], self.range_max[index[k[src]]]
+        across = d * np.abs(np.sin(off))
+        entry = d * np.cos(off) - np.sqrt(np.maximum(0.0, r * r - across * across))
+        inside = d <= r
+        meets = inside | ((across <= r) & (entry >= 0.0) & (entry <= reach))
+        ray = first[k[src]] + beam
+        return ray[meets], (np.where(inside, 0.0, entry) / reach)[meets]
+
+    def _windows(
+        self, index: IntArray, k: IntArray, bearing: FloatArray, half: FloatArray
+    ) -> tuple[IntArray, IntArray, FloatArray]:
+        """Every (window, beam) with the beam within ``half`` (rad, plus SLACK_BEAMS) of the
+        window's ``bearing`` from scanner k's beam 0: the window, the beam (an index into
+        the scanner's beams) and the beam's angle from the bearing."""
+        robot = index[k]
+        full = self.full[robot]
+        n, inc = self.beams[robot], self.increment[robot]
+        # A full turn's beams wrap round (index mod beams). A partial field of view's beams
+        # span [0, fov] from beam 0: the bearing is taken in [0, 2 pi) and looked for one
+        # turn either side too, so a shape straddling beam 0's direction is found at both ends.
+        copies = np.where(full, 1, 3)
+        src = np.repeat(np.arange(len(copies)), copies)  # the window each copy looks for
+        turn = np.arange(len(src)) - np.repeat(np.cumsum(copies) - copies, copies) - 1
+        base = np.where(full, bearing, np.mod(bearing, TWO_PI))
+        centre_rad = base[src] + np.where(full[src], 0.0, turn * TWO_PI)
+        n, inc = n[src], inc[src]
+        centre = centre_rad / inc  # in beams
+        spread = half[src] / inc + SLACK_BEAMS
+        lo = np.ceil(centre - spread).astype(np.intp)
+        count = np.clip(np.floor(centre + spread).astype(np.intp) - lo + 1, 0, n)
+        which, beam = spans(lo, count)  # every (copy, beam) within the copies' extents
+        # beams past either end of a partial field of view do not exist
+        exists = full[src[which]] | ((beam >= 0) & (beam < n[which]))
+        which, beam = which[exists], beam[exists]
+        off = beam * inc[which] - centre_rad[which]
+        return src[which], beam % n[which], off
 
 
-def cast_fleet(
-    scene: Scene,
-    static: Scene,
-    lidars: Sequence[Lidar],
-    poses: Sequence[Pose],
-    scanning: Sequence[int],
-) -> list[Cast]:
-    """(hit, fraction) per beam of each robot in ``scanning`` (indices into ``poses`` and
-    ``lidars``, robot i's lidar; ``scene`` has every robot, ``static`` the same world without
-    them), in that order. Robots may carry different lidars (several models)."""
-    if not scanning:
-        return []
-    mine = [lidars[i] for i in scanning]
-    rays = [lidar.rays(*poses[i]) for lidar, i in zip(mine, scanning, strict=True)]
-    starts, ends = rays[0]
-    if len(rays) > 1:
-        starts = np.concatenate([s for s, _ in rays])
-        ends = np.concatenate([e for _, e in rays])
-    first = np.cumsum([0, *(lidar.params.beams for lidar in mine)])  # each one's first ray
-    range_max = np.array([lidar.params.range_max_m for lidar in mine])
-    pairs = _reach(scene, poses, scanning, range_max + scene.max_radius, mine)
-    # 1: the static scene
-    hit, fraction = static.cast(starts, ends)
-    # 2: the robots, nearer than the static hit
-    ray, entry = _robot_hits(scene, pairs, mine, first)
-    if len(ray):
-        nearest = np.full(len(fraction), np.inf)
-        np.minimum.at(nearest, ray, entry)
-        nearest /= np.repeat(range_max, np.diff(first))
-        met = nearest < fraction
-        hit[met] = True
-        fraction[met] = nearest[met]
-    return [(hit[a:b], fraction[a:b]) for a, b in itertools.pairwise(first.tolist())]
-
-
-def _reach(
-    scene: Scene,
-    poses: Sequence[Pose],
-    scanning: Sequence[int],
-    reach: FloatArray,
-    lidars: Sequence[Lidar],
-) -> _Pairs:
-    """The pairs of a scanning robot and another robot within its ``reach`` whose body rises
-    to the scanner's beams."""
-    xy = np.array([(x, y) for x, y, _ in poses])
-    offsets = xy[None, :, :] - xy[np.asarray(scanning)][:, None, :]
-    dist = np.hypot(offsets[..., 0], offsets[..., 1])
-    near = dist <= reach[:, None]
-    near[np.arange(len(scanning)), np.asarray(scanning)] = False  # not its own body
-    # a body lower than a lidar is below its beams' plane (as in Bullet's scene: a body
-    # spans the floor to its height, the beams run at the lidar's height)
-    tops = np.array([scene.height[b] for b in scene.robot_bodies])
-    beam_z = np.array([lidar.height for lidar in lidars])
-    near &= beam_z[:, None] <= tops[None, :]
-    k, j = np.nonzero(near)
-    yaw = np.array([poses[i][2] for i in scanning])[k]
-    angle_min = np.array([lidar.params.angle_min_rad for lidar in lidars])[k]
-    bearing = np.arctan2(offsets[k, j, 1], offsets[k, j, 0]) - yaw - angle_min
-    return _Pairs(k, j, dist[k, j], bearing)
-
-
-def _robot_hits(
-    scene: Scene, pairs: _Pairs, lidars: Sequence[Lidar], first: IntArray
-) -> tuple[IntArray, FloatArray]:
-    """Every (beam, robot) meeting of the pairs: the beam (an index into the batch, scanner
-    k's own starting at ``first[k]``) and how far along it the beam enters the robot's body,
-    m (0 for a beam that starts inside it).
-
-    A beam from the scanner's centre meets a disc of radius r whose centre lies D away only if
-    its bearing is within asin(r / D) of the disc's; of those, the beams whose line passes
-    within r of the centre, where they enter the disc at D cos(off) - sqrt(r^2 - across^2)."""
-    if len(pairs.k) == 0:
-        return np.empty(0, dtype=np.intp), np.empty(0)
-    radii = np.array([scene.radius[b] for b in scene.robot_bodies])
-    beams = np.array([lidar.params.beams for lidar in lidars])
-    increments = np.array([lidar.params.angle_increment for lidar in lidars])
-    reach = np.array([lidar.params.range_max_m for lidar in lidars])
-    full = np.array([lidar.params.full_turn for lidar in lidars])[pairs.k]
-    # A full turn's beams wrap round (index mod beams). A partial field of view's beams span
-    # [0, fov] from beam 0: the disc's bearing is taken in [0, 2 pi) and looked for one turn
-    # either side too, so a disc straddling beam 0's direction is found at both ends.
-    copies = np.where(full, 1, 3)
-    src = np.repeat(np.arange(len(copies)), copies)  # the pair each window looks for
-    turn = np.arange(len(src)) - np.repeat(np.cumsum(copies) - copies, copies) - 1
-    base = np.where(full, pairs.bearing, np.mod(pairs.bearing, 2.0 * np.pi))
-    bearing = base[src] + np.where(full[src], 0.0, turn * 2.0 * np.pi)
-    k, n, inc = pairs.k[src], beams[pairs.k[src]], increments[pairs.k[src]]
-    radius, dist = radii[pairs.j[src]], pairs.dist[src]
-    # a disc round the beams' origin (robots never overlap so far) would meet them all
-    wide = np.arcsin(np.minimum(1.0, radius / np.maximum(dist, 1e-12))) / inc
-    half = np.where(dist > radius, wide, n) + SLACK_BEAMS
-    centre = bearing / inc  # in beams
-    lo = np.ceil(centre - half).astype(np.intp)
-    count = np.minimum(np.floor(centre + half).astype(np.intp) - lo + 1, n)
-    # every (window, beam) within the windows' angular extents, flattened
-    which = np.repeat(np.arange(len(count)), count)
-    beam = lo[which] + np.arange(len(which)) - np.repeat(np.cumsum(count) - count, count)
-    # beams past either end of a partial field of view do not exist
-    exists = full[src[which]] | ((beam >= 0) & (beam < n[which]))
-    which, beam = which[exists], beam[exists]
-    # the beam's line passes ``across`` from the disc's centre, and enters it ``entry`` along
-    off = beam * inc[which] - bearing[which]
-    d, r = dist[which], radius[which]
-    across = d * np.abs(np.sin(off))
-    entry = d * np.cos(off) - np.sqrt(np.maximum(0.0, r * r - across * across))
-    inside = d <= r
-    meets = inside | ((across <= r) & (entry >= 0.0) & (entry <= reach[k[which]]))
-    ray = first[k[which]] + beam % n[which]
-    return ray[meets], np.where(inside, 0.0, entry)[meets]
+def _none() -> Meetings:
+    return np.empty(0, dtype=np.intp), np.empty(0)

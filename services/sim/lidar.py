@@ -3,8 +3,7 @@
 The geometry is the robot model's lidar (common/robotmodel.py: beams, field of view, first
 beam's angle, range, noise, mount height). Beams start at the robot's centre, at the lidar's
 height, and end at ``range_max``. The beams of every robot that scans in a physics step are
-cast together (fleetcast.py), each robot's own body out of the way of its own beams only, so
-a beam never hits its own robot and always sees the others.
+cast together (fleetcast.py): a beam never meets its own robot and always the others.
 
 Ranges get Gaussian noise; a hit beyond ``range_max`` reads ``inf``, and a hit closer than
 ``range_min`` reads ``range_min`` (an obstacle there is real, and ``inf`` would tell a

@@ -1,5 +1,6 @@
 """The pybullet scene: static walls and obstacles, kinematic robot bodies, and the geometry
-queries the sim needs (batch ray casts, penetration and contact tests).
+queries the sim needs (penetration and contact tests; the lidar is cast without Bullet, in
+services/sim/fleetcast.py).
 
 Robots are moved kinematically (``resetBasePositionAndOrientation``), so the scene never
 calls ``stepSimulation``: pybullet is the collision engine, not the integrator. That keeps
@@ -9,23 +10,12 @@ a run exactly reproducible and cheap enough for many times real time.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
 from dataclasses import dataclass
 
-import numpy as np
-import numpy.typing as npt
 import pybullet as p
 
 from services.sim.world import World
 
-# pybullet caps one rayTestBatch call at MAX_RAY_INTERSECTION_BATCH_SIZE_STREAMING rays:
-# 16384 on Linux but 4096 on macOS builds; longer casts go in chunks of the smaller cap
-RAY_BATCH = 4096
-# threads per rayTestBatch call: on the 2 shared cores the sim runs on, more measured no
-# faster (docs/BENCHMARKS.md, "Simulator speed")
-RAY_THREADS = 1
-# where a robot's body waits while lidar beams are cast without it: far below their plane
-HIDDEN_Z = -10.0
 # distance under which two bodies count as touching, m
 CONTACT_TOLERANCE_M = 0.001
 # how far around a robot the contact test looks; the clearance it finds lets the sim skip
@@ -68,18 +58,14 @@ class Scene:
         self.gui = gui
         self.names: dict[int, str] = {}
         self._ground: set[int] = set()
-        # where each robot's body was last placed, to put a hidden one back exactly there
-        self._poses: dict[int, tuple[float, float, float]] = {}
-        self.hidden: set[int] = set()  # robots lowered out of the beams' plane, by index
         if gui:
             p.configureDebugVisualizer(p.COV_ENABLE_GUI, 0, physicsClientId=self.client)
         self._build_static(world)
         self.robot_bodies: list[int] = []
         # per body: its model's footprint radius and height (robots of several models share a
-        # world), the largest radius for the reach of contact and lidar tests
+        # world)
         self.radius: dict[int, float] = {}
         self.height: dict[int, float] = {}
-        self.max_radius = max((r.model.footprint_radius_m for r in world.robots), default=0.0)
         shapes: dict[tuple[float, float], tuple[int, int]] = {}
         for spec in world.robots:
             radius, height = spec.model.footprint_radius_m, spec.model.height_m
@@ -98,7 +84,7 @@ class Scene:
             self.robot_bodies.append(body)
             self.radius[body], self.height[body] = radius, height
             # placed once more as every later move places it, so a body's transform is always
-            # the one _place gives for its pose: a hidden robot put back is bit for bit the same
+            # the one _place gives for its pose
             self._place(body, spec.x, spec.y, spec.yaw)
 
     # -- building --------------------------------------------------------------------------
@@ -138,8 +124,7 @@ class Scene:
 
     def _walls(self, world: World) -> None:
         """The map's occupied cells as one static triangle mesh named "wall": a prism per
-        rectangle of cells. Rays test triangles analytically, where a box needs an iterative
-        convex test; that measured 40% off the lidar's cost in the warehouse."""
+        rectangle of cells (a handful of bodies instead of thousands)."""
         grid = world.grid
         vertices: list[list[float]] = []
         indices: list[int] = []
@@ -235,7 +220,6 @@ class Scene:
 
     # -- queries ---------------------------------------------------------------------------
     def _place(self, body: int, x: float, y: float, yaw: float) -> None:
-        self._poses[body] = (x, y, yaw)
         p.resetBasePositionAndOrientation(
             body,
             [x, y, self.height[body] / 2.0],
@@ -301,67 +285,6 @@ class Scene:
         did not move)."""
         dist = self._distances(self.robot_bodies[index], x, y, CLEARANCE_REACH_M)
         return self._touching(dist), max(0.0, min(dist.values(), default=CLEARANCE_REACH_M))
-
-    def hide(self, indices: Iterable[int]) -> None:
-        """Lower these robots out of the beams' plane, where no ray can meet them, until
-        :meth:`show`; contact tests must not run meanwhile."""
-        for index in indices:
-            if index in self.hidden:
-                continue
-            body = self.robot_bodies[index]
-            x, y, yaw = self._poses[body]
-            quat = [0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0)]
-            p.resetBasePositionAndOrientation(
-                body, [x, y, HIDDEN_Z], quat, physicsClientId=self.client
-            )
-            self.hidden.add(index)
-
-    def show(self, indices: Iterable[int]) -> None:
-        """Put hidden robots back where they were placed (others are left alone)."""
-        for index in sorted(self.hidden.intersection(indices)):
-            body = self.robot_bodies[index]
-            self._place(body, *self._poses[body])
-            self.hidden.discard(index)
-
-    def cast(
-        self, starts: npt.NDArray[np.float64], ends: npt.NDArray[np.float64]
-    ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.float64]]:
-        """Batch ray cast of the scene as it stands: per ray, whether it hit and the hit
-        fraction along it (1.0 where it hit nothing)."""
-        body = np.empty(len(starts), dtype=np.intp)
-        fraction = np.empty(len(starts))
-        for lo in range(0, len(starts), RAY_BATCH):
-            results = p.rayTestBatch(
-                starts[lo : lo + RAY_BATCH],
-                ends[lo : lo + RAY_BATCH],
-                numThreads=RAY_THREADS,
-                physicsClientId=self.client,
-            )
-            body[lo : lo + len(results)] = [r[0] for r in results]
-            fraction[lo : lo + len(results)] = [r[2] for r in results]
-        hit = body >= 0
-        fraction[~hit] = 1.0
-        return hit, fraction
-
-    def cast_from(
-        self, index: int, starts: npt.NDArray[np.float64], ends: npt.NDArray[np.float64]
-    ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.float64]]:
-        """Batch ray cast of robot ``index``'s beams alone, every other robot in place: Bullet's
-        own view of a robot's lidar, which the sim's (services/sim/fleetcast.py, the robots in
-        closed form) is tested against.
-
-        The robot's own body is lowered out of the beams' plane for the cast, so the beams
-        can start at its centre without hitting it. (pybullet has no per-call exclusion of a
-        body: ``parentObjectUniqueId`` only changes the rays' frame, and the collision mask is
-        applied after the ray-shape test. Starting rays outside the body instead still tests
-        every ray against the body's cylinder: measured ten times the cost of a ray that
-        starts clear of it, and three quarters of the ranges then differ, by up to 4 mm.)
-        """
-        self.hide([index])
-        try:
-            return self.cast(starts, ends)
-        finally:
-            self.show([index])
 
     def close(self) -> None:
         try:

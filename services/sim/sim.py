@@ -23,8 +23,9 @@ from common.errors import ConfigError
 from common.log import event
 from services.sim.battery import Battery, BatteryModel
 from services.sim.clock import Every
-from services.sim.fleetcast import Cast, cast_fleet
+from services.sim.fleetcast import Cast, FleetCast
 from services.sim.lidar import Lidar
+from services.sim.outline import Outline
 from services.sim.physics import CONTACT_TOLERANCE_M, Scene
 from services.sim.robot import RobotState, accelerate, clamp_command, integrate
 from services.sim.world import World
@@ -87,9 +88,8 @@ class Simulation:
         shared: dict[object, Lidar] = {}
         self.lidars = [shared.setdefault(r.model.lidar, Lidar(r.model.lidar)) for r in world.robots]
         self.scene = Scene(world, gui=config.gui)
-        # the lidar's static pass casts in a scene of its own, the same walls and obstacles
-        # without the robots, so no robot has to be lowered out of the beams for it
-        self.static = Scene(replace(world, robots=()))
+        # every robot's lidar, in closed form (Bullet only moves bodies and finds contacts)
+        self.cast = FleetCast(Outline.of(world), world.models, self.lidars)
         self._touching: list[frozenset[str]] = [frozenset() for _ in self.robots]
         self._seq: dict[tuple[int, str], int] = {}
         # Each robot's sensors run on its own phase, i/N of a period after robot 0's, as the
@@ -163,7 +163,6 @@ class Simulation:
 
     def close(self) -> None:
         self.scene.close()
-        self.static.close()
 
     # -- internals -------------------------------------------------------------------------
     def _time_out_commands(self) -> None:
@@ -252,7 +251,7 @@ class Simulation:
             casts = dict(
                 zip(
                     scanning,
-                    cast_fleet(self.scene, self.static, self.lidars, poses, scanning),
+                    self.cast(poses, scanning),
                     strict=True,
                 )
             )
