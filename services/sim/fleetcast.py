@@ -69,6 +69,7 @@ class FleetCast:
         self.full = np.array([lidar.params.full_turn for lidar in lidars], dtype=bool)
         self.beam_z = np.array([lidar.height for lidar in lidars])
         self.face_e = outline.b - outline.a
+        self.face_length2 = np.maximum(np.sum(self.face_e**2, axis=1), 1e-300)
 
     def __call__(self, poses: Sequence[Pose], scanning: Sequence[int]) -> list[Cast]:
         """(hit, fraction along the ray) per beam of each robot in ``scanning`` (indices into
@@ -108,9 +109,9 @@ class FleetCast:
         e = self.face_e[f]
         # turned towards the scanner (it is on the free side, the face's left), within reach
         facing = e[:, 0] * rel[:, 1] - e[:, 1] * rel[:, 0] > 0.0
-        t = np.clip(np.sum(rel * e, axis=1) / np.maximum(np.sum(e * e, axis=1), 1e-300), 0.0, 1.0)
-        gap = rel - t[:, None] * e
-        near = np.sum(gap * gap, axis=1) <= self.range_max[index[k]] ** 2
+        along = (rel[:, 0] * e[:, 0] + rel[:, 1] * e[:, 1]) / self.face_length2[f]
+        gap = rel - np.clip(along, 0.0, 1.0)[:, None] * e
+        near = gap[:, 0] ** 2 + gap[:, 1] ** 2 <= self.range_max[index[k]] ** 2
         tall = self.beam_z[index[k]] <= out.face_top[f]
         keep = facing & near & tall
         k, f = k[keep], f[keep]
@@ -173,19 +174,21 @@ class FleetCast:
         # A full turn's beams wrap round (index mod beams). A partial field of view's beams
         # span [0, fov] from beam 0: the bearing is taken in [0, 2 pi) and looked for one
         # turn either side too, so a shape straddling beam 0's direction is found at both ends.
-        copies = np.where(full, 1, 3)
-        src = np.repeat(np.arange(len(copies)), copies)  # the window each copy looks for
-        turn = np.arange(len(src)) - np.repeat(np.cumsum(copies) - copies, copies) - 1
-        base = np.where(full, bearing, np.mod(bearing, TWO_PI))
-        centre_rad = base[src] + np.where(full[src], 0.0, turn * TWO_PI)
-        n, inc = n[src], inc[src]
+        if full.all():
+            src, centre_rad = np.arange(len(k)), bearing
+        else:
+            # the window each copy looks for, and the turn (-1, 0, 1) it looks in
+            src, turn = spans(np.where(full, 0, -1), np.where(full, 1, 3))
+            base = np.where(full, bearing, np.mod(bearing, TWO_PI))
+            centre_rad = base[src] + turn * TWO_PI
+            full, n, inc = full[src], n[src], inc[src]
         centre = centre_rad / inc  # in beams
         spread = half[src] / inc + SLACK_BEAMS
         lo = np.ceil(centre - spread).astype(np.intp)
         count = np.clip(np.floor(centre + spread).astype(np.intp) - lo + 1, 0, n)
         which, beam = spans(lo, count)  # every (copy, beam) within the copies' extents
         # beams past either end of a partial field of view do not exist
-        exists = full[src[which]] | ((beam >= 0) & (beam < n[which]))
+        exists = full[which] | ((beam >= 0) & (beam < n[which]))
         which, beam = which[exists], beam[exists]
         off = beam * inc[which] - centre_rad[which]
         return src[which], beam % n[which], off
