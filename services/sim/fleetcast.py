@@ -33,7 +33,6 @@ from services.sim.outline import Outline, spans
 Pose = tuple[float, float, float]
 Cast = tuple[npt.NDArray[np.bool_], npt.NDArray[np.float64]]
 IntArray = npt.NDArray[np.intp]
-Meetings = tuple[IntArray, FloatArray]  # (ray, fraction along it) of each meeting
 
 # beams of slack each side of a shape's angular extent, against rounding in the angles (the
 # beams within are then tested exactly)
@@ -52,7 +51,6 @@ class FleetCast:
         self, outline: Outline, models: Sequence[RobotModel], lidars: Sequence[Lidar]
     ) -> None:
         self.outline = outline
-        self.lidars = list(lidars)
         n = len(models)
         # every disc: the outline's, then one per robot (its owner's index; -1: static)
         self.radius = np.concatenate([outline.radius, [m.footprint_radius_m for m in models]])
@@ -68,6 +66,17 @@ class FleetCast:
         self.angle_min = np.array([lidar.params.angle_min_rad for lidar in lidars])
         self.full = np.array([lidar.params.full_turn for lidar in lidars], dtype=bool)
         self.beam_z = np.array([lidar.height for lidar in lidars])
+        # every distinct lidar's beam directions (from the heading) in one table: robot i's
+        # beam b is entry table[i] + b
+        offset: dict[int, int] = {}
+        parts: list[Lidar] = []
+        for lidar in lidars:
+            if id(lidar) not in offset:
+                offset[id(lidar)] = sum(p.params.beams for p in parts)
+                parts.append(lidar)
+        self.table = np.array([offset[id(lidar)] for lidar in lidars], dtype=np.intp)
+        self.cos = np.concatenate([p.cos for p in parts]) if parts else np.empty(0)
+        self.sin = np.concatenate([p.sin for p in parts]) if parts else np.empty(0)
         self.face_e = outline.b - outline.a
         self.face_length2 = np.maximum(np.sum(self.face_e**2, axis=1), 1e-300)
 
@@ -77,32 +86,51 @@ class FleetCast:
         if not scanning:
             return []
         index = np.asarray(scanning, dtype=np.intp)
-        rays = [self.lidars[i].rays(*poses[i]) for i in scanning]
-        starts = np.concatenate([s[:, :2] for s, _ in rays])
-        ends = np.concatenate([e[:, :2] for _, e in rays])
         first = np.concatenate([[0], np.cumsum(self.beams[index])])  # each one's first ray
         xy = np.array([(x, y) for x, y, _ in poses]).reshape(-1, 2)
         yaw = np.array([poses[i][2] for i in scanning])
-        fraction = np.full(len(starts), np.inf)
-        for ray, along in (
-            self._faces(index, xy[index], yaw, first, starts, ends),
-            self._discs(index, xy, yaw, first),
-        ):
-            np.minimum.at(fraction, ray, along)
+        # every shape that may meet a scanner's beams, faces first: its scanner (a position
+        # in ``index``), which one, and its angular extent from the scanner
+        fk, face, f_bearing, f_half = self._faces(index, xy[index])
+        dk, disc, dist, d_bearing, d_half = self._discs(index, xy)
+        k = np.concatenate([fk, dk])
+        aim = yaw[k] + self.angle_min[index[k]]  # beam 0's direction
+        bearing = np.concatenate([f_bearing, d_bearing]) - aim
+        src, beam, off = self._windows(index, k, bearing, np.concatenate([f_half, d_half]))
+        ray = first[k[src]] + beam
+        on_face = src < len(fk)
+        # the faces: each candidate beam's ray, from its scanner's centre to its range's end
+        f_src = src[on_face]
+        scanner = fk[f_src]
+        d = self._rays(index[scanner], beam[on_face], yaw[scanner])
+        f_met, f_along = self._cross(face[f_src], xy[index[scanner]], d)
+        # the discs
+        d_src = src[~on_face] - len(fk)
+        reach = self.range_max[index[dk[d_src]]]
+        d_met, d_along = _enter(dist[d_src], self.radius[disc[d_src]], off[~on_face], reach)
+        fraction = np.full(first[-1], np.inf)
+        met = np.concatenate([ray[on_face][f_met], ray[~on_face][d_met]])
+        np.minimum.at(fraction, met, np.concatenate([f_along, d_along]))
         hit = fraction <= 1.0  # a meeting at the very end of a ray is one (as in Bullet)
         fraction[~hit] = 1.0
         return [(hit[a:b], fraction[a:b]) for a, b in itertools.pairwise(first.tolist())]
 
-    # -- the outline's faces ----------------------------------------------------------------
+    def _rays(self, robot: IntArray, beam: IntArray, yaw: FloatArray) -> FloatArray:
+        """Each robot's beam as a vector, from its centre to its range's end, the robot
+        heading ``yaw``."""
+        t = self.table[robot] + beam
+        c, s = np.cos(yaw), np.sin(yaw)
+        cos, sin = self.cos[t], self.sin[t]
+        ray: FloatArray = np.stack([cos * c - sin * s, sin * c + cos * s], axis=1)
+        ray *= self.range_max[robot][:, None]
+        return ray
+
     def _faces(
-        self,
-        index: IntArray,
-        origin: FloatArray,
-        yaw: FloatArray,
-        first: IntArray,
-        starts: FloatArray,
-        ends: FloatArray,
-    ) -> Meetings:
+        self, index: IntArray, origin: FloatArray
+    ) -> tuple[IntArray, IntArray, FloatArray, FloatArray]:
+        """The outline's faces turned towards each scanner, within its reach and as tall as
+        its beams: (scanner, face, bearing of the face's middle direction, half its angular
+        width), angles in rad in the world's frame."""
         out = self.outline
         k, f = out.near(origin, self.range_max[index])
         rel = origin[k] - out.a[f]  # the scanner from each face's start
@@ -115,28 +143,32 @@ class FleetCast:
         tall = self.beam_z[index[k]] <= out.face_top[f]
         keep = facing & near & tall
         k, f = k[keep], f[keep]
-        if len(k) == 0:
-            return _none()
         # the face's angular extent from the scanner, under half a turn (it faces the scanner)
         to_a, to_b = out.a[f] - origin[k], out.b[f] - origin[k]
         phi_a = np.arctan2(to_a[:, 1], to_a[:, 0])
-        width = np.mod(np.arctan2(to_b[:, 1], to_b[:, 0]) - phi_a, TWO_PI)
-        bearing = phi_a + width / 2.0 - yaw[k] - self.angle_min[index[k]]
-        src, beam, _ = self._windows(index, k, bearing, width / 2.0)
-        ray = first[k[src]] + beam
-        # where the ray start + s (end - start) crosses the face a + u e, s and u in [0, 1]
-        d = ends[ray] - starts[ray]
-        w = out.a[f[src]] - starts[ray]
-        fe = self.face_e[f[src]]
-        denom = d[:, 0] * fe[:, 1] - d[:, 1] * fe[:, 0]
-        safe = np.where(denom > 0.0, denom, 1.0)
-        s = (w[:, 0] * fe[:, 1] - w[:, 1] * fe[:, 0]) / safe
-        u = (w[:, 0] * d[:, 1] - w[:, 1] * d[:, 0]) / safe
-        meets = (denom > 0.0) & (s >= 0.0) & (s < 1.0) & (u >= -CORNER) & (u <= 1.0 + CORNER)
-        return ray[meets], s[meets]
+        half = np.mod(np.arctan2(to_b[:, 1], to_b[:, 0]) - phi_a, TWO_PI) / 2.0
+        return k, f, phi_a + half, half
 
-    # -- discs: cylinder obstacles and the other robots ---------------------------------------
-    def _discs(self, index: IntArray, xy: FloatArray, yaw: FloatArray, first: IntArray) -> Meetings:
+    def _cross(
+        self, face: IntArray, start: FloatArray, d: FloatArray
+    ) -> tuple[npt.NDArray[np.bool_], FloatArray]:
+        """Whether each ray start + s d crosses its face a + u e from the free side, s in
+        [0, 1) and u in [0, 1], and the s of those that do."""
+        w = self.outline.a[face] - start
+        e = self.face_e[face]
+        denom = d[:, 0] * e[:, 1] - d[:, 1] * e[:, 0]
+        safe = np.where(denom > 0.0, denom, 1.0)
+        s = (w[:, 0] * e[:, 1] - w[:, 1] * e[:, 0]) / safe
+        u = (w[:, 0] * d[:, 1] - w[:, 1] * d[:, 0]) / safe
+        met = (denom > 0.0) & (s >= 0.0) & (s < 1.0) & (u >= -CORNER) & (u <= 1.0 + CORNER)
+        return met, s[met]
+
+    def _discs(
+        self, index: IntArray, xy: FloatArray
+    ) -> tuple[IntArray, IntArray, FloatArray, FloatArray, FloatArray]:
+        """The discs (cylinder obstacles, the other robots) within each scanner's reach and as
+        tall as its beams: (scanner, disc, distance between the centres, bearing of the disc's
+        centre, half its angular width), angles in rad in the world's frame."""
         centres = np.concatenate([self._static_xy, xy])
         offsets = centres[None, :, :] - xy[index][:, None, :]
         dist = np.hypot(offsets[..., 0], offsets[..., 1])
@@ -144,23 +176,11 @@ class FleetCast:
         near &= self.owner[None, :] != index[:, None]  # not its own body
         near &= self.beam_z[index][:, None] <= self.top[None, :]
         k, j = np.nonzero(near)
-        if len(k) == 0:
-            return _none()
         radius, d = self.radius[j], dist[k, j]
-        bearing = np.arctan2(offsets[k, j, 1], offsets[k, j, 0]) - yaw[k] - self.angle_min[index[k]]
+        bearing = np.arctan2(offsets[k, j, 1], offsets[k, j, 0])
         # a disc round the beams' origin (never so far: bodies do not overlap) meets them all
         half = np.where(d > radius, np.arcsin(np.minimum(1.0, radius / np.maximum(d, 1e-12))), 4.0)
-        src, beam, off = self._windows(index, k, bearing, half)
-        # A beam from the scanner's centre meets a disc of radius r whose centre lies D away
-        # if its line passes within r of the centre, entering at D cos(off) - sqrt(r^2 -
-        # across^2) along it.
-        d, r, reach = d[src], radius[src], self.range_max[index[k[src]]]
-        across = d * np.abs(np.sin(off))
-        entry = d * np.cos(off) - np.sqrt(np.maximum(0.0, r * r - across * across))
-        inside = d <= r
-        meets = inside | ((across <= r) & (entry >= 0.0) & (entry <= reach))
-        ray = first[k[src]] + beam
-        return ray[meets], (np.where(inside, 0.0, entry) / reach)[meets]
+        return k, j, d, bearing, half
 
     def _windows(
         self, index: IntArray, k: IntArray, bearing: FloatArray, half: FloatArray
@@ -194,5 +214,16 @@ class FleetCast:
         return src[which], beam % n[which], off
 
 
-def _none() -> Meetings:
-    return np.empty(0, dtype=np.intp), np.empty(0)
+def _enter(
+    d: FloatArray, r: FloatArray, off: FloatArray, reach: FloatArray
+) -> tuple[npt.NDArray[np.bool_], FloatArray]:
+    """Whether a beam at angle ``off`` from the direction of a disc of radius r whose centre
+    lies d away meets it within ``reach``, and how far along the ray (a fraction of reach).
+
+    The beam's line passes d |sin(off)| from the centre and enters the disc at d cos(off) -
+    sqrt(r^2 - across^2) along it; a beam that starts inside the disc meets it at once."""
+    across = d * np.abs(np.sin(off))
+    entry = d * np.cos(off) - np.sqrt(np.maximum(0.0, r * r - across * across))
+    inside = d <= r
+    met = inside | ((across <= r) & (entry >= 0.0) & (entry <= reach))
+    return met, (np.where(inside, 0.0, entry) / reach)[met]

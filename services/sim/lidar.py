@@ -30,16 +30,17 @@ class Lidar:
         self.height = params.height_m
         # beams outside a partial field of view do not exist: the ranges hold only the fov's
         angles = params.angle_min_rad + params.angle_increment * np.arange(params.beams)
-        self._cos = np.cos(angles)
-        self._sin = np.sin(angles)
+        # each beam's direction from the heading
+        self.cos = np.cos(angles)
+        self.sin = np.sin(angles)
 
     def rays(self, x: float, y: float, yaw: float) -> tuple[FloatArray, FloatArray]:
         """Ray starts and ends, shape (beams, 3), of a robot at (x, y, yaw)."""
         n = self.params.beams
         # the beam directions turned by the robot's yaw: cos(a + yaw), sin(a + yaw)
         cy, sy = math.cos(yaw), math.sin(yaw)
-        dx = self._cos * cy - self._sin * sy
-        dy = self._sin * cy + self._cos * sy
+        dx = self.cos * cy - self.sin * sy
+        dy = self.sin * cy + self.cos * sy
         starts = np.empty((n, 3))
         starts[:, 0] = x
         starts[:, 1] = y
