@@ -1,4 +1,4 @@
-"""The 2-D lidar: beam geometry for batch ray casting, and ranges with noise from the hits.
+"""The 2-D lidar: beam geometry, and ranges with noise from the hits.
 
 The geometry is the robot model's lidar (common/robotmodel.py: beams, field of view, first
 beam's angle, range, noise, mount height). Beams start at the robot's centre, at the lidar's
@@ -35,7 +35,9 @@ class Lidar:
         self.sin = np.sin(angles)
 
     def rays(self, x: float, y: float, yaw: float) -> tuple[FloatArray, FloatArray]:
-        """Ray starts and ends, shape (beams, 3), of a robot at (x, y, yaw)."""
+        """Ray starts and ends, shape (beams, 3), of a robot at (x, y, yaw): the beams as 3-D
+        rays, as Bullet's ray test takes them (the sim's own cast, fleetcast.py, turns the
+        same ``cos`` and ``sin`` by the yaw; the tests compare the two)."""
         n = self.params.beams
         # the beam directions turned by the robot's yaw: cos(a + yaw), sin(a + yaw)
         cy, sy = math.cos(yaw), math.sin(yaw)
