@@ -205,11 +205,12 @@ class FleetCast:
         centre = centre_rad / inc  # in beams
         spread = half[src] / inc + SLACK_BEAMS
         lo = np.ceil(centre - spread).astype(np.intp)
-        count = np.clip(np.floor(centre + spread).astype(np.intp) - lo + 1, 0, n)
-        which, beam = spans(lo, count)  # every (copy, beam) within the copies' extents
-        # beams past either end of a partial field of view do not exist
-        exists = full[which] | ((beam >= 0) & (beam < n[which]))
-        which, beam = which[exists], beam[exists]
+        hi = np.floor(centre + spread).astype(np.intp)
+        # a full turn's window covers each beam once at most; a partial field of view's
+        # beams past either end do not exist
+        hi = np.where(full, np.minimum(hi, lo + n - 1), np.minimum(hi, n - 1))
+        lo = np.where(full, lo, np.maximum(lo, 0))
+        which, beam = spans(lo, np.maximum(hi - lo + 1, 0))  # every (copy, beam) within
         off = beam * inc[which] - centre_rad[which]
         return src[which], beam % n[which], off
 

@@ -421,3 +421,27 @@ def test_a_noisy_turned_map_of_thousands_of_faces_is_cast_as_the_reference() -> 
     for i, one in enumerate(got):
         assert_cast_is_reference(one, reference(world, lidars, poses, i), i)
         assert np.mean(one[0]) > 0.5  # the specks are everywhere
+
+
+def test_a_lidar_of_one_or_two_beams_meets_what_is_in_their_way() -> None:
+    # a shape's window of candidate beams can be wider than the lidar's field of view and
+    # start before its first beam: the beams within must all be tested
+    grid = OccupancyGrid(np.full((40, 40), FREE, dtype=np.uint8), 0.05, (0.0, 0.0, 0.0), "e")
+    one = replace(BURGER, lidar=replace(BURGER.lidar, beams=1, fov_rad=0.0, angle_min_rad=0.3))
+    two = replace(BURGER, lidar=replace(BURGER.lidar, beams=2, fov_rad=0.2, angle_min_rad=-0.1))
+    box = ObstacleSpec("box", "box", 1.5, 1.0, yaw=0.1, size=(0.2, 0.4, 0.3))
+    robots = (
+        RobotSpec("r1", 0.5, 0.5, model=one),
+        RobotSpec("r2", 1.0, 0.4, model=two),
+        RobotSpec("r3", 0.6, 1.5),
+    )
+    world = World("e", "e", grid, robots, obstacles=(box,))
+    cast, lidars = fleet(world)
+    rng = np.random.default_rng(1)
+    met = 0
+    for _ in range(300):
+        poses = [(r.x, r.y, float(rng.uniform(-4.0, 4.0))) for r in robots]
+        for i, got in enumerate(cast(poses, [0, 1, 2])):
+            assert_cast_is_reference(got, reference(world, lidars, poses, i), i)
+            met += int(np.sum(got[0])) if i < 2 else 0
+    assert met > 100
