@@ -19,7 +19,7 @@ import services.sim.sim as sim_module
 from common.robotmodel import load_model
 from services.sim.fleetcast import Cast, FleetCast, Pose
 from services.sim.lidar import Lidar
-from services.sim.mapserver import FREE, OCCUPIED, OccupancyGrid
+from services.sim.mapserver import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 from services.sim.outline import Outline
 from services.sim.physics import Scene
 from services.sim.robot import BURGER
@@ -445,3 +445,70 @@ def test_a_lidar_of_one_or_two_beams_meets_what_is_in_their_way() -> None:
             assert_cast_is_reference(got, reference(world, lidars, poses, i), i)
             met += int(np.sum(got[0])) if i < 2 else 0
     assert met > 100
+
+
+def _random_world(rng: np.random.Generator) -> World:
+    """A map of random specks (occupied and unknown cells) turned and moved anywhere, random
+    boxes and cylinders, and robots of random bodies and lidars (1 to 800 beams, any field
+    of view and first beam, any height and range) placed clear of everything."""
+    rows, cols = (int(v) for v in rng.integers(10, 80, size=2))
+    cells = rng.choice([FREE, OCCUPIED, UNKNOWN], p=[0.9, 0.07, 0.03], size=(rows, cols))
+    origin = (float(rng.uniform(-3, 3)), float(rng.uniform(-3, 3)), float(rng.uniform(-3.2, 3.2)))
+    grid = OccupancyGrid(cells.astype(np.uint8), float(rng.choice([0.025, 0.05, 0.1])), origin, "f")
+    obstacles = []
+    for j in range(int(rng.integers(0, 6))):
+        x, y = grid.cell_to_world(*rng.uniform(0, [cols, rows]))
+        if rng.random() < 0.5:
+            size = (*rng.uniform(0.05, 0.6, size=2).tolist(), float(rng.uniform(0.05, 0.5)))
+            yaw = float(rng.uniform(-3, 3))
+            obstacles.append(ObstacleSpec(f"b{j}", "box", x, y, yaw=yaw, size=size))
+        else:
+            r, h = float(rng.uniform(0.03, 0.3)), float(rng.uniform(0.05, 0.5))
+            obstacles.append(ObstacleSpec(f"c{j}", "cylinder", x, y, size=(2 * r, 2 * r, h)))
+    walls = float(rng.uniform(0.1, 0.5))
+    world = World("f", "f", grid, (), obstacles=tuple(obstacles), wall_height_m=walls)
+    robots: list[RobotSpec] = []
+    wanted = int(rng.integers(1, 8))
+    for _ in range(500):
+        if len(robots) == wanted:
+            break
+        beams = int(rng.integers(1, 800))
+        fov = 2 * math.pi if rng.random() < 0.4 else float(rng.uniform(0.05, 6.2))
+        lidar = replace(
+            BURGER.lidar,
+            beams=beams,
+            fov_rad=0.0 if beams == 1 and fov < 6 else fov,
+            angle_min_rad=float(rng.uniform(-4, 4)),
+            range_max_m=float(rng.uniform(0.5, 12)),
+            height_m=float(rng.uniform(0.05, 0.4)),
+        )
+        radius = float(rng.uniform(0.05, 0.3))
+        body = replace(
+            BURGER, lidar=lidar, footprint_radius_m=radius, height_m=float(rng.uniform(0.1, 0.5))
+        )
+        x, y = grid.cell_to_world(*rng.uniform(0, [cols, rows]))
+        clear = all(
+            math.hypot(x - o.x, y - o.y) > radius + o.model.footprint_radius_m for o in robots
+        )
+        if clear and world.blocked(x, y, radius) is None:
+            robots.append(
+                RobotSpec(f"r{len(robots)}", x, y, float(rng.uniform(-3.2, 3.2)), model=body)
+            )
+    return replace(world, robots=tuple(robots))
+
+
+def test_random_worlds_and_lidars_are_cast_as_the_reference() -> None:
+    rng = np.random.default_rng(12)
+    beams = 0
+    for _ in range(60):
+        world = _random_world(rng)
+        if not world.robots:
+            continue
+        cast, lidars = fleet(world)
+        poses = [(r.x, r.y, r.yaw) for r in world.robots]
+        count = int(rng.integers(1, len(poses) + 1))
+        scanning = sorted(rng.choice(len(poses), size=count, replace=False).tolist())
+        for i, got in zip(scanning, cast(poses, scanning), strict=True):
+            assert_cast_is_reference(got, reference(world, lidars, poses, i), i)
+            beams += int(np.sum(got[0]))
+    assert beams > 5000  # beams that met something
