@@ -15,8 +15,9 @@ point is on its left: the faces turned away from a lidar are left out before any
 tested (a lidar never stands inside a wall or an obstacle: robots are kept out of them).
 
 Faces are cut into pieces at most ``BUCKET_M`` long and filed in square buckets of that side
-by their midpoints, so that a lidar looks only at the faces of the buckets its reach covers:
-a map of tens of thousands of faces (a noisy scan of a building) costs each cast its
+by their midpoints (larger pieces and buckets in a world so wide that there would be more
+than MAX_BUCKETS a side), so that a lidar looks only at the faces of the buckets its reach
+covers: a map of tens of thousands of faces (a noisy scan of a building) costs each cast its
 neighbourhood, not the whole map.
 """
 
@@ -35,8 +36,11 @@ from services.sim.world import World
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
 
-# the longest piece of a face, and the side of a bucket, m
+# the longest piece of a face, and the side of a bucket, m; in a world wider than
+# MAX_BUCKETS of them (an obstacle placed far off the map) the buckets grow to keep their
+# number bounded
 BUCKET_M = 1.0
+MAX_BUCKETS = 512
 
 
 @dataclass(frozen=True)
@@ -53,6 +57,7 @@ class Outline:
     radius: FloatArray  # (discs,)
     disc_top: FloatArray  # (discs,)
     corner: tuple[float, float]
+    side: float  # of a bucket, and the longest piece of a face, m
     columns: int
     rows: int
     first: IntArray  # (buckets + 1,)
@@ -75,11 +80,14 @@ class Outline:
             faces += [(corners[k], corners[(k + 1) % 4], sz) for k in range(4)]
         a = np.array([f[0] for f in faces], dtype=np.float64).reshape(-1, 2)
         b = np.array([f[1] for f in faces], dtype=np.float64).reshape(-1, 2)
-        a, b, top = _cut(a, b, np.array([f[2] for f in faces], dtype=np.float64))
+        ends = np.concatenate([a, b])
+        extent = float((ends.max(axis=0) - ends.min(axis=0)).max()) if len(ends) else 0.0
+        side = max(BUCKET_M, extent / MAX_BUCKETS)
+        a, b, top = _cut(a, b, np.array([f[2] for f in faces], dtype=np.float64), side)
         d = np.array(discs, dtype=np.float64).reshape(-1, 4)
         middle = (a + b) / 2.0
         corner = middle.min(axis=0) if len(middle) else np.zeros(2)
-        cell = np.floor((middle - corner) / BUCKET_M).astype(np.intp)
+        cell = np.floor((middle - corner) / side).astype(np.intp)
         columns, rows = (cell.max(axis=0) + 1).tolist() if len(cell) else (1, 1)
         bucket = cell[:, 1] * columns + cell[:, 0]
         order = np.argsort(bucket, kind="stable")
@@ -92,6 +100,7 @@ class Outline:
             d[:, 2],
             d[:, 3],
             (float(corner[0]), float(corner[1])),
+            side,
             int(columns),
             int(rows),
             first,
@@ -100,10 +109,11 @@ class Outline:
     def near(self, xy: FloatArray, reach: FloatArray) -> tuple[IntArray, IntArray]:
         """(k, face) for every face that may lie within ``reach[k]`` of point ``xy[k]``: the
         faces of every bucket within reach (a superset; the caller tests each exactly)."""
-        # a piece is at most BUCKET_M long: its points are within half that of its midpoint
-        span = reach + BUCKET_M / 2.0
-        low = np.floor((xy - span[:, None] - self.corner) / BUCKET_M).astype(np.intp)
-        high = np.floor((xy + span[:, None] - self.corner) / BUCKET_M).astype(np.intp)
+        # a piece is at most a bucket's side long: its points are within half that of its
+        # midpoint
+        span = reach + self.side / 2.0
+        low = np.floor((xy - span[:, None] - self.corner) / self.side).astype(np.intp)
+        high = np.floor((xy + span[:, None] - self.corner) / self.side).astype(np.intp)
         c0, c1 = np.maximum(low[:, 0], 0), np.minimum(high[:, 0], self.columns - 1)
         r0, r1 = np.maximum(low[:, 1], 0), np.minimum(high[:, 1], self.rows - 1)
         # one run of buckets per (point, bucket row): a row's buckets c0..c1 are contiguous
@@ -147,10 +157,10 @@ def spans(lo: IntArray, count: IntArray) -> tuple[IntArray, IntArray]:
 
 
 def _cut(
-    a: FloatArray, b: FloatArray, top: FloatArray
+    a: FloatArray, b: FloatArray, top: FloatArray, side: float
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """The faces cut into equal pieces at most BUCKET_M long."""
-    pieces = np.maximum(np.ceil(np.hypot(*(b - a).T) / BUCKET_M).astype(np.intp), 1)
+    """The faces cut into equal pieces at most ``side`` long."""
+    pieces = np.maximum(np.ceil(np.hypot(*(b - a).T) / side).astype(np.intp), 1)
     face, m = spans(np.zeros(len(pieces), dtype=np.intp), pieces)
     step = (b - a)[face] / pieces[face, None]
     start = a[face] + step * m[:, None]

@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from services.sim.mapserver import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
-from services.sim.outline import BUCKET_M, Outline, grid_faces
+from services.sim.outline import BUCKET_M, MAX_BUCKETS, Outline, grid_faces
 from services.sim.robot import BURGER
 from services.sim.world import ObstacleSpec, RobotSpec, World
 
@@ -153,3 +153,18 @@ def test_near_finds_every_face_within_reach() -> None:
     want = set(zip(*np.nonzero(gap <= reach[:, None]), strict=True))
     assert want <= found and len(want) > 1000
     assert len(found) < 0.5 * 400 * len(outline.a)  # and not every face: the buckets work
+
+
+def test_a_world_reaching_far_off_the_map_keeps_its_buckets_few() -> None:
+    # a crate 100 km away and a 50 km wall: wider buckets and longer pieces, not millions
+    far = ObstacleSpec("far", "box", 1e5, -1e5, size=(1.0, 1.0, 1.0))
+    wall = ObstacleSpec("wall", "box", 0.0, 3.0, size=(5e4, 0.2, 1.0))
+    outline = Outline.of(world(grid(["......"] * 6), (far, wall)))
+    assert outline.columns <= MAX_BUCKETS + 1 and outline.rows <= MAX_BUCKETS + 1
+    length = np.hypot(*(outline.b - outline.a).T)
+    assert length.max() <= outline.side + 1e-9 and len(length) < 1000
+    # and every face is still found within reach
+    k, f = outline.near(np.array([[0.0, 2.5], [1e5 - 1.0, -1e5]]), np.array([1.0, 1.0]))
+    names = {(int(i), tuple(np.round(outline.a[j], 3))) for i, j in zip(k, f, strict=True)}
+    assert any(i == 0 and a[1] == 2.9 for i, a in names)  # the wall's near face
+    assert any(i == 1 and a[0] == 1e5 - 0.5 for i, a in names)  # the crate's west face
