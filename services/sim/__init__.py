@@ -10,7 +10,7 @@ Modules, one concept each:
 - lidar      beam geometry and noisy ranges
 - battery    the drain and charge model
 - clock      sim-time schedules, wall-clock pacing, --rate
-- physics    the pybullet scene: bodies, contact tests (and Bullet's ray cast, for tests)
+- physics    the pybullet scene: bodies, contact tests
 - outline    a world's walls and obstacles as a 2-D lidar sees them
 - fleetcast  every scanning robot's lidar, cast together in closed form
 - messages   the contract payloads the sim publishes, and cmd_vel parsing

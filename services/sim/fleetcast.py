@@ -56,7 +56,6 @@ class FleetCast:
         self.radius = np.concatenate([outline.radius, [m.footprint_radius_m for m in models]])
         self.top = np.concatenate([outline.disc_top, [m.height_m for m in models]])
         self.owner = np.concatenate([np.full(len(outline.radius), -1), np.arange(n)])
-        self._static_xy = outline.centre
         self.beams = np.array([lidar.params.beams for lidar in lidars], dtype=np.intp)
         inc = np.array([lidar.params.angle_increment for lidar in lidars])
         # a one-beam partial lidar has no increment: any width stands in (windows only choose
@@ -169,7 +168,7 @@ class FleetCast:
         """The discs (cylinder obstacles, the other robots) within each scanner's reach and as
         tall as its beams: (scanner, disc, distance between the centres, bearing of the disc's
         centre, half its angular width), angles in rad in the world's frame."""
-        centres = np.concatenate([self._static_xy, xy])
+        centres = np.concatenate([self.outline.centre, xy])
         offsets = centres[None, :, :] - xy[index][:, None, :]
         dist = np.hypot(offsets[..., 0], offsets[..., 1])
         near = dist <= (self.range_max[index][:, None] + self.radius[None, :])

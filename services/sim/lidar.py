@@ -34,25 +34,6 @@ class Lidar:
         self.cos = np.cos(angles)
         self.sin = np.sin(angles)
 
-    def rays(self, x: float, y: float, yaw: float) -> tuple[FloatArray, FloatArray]:
-        """Ray starts and ends, shape (beams, 3), of a robot at (x, y, yaw): the beams as 3-D
-        rays, as Bullet's ray test takes them (the sim's own cast, fleetcast.py, turns the
-        same ``cos`` and ``sin`` by the yaw; the tests compare the two)."""
-        n = self.params.beams
-        # the beam directions turned by the robot's yaw: cos(a + yaw), sin(a + yaw)
-        cy, sy = math.cos(yaw), math.sin(yaw)
-        dx = self.cos * cy - self.sin * sy
-        dy = self.sin * cy + self.cos * sy
-        starts = np.empty((n, 3))
-        starts[:, 0] = x
-        starts[:, 1] = y
-        starts[:, 2] = self.height
-        ends = np.empty((n, 3))
-        ends[:, 0] = x + dx * self.params.range_max_m
-        ends[:, 1] = y + dy * self.params.range_max_m
-        ends[:, 2] = self.height
-        return starts, ends
-
     def ranges(
         self, hit: npt.NDArray[np.bool_], fraction: FloatArray, rng: np.random.Generator
     ) -> FloatArray:

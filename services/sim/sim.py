@@ -248,13 +248,7 @@ class Simulation:
         casts: dict[int, Cast] = {}
         if scanning:
             poses = [(r.x, r.y, r.yaw) for r in self.robots]
-            casts = dict(
-                zip(
-                    scanning,
-                    self.cast(poses, scanning),
-                    strict=True,
-                )
-            )
+            casts = dict(zip(scanning, self.cast(poses, scanning), strict=True))
         for i, robot in enumerate(self.robots):
             due = self._schedule[i]
             if due[ODOM].due(step):

@@ -52,6 +52,22 @@ BULLET_RANGE_M = 0.01
 WALL_RANGE_M = 1e-6
 
 
+def rays(lidar: Lidar, pose: Pose) -> tuple[np.ndarray, np.ndarray]:
+    """A robot's beams as 3-D rays from its centre to its range's end, as Bullet's ray test
+    takes them (the beams' directions from the lidar's ``cos`` and ``sin``, turned by the
+    robot's yaw, as the sim's cast turns them)."""
+    x, y, yaw = pose
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    reach = lidar.params.range_max_m
+    dx = lidar.cos * cy - lidar.sin * sy
+    dy = lidar.sin * cy + lidar.cos * sy
+    starts = np.column_stack(
+        [np.full(len(dx), x), np.full(len(dx), y), np.full(len(dx), lidar.height)]
+    )
+    ends = np.column_stack([x + dx * reach, y + dy * reach, np.full(len(dx), lidar.height)])
+    return starts, ends
+
+
 def _slab(o: np.ndarray, d: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Per ray o + s d (s in [0, 1)), the nearest s at which it enters any of the axis-aligned
     boxes [lo, hi], inf where it enters none."""
@@ -82,7 +98,7 @@ def static_reference(world: World, lidar: Lidar, pose: Pose) -> np.ndarray:
     """Per beam, the fraction along its ray at which it first enters a wall or an obstacle as
     tall as its height (inf: none): each rectangle of occupied cells a box in the map's frame,
     each box obstacle one in its own, each cylinder a disc."""
-    starts, ends = lidar.rays(*pose)
+    starts, ends = rays(lidar, pose)
     z = lidar.height
     best = np.full(len(starts), np.inf)
     g = world.grid
@@ -119,7 +135,7 @@ def reference(world: World, lidars: Sequence[Lidar], poses: Sequence[Pose], i: i
     top reaches the beams' height) each beam's ray enters."""
     lidar = lidars[i]
     best = static_reference(world, lidar, poses[i])
-    starts, ends = lidar.rays(*poses[i])
+    starts, ends = rays(lidar, poses[i])
     for j, (x, y, _) in enumerate(poses):
         model = world.models[j]
         if j != i and model.height_m >= lidar.height:
@@ -132,7 +148,7 @@ def reference(world: World, lidars: Sequence[Lidar], poses: Sequence[Pose], i: i
 def grazing(world: World, lidar: Lidar, poses: Sequence[Pose], i: int) -> np.ndarray:
     """Robot i's beams that pass within GRAZE_M of a corner of the outline, of a box, or of
     the edge of a cylinder or another robot, ahead of it."""
-    starts, ends = lidar.rays(*poses[i])
+    starts, ends = rays(lidar, poses[i])
     length = lidar.params.range_max_m
     ux, uy = (ends[:, 0] - starts[:, 0]) / length, (ends[:, 1] - starts[:, 1]) / length
     x0, y0, _ = poses[i]
@@ -159,7 +175,7 @@ def bullet_cast(scene: Scene, index: int, pose: Pose, lidar: Lidar) -> Cast:
         body, [0.0, 0.0, -10.0], [0, 0, 0, 1], physicsClientId=scene.client
     )
     try:
-        starts, ends = lidar.rays(*pose)
+        starts, ends = rays(lidar, pose)
         results = p.rayTestBatch(starts, ends, physicsClientId=scene.client)
     finally:
         scene.place(index, *pose)
