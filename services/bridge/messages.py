@@ -15,8 +15,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Collection, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Final
+
+import numpy as np
+import numpy.typing as npt
 
 from common import bus
 from common.contract import keys
@@ -104,6 +107,9 @@ class LaserScan:
     range_min: float
     range_max: float
     ranges: list[float]
+    # ``ranges`` as float64, when validation already made it (the safety layer's geometry
+    # and the row image start from it; a record built by hand has None)
+    array: npt.NDArray[np.float64] | None = field(default=None, compare=False, repr=False)
 
 
 @dataclass(frozen=True, slots=True)
@@ -252,6 +258,21 @@ def parse_scan(robot_id: str, body: dict[str, Any], beams: int | None = None) ->
             BEAM_COUNT,
             f"{len(ranges)} beams {increment:g} rad apart sweep more than a full turn",
         )
+    if set(map(type, ranges)) == {float}:
+        # the sim's and any float64 writer's: every value checked at once
+        array = np.array(ranges, dtype=np.float64)
+        # refuses NaN (every comparison with it is false), -inf, negatives, and finite values
+        # too large for real[]; +inf ("nothing in range") passes
+        if (((array >= 0.0) & (array <= MAX_RANGE_M)) | (array == math.inf)).all():
+            return LaserScan(
+                robot_id, stamp, seq, angle_min, increment, range_min, range_max, ranges, array
+            )
+    values = _ranges(ranges)  # raises the first fault; ints become floats
+    return LaserScan(robot_id, stamp, seq, angle_min, increment, range_min, range_max, values)
+
+
+def _ranges(ranges: list[Any]) -> list[float]:
+    """``ranges`` checked one by one: MalformedMessage naming the first bad value."""
     converted = False
     for i, value in enumerate(ranges):
         kind = type(value)
@@ -259,12 +280,9 @@ def parse_scan(robot_id: str, body: dict[str, Any], beams: int | None = None) ->
             if kind is not int:  # also refuses bool, whose type is not int
                 raise MalformedMessage(WRONG_TYPE, f"ranges[{i}] is a {_kind(value)}")
             converted = True
-        # refuses NaN (every comparison with it is false), -inf, negatives, and finite values
-        # too large for real[]; +inf ("nothing in range") passes
         if not 0 <= value <= MAX_RANGE_M and value != math.inf:
             raise MalformedMessage(BAD_RANGE, f"ranges[{i}]={value} (NaN, negative or huge)")
-    values = [float(v) for v in ranges] if converted else ranges
-    return LaserScan(robot_id, stamp, seq, angle_min, increment, range_min, range_max, values)
+    return [float(v) for v in ranges] if converted else ranges
 
 
 def parse_battery(robot_id: str, body: dict[str, Any]) -> BatteryState:

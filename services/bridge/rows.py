@@ -23,6 +23,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from common.contract import keys
 from services.bridge.messages import BatteryState, Collision, LaserScan, Odometry, SensorRecord
 
@@ -153,7 +155,9 @@ def _laser_scan_image(record: Any) -> Image:
         "range_max": s.range_max,
         # real[]: each value rounded to float32 (round to nearest, as the driver and Postgres
         # do), then widened back, so these are the very floats a SELECT returns
-        "ranges": array("f", s.ranges).tolist(),
+        "ranges": (
+            s.array.astype(np.float32) if s.array is not None else array("f", s.ranges)
+        ).tolist(),
     }
 
 

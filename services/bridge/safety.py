@@ -71,37 +71,60 @@ class SafetyParams:
     blind_mps: float = math.inf
 
 
-@dataclass(frozen=True, slots=True)
 class Scan:
-    """A robot's newest scan as the layer needs it: the returns in the robot's frame."""
+    """A robot's newest scan as the layer needs it: the returns in the robot's frame.
 
-    stamp: float
-    x: FloatArray
-    y: FloatArray
+    The returns are worked out from the record on first use: most scans are superseded by
+    the next before a moving command is judged against them.
+    """
+
+    __slots__ = ("_record", "_xy", "stamp")
+
+    def __init__(self, record: LaserScan) -> None:
+        self.stamp = record.stamp
+        self._record = record
+        self._xy: tuple[FloatArray, FloatArray] | None = None
 
     @classmethod
     def of(cls, record: LaserScan) -> Scan:
-        ranges = np.asarray(record.ranges, dtype=np.float64)
-        angles = record.angle_min + record.angle_increment * np.arange(len(ranges))
-        # inf is "nothing in range"; below range_min a beam carries no information (ROS)
-        valid = np.isfinite(ranges) & (ranges >= record.range_min - _RANGE_TOLERANCE_M)
-        r, a = ranges[valid], angles[valid]
-        return cls(record.stamp, r * np.cos(a), r * np.sin(a))
+        return cls(record)
+
+    @property
+    def x(self) -> FloatArray:
+        return self._returns()[0]
+
+    @property
+    def y(self) -> FloatArray:
+        return self._returns()[1]
+
+    def _returns(self) -> tuple[FloatArray, FloatArray]:
+        if self._xy is None:
+            record = self._record
+            ranges = record.array
+            if ranges is None:
+                ranges = np.asarray(record.ranges, dtype=np.float64)
+            angles = record.angle_min + record.angle_increment * np.arange(len(ranges))
+            # inf is "nothing in range"; below range_min a beam carries no information (ROS)
+            valid = np.isfinite(ranges) & (ranges >= record.range_min - _RANGE_TOLERANCE_M)
+            r, a = ranges[valid], angles[valid]
+            self._xy = (r * np.cos(a), r * np.sin(a))
+        return self._xy
 
     def free_travel(self, direction: int, radius: float) -> tuple[float, float, float]:
         """(free travel, range, bearing) of the nearest return a disc of ``radius`` would
         touch moving straight ahead (``direction`` 1) or back (-1): (inf, inf, 0) if none."""
-        along = self.x * direction
-        ahead = (along > 0.0) & (np.abs(self.y) < radius)
+        xs, ys = self._returns()
+        along = xs * direction
+        ahead = (along > 0.0) & (np.abs(ys) < radius)
         if not ahead.any():
             return math.inf, math.inf, 0.0
         index = np.flatnonzero(ahead)
-        y = self.y[index]
+        y = ys[index]
         travel = along[index] - np.sqrt(radius * radius - y * y)
         best = int(np.argmin(travel))
         i = int(index[best])
-        bearing = math.degrees(math.atan2(float(self.y[i]), float(self.x[i])))
-        return float(travel[best]), math.hypot(float(self.x[i]), float(self.y[i])), bearing
+        bearing = math.degrees(math.atan2(float(ys[i]), float(xs[i])))
+        return float(travel[best]), math.hypot(float(xs[i]), float(ys[i])), bearing
 
 
 @dataclass(frozen=True, slots=True)

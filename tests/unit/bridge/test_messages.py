@@ -130,3 +130,38 @@ def test_a_key_of_another_topic_is_refused() -> None:
     with pytest.raises(MalformedMessage) as caught:
         parse_sensor(keys.ODOM, keys.robot_key("r1", keys.SCAN), pack(payloads.odom()), KNOWN)
     assert caught.value.reason == messages.BAD_ROBOT_ID
+
+
+@pytest.mark.parametrize(
+    ("value", "reason", "detail"),
+    [
+        (math.nan, "bad_range", "ranges[7]=nan"),
+        (-0.5, "bad_range", "ranges[7]=-0.5"),
+        (-math.inf, "bad_range", "ranges[7]=-inf"),
+        (2e4, "bad_range", "ranges[7]=20000.0"),
+        (True, "wrong_type", "ranges[7] is a bool"),
+        (None, "wrong_type", "ranges[7] is a nil"),
+        ("1.0", "wrong_type", "ranges[7] is a str"),
+    ],
+)
+def test_a_bad_beam_among_floats_is_named_by_its_index(
+    value: Any, reason: str, detail: str
+) -> None:
+    # the later bad beam must not be the one reported: every float is checked at once first
+    ranges: list[Any] = payloads.scan_ranges()
+    ranges[7], ranges[300] = value, -1.0
+    with pytest.raises(MalformedMessage) as caught:
+        parse(keys.SCAN, payloads.scan(ranges=ranges))
+    assert caught.value.reason == reason
+    assert caught.value.detail.split(" (")[0] == detail
+
+
+def test_a_scan_of_floats_carries_its_ranges_as_an_array_too() -> None:
+    floats = parse(keys.SCAN, payloads.scan())
+    assert isinstance(floats, LaserScan) and floats.array is not None
+    assert floats.array.tolist() == floats.ranges == payloads.scan_ranges()
+    # a lenient writer's integers take the one-by-one way: floats, and no array
+    mixed = parse(keys.SCAN, payloads.scan(ranges=[1, *payloads.scan_ranges()[1:]]))
+    assert isinstance(mixed, LaserScan) and mixed.array is None
+    assert type(mixed.ranges[0]) is float
+    assert mixed.ranges == [1.0, *payloads.scan_ranges()[1:]]

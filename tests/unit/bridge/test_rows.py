@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from array import array
 
+import numpy as np
+
 from common.contract import keys
 from services.bridge.messages import LaserScan, Odometry
 from services.bridge.rows import SENSOR_TABLES, newest_per_robot
@@ -69,3 +71,16 @@ def test_a_scan_image_holds_its_ranges_as_real_keeps_them() -> None:
         "ranges",
     }
     assert LASER_SCAN.name == keys.LASER_SCAN
+
+
+def test_a_scan_image_is_the_same_from_a_validated_scan_as_from_its_list() -> None:
+    ranges = [0.1 * i + 1e-9 for i in range(359)] + [math.inf]
+    by_hand = LaserScan("r1", 1.0, 3, 0.0, math.tau / 360, 0.12, 3.5, ranges)
+    validated = LaserScan(
+        "r1", 1.0, 3, 0.0, math.tau / 360, 0.12, 3.5, ranges, np.array(ranges, dtype=np.float64)
+    )
+    [(_, _, one)] = newest_per_robot(LASER_SCAN, [by_hand], [(5, "r1")], images=True)
+    [(_, _, other)] = newest_per_robot(LASER_SCAN, [validated], [(5, "r1")], images=True)
+    assert one is not None and other is not None
+    assert other["ranges"] == one["ranges"] == list(array("f", ranges))
+    assert all(type(r) is float for r in other["ranges"])  # msgpack packs them as floats

@@ -6,8 +6,10 @@ import math
 
 import pytest
 
+from common import bus
+from common.contract import keys
 from common.errors import ConfigError
-from services.bridge.messages import LaserScan
+from services.bridge.messages import LaserScan, parse_sensor
 from services.bridge.safety import (
     CLEAR,
     LIMITED,
@@ -221,3 +223,27 @@ def test_a_partial_field_of_view_checks_the_beams_it_has() -> None:
     # free travel 0.28 m, minus the margin: 0.23 m; 2 m/s needs 0.2 + 0.2 m at 10 m/s^2
     assert verdict.outcome == LIMITED
     assert stopping_m(verdict.linear, 0.1, 10.0) == pytest.approx(0.5 - 0.22 - 0.05, abs=1e-3)
+
+
+def test_a_validated_scan_is_judged_as_the_same_scan_built_by_hand() -> None:
+    # the bridge's records carry their ranges as an array too (parse_scan); the verdicts and
+    # the reasons they give must not depend on which the layer started from
+    obstacles = ((0.31, 2.0), (0.5, -8.0), (0.25, 181.0), (0.12, 95.0))
+    by_hand = scan(1.0, *obstacles)
+    validated = parse_sensor(
+        keys.SCAN,
+        keys.robot_key("r1", keys.SCAN),
+        bus.pack({**_scan_body(by_hand), "seq": 0}),
+        {"r1": 360},
+    )
+    assert isinstance(validated, LaserScan) and validated.array is not None
+    for linear in (0.22, 0.1, -0.22, 0.05, 0.0):
+        one, other = layer(), layer()
+        one.scan(by_hand)
+        other.scan(validated)
+        assert other.judge("r1", linear, R, 1.05, DECEL) == one.judge("r1", linear, R, 1.05, DECEL)
+
+
+def _scan_body(record: LaserScan) -> dict[str, object]:
+    fields = ("stamp", "angle_min", "angle_increment", "range_min", "range_max", "ranges")
+    return {name: getattr(record, name) for name in fields}
