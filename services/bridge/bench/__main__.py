@@ -10,6 +10,8 @@ import platform
 import sys
 from typing import Any
 
+import psutil
+
 import services.bridge.bench as package
 from services.bridge.bench import legs
 from services.bridge.bench.latency import Notifications, summary_ms
@@ -28,7 +30,16 @@ async def run(args: argparse.Namespace) -> dict[str, Any]:
         try:
             player = Player(stack.session, robots)
             await asyncio.sleep(1.0)  # the bridge's subscriptions are in place
-            steady = await legs.steady(stack.conn, player, notes, args.seconds)
+            bridge = psutil.Process(stack.pid)
+            cpu_s, sent = _cpu_s(bridge), len(player.sent)
+            steady = await legs.steady(
+                stack.conn, player, notes, args.seconds, args.odom_hz, args.scan_hz
+            )
+            # everything the bridge did for the steady leg's messages: validate, write,
+            # notify, and its own housekeeping meanwhile
+            cpu_s, sent = _cpu_s(bridge) - cpu_s, len(player.sent) - sent
+            steady["bridge_cpu_s"] = round(cpu_s, 3)
+            steady["bridge_cpu_us_per_message"] = round(1e6 * cpu_s / sent, 1) if sent else None
             burst = await legs.burst(stack.conn, player, notes, args.burst)
         finally:
             notes.close()
@@ -52,10 +63,17 @@ async def run(args: argparse.Namespace) -> dict[str, Any]:
     }
 
 
+def _cpu_s(process: psutil.Process) -> float:
+    times = process.cpu_times()
+    return float(times.user + times.system)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog=PROG, description=package.__doc__)
     parser.add_argument("--seconds", type=float, default=10.0, help="steady phase length")
     parser.add_argument("--robots", type=int, default=1)
+    parser.add_argument("--odom-hz", type=float, default=30.0, help="steady odometry rate")
+    parser.add_argument("--scan-hz", type=float, default=5.0, help="steady scan rate")
     parser.add_argument("--burst", type=int, default=3000, help="odometry messages in the burst")
     parser.add_argument("--json", help="also write the JSON result to this file")
     args = parser.parse_args(argv)

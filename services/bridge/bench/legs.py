@@ -28,9 +28,14 @@ BURST_QUIET_S = 2.0
 
 
 async def steady(
-    conn: asyncpg.Connection, player: Player, notes: Notifications, seconds: float
+    conn: asyncpg.Connection,
+    player: Player,
+    notes: Notifications,
+    seconds: float,
+    odom_hz: float = 30.0,
+    scan_hz: float = 5.0,
 ) -> dict[str, Any]:
-    """Odometry at 30 Hz and scans at 5 Hz per robot for ``seconds``, after a warm-up."""
+    """Odometry and scans at their rates per robot for ``seconds``, after a warm-up."""
     # Warm-up, not measured: the first sample of a new publisher costs Zenoh a few ms
     # more (measured 6-40 ms on this machine), once per stream.
     for robot in player.robots:
@@ -38,12 +43,14 @@ async def steady(
             player.publish(robot, topic)
     await asyncio.sleep(0.5)
     warm = dict(player.seq)
-    await asyncio.to_thread(player.steady, seconds)
+    await asyncio.to_thread(player.steady, seconds, odom_hz, scan_hz)
     await asyncio.sleep(0.5)
     rows = await read_rows(conn, {})
     visible, inserted = latencies(player, notes.take(), rows, warm)
     return {
         "seconds": seconds,
+        "odom_hz": odom_hz,
+        "scan_hz": scan_hz,
         "odom_to_notification": summary_ms(visible[keys.ODOM]),
         "scan_to_notification": summary_ms(visible[keys.SCAN]),
         "odom_to_received_at": summary_ms(inserted[keys.ODOM]),

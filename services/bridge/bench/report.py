@@ -16,7 +16,9 @@ def report(result: dict[str, Any]) -> str:
     return "\n".join(
         [
             f"bridge benchmark: {result['robots']} robot(s), {result['machine']['cpus']} CPUs",
-            f"steady ({st['seconds']} s, odom 30 Hz + scan 5 Hz per robot):",
+            f"steady ({st['seconds']} s, odom {st['odom_hz']:g} Hz + scan {st['scan_hz']:g} Hz"
+            f" per robot): the bridge {st['bridge_cpu_s']} CPU s,"
+            f" {st['bridge_cpu_us_per_message']} us a message",
             line("odom -> notification", st["odom_to_notification"]),
             line("scan -> notification", st["scan_to_notification"]),
             line("odom -> received_at", st["odom_to_received_at"]),

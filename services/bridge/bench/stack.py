@@ -101,6 +101,12 @@ class BenchStack:
             await asyncio.sleep(0.05)
         return time.monotonic() - started
 
+    @property
+    def pid(self) -> int:
+        """The bridge process's id."""
+        assert self.child is not None, "start_bridge first"
+        return self.child.pid
+
     async def stop_bridge(self) -> int:
         """SIGTERM the bridge, as a supervisor would; its exit code."""
         assert self.child is not None, "start_bridge first"
