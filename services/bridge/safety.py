@@ -85,10 +85,6 @@ class Scan:
         self._record = record
         self._xy: tuple[FloatArray, FloatArray] | None = None
 
-    @classmethod
-    def of(cls, record: LaserScan) -> Scan:
-        return cls(record)
-
     @property
     def x(self) -> FloatArray:
         return self._returns()[0]
@@ -167,7 +163,7 @@ class SafetyLayer:
             return
         held = self.scans.get(record.robot_id)
         if held is None or record.stamp >= held.stamp:
-            self.scans[record.robot_id] = Scan.of(record)
+            self.scans[record.robot_id] = Scan(record)
 
     def judge(
         self, robot: str, linear: float, radius: float, now: float | None, decel_mps2: float
