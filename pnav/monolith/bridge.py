@@ -185,8 +185,7 @@ def _row(record: SensorRecord) -> Row:
             "angular_rps": record.angular,
         }
     if isinstance(record, LaserScan):
-        values = record.ranges if record.array is None else record.array
-        ranges = np.asarray(values, dtype=np.float32)  # real[]
+        ranges = record.values().astype(np.float32)  # real[]
         ranges.flags.writeable = False  # shared by every reader of the row: never changed
         return common | {
             "seq": record.seq,

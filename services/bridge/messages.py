@@ -111,6 +111,10 @@ class LaserScan:
     # and the row image start from it; a record built by hand has None)
     array: npt.NDArray[np.float64] | None = field(default=None, compare=False, repr=False)
 
+    def values(self) -> npt.NDArray[np.float64]:
+        """``ranges`` as a float64 array: the one validation made, or one made now."""
+        return self.array if self.array is not None else np.asarray(self.ranges, np.float64)
+
 
 @dataclass(frozen=True, slots=True)
 class BatteryState:

@@ -18,7 +18,6 @@ so not in the image.
 
 from __future__ import annotations
 
-from array import array
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -155,9 +154,7 @@ def _laser_scan_image(record: Any) -> Image:
         "range_max": s.range_max,
         # real[]: each value rounded to float32 (round to nearest, as the driver and Postgres
         # do), then widened back, so these are the very floats a SELECT returns
-        "ranges": (
-            s.array.astype(np.float32) if s.array is not None else array("f", s.ranges)
-        ).tolist(),
+        "ranges": s.values().astype(np.float32).tolist(),
     }
 
 

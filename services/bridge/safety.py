@@ -96,9 +96,7 @@ class Scan:
     def _returns(self) -> tuple[FloatArray, FloatArray]:
         if self._xy is None:
             record = self._record
-            ranges = record.array
-            if ranges is None:
-                ranges = np.asarray(record.ranges, dtype=np.float64)
+            ranges = record.values()
             angles = record.angle_min + record.angle_increment * np.arange(len(ranges))
             # inf is "nothing in range"; below range_min a beam carries no information (ROS)
             valid = np.isfinite(ranges) & (ranges >= record.range_min - _RANGE_TOLERANCE_M)
