@@ -219,31 +219,31 @@ class Database:
         sql: str,
         *args: Any,
         images: Sequence[tuple[str, Mapping[str, Any]]],
+        pair_on: tuple[str, ...] = ("robot_id",),
     ) -> list[int]:
-        """Run one statement (autocommit) that inserts one row per robot of ``images`` and
-        returns ``(id, robot_id)`` per row; then notify ``table`` for each robot with its
-        id and its image (the row's contract columns as written). One commit and one round
-        trip for all the robots: batching across robots (DESIGN.md section 7).
+        """Run one statement (autocommit) that inserts one row per ``(robot, image)`` of
+        ``images`` and returns ``id`` and the ``pair_on`` columns per row; then notify
+        ``table`` for each robot with its id and its image (the row's contract columns as
+        written). One commit and one round trip for all the rows: batching across robots
+        (DESIGN.md section 7).
 
-        The robots of ``images`` must be distinct: RETURNING's rows are paired with the
-        images by robot, whatever order they come in. The ids, in the order of ``images``.
+        RETURNING's rows are paired with the images by their ``pair_on`` columns (the
+        robot, by default), whatever order they come in, so those must be distinct across
+        ``images``. The ids, in the order of ``images``.
         """
-        robots = [robot for robot, _ in images]
-        if len(set(robots)) != len(robots):
-            raise UsageError(f"write_rows on {table}: one row per robot, got {robots}")
+        wanted = [tuple(image[column] for column in pair_on) for _, image in images]
+        if len(set(wanted)) != len(wanted):
+            raise UsageError(f"write_rows on {table}: {pair_on} repeats in {wanted}")
         records = await self.lane.fetch(sql, *args)
-        ids = {record[1]: record[0] for record in records}
+        ids = {tuple(record[column] for column in pair_on): record["id"] for record in records}
         notify = self.notifier.notify
-        for robot, image in images:
-            row_id = ids.get(robot)
+        for (robot, image), key in zip(images, wanted, strict=True):
+            row_id = ids.get(key)
             if row_id is not None:
                 notify(table, robot, row_id, {**image, "id": row_id})
-        missing = [robot for robot in robots if robot not in ids]
-        if missing or len(records) != len(robots):
-            raise InternalError(
-                f"write_rows on {table}: {len(records)} rows returned for robots {robots}"
-            )
-        return [ids[robot] for robot in robots]
+        if len(records) != len(wanted) or any(key not in ids for key in wanted):
+            raise InternalError(f"write_rows on {table}: {len(records)} rows returned for {wanted}")
+        return [ids[key] for key in wanted]
 
     @asynccontextmanager
     async def transaction(self) -> AsyncIterator[Changes]:

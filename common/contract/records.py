@@ -9,15 +9,13 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeAlias
 
 import asyncpg
 import numpy as np
 
-from common.contract import keys
-from common.db import Database
 from common.robotmodel import DEFAULT_MODEL, load_model
 
 # the robot table's defaults for the model columns are the default model's (schema.sql)
@@ -151,6 +149,26 @@ async def newest_odometry(db: Executor, robot_id: str) -> Odometry | None:
         robot_id,
     )
     return Odometry(**dict(row)) if row else None
+
+
+# LATERAL + LIMIT 1 walks the (robot_id, id DESC) index once per robot asked for
+_NEWEST_ODOMETRIES = """
+SELECT o.id, o.robot_id, o.stamp, o.x, o.y, o.yaw, o.linear_mps, o.angular_rps
+FROM unnest($1::text[]) AS r(robot_id)
+CROSS JOIN LATERAL (
+    SELECT id, robot_id, stamp, x, y, yaw, linear_mps, angular_rps FROM odometry
+    WHERE odometry.robot_id = r.robot_id ORDER BY id DESC LIMIT 1
+) o
+"""
+
+
+async def newest_odometries(db: Executor, robot_ids: Sequence[str]) -> dict[str, Odometry | None]:
+    """Each robot's newest odometry (None: none yet), in one round trip."""
+    rows = await db.fetch(_NEWEST_ODOMETRIES, list(robot_ids))
+    found: dict[str, Odometry | None] = dict.fromkeys(robot_ids)
+    for row in rows:
+        found[row["robot_id"]] = Odometry(**dict(row))
+    return found
 
 
 async def newest_scan(db: Executor, robot_id: str) -> LaserScan | None:
@@ -301,65 +319,3 @@ async def charging_stations(db: Executor) -> list[ChargingStation]:
         "SELECT station_id, x, y, radius_m FROM charging_station ORDER BY station_id"
     )
     return [ChargingStation(**dict(r)) for r in rows]
-
-
-_RECOMMEND = """
-INSERT INTO command_recommendation (robot_id, kind, source, priority, linear_mps, angular_rps,
-    system_command, stamp, expires_stamp, inputs, reason)
-VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)
-RETURNING id
-"""
-# the columns _RECOMMEND writes, in its order: the image of the row (CONTRACT.md "Row images")
-RECOMMENDATION_COLUMNS = (
-    *("robot_id", "kind", "source", "priority", "linear_mps", "angular_rps"),
-    *("system_command", "stamp", "expires_stamp", "inputs", "reason"),
-)
-
-
-async def _recommend(db: Database, robot_id: str, *values: Any) -> int:
-    args = (robot_id, *values)
-    # the row as written goes with the notification: the decision keeps the live rows from
-    # these images and reads the table only when one is missing (or at its period)
-    image = dict(zip(RECOMMENDATION_COLUMNS, args, strict=True))
-    value = await db.write(keys.COMMAND_RECOMMENDATION, robot_id, _RECOMMEND, *args, image=image)
-    return int(value)
-
-
-async def recommend_velocity(
-    db: Database,
-    robot_id: str,
-    *,
-    source: str,
-    priority: int,
-    linear: float,
-    angular: float,
-    stamp: float,
-    ttl_s: float,
-    reason: str,
-    inputs: dict[str, Any] | None = None,
-) -> int:
-    """Write a robot recommendation valid until ``stamp + ttl_s`` (sim time) and notify,
-    with the row's image."""
-    return await _recommend(
-        db, robot_id, "robot", source, priority, float(linear), float(angular), None,
-        stamp, stamp + ttl_s, inputs or {}, reason,
-    )  # fmt: skip
-
-
-async def recommend_system(
-    db: Database,
-    robot_id: str,
-    *,
-    source: str,
-    priority: int,
-    command: str,
-    stamp: float,
-    ttl_s: float,
-    reason: str,
-    inputs: dict[str, Any] | None = None,
-) -> int:
-    """Write a system recommendation (e.g. CMD_BATTSAVE) and notify, with the row's image."""
-    return await _recommend(
-        db, robot_id, "system", source, priority, None, None, command,
-        stamp, stamp + ttl_s, inputs or {}, reason,
-    )  # fmt: skip

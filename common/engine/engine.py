@@ -14,6 +14,9 @@ Our additions to the thesis:
 
 - A meta rule (``Rule.meta``) discarded because of an error is re-seeded from the factory
   given to :meth:`Engine.add_meta`, logged and counted.
+- Activation-end hooks (:meth:`Engine.at_activation_end`): awaited after an activation's
+  last rule and before it counts as ended (``under_way``), so a store that defers its rules'
+  writes sends them all in one round trip, still inside the activation.
 - Per-robot wake-ups. ``wake(robot)`` and ``hurry(robot)`` record the robot they are about
   (None: anything). An activation started only by wakes and hurries that all named robots
   is *focused* on those robots: it runs, in queue order, the rules whose ``Rule.robot_id``
@@ -33,10 +36,10 @@ import asyncio
 import logging
 import time
 from collections import deque
-from collections.abc import Callable, Iterable
+from collections.abc import Awaitable, Callable, Iterable
 
 from common.config import EngineSettings
-from common.engine.errorlog import ErrorLog
+from common.engine.errorlog import ErrorLog, error_key
 from common.engine.rule import Rule
 from common.engine.stats import EngineCounters, RuleStats
 from common.engine.steps import StepRunner
@@ -46,6 +49,7 @@ from common.errors import UsageError
 log = logging.getLogger("pnav.engine")
 
 RuleFactory = Callable[[], Rule]
+ActivationEnd = Callable[[], Awaitable[None]]
 
 
 class Engine(StepRunner):
@@ -80,6 +84,7 @@ class Engine(StepRunner):
         self.cut = False
         # Resolved when the activation under way ends (None: none is): see under_way().
         self._ending: asyncio.Future[None] | None = None
+        self._at_end: list[ActivationEnd] = []
 
     # -- putting rules in ------------------------------------------------------------------
     def add(self, rule: Rule) -> None:
@@ -96,6 +101,17 @@ class Engine(StepRunner):
         self._meta_factories[type(rule)] = factory
         self.add(rule)
         return rule
+
+    def at_activation_end(self, hook: ActivationEnd) -> None:
+        """Await ``hook()`` at the end of every activation, after its last rule and before
+        the activation counts as ended (:meth:`under_way`), in the order added.
+
+        For a store that defers the writes its rules ask for (one multi-row INSERT for the
+        activation instead of a round trip per rule: DESIGN.md section 7, batching across
+        robots). A hook owns its errors: one that raises is logged once per distinct error
+        and counted (``counters.hook_errors``); the engine runs on.
+        """
+        self._at_end.append(hook)
 
     @property
     def watched_tables(self) -> tuple[str, ...]:
@@ -120,6 +136,8 @@ class Engine(StepRunner):
                 ran, passed_over = await self._run_focused(focus, deadline)
                 self.counters.focused_activations += 1
                 self.counters.out_of_focus += passed_over
+            for hook in self._at_end:
+                await self._run_hook(hook)
         finally:
             self._ending = None
             ending.set_result(None)
@@ -131,6 +149,16 @@ class Engine(StepRunner):
         self.counters.rules_run += ran
         self.error_log.flush()
         return ran
+
+    async def _run_hook(self, hook: ActivationEnd) -> None:
+        try:
+            await hook()
+        except Exception as exc:
+            self.counters.hook_errors += 1
+            where = getattr(hook, "__qualname__", repr(hook))
+            key = error_key(type(getattr(hook, "__self__", hook)), f"end:{where}", exc)
+            message = f"engine {self.name}: activation-end hook {where} failed: {exc!r}"
+            self.error_log.report(key, logging.ERROR, message, {}, exc_info=exc)
 
     def under_way(self) -> asyncio.Future[None] | None:
         """A future resolved when the activation under way ends, or None when none is.

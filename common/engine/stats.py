@@ -60,6 +60,7 @@ class EngineCounters:
     capped_by_n: int = 0
     capped_by_f: int = 0
     meta_reseeded: int = 0
+    hook_errors: int = 0  # activation-end hooks that raised (Engine.at_activation_end)
 
     def woken_by(self, reason: str) -> None:
         """Count an activation started by ``reason`` (common.engine.trigger: NOTIFICATION,

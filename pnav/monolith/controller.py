@@ -10,7 +10,7 @@ answers :class:`~services.controller.store.PgControllerSource`; the service's ow
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -87,24 +87,17 @@ class MemoryControllerSource:
         row = self.contract[keys.PLANNED_PATH].newest(robot_id)
         return None if row is None else planned_path_of(row)
 
+    async def newest_odometries(self, robot_ids: Sequence[str]) -> dict[str, Odometry | None]:
+        return {robot_id: await self.newest_odometry(robot_id) for robot_id in robot_ids}
+
     async def recommend(self, recommendation: Recommendation) -> int:
-        r = recommendation
-        row = {
-            "robot_id": r.robot_id,
-            "kind": "robot",
-            "source": r.source,
-            "priority": r.priority,
-            "linear_mps": float(r.linear),
-            "angular_rps": float(r.angular),
-            "system_command": None,
-            "stamp": r.stamp,
-            "expires_stamp": r.stamp + r.ttl_s,
-            "inputs": dict(r.inputs),
-            "reason": r.reason,
-            "treated_by": None,
-        }
+        image = recommendation.row().image()
+        row = {**image, "inputs": dict(image["inputs"]), "treated_by": None}
         # inserted, then announced to the contract's listeners, as Database.write does
         return self.contract.insert(keys.COMMAND_RECOMMENDATION, row)
+
+    async def recommend_many(self, recommendations: Sequence[Recommendation]) -> list[int | None]:
+        return [await self.recommend(r) for r in recommendations]
 
 
 def controller_engine(
@@ -117,5 +110,6 @@ def controller_engine(
     at sim time ``now`` (which its caches count in too); the store, to be told every change
     the contract announces (``store.note``). ``scenarios``: the installed ones if None."""
     store = ControllerStore(MemoryControllerSource(contract), clock=now)
+    engine.at_activation_end(store.defer_recommendations())
     seed_controller(engine, store, installed_scenarios() if scenarios is None else scenarios)
     return store

@@ -12,7 +12,7 @@ lockstep stack.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -144,22 +144,12 @@ class MemoryPlannerSource:
         return max(expiries) if expiries else None
 
     async def recommend(self, rec: Recommendation) -> int:
-        system = rec.command is not None
-        row: Row = {
-            "robot_id": rec.robot_id,
-            "kind": "system" if system else "robot",
-            "source": rec.source,
-            "priority": rec.priority,
-            "linear_mps": None if system else float(rec.linear),
-            "angular_rps": None if system else float(rec.angular),
-            "system_command": rec.command,
-            "stamp": rec.stamp,
-            "expires_stamp": rec.stamp + rec.ttl_s,
-            "inputs": rec.inputs or {},
-            "reason": rec.reason,
-            "treated_by": None,
-        }
+        image = rec.row().image()
+        row: Row = {**image, "inputs": dict(image["inputs"]), "treated_by": None}
         return self.contract.insert(keys.COMMAND_RECOMMENDATION, row)
+
+    async def recommend_many(self, recs: Sequence[Recommendation]) -> list[int | None]:
+        return [await self.recommend(rec) for rec in recs]
 
     async def publish_path(self, path: PathRow) -> int:
         return self.contract.insert(keys.PLANNED_PATH, dict(path))
@@ -173,5 +163,6 @@ def planner_engine(
     run's clock), so a run depends on the sim alone. Hand it every change the contract
     announces (``store.note``)."""
     store = PlannerStore(MemoryPlannerSource(contract), now, now, lambda: True)
+    engine.at_activation_end(store.defer_recommendations())
     meta.seed(engine, store, meta.move_scenarios())
     return store

@@ -29,6 +29,7 @@ from typing import Any, ClassVar, Protocol
 
 from common import log
 from common.contract.planned_path import PlannedPath
+from common.contract.recommendations import RecommendationRow
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
 from common.engine.supervisor import Supervised, Ticket
 from common.errors import InternalError
@@ -72,6 +73,14 @@ class Recommendation:
     reason: str
     inputs: dict[str, Any]
 
+    def row(self) -> RecommendationRow:
+        """The command_recommendation row it is written as."""
+        return RecommendationRow.velocity(
+            self.robot_id, source=self.source, priority=self.priority, linear=self.linear,
+            angular=self.angular, stamp=self.stamp, ttl_s=self.ttl_s, reason=self.reason,
+            inputs=self.inputs,
+        )  # fmt: skip
+
     @property
     def scan_id(self) -> int | None:
         """The laser_scan row it was derived from (``inputs.laser_scan``)."""
@@ -113,7 +122,9 @@ class Host(Protocol):
     def last_recommended_scan(self, robot_id: str, source: str) -> int | None:
         """The newest scan ``source`` recommended on for the robot (this tenure), if any."""
 
-    async def recommend(self, recommendation: Recommendation) -> int: ...
+    async def recommend(self, recommendation: Recommendation) -> None:
+        """Write the recommendation (the controller's store holds it until the end of the
+        activation and writes the activation's rows in one statement)."""
 
 
 class ControllerScenario(Supervised[Key, ScenarioSpec]):

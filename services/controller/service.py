@@ -13,11 +13,10 @@ import time
 
 from common import log
 from common.bus import Notification
-from common.db import Database
 from common.runtime import Runtime
 from common.service import ScenarioService
 from services.controller.meta import seed_controller
-from services.controller.scenario import Recommendation, installed_scenarios
+from services.controller.scenario import installed_scenarios
 from services.controller.store import ControllerStore, PgControllerSource
 
 logger = logging.getLogger("pnav.controller")
@@ -36,7 +35,10 @@ class ControllerService(ScenarioService):
 
         # in lockstep the caches count sim time, so a run does not depend on the machine
         clock = sim.now if runtime.ledger is not None else time.monotonic
-        self.store = ControllerStore(PgControllerSource(runtime.database), clock, sim_now)
+        source = PgControllerSource(runtime.database)
+        self.store = ControllerStore(source, clock, sim_now, serves=self.owns)
+        # one INSERT per activation for every recommendation its rules made
+        self.engine.at_activation_end(self.store.defer_recommendations())
 
     def notifications_lost(self) -> int | None:
         return self.store.notifications_lost
@@ -55,9 +57,3 @@ class ControllerService(ScenarioService):
         # forgotten (another replica served it meanwhile).
         self.store.forget(gained | lost)
         super().on_ownership_change(gained, lost)
-
-
-async def store_recommendation(db: Database, recommendation: Recommendation) -> int:
-    """Transitional: pnav/monolith/stack.py imports this until it builds the controller with
-    ``pnav.monolith.controller.controller_engine``; delete it with that import."""
-    return await PgControllerSource(db).recommend(recommendation)

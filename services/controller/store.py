@@ -15,21 +15,29 @@ odometry image heard, if the service hears odometry (:attr:`ControllerStore.list
 does not by default), else one query for the odometry alone. Either falls back to the table
 as the contract says: no image, a ``seq`` gap (``common.freshness.Sequences``), or nothing
 heard for ``recheck_s`` (the scan cache's period, as without images).
+
+Batching across robots (DESIGN.md section 7): the odometry query asks, in the same round
+trip, for every other robot served whose scan came as an image and has none yet (their rules
+run later in the same activation); and in the service, recommendations are held until the
+activation ends and written in one statement (:meth:`ControllerStore.defer_recommendations`,
+common.writebehind).
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterable
+from collections.abc import Awaitable, Callable, Iterable, Sequence
 from typing import Protocol
 
 from common import log
 from common.bus import Notification
 from common.contract import keys, records
 from common.contract.planned_path import PlannedPath, newest_planned_path, planned_path_of
+from common.contract.recommendations import write_recommendation, write_recommendations
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
 from common.db import Database
 from common.freshness import FreshCache, Sequences
+from common.writebehind import WriteBehind
 from services.controller.scenario import Key, Recommendation
 
 logger = logging.getLogger("pnav.controller")
@@ -59,11 +67,18 @@ class ControllerSource(Protocol):
 
     async def newest_odometry(self, robot_id: str) -> Odometry | None: ...
 
+    async def newest_odometries(self, robot_ids: Sequence[str]) -> dict[str, Odometry | None]:
+        """Each robot's newest odometry (None: none yet), in one round trip."""
+
     async def newest_planned_path(self, robot_id: str) -> PlannedPath | None:
         """The path in force for the robot (the planner's newest planned_path row)."""
 
     async def recommend(self, recommendation: Recommendation) -> int:
         """Write a command_recommendation row (notified after commit); its id."""
+
+    async def recommend_many(self, recommendations: Sequence[Recommendation]) -> list[int | None]:
+        """Write rows of distinct (robot, source) in one commit, each notified after it;
+        their ids in order (None: refused)."""
 
 
 class PgControllerSource:
@@ -84,23 +99,21 @@ class PgControllerSource:
     async def newest_odometry(self, robot_id: str) -> Odometry | None:
         return await records.newest_odometry(self.db, robot_id)
 
+    async def newest_odometries(self, robot_ids: Sequence[str]) -> dict[str, Odometry | None]:
+        return await records.newest_odometries(self.db, robot_ids)
+
     async def newest_planned_path(self, robot_id: str) -> PlannedPath | None:
         return await newest_planned_path(self.db, robot_id)
 
     async def recommend(self, recommendation: Recommendation) -> int:
-        r = recommendation
-        return await records.recommend_velocity(
-            self.db,
-            r.robot_id,
-            source=r.source,
-            priority=r.priority,
-            linear=r.linear,
-            angular=r.angular,
-            stamp=r.stamp,
-            ttl_s=r.ttl_s,
-            reason=r.reason,
-            inputs=r.inputs,
-        )
+        return await write_recommendation(self.db, recommendation.row())
+
+    async def recommend_many(self, recommendations: Sequence[Recommendation]) -> list[int | None]:
+        return await write_recommendations(self.db, [r.row() for r in recommendations])
+
+
+def _recommendation_key(r: Recommendation) -> tuple[str, str]:
+    return r.robot_id, r.source
 
 
 def _scan_id(pair: ScanAndOdometry) -> int | None:
@@ -138,8 +151,15 @@ class ControllerStore:
         clock: Callable[[], float],
         sim_now: Callable[[], float | None] | None = None,
         recheck_s: float = RECHECK_S,
+        serves: Callable[[str], bool] | None = None,
     ) -> None:
+        """``serves(robot)``: whether this replica acts for the robot (its lease), so that
+        one odometry query asks only for robots a rule here may decide on (default: all)."""
         self.source = source
+        self._serves = serves or (lambda _robot: True)
+        # recommendations held until the activation ends (defer_recommendations); None:
+        # each one written when a rule asks
+        self.outbox: WriteBehind[Recommendation] | None = None
         self._clock = clock
         self._sim_now = sim_now or clock
         self.recheck_s = recheck_s
@@ -291,10 +311,31 @@ class ControllerStore:
                 self.odometry_images_used += 1
                 self._odometry[robot_id] = (scan.id, image[0])
                 return image[0]
-        odometry = await self.source.newest_odometry(robot_id)
+        return await self._read_odometry(robot_id, scan.id)
+
+    async def _read_odometry(self, robot_id: str, scan_id: int) -> Odometry | None:
+        """Read the robot's odometry for ``scan_id``, and in the same round trip that of
+        every other robot served whose scan from an image has none yet: their rules, later
+        in this activation, find it here (DESIGN.md section 7, one query for many robots).
+        Read after every one of those scans was heard, it is what each robot's own query
+        would have read."""
+        wanted = {robot_id: scan_id}
+        for other in self._imaged:
+            pair = self.scans.peek(other)
+            if pair is None or pair[0] is None or other in wanted:
+                continue
+            other_scan = pair[0].id
+            held = self._odometry.get(other)
+            if (held is None or held[0] != other_scan) and self._serves(other):
+                wanted[other] = other_scan
+        if len(wanted) == 1:
+            found = {robot_id: await self.source.newest_odometry(robot_id)}
+        else:
+            found = await self.source.newest_odometries(list(wanted))
         self.odometry_reads += 1
-        self._odometry[robot_id] = (scan.id, odometry)
-        return odometry
+        for robot, for_scan in wanted.items():
+            self._odometry[robot] = (for_scan, found.get(robot))
+        return found.get(robot_id)
 
     async def planned_path(self, robot_id: str) -> PlannedPath | None:
         return await self.paths.get(robot_id, lambda: self.source.newest_planned_path(robot_id))
@@ -302,9 +343,25 @@ class ControllerStore:
     def last_recommended_scan(self, robot_id: str, source: str) -> int | None:
         return self._recommended.get((robot_id, source))
 
-    async def recommend(self, recommendation: Recommendation) -> int:
-        r = recommendation
-        row_id = await self.source.recommend(r)
+    async def recommend(self, recommendation: Recommendation) -> None:
+        if self.outbox is not None:
+            self.outbox.add(recommendation, self._written)
+            return
+        self._written(recommendation, await self.source.recommend(recommendation))
+
+    def defer_recommendations(self) -> Callable[[], Awaitable[None]]:
+        """Hold every recommendation until the returned hook is awaited, then write them
+        in one statement (``Engine.at_activation_end``: common.writebehind). Without it
+        each is written when its rule asks."""
+        if self.outbox is None:
+            self.outbox = WriteBehind(
+                self.source.recommend_many, _recommendation_key, "command_recommendation"
+            )
+        return self.outbox.flush
+
+    def _written(self, r: Recommendation, row_id: int | None) -> None:
+        if row_id is None:
+            return  # refused or lost (logged): the scenario may recommend on the scan again
         if r.scan_id is not None:
             self._recommended[(r.robot_id, r.source)] = r.scan_id
         log.event(
@@ -318,7 +375,6 @@ class ControllerStore:
             angular=round(r.angular, 3),
             reason=r.reason,
         )
-        return row_id
 
     async def _read_tables(self) -> Tables:
         return await self.source.robots(), await self.source.active_strategies()

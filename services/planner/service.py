@@ -32,6 +32,8 @@ class PlannerService(ScenarioService):
         self.store = PlannerStore(
             PgPlannerSource(runtime.database), gates, clock.now, lambda: clock.started
         )
+        # one INSERT per activation for every velocity recommendation its rules made
+        self.engine.at_activation_end(self.store.defer_recommendations())
         self.rules: PlannerRules | None = None
 
     def notifications_lost(self) -> int | None:

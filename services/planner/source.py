@@ -5,9 +5,11 @@ notifications told the service and gives the rules their view."""
 
 from __future__ import annotations
 
-from typing import Any, Protocol
+from collections.abc import Sequence
+from typing import Protocol
 
 from common.contract import keys, planned_path, records
+from common.contract.recommendations import write_recommendation, write_recommendations
 from common.db import Database
 from services.planner.paths import PathRow
 from services.planner.recommendation import Recommendation
@@ -71,6 +73,10 @@ class PlannerSource(Protocol):
     async def recommend(self, rec: Recommendation) -> int:
         """Write a command_recommendation row and notify; its id."""
 
+    async def recommend_many(self, recs: Sequence[Recommendation]) -> list[int | None]:
+        """Write rows of distinct (robot, source) in one commit, each notified after it;
+        their ids in order (None: refused)."""
+
     async def publish_path(self, path: PathRow) -> int:
         """Write a planned_path row (``path``: its contract columns) and notify; its id."""
 
@@ -125,19 +131,10 @@ class PgPlannerSource:
         return float(value) if value is not None else None
 
     async def recommend(self, rec: Recommendation) -> int:
-        fields: dict[str, Any] = {
-            "source": rec.source,
-            "priority": rec.priority,
-            "stamp": rec.stamp,
-            "ttl_s": rec.ttl_s,
-            "reason": rec.reason,
-            "inputs": rec.inputs,
-        }
-        if rec.command is None:
-            return await records.recommend_velocity(
-                self.db, rec.robot_id, linear=rec.linear, angular=rec.angular, **fields
-            )
-        return await records.recommend_system(self.db, rec.robot_id, command=rec.command, **fields)
+        return await write_recommendation(self.db, rec.row())
+
+    async def recommend_many(self, recs: Sequence[Recommendation]) -> list[int | None]:
+        return await write_recommendations(self.db, [rec.row() for rec in recs])
 
     async def publish_path(self, path: PathRow) -> int:
         return await planned_path.write_planned_path(self.db, path)

@@ -25,7 +25,7 @@ the table between every two reports).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Awaitable, Callable, Iterable
 from typing import Any
 
 import services.planner.chargers as chargers
@@ -33,6 +33,7 @@ import services.planner.obstacles as obstacles
 from common.bus import Notification
 from common.contract import keys, records
 from common.freshness import FreshCache, Sequences
+from common.writebehind import WriteBehind
 from services.planner.paths import PathRow
 from services.planner.recommendation import Recommendation
 from services.planner.routes import Router, Target
@@ -48,6 +49,10 @@ FAST_REFRESH_S = 0.5
 _WORLD_TABLES = (keys.ROBOT, keys.MAP, keys.CHARGING_STATION)
 _STRATEGY_TABLES = (keys.ACTIVE_STRATEGY, keys.STRATEGY)
 _WORLD, _ACTIVE = "world", "active"  # the keys of the two whole-table caches
+
+
+def _recommendation_key(rec: Recommendation) -> tuple[str, str]:
+    return rec.robot_id, rec.source
 
 
 class PlannerStore:
@@ -81,6 +86,9 @@ class PlannerStore:
         self._odometry: dict[str, tuple[records.Odometry, float] | None] = {}
         self._battery: dict[str, tuple[records.Battery, float] | None] = {}  # the same
         self._seqs = Sequences()
+        # velocity recommendations held until the activation ends (defer_recommendations);
+        # None: each written when a rule asks
+        self.outbox: WriteBehind[Recommendation] | None = None
         self.odometry_reads = 0  # odometry read from the table (tests, benchmarks)
         self.battery_reads = 0  # battery rows read from the table (tests, benchmarks)
 
@@ -228,12 +236,25 @@ class PlannerStore:
         ttl_s: float,
         reason: str,
         inputs: dict[str, Any],
-    ) -> int:
-        return await self.source.recommend(
-            Recommendation(
-                robot_id, source, priority, stamp, ttl_s, reason, inputs, linear, angular
-            )
+    ) -> None:
+        rec = Recommendation(
+            robot_id, source, priority, stamp, ttl_s, reason, inputs, linear, angular
         )
+        if self.outbox is not None:
+            self.outbox.add(rec)
+            return
+        await self.source.recommend(rec)
+
+    def defer_recommendations(self) -> Callable[[], Awaitable[None]]:
+        """Hold every velocity recommendation until the returned hook is awaited, then
+        write them in one statement (``Engine.at_activation_end``: common.writebehind).
+        Without it each is written when its rule asks. System recommendations are always
+        written at once: the battery rule reads them back (``live_system``) before writing."""
+        if self.outbox is None:
+            self.outbox = WriteBehind(
+                self.source.recommend_many, _recommendation_key, "command_recommendation"
+            )
+        return self.outbox.flush
 
     async def recommend_system(
         self,

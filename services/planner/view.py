@@ -69,7 +69,9 @@ class Contract(Clocks, Protocol):
         ttl_s: float,
         reason: str,
         inputs: dict[str, Any],
-    ) -> int: ...
+    ) -> None:
+        """Write a velocity recommendation (the service's store holds it until the end of
+        the activation and writes the activation's rows in one statement)."""
 
     async def recommend_system(
         self,

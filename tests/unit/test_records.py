@@ -10,7 +10,7 @@ import pytest
 
 from common import bus
 from common.config import ZenohSettings
-from common.contract import records
+from common.contract import recommendations, records
 from common.db import Database, create_pool
 
 
@@ -86,7 +86,7 @@ async def test_recommendations_carry_expiry_and_provenance(
     session = bus.open_session(zenoh_settings)
     db = Database(await create_pool(db_url), bus.Notifier(session))
     try:
-        rid = await records.recommend_velocity(
+        rid = await recommendations.recommend_velocity(
             db,
             "r1",
             source="avoid_left",
@@ -98,7 +98,7 @@ async def test_recommendations_carry_expiry_and_provenance(
             reason="obstacle on the right",
             inputs={"laser_scan": 7},
         )
-        sid = await records.recommend_system(
+        sid = await recommendations.recommend_system(
             db,
             "r1",
             source="battery_check",

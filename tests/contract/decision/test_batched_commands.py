@@ -13,7 +13,7 @@ from typing import Any
 
 from common import bus
 from common.bus import Notification
-from common.contract import keys, records
+from common.contract import keys, recommendations
 from common.runtime import Runtime
 from common.testing import eventually
 from services.decision.arbitration import RobotDecision
@@ -24,7 +24,7 @@ NOT_IN_THE_IMAGE = ("created_at", "safety", "sent_linear_mps", "sent_angular_rps
 
 
 async def recommend(client: Runtime, robot_id: str, source: str, priority: int) -> int:
-    return await records.recommend_velocity(
+    return await recommendations.recommend_velocity(
         client.database,
         robot_id,
         source=source,

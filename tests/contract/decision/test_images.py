@@ -1,6 +1,6 @@
 """The decision service with row images (CONTRACT.md "Row images"), against Postgres and
 Zenoh: recommendations written as the controller and planner write them
-(``records.recommend_velocity``, one row per notification, with its image).
+(``recommendations.recommend_velocity``, one row per notification, with its image).
 
 With images the service keeps the live rows from the notifications and decides without
 reading the table (its period fallback set out of the way here, so any read would show);
@@ -19,7 +19,7 @@ import pytest
 from common import bus
 from common.bus import Notification
 from common.config import ServiceConfig
-from common.contract import keys, records
+from common.contract import keys, recommendations
 from common.runtime import Runtime
 from common.testing import ClockPlayer, running_service
 from services.decision.service import DecisionService
@@ -30,7 +30,7 @@ NOT_THE_DECISIONS = ("created_at", "safety", "sent_linear_mps", "sent_angular_rp
 
 
 async def recommend(client: Runtime, source: str, priority: int, linear: float) -> int:
-    return await records.recommend_velocity(
+    return await recommendations.recommend_velocity(
         client.database,
         "r1",
         source=source,

@@ -35,20 +35,27 @@ class Rig:
         self.now: float | None = SIM_NOW  # sim time the rules see (None: no clock yet)
         self.wall = 0.0  # the store's clock: the caches' recheck counts it
         self.source = source(self.contract)
-        self.store = ControllerStore(self.source, lambda: self.wall, lambda: self.now)
         self.owned: set[str] | None = None  # None: this replica owns every robot
+        self.store = ControllerStore(
+            self.source, lambda: self.wall, lambda: self.now, serves=self.owns
+        )
         self.engine = Engine()
+        # as the service and the monolith: an activation's recommendations written at its end
+        self.engine.at_activation_end(self.store.defer_recommendations())
         self.state: ControllerState = seed_controller(
             self.engine,
             self.store,
             installed_scenarios() if scenarios is None else scenarios,
-            owns=lambda robot_id: self.owned is None or robot_id in self.owned,
+            owns=self.owns,
         )
         # images: every notification carries its row, numbered per key as a Notifier does
         self.images = images
         self.seqs: dict[tuple[str, str | None], int] = {}
         self.contract.row_listeners.append(self._notify)
         self.add_robot(BURGER)
+
+    def owns(self, robot_id: str) -> bool:
+        return self.owned is None or robot_id in self.owned
 
     def _notify(
         self, table: str, robot: str | None, row_id: int | None, row: dict[str, Any] | None
@@ -88,11 +95,19 @@ class Rig:
         return self.contract.insert(keys.LASER_SCAN, row)
 
     def odometry(
-        self, linear: float, angular: float = 0.0, stamp: float = SIM_NOW, robot_id: str = "r1"
+        self,
+        linear: float,
+        angular: float = 0.0,
+        stamp: float = SIM_NOW,
+        robot_id: str = "r1",
+        *,
+        heard: bool = True,
     ) -> int:
+        """An odometry row; ``heard=False``: its notification does not reach the store (the
+        service hears no odometry by default: services/controller/store.py)."""
         row = {"robot_id": robot_id, "stamp": stamp, "x": 0.0, "y": 0.0, "yaw": 0.0}
         row |= {"linear_mps": linear, "angular_rps": angular}
-        return self.contract.insert(keys.ODOMETRY, row)
+        return self.contract.insert(keys.ODOMETRY, row, notify=heard)
 
     # -- running and looking ---------------------------------------------------------------
     async def tick(self) -> list[str]:

@@ -118,9 +118,12 @@ async def test_what_was_recommended_on_is_kept_until_the_robot_changes_hands() -
     rig = Rig()
     store = rig.store
     assert store.last_recommended_scan("r1", "safety_stop") is None
-    row_id = await store.recommend(recommendation(4))
+    await store.recommend(recommendation(4))
+    assert rig.recommendations() == []  # held until the activation ends
+    assert store.last_recommended_scan("r1", "safety_stop") is None
+    await store.defer_recommendations()()  # the engine's activation-end hook
     row = rig.recommendations()[-1]
-    assert (row["id"], row["kind"], row["expires_stamp"]) == (row_id, "robot", 10.5)
+    assert (row["kind"], row["expires_stamp"]) == ("robot", 10.5)
     assert store.last_recommended_scan("r1", "safety_stop") == 4
     assert store.last_recommended_scan("r1", "avoid_left") is None  # per scenario
     await store.newest_scan("r1")

@@ -40,6 +40,8 @@ class Planner:
         )
         self.engine = Engine(EngineSettings(period_s=60.0), name="planner")
         self.engine.clock = self.now
+        # as the service and the monolith: an activation's recommendations written at its end
+        self.engine.at_activation_end(self.store.defer_recommendations())
         self.owned = {ROBOT}
         found = meta.move_scenarios() if scenarios is None else scenarios
         self.rules = meta.seed(self.engine, self.store, found, owns=self.owned.__contains__)

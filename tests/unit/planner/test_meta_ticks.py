@@ -56,11 +56,13 @@ async def test_a_strategy_switch_replaces_the_rules_in_one_activation_and_idle_e
     assert p.running() == CHARGE
     assert p.queue() == ["TurnThenMove", "ChargeComplete", "MetaPlanner"]
     new = p.recommendations()[said:]
+    # the system recommendation is written when its rule asks; the velocity at the
+    # activation's end (the store holds velocities for one write: services/planner/store.py)
     assert [(r["source"], r["inputs"].get("charger")) for r in new] == [
-        ("turn_then_move", "dock"),  # the new move rule drives to the charger
         ("charge_complete", None),  # 75 % holds 3x what the way back to the goal needs
+        ("turn_then_move", "dock"),  # the new move rule drives to the charger
     ]
-    assert new[0]["inputs"]["strategy"] == "CHARGE" and new[1]["system_command"] == "CMD_RESUME"
+    assert new[1]["inputs"]["strategy"] == "CHARGE" and new[0]["system_command"] == "CMD_RESUME"
 
     p.strategy("IDLE")
     await p.tick()  # IDLE has no planner scenario: both rules end

@@ -159,3 +159,25 @@ async def test_a_battery_image_stands_in_for_the_query_until_refresh_s() -> None
     p.t += REFRESH_S  # nothing heard for the period: read the table
     await store.newest_battery(ROBOT)
     assert store.battery_reads == 3
+
+
+async def test_velocity_recommendations_wait_for_the_activation_end_and_go_together() -> None:
+    p = Planner()  # as the service: the engine's activation end flushes the store
+    store = p.store
+    p.contract.insert(keys.ROBOT, robot_row("r2"))
+    fields = {"priority": 10, "stamp": p.t, "ttl_s": 0.5, "reason": "test", "inputs": {}}
+    for robot_id in (ROBOT, "r2"):
+        await store.recommend_velocity(
+            robot_id, source="turn_then_move", linear=0.1, angular=0.0, **fields
+        )
+    # a system recommendation is written at once: the battery rule reads it back
+    await store.recommend_system(ROBOT, source="battery_check", command="CMD_BATTSAVE", **fields)
+    rows = p.contract[keys.COMMAND_RECOMMENDATION].all_rows()
+    assert [(r["robot_id"], r["kind"]) for r in rows] == [(ROBOT, "system")]
+    await p.engine.activation()  # its end writes what was held, in one call
+    rows = p.contract[keys.COMMAND_RECOMMENDATION].all_rows()
+    assert sorted((r["robot_id"], r["kind"]) for r in rows) == [
+        (ROBOT, "robot"), (ROBOT, "system"), ("r2", "robot"),
+    ]  # fmt: skip
+    outbox = store.outbox
+    assert outbox is not None and (outbox.calls, outbox.written) == (1, 2)  # one write

@@ -1,0 +1,211 @@
+"""Writing command_recommendation rows: one at a time, or a batch in one statement.
+
+Every row is written with its image (CONTRACT.md "Row images": the columns as written, with
+its ``id``), notified after the commit, so the decision service keeps the live rows without
+reading them back. A batch (:func:`write_recommendations`) is one INSERT for rows of many
+robots and scenarios, one commit, then one notification per row: what a store that defers
+its rules' writes to the end of an activation sends (DESIGN.md section 7, batching across
+robots; common.writebehind).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import asyncpg
+
+from common.contract import keys
+from common.db import Database
+
+logger = logging.getLogger("pnav.contract")
+
+_RECOMMEND = """
+INSERT INTO command_recommendation (robot_id, kind, source, priority, linear_mps, angular_rps,
+    system_command, stamp, expires_stamp, inputs, reason)
+VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)
+RETURNING id
+"""
+# RETURNING's rows are paired with the batch's by (robot_id, source), which a batch holds
+# once each (common.writebehind splits a batch that would not); inputs go as JSON text, so
+# the jsonb codec is not asked to encode an array of them.
+_RECOMMEND_MANY = """
+INSERT INTO command_recommendation (robot_id, kind, source, priority, linear_mps, angular_rps,
+    system_command, stamp, expires_stamp, inputs, reason)
+SELECT r, k, s, p, l, a, c, st, e, i::jsonb, why
+FROM unnest($1::text[], $2::text[], $3::text[], $4::int[], $5::float8[], $6::float8[],
+            $7::text[], $8::float8[], $9::float8[], $10::text[], $11::text[])
+     AS u(r, k, s, p, l, a, c, st, e, i, why)
+RETURNING id, robot_id, source
+"""
+# What a batch refused as data (a robot deleted meanwhile, a value a CHECK refuses): its
+# rows are written one by one instead, so one bad row costs only itself.
+_REFUSED = (asyncpg.IntegrityConstraintViolationError, asyncpg.DataError)
+
+
+@dataclass(frozen=True)
+class RecommendationRow:
+    """A command_recommendation row about to be written: its contract columns, in the
+    order of :data:`RECOMMENDATION_COLUMNS`."""
+
+    robot_id: str
+    kind: str  # 'robot' (a velocity) or 'system' (a system command)
+    source: str
+    priority: int
+    linear_mps: float | None
+    angular_rps: float | None
+    system_command: str | None
+    stamp: float
+    expires_stamp: float
+    inputs: dict[str, Any]
+    reason: str
+
+    @classmethod
+    def velocity(
+        cls,
+        robot_id: str,
+        *,
+        source: str,
+        priority: int,
+        linear: float,
+        angular: float,
+        stamp: float,
+        ttl_s: float,
+        reason: str,
+        inputs: dict[str, Any] | None = None,
+    ) -> RecommendationRow:
+        """A robot recommendation valid until ``stamp + ttl_s`` (sim time)."""
+        return cls(
+            robot_id, "robot", source, priority, float(linear), float(angular), None,
+            stamp, stamp + ttl_s, inputs or {}, reason,
+        )  # fmt: skip
+
+    @classmethod
+    def system(
+        cls,
+        robot_id: str,
+        *,
+        source: str,
+        priority: int,
+        command: str,
+        stamp: float,
+        ttl_s: float,
+        reason: str,
+        inputs: dict[str, Any] | None = None,
+    ) -> RecommendationRow:
+        """A system recommendation (e.g. CMD_BATTSAVE) valid until ``stamp + ttl_s``."""
+        return cls(
+            robot_id, "system", source, priority, None, None, command,
+            stamp, stamp + ttl_s, inputs or {}, reason,
+        )  # fmt: skip
+
+    def values(self) -> tuple[Any, ...]:
+        """The columns' values, in :data:`RECOMMENDATION_COLUMNS`' order (no copies)."""
+        return (
+            self.robot_id, self.kind, self.source, self.priority, self.linear_mps,
+            self.angular_rps, self.system_command, self.stamp, self.expires_stamp,
+            self.inputs, self.reason,
+        )  # fmt: skip
+
+    @property
+    def key(self) -> tuple[str, str]:
+        """(robot, source): what pairs a batch's rows with the ids RETURNING gives."""
+        return self.robot_id, self.source
+
+    def image(self) -> dict[str, Any]:
+        """The row's contract columns as written (the notification adds ``id``)."""
+        return dict(zip(RECOMMENDATION_COLUMNS, self.values(), strict=True))
+
+
+# the columns a recommendation is written with, in RecommendationRow's order: its image
+RECOMMENDATION_COLUMNS = (
+    *("robot_id", "kind", "source", "priority", "linear_mps", "angular_rps"),
+    *("system_command", "stamp", "expires_stamp", "inputs", "reason"),
+)
+
+
+async def write_recommendation(db: Database, row: RecommendationRow) -> int:
+    """Write one row and notify with its image; its id."""
+    value = await db.write(
+        keys.COMMAND_RECOMMENDATION, row.robot_id, _RECOMMEND, *row.values(), image=row.image()
+    )
+    return int(value)
+
+
+async def write_recommendations(
+    db: Database, rows: Sequence[RecommendationRow]
+) -> list[int | None]:
+    """Write ``rows`` (distinct (robot, source) pairs) in one statement and one commit, then
+    notify each with its image. Their ids, in order; None for a row the database refused
+    (a refused batch is written again row by row; logged)."""
+    if not rows:
+        return []
+    if len(rows) == 1:
+        return [await write_recommendation(db, rows[0])]
+    columns = [list(column) for column in zip(*(row.values() for row in rows), strict=True)]
+    columns[9] = [json.dumps(inputs) for inputs in columns[9]]
+    try:
+        ids = await db.write_rows(
+            keys.COMMAND_RECOMMENDATION,
+            _RECOMMEND_MANY,
+            *columns,
+            images=[(row.robot_id, row.image()) for row in rows],
+            pair_on=("robot_id", "source"),
+        )
+    except _REFUSED as exc:
+        logger.warning("recommendation batch refused (%r): writing its rows one by one", exc)
+        return [await _write_alone(db, row) for row in rows]
+    return list(ids)
+
+
+async def _write_alone(db: Database, row: RecommendationRow) -> int | None:
+    try:
+        return await write_recommendation(db, row)
+    except _REFUSED as exc:
+        logger.warning("recommendation for %s refused: %r", row.robot_id, exc)
+        return None
+
+
+async def recommend_velocity(
+    db: Database,
+    robot_id: str,
+    *,
+    source: str,
+    priority: int,
+    linear: float,
+    angular: float,
+    stamp: float,
+    ttl_s: float,
+    reason: str,
+    inputs: dict[str, Any] | None = None,
+) -> int:
+    """Write a robot recommendation valid until ``stamp + ttl_s`` (sim time) and notify,
+    with the row's image."""
+    row = RecommendationRow.velocity(
+        robot_id, source=source, priority=priority, linear=linear, angular=angular,
+        stamp=stamp, ttl_s=ttl_s, reason=reason, inputs=inputs,
+    )  # fmt: skip
+    return await write_recommendation(db, row)
+
+
+async def recommend_system(
+    db: Database,
+    robot_id: str,
+    *,
+    source: str,
+    priority: int,
+    command: str,
+    stamp: float,
+    ttl_s: float,
+    reason: str,
+    inputs: dict[str, Any] | None = None,
+) -> int:
+    """Write a system recommendation (e.g. CMD_BATTSAVE) and notify, with the row's image."""
+    row = RecommendationRow.system(
+        robot_id, source=source, priority=priority, command=command,
+        stamp=stamp, ttl_s=ttl_s, reason=reason, inputs=inputs,
+    )  # fmt: skip
+    return await write_recommendation(db, row)
