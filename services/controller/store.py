@@ -320,13 +320,19 @@ class ControllerStore:
         Read after every one of those scans was heard, it is what each robot's own query
         would have read."""
         wanted = {robot_id: scan_id}
+        now = self._clock()
         for other in self._imaged:
             pair = self.scans.peek(other)
             if pair is None or pair[0] is None or other in wanted:
                 continue
             other_scan = pair[0].id
             held = self._odometry.get(other)
-            if (held is None or held[0] != other_scan) and self._serves(other):
+            if held is not None and held[0] == other_scan:
+                continue  # it has its odometry
+            image = self._odometry_images.get(other)
+            if image is not None and now - image[1] < self.recheck_s:
+                continue  # an odometry image will stand in (when the service hears them)
+            if self._serves(other):
                 wanted[other] = other_scan
         if len(wanted) == 1:
             found = {robot_id: await self.source.newest_odometry(robot_id)}

@@ -103,3 +103,25 @@ async def test_an_activations_recommendations_go_in_one_write_at_its_end() -> No
         assert rig.store.last_recommended_scan(robot_id, "safety_stop") == scan.id
     assert await rig.tick() == []  # no new scan: nothing held, nothing written
     assert source.writes == [["r1", "r2", "r3"]]
+
+
+async def test_a_robot_with_a_fresh_odometry_image_is_left_out_of_the_batched_query() -> None:
+    rig, source = three_robots()
+    store = rig.store
+    rig.odometry(0.1, robot_id="r1", heard=False)
+    heard = rig.odometry(0.2, robot_id="r2")  # its image reaches the store
+    rig.odometry(0.3, robot_id="r3", heard=False)
+    scans = {}
+    for robot_id in ("r1", "r2", "r3"):
+        rig.new_scan(robot_id=robot_id)
+        scans[robot_id] = await store.newest_scan(robot_id)
+    # r1 has no odometry image: one query for it and r3, not for r2, whose image stands in
+    r1 = await store.odometry_at(scans["r1"])
+    assert r1 is not None and r1.linear_mps == 0.1
+    assert (source.batch_reads, source.lone_reads) == ([["r1", "r3"]], [])
+    r2 = await store.odometry_at(scans["r2"])
+    assert r2 is not None and r2.id == heard  # from its image: no query
+    r3 = await store.odometry_at(scans["r3"])
+    assert r3 is not None and r3.linear_mps == 0.3  # read with r1's: no query
+    assert (source.batch_reads, source.lone_reads) == ([["r1", "r3"]], [])
+    assert store.odometry_images_used == 1
