@@ -108,6 +108,8 @@ class Outcome:
     cpu_by_role: dict[str, float] = field(default_factory=dict)  # sim, postgres, launcher...
     # the sim's pacing gave up waiting for the stack this often (its log; None: unread)
     gate_timeouts: int | None = None
+    # the sim waited for the stack this often per sim second of its whole run (its log)
+    gate_waits_per_sim_s: float | None = None
     log_dir: str = ""
     latency_ms: list[float] = field(default_factory=list)  # sense-to-act, one per decision
 
@@ -183,11 +185,12 @@ async def ensure_combo(rt: Runtime, combo: Combo) -> None:
     )
 
 
-def gate_figures(sim_log: Path) -> dict[str, int]:
+def gate_figures(sim_log: Path) -> dict[str, float]:
     """``gate_waits`` and ``gate_timeouts`` from the sim's last "sim stopped" line ({} if
     there is none: the sim did not stop cleanly, or the log is elsewhere); a lockstep sim's
     ``lockstep_waits`` under the same name, its ``lockstep_timeouts`` plus
-    ``lockstep_lost`` as ``gate_timeouts``."""
+    ``lockstep_lost`` as ``gate_timeouts``; and ``gate_waits_per_sim_s``, the waits over
+    the line's ``sim_time`` (the whole run, the hold at sim time 0 included)."""
     try:
         text = sim_log.read_text(errors="replace")
     except OSError:
@@ -196,11 +199,16 @@ def gate_figures(sim_log: Path) -> dict[str, int]:
     if not stops:
         return {}
     found = dict(re.findall(r"(?:gate|lockstep)_(waits|timeouts|lost)=(\d+)", stops[-1]))
-    figures = {f"gate_{name}": int(found[name]) for name in ("waits", "timeouts") if name in found}
+    figures: dict[str, float] = {
+        f"gate_{name}": int(found[name]) for name in ("waits", "timeouts") if name in found
+    }
     if "lost" in found and "gate_timeouts" in figures:
         # a message that never reached a participant mid-run spoils the repeat as a wait
         # given up does
         figures["gate_timeouts"] += int(found["lost"])
+    sim_time = re.search(r"\bsim_time=([0-9.]+)", stops[-1])
+    if sim_time is not None and "gate_waits" in figures and float(sim_time.group(1)) > 0:
+        figures["gate_waits_per_sim_s"] = round(figures["gate_waits"] / float(sim_time[1]), 2)
     return figures
 
 
@@ -310,6 +318,8 @@ async def run_episode(episode: Episode, log_dir: Path | None = None) -> Outcome:
         ]
     final = math.dist(trajectory[-1][1:], episode.goal) if trajectory else math.inf
     cpu = {role: float(r["cpu_s"]) for role, r in usage.report().items()} if usage else {}
+    paced = gate_figures(log_dir / "sim.log")
+    timeouts = paced.get("gate_timeouts")
     return Outcome(
         end,
         time_s,
@@ -320,7 +330,8 @@ async def run_episode(episode: Episode, log_dir: Path | None = None) -> Outcome:
         run_wall_s=usage.wall_s if usage else 0.0,
         cpu_s=sum(cpu.values()),
         cpu_by_role=cpu,
-        gate_timeouts=gate_figures(log_dir / "sim.log").get("gate_timeouts"),
+        gate_timeouts=None if timeouts is None else int(timeouts),
+        gate_waits_per_sim_s=paced.get("gate_waits_per_sim_s"),
         log_dir=str(log_dir),
         latency_ms=sense_to_act_ms(log_dir / "trace.csv", collected, *window) if usage else [],
     )

@@ -40,6 +40,7 @@ class RunRecord:
     cpu_s: float = 0.0  # over the same span
     cpu_by_role: dict[str, float] = field(default_factory=dict)
     gate_timeouts: int | None = None  # the sim's pacing gave up waiting this often
+    gate_waits_per_sim_s: float | None = None  # the sim waited for the stack this often
     latency_ms: list[float] = field(default_factory=list)  # the monolith's sense-to-act
     log_dir: str = ""
     error: str = ""
@@ -163,7 +164,31 @@ def cost(runs: Sequence[RunRecord]) -> dict[str, Any]:
         "episode_wall_s_mean": round(sum(r.wall_s for r in runs) / len(runs), 3),
         "gate_timeouts": sum(gates) if gates else None,  # None: no gate (the monolith)
         "latency_ms": {k: round(v, 3) for k, v in percentiles(latency).items()},
+        "cpu_ms_per_sim_s_by_role": by_role(driven, sim),
+        "gate_waits_per_sim_s": _per_sim_s(driven, sim),
     }
+
+
+def by_role(driven: Sequence[RunRecord], sim: float) -> dict[str, float]:
+    """Each process role's CPU (ms) per sim second over ``driven`` (sim seconds ``sim``),
+    most first; {} where no run measured its processes (the monolith is one process)."""
+    totals: dict[str, float] = {}
+    for r in driven:
+        for role, cpu_s in r.cpu_by_role.items():
+            totals[role] = totals.get(role, 0.0) + cpu_s
+    if not sim:
+        return {}
+    ranked = sorted(totals.items(), key=lambda kv: (-kv[1], kv[0]))
+    return {role: round(1000.0 * cpu_s / sim, 1) for role, cpu_s in ranked}
+
+
+def _per_sim_s(driven: Sequence[RunRecord], sim: float) -> float | None:
+    """The pacing's waits per sim second, weighted by each run's sim time (None: not read)."""
+    rated = [(r.gate_waits_per_sim_s, r.result.time_s) for r in driven]
+    known = [(rate, t) for rate, t in rated if rate is not None]
+    if not known or not sim:
+        return None
+    return round(sum(rate * t for rate, t in known) / sum(t for _, t in known), 1)
 
 
 def _ratio(a: float | None, b: float | None) -> float | None:
@@ -207,6 +232,32 @@ def cost_table(records: Sequence[RunRecord]) -> Table:
             rows[-1] += [f"{c['episode_wall_s_mean']:.1f}", gate]
     headers = "combo|mode|sim s|wall s/sim s|CPU s/sim s|latency ms p50 / p99|episode wall s"
     return table("what the runs cost", headers + "|gate timeouts", rows)
+
+
+def role_table(records: Sequence[RunRecord]) -> Table | None:
+    """Per combo: where the stack's CPU goes, each process role's ms per sim second, next to
+    the monolith's whole process and the sim's pacing waits per sim second (lockstep: one
+    round of every participant's status each); None when no run measured its processes."""
+    entries = costs(records)
+    roles: dict[str, float] = {}
+    for entry in entries.values():
+        for role, ms in entry.get(STACK, {}).get("cpu_ms_per_sim_s_by_role", {}).items():
+            roles[role] = roles.get(role, 0.0) + ms
+    if not roles:
+        return None
+    order = [role for role, _ in sorted(roles.items(), key=lambda kv: (-kv[1], kv[0]))]
+    rows = []
+    for combo, entry in entries.items():
+        st = entry.get(STACK)
+        if st is None or not st["cpu_ms_per_sim_s_by_role"]:
+            continue
+        mine = st["cpu_ms_per_sim_s_by_role"]
+        mono = entry.get(MONOLITH, {}).get("cpu_per_sim_s")
+        figures = [*(mine.get(role) for role in order), sum(mine.values())]
+        figures += [None if mono is None else mono * 1000.0, st["gate_waits_per_sim_s"]]
+        rows.append([combo, *(_num(x, 1) for x in figures)])
+    headers = "|".join(["combo", *order, "stack", "monolith", "pacing waits / sim s"])
+    return table("where the stack's CPU goes, ms per sim second", headers, rows)
 
 
 def comparison_table(records: Sequence[RunRecord]) -> Table | None:
@@ -260,9 +311,9 @@ def run_table(records: Sequence[RunRecord], *, links: bool) -> Table:
 
 
 def tables(records: Sequence[RunRecord]) -> list[Table]:
-    compared = comparison_table(records)
+    extra = [t for t in (role_table(records), comparison_table(records)) if t is not None]
     out = [*summary_tables(records, STACK), *summary_tables(records, MONOLITH)]
-    return [*out, cost_table(records), *([compared] if compared else [])]
+    return [*out, cost_table(records), *extra]
 
 
 LEGEND = """\

@@ -104,7 +104,10 @@ def select_worlds(
     return chosen
 
 
-EXTRAS = ("run_wall_s", "cpu_s", "cpu_by_role", "gate_timeouts", "latency_ms", "log_dir")
+EXTRAS = (
+    *("run_wall_s", "cpu_s", "cpu_by_role", "gate_timeouts", "gate_waits_per_sim_s"),
+    *("latency_ms", "log_dir"),
+)
 
 
 def to_record(

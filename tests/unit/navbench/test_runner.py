@@ -234,7 +234,11 @@ def fake_stack(suite: list[BenchmarkWorld]) -> Callable[..., Awaitable[Outcome]]
                 return Outcome("collision", 10.0, path[:50], [(10.0, *path[49][1:], "w")])
             return Outcome("stalled", 12.0, path[: len(path) // 2], wall_s=9.0)
         arrival = next(p for p in path if math.dist(p[1:], world.goal) <= 0.3)
-        return Outcome("goal", arrival[0], path, [], 0.3, wall_s=5.0, run_wall_s=2.0, cpu_s=3.0)
+        return Outcome(
+            *("goal", arrival[0], path, [], 0.3),
+            **dict(wall_s=5.0, run_wall_s=2.0, cpu_s=3.0, gate_waits_per_sim_s=60.0),
+            cpu_by_role={"sim": 2.0, "bridge": 0.75, "postgres": 0.25},
+        )
 
     return run_episode
 
@@ -287,8 +291,27 @@ def test_the_bench_writes_json_a_picture_per_run_and_a_readme(
     assert runs[0]["png"] == "barn_easy_000__GOTO_AVOID-turn_then_move.png"
     assert "barn_easy_000 GOTO_DIRECT/move_while_turning run 0 (stack): stalled" in readme
     assert "| easy | GOTO_AVOID/turn_then_move | 1 | 100 % |" in readme
+    # where it went: each role's CPU per sim second, most first, and the pacing's waits
+    sim_s = runs[0]["time_s"] + runs[2]["time_s"]
+    avoid = doc["cost"][AVOID.label]["stack"]
+    cpu_s = {"sim": 2.0, "bridge": 0.75, "postgres": 0.25}  # a run, in the fake
+    assert avoid["cpu_ms_per_sim_s_by_role"] == {
+        role: pytest.approx(2 * 1000.0 * s / sim_s, abs=0.05) for role, s in cpu_s.items()
+    }
+    assert avoid["gate_waits_per_sim_s"] == 60.0
+    # the runs that measured no process (GOTO_DIRECT's here) have no breakdown
+    direct = doc["cost"][DIRECT.label]["stack"]
+    assert direct["cpu_ms_per_sim_s_by_role"] == {} and direct["gate_waits_per_sim_s"] is None
     printed = capsys.readouterr().out
     assert "stack: per combo" in printed and "what the runs cost" in printed
+    assert "where the stack's CPU goes, ms per sim second" in printed
+    assert "where the stack's CPU goes" in readme
+    lines = printed.splitlines()
+    at = lines.index("where the stack's CPU goes, ms per sim second")
+    assert lines[at + 1].split()[:4] == ["combo", "sim", "bridge", "postgres"]  # most first
+    row = lines[at + 2].split()
+    assert row[0] == AVOID.label and row[-2:] == ["-", "60.0"]  # no monolith; 60 waits a sim s
+    assert float(row[4]) == pytest.approx(6000.0 / sim_s, abs=0.1)  # the stack: 3 CPU s a run
 
 
 def test_the_monolith_runs_each_episode_too_and_the_costs_are_compared(
@@ -385,7 +408,11 @@ def test_gate_figures_come_from_the_sims_last_stop_line(tmp_path: Path) -> None:
         "x INFO sim sim stopped sim_time=36.6 commands=360 gate_waits=362 gate_timeouts=0 "
         "gate_waited_wall_s=2.27\n"
     )
-    assert episode_module.gate_figures(log) == {"gate_waits": 362, "gate_timeouts": 0}
+    assert episode_module.gate_figures(log) == {
+        "gate_waits": 362,
+        "gate_timeouts": 0,
+        "gate_waits_per_sim_s": 9.89,  # over the last line's sim time: 362 / 36.6
+    }
 
 
 def test_a_lockstep_sims_timeouts_and_lost_messages_both_count_as_gate_timeouts(
@@ -398,4 +425,8 @@ def test_a_lockstep_sims_timeouts_and_lost_messages_both_count_as_gate_timeouts(
         "lockstep_waited_wall_s=3.418\n"
     )
     # messages missed while the stack started (before the run) do not count
-    assert episode_module.gate_figures(log) == {"gate_waits": 847, "gate_timeouts": 3}
+    assert episode_module.gate_figures(log) == {
+        "gate_waits": 847,
+        "gate_timeouts": 3,
+        "gate_waits_per_sim_s": 66.69,
+    }
