@@ -164,12 +164,12 @@ def cost(runs: Sequence[RunRecord]) -> dict[str, Any]:
         "episode_wall_s_mean": round(sum(r.wall_s for r in runs) / len(runs), 3),
         "gate_timeouts": sum(gates) if gates else None,  # None: no gate (the monolith)
         "latency_ms": {k: round(v, 3) for k, v in percentiles(latency).items()},
-        "cpu_ms_per_sim_s_by_role": by_role(driven, sim),
-        "gate_waits_per_sim_s": _per_sim_s(driven, sim),
+        "cpu_ms_per_sim_s_by_role": _cpu_by_role(driven, sim),
+        "gate_waits_per_sim_s": _waits_per_sim_s(driven, sim),
     }
 
 
-def by_role(driven: Sequence[RunRecord], sim: float) -> dict[str, float]:
+def _cpu_by_role(driven: Sequence[RunRecord], sim: float) -> dict[str, float]:
     """Each process role's CPU (ms) per sim second over ``driven`` (sim seconds ``sim``),
     most first; {} where no run measured its processes (the monolith is one process)."""
     totals: dict[str, float] = {}
@@ -182,7 +182,7 @@ def by_role(driven: Sequence[RunRecord], sim: float) -> dict[str, float]:
     return {role: round(1000.0 * cpu_s / sim, 1) for role, cpu_s in ranked}
 
 
-def _per_sim_s(driven: Sequence[RunRecord], sim: float) -> float | None:
+def _waits_per_sim_s(driven: Sequence[RunRecord], sim: float) -> float | None:
     """The pacing's waits per sim second, weighted by each run's sim time (None: not read)."""
     rated = [(r.gate_waits_per_sim_s, r.result.time_s) for r in driven]
     known = [(rate, t) for rate, t in rated if rate is not None]
