@@ -277,16 +277,17 @@ def run(args: argparse.Namespace) -> int:
     if args.runs < 1:
         raise UsageError("--runs must be 1 or more")
     combos = pick_combos(args.combos, shipped_combos())
-    worlds = select_worlds(load_suite(args.suite), args.levels, args.worlds)
+    # what the user typed is checked before the suite loads (seconds for a large one)
     robot = resolve_model(args.model) if getattr(args, "model", None) else None
-    logs = args.report / "logs" if args.report else Path(tempfile.mkdtemp(prefix="pnav-nav-"))
-    worlds = with_model(worlds, robot, logs / "worlds")
     before: list[dict[str, Any]] = []
     if args.compare is not None:
         try:
             before = json.loads(args.compare.read_text())["runs"]
         except (OSError, ValueError, KeyError) as exc:
             raise UsageError(f"--compare {args.compare}: not a bench nav JSON ({exc})") from None
+    worlds = select_worlds(load_suite(args.suite), args.levels, args.worlds)
+    logs = args.report / "logs" if args.report else Path(tempfile.mkdtemp(prefix="pnav-nav-"))
+    worlds = with_model(worlds, robot, logs / "worlds")
     monolith = load_monolith() if args.monolith else None
     plan = Plan(worlds, combos, args.runs, logs, args.report, monolith, pacing=args.pacing)
     total = len(worlds) * len(combos) * args.runs * (2 if monolith else 1)
