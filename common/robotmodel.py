@@ -25,6 +25,7 @@ from typing import Any
 
 import yaml
 
+from common import yamldoc
 from common.errors import ModelError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -158,7 +159,7 @@ def load_model(
     path = model_path(name_or_path)
     where = _shown(path)
     try:
-        doc = yaml.safe_load(path.read_text())
+        doc = yamldoc.load(path.read_text())
     except (OSError, yaml.YAMLError) as exc:
         raise ModelError(f"{where}: cannot read model YAML: {exc}") from None
     if not isinstance(doc, dict):

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 import yaml
 
+from common import yamldoc
 from common.errors import UsageError
 
 if TYPE_CHECKING:
@@ -66,7 +67,7 @@ def for_model(world: BenchmarkWorld, robot: RobotFit, folder: Path) -> Benchmark
         limit = barn.time_limit(robot.max_linear_mps)
     world_file = world.world_file
     if robot.name != world.model:
-        doc = yaml.safe_load(world.world_file.read_text())
+        doc = yamldoc.load(world.world_file.read_text())
         doc["map"] = str(world.map_file.resolve())  # the copy lives elsewhere
         for entry in doc["robots"]:
             entry["model"] = robot.world_ref

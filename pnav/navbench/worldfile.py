@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from common import yamldoc
 from common.errors import WorldError
 from pnav.navbench.difficulty import Difficulty
 from pnav.navbench.generator import LEVELS, ORIGIN, GeneratedWorld
@@ -205,7 +206,7 @@ def read_benchmark(path: str | Path) -> BenchmarkWorld:
 
 def is_benchmark_world(path: Path) -> bool:
     try:
-        doc = yaml.safe_load(path.read_text())
+        doc = yamldoc.load(path.read_text())
     except (OSError, yaml.YAMLError):
         return False
     return isinstance(doc, dict) and isinstance(doc.get("benchmark"), dict)

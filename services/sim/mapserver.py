@@ -31,6 +31,7 @@ import numpy as np
 import numpy.typing as npt
 import yaml
 
+from common import yamldoc
 from common.errors import WorldError
 
 FREE = 0
@@ -260,7 +261,7 @@ def load_map(path: str | Path) -> OccupancyGrid:
 
 def _read_yaml(path: Path) -> dict[str, Any]:
     try:
-        doc = yaml.safe_load(path.read_text())
+        doc = yamldoc.load(path.read_text())
     except FileNotFoundError:
         raise WorldError(f"{path}: map file not found") from None
     except (OSError, yaml.YAMLError) as exc:

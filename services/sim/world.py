@@ -29,6 +29,7 @@ from typing import Any
 
 import yaml
 
+from common import yamldoc
 from common.contract import keys
 from common.errors import ModelError, WorldError
 from common.robotmodel import DEFAULT_MODEL, RobotModel, load_model
@@ -318,7 +319,7 @@ def _check_start(world: World, path: Path, spec: RobotSpec, placed: list[RobotSp
 def read_world_yaml(path: Path) -> Any:
     """A world file's YAML document; WorldError naming the file if it cannot be read."""
     try:
-        return yaml.safe_load(path.read_text())
+        return yamldoc.load(path.read_text())
     except FileNotFoundError:
         raise WorldError(f"{path}: world file not found") from None
     except (OSError, yaml.YAMLError) as exc:
