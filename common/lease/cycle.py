@@ -194,12 +194,19 @@ class Cycle:
             lease_id, wait_s = taken
             self.counters.acquired += 1
             self.announce(robot, lease_id)
-            (gained if self.held.add(robot, wait_s) else waiting).append(robot)
+            if self.held.add(robot, wait_s):
+                gained.append(robot)
+                # ``owns`` is true from here: the service hears of the gain before the next
+                # await (the next robot's lock), so none of its activations sees the robot
+                # owned before it has rebuilt what it keeps for it from the tables (a
+                # decision replica that did issued a command its old owner had issued)
+                self.held.report(frozenset((robot,)), frozenset())
+            else:
+                waiting.append(robot)
         if waiting:
             self._log("robots taken over, waiting out their vanished holder", waiting)
         if gained:
             self._log("robots leased", gained)
-            self.held.report(frozenset(gained), frozenset())
 
     def _log(self, what: str, robots: Iterable[str]) -> None:
         log.event(

@@ -36,7 +36,7 @@ class Holdings:
 
     def add(self, robot: str, wait_s: float) -> bool:
         """Its lock is ours; act for it now (True) or after ``wait_s``. A caller that gets
-        True reports the gain itself (with others taken in the same cycle)."""
+        True reports the gain itself, before its next await: the robot is acted for now."""
         self.owned.add(robot)
         if wait_s <= 0:
             return True

@@ -109,10 +109,16 @@ class DecisionStore:
         return now
 
     async def live(self, now: float) -> dict[str, list[Recommendation]]:
-        await self._catch_up()
-        at = self._clock()
-        if self._stale or not (self._read_at <= at < self._read_at + self.reread_s):
-            await self._read(now, at)
+        while True:
+            await self._catch_up()
+            at = self._clock()
+            if self._stale or not (self._read_at <= at < self._read_at + self.reread_s):
+                await self._read(now, at)
+            # A robot gained while a read was under way is owned from now on: deciding it
+            # before its last command is read again would issue it twice (its old owner's
+            # command is not in what this replica kept). So catch it up first.
+            if not self._regained:
+                break
         live = self._live
         live.expire(now)
         due = {
@@ -189,18 +195,23 @@ class DecisionStore:
             raise
         self.reads += 1
         self._live.replace(read)
-        # A robot removed from the robot table (or now another replica's) has nothing left
-        # to stop here.
-        for robot_id in [r for r in self._issued if r not in read or not self._owns(r)]:
+        # A robot removed from the robot table has nothing left to stop here. Robots given
+        # up are dropped when the lease reports them lost (on_ownership_change), not here:
+        # ``owns`` is also false while the lease waits for its next confirmation, with the
+        # lock still held, and a robot dropped then would be issued again when it is true.
+        for robot_id in [r for r in self._issued if r not in read]:
             del self._issued[robot_id]
 
     async def _catch_up(self) -> None:
+        # A read covers the robots gained before it starts; one gained while it is under way
+        # may have had its old owner's last command committed after the read looked, so it
+        # stays in ``_regained`` for the next read.
         if not self._bootstrapped:
             # First look after start: carry on from the table, so a restart neither repeats
             # a stop nor forgets that a robot is moving.
+            self._regained.clear()
             self._issued = await self.source.last_issued()
             self._bootstrapped = True
-            self._regained.clear()
         elif self._regained:
             # Robots taken over from another replica: carry on from what it issued last.
             regained, self._regained = self._regained, set()

@@ -107,6 +107,35 @@ async def test_a_lone_replica_owns_every_robot_when_start_returns(
     assert held == 0
 
 
+async def test_every_robot_is_reported_gained_before_another_task_sees_it_owned(
+    conn: asyncpg.Connection, db_url: str
+) -> None:
+    await add_robots(conn, ROBOTS)
+    reported: set[str] = set()
+    seen_early: list[str] = []  # owned, as another task saw it, before the service was told
+
+    def on_change(gained: frozenset[str], lost: frozenset[str]) -> None:
+        reported.update(gained)
+        reported.difference_update(lost)
+
+    a = LeaseManager(db_url, SERVICE, "a", FAST, on_change=on_change)
+
+    async def look_at_every_await() -> None:
+        # an engine's activation runs whenever the lease cycle awaits (each robot's lock)
+        while True:
+            seen_early.extend(r for r in a.owned if r not in reported)
+            await asyncio.sleep(0)
+
+    looking = asyncio.create_task(look_at_every_await())
+    try:
+        await a.start()  # takes all six robots, one lock after another
+        assert a.owned == frozenset(ROBOTS) and reported == set(ROBOTS)
+    finally:
+        looking.cancel()
+        await a.stop()
+    assert seen_early == []
+
+
 async def test_three_replicas_split_six_robots_and_take_over_when_one_dies(
     conn: asyncpg.Connection, db_url: str
 ) -> None:

@@ -82,7 +82,12 @@ async def test_a_lone_replica_owns_every_robot_from_its_first_activation(
         # the first activation already acted for both: leases were taken before it ran
         assert service.owned_robots() == frozenset({"r1", "r2"})
         assert set(service.acted) == {"r1", "r2"}
-        assert service.changes[0] == (frozenset({"r1", "r2"}), frozenset())
+        # each reported gained as its lock was taken, before any activation could see it
+        assert {gained for gained, _ in service.changes[:2]} == {
+            frozenset({"r1"}),
+            frozenset({"r2"}),
+        }
+        assert not any(lost for _, lost in service.changes[:2])
         # a robot registered later (with its notification) is taken and served
         runtime = await Runtime.open(replace(cfg, service="writer", instance="w"))
         try:

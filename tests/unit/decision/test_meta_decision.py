@@ -260,6 +260,63 @@ async def test_a_robot_regained_from_another_replica_carries_on_from_the_table()
     assert await bench.tick(10.2) == Seen()  # given up: nothing more from this replica
 
 
+class GainDuringRead:
+    """The bench's source, with a hook run while a read of the live recommendations is
+    under way (between the query going out and its rows coming back)."""
+
+    def __init__(self, source: Any) -> None:
+        self.source = source
+        self.during_read: list[Any] = []
+
+    async def live_recommendations(self, now: float) -> Any:
+        read = await self.source.live_recommendations(now)
+        while self.during_read:
+            self.during_read.pop(0)()
+        return read
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.source, name)
+
+
+async def test_a_robot_gained_while_the_table_is_read_is_caught_up_before_it_is_decided() -> None:
+    bench = Bench(owned=set())  # another replica holds r1
+    source = bench.store.source = GainDuringRead(bench.store.source)
+    assert await bench.tick(10.0) == Seen()  # first look: the table read; r1 is not ours
+    rec = bench.recommend("turn_then_move", 10, 0.2, 0.0)
+    # the other replica decides it at 10.3 (its own store, the same table), then gives r1
+    # back: the lease reports it gained here while this replica's periodic read is under way
+    other = MemoryDecisionSource(bench.contract)
+    await other.write_robot_command(
+        RobotDecision("r1", 10.3, 0.2, 0.0, rec, "turn_then_move", (rec,), "theirs")
+    )
+    assert bench.written_elsewhere() == [(10.3, "turn_then_move")]
+
+    def gain() -> None:
+        bench.owned = {"r1"}
+        bench.store.on_ownership_change(frozenset({"r1"}), frozenset())
+
+    source.during_read.append(gain)
+    assert await bench.tick(10.3) == Seen()  # carries on from their row: not due yet
+    assert await bench.tick(10.35) == Seen()
+    assert await bench.tick(10.4) == Seen([], [], True)  # a period after their row
+    assert await bench.tick(10.4) == Seen([(10.4, "turn_then_move", 0.2, 0.0, rec, (rec,))])
+
+
+async def test_a_lease_waiting_for_its_confirmation_does_not_forget_what_was_issued() -> None:
+    bench = Bench(owned={"r1"})
+    rec = bench.recommend("turn_then_move", 10, 0.2, 0.0)
+    assert await bench.tick(10.0) == Seen([], [], True)  # decided; written next activation
+    assert await bench.tick(10.0) == Seen([(10.0, "turn_then_move", 0.2, 0.0, rec, (rec,))])
+    # the lease's confirmation is late: ``owns`` is false with the lock still held and
+    # nothing reported lost; a robot-table hint makes the next look read the table
+    bench.owned = set()
+    bench.store.note(Notification(keys.ROBOT, None, None))
+    assert await bench.tick(10.02) == Seen()  # not acting meanwhile
+    bench.owned = {"r1"}  # confirmed again: nothing was gained or lost
+    assert await bench.tick(10.04) == Seen()  # its command of 10.0 stands: not issued again
+    assert await bench.tick(10.1) == Seen([], [], True)  # re-issued a period after it
+
+
 async def test_a_robot_given_back_between_its_decision_and_the_write_is_not_written() -> None:
     bench = Bench(robots=("r1", "r2"))
     one = bench.recommend("turn_then_move", 10, 0.2, 0.0, robot_id="r1")
