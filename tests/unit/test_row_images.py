@@ -8,7 +8,7 @@ import contextlib
 
 from common import bus
 from common.bus import Notification
-from common.config import ZenohSettings
+from common.config import DATA_QUEUE_BATCHES, ZenohSettings
 from common.contract import keys
 from common.db import Database, create_pool
 from common.freshness import Sequences
@@ -88,6 +88,9 @@ async def test_the_first_notification_on_a_fresh_key_is_not_lost(
 ) -> None:
     # A fresh publisher's first put used to be dropped about half the time (writer-side
     # filtering until the router answers its interest): every robot's first row unannounced.
+    # In bursts of half the link's queue, each waited for: a longer burst can also overflow
+    # the queue when the link's thread waits for a core (congestion control DROP, by design:
+    # pnav/bench/drops.py), which is not what this checks.
     got: set[str] = set()
     listener = bus.open_session(zenoh_settings)
     sub = bus.subscribe_threaded(
@@ -98,10 +101,14 @@ async def test_the_first_notification_on_a_fresh_key_is_not_lost(
         await asyncio.sleep(1.0)  # the subscription reaches the router
         notifier = bus.Notifier(writer)
         robots = [f"r{i}" for i in range(60)]
-        for robot in robots:
-            notifier.notify(keys.ODOMETRY, robot, 1, {"robot_id": robot, "id": 1})
-        with contextlib.suppress(AssertionError):  # the assertion below names what is missing
-            await eventually(lambda: len(got) >= len(robots), within=10, what="notes")
+        burst = DATA_QUEUE_BATCHES // 2
+        for start in range(0, len(robots), burst):
+            sent = robots[start : start + burst]
+            for robot in sent:
+                notifier.notify(keys.ODOMETRY, robot, 1, {"robot_id": robot, "id": 1})
+            wanted = {keys.notify_key(keys.ODOMETRY, r) for r in sent}
+            with contextlib.suppress(AssertionError):  # the assertion below names the lost
+                await eventually(lambda wanted=wanted: wanted <= got, within=2.0, what="notes")
         assert sorted(got) == sorted(keys.notify_key(keys.ODOMETRY, r) for r in robots)
         notifier.close()
     finally:
