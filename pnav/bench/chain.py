@@ -29,7 +29,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import functools
-import json
+import math
 import os
 import signal
 import subprocess
@@ -51,6 +51,7 @@ from common.engine import Engine, Rule
 from common.stack import LocalZenoh
 from common.testing import EmbeddedPostgres
 from pnav.bench.hop import router_process
+from pnav.bench.report import emit, machine, percentiles
 
 PERIOD_S = 0.05  # 20 Hz, as `pnav bench latency` drives its robots
 WARMUP_S = 2.0
@@ -219,25 +220,18 @@ def measure(
     sub.undeclare()
     session.close()
     assert measuring_from_ns is not None
-    latencies = sorted((r - s) / 1e6 for s, r in got if s >= measuring_from_ns)
+    latencies = [(r - s) / 1e6 for s, r in got if s >= measuring_from_ns]
+    spread = percentiles(latencies)  # {} when no sample came back
     sent = int(seconds / PERIOD_S) * robots
     by_role = {role: round((after[role] - before[role]) / seconds * 100, 1) for role in cpu}
     return {
         "robots": robots,
         "samples": len(latencies),
         "sent": sent,
-        "p50_ms": _pct(latencies, 0.50),
-        "p95_ms": _pct(latencies, 0.95),
-        "p99_ms": _pct(latencies, 0.99),
+        **{f"{p}_ms": round(spread.get(p, math.nan), 3) for p in ("p50", "p95", "p99")},
         "cpu_pct": round(sum(by_role.values()), 1),
         "cpu_pct_by_role": by_role,
     }
-
-
-def _pct(values: list[float], q: float) -> float:
-    if not values:
-        return float("nan")
-    return round(values[min(len(values) - 1, int(len(values) * q))], 3)
 
 
 def _cpu(process: psutil.Process | None) -> float:
@@ -321,19 +315,9 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         pg.stop()
     print(f"rows committed: {rows}")
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(
-                {
-                    "period_s": PERIOD_S,
-                    "seconds": args.seconds,
-                    "zenoh": args.zenoh,
-                    "rows": rows,
-                    "runs": results,
-                },
-                f,
-                indent=1,
-            )
+    figures = {"benchmark": "chain", "machine": machine(), "period_s": PERIOD_S}
+    figures |= {"seconds": args.seconds, "zenoh": args.zenoh, "rows": rows, "runs": results}
+    emit(figures, args.json)
     return 0
 
 

@@ -178,8 +178,12 @@ def _cpu_by_role(driven: Sequence[RunRecord], sim: float) -> dict[str, float]:
             totals[role] = totals.get(role, 0.0) + cpu_s
     if not sim:
         return {}
-    ranked = sorted(totals.items(), key=lambda kv: (-kv[1], kv[0]))
-    return {role: round(1000.0 * cpu_s / sim, 1) for role, cpu_s in ranked}
+    return {role: round(1000.0 * totals[role] / sim, 1) for role in _most_first(totals)}
+
+
+def _most_first(totals: dict[str, float]) -> list[str]:
+    """The roles of ``totals``, largest first (ties by name)."""
+    return [role for role, _ in sorted(totals.items(), key=lambda kv: (-kv[1], kv[0]))]
 
 
 def _waits_per_sim_s(driven: Sequence[RunRecord], sim: float) -> float | None:
@@ -245,7 +249,7 @@ def role_table(records: Sequence[RunRecord]) -> Table | None:
             roles[role] = roles.get(role, 0.0) + ms
     if not roles:
         return None
-    order = [role for role, _ in sorted(roles.items(), key=lambda kv: (-kv[1], kv[0]))]
+    order = _most_first(roles)
     rows = []
     for combo, entry in entries.items():
         st = entry.get(STACK)
