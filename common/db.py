@@ -164,6 +164,16 @@ class Changes:
         return [(t, robot, row_id, row) for (t, robot), (row_id, row) in self._pending.items()]
 
 
+# A FROM item that makes the statement's own (implicit) transaction commit without waiting
+# for its WAL to be flushed: ``set_config(..., true)`` lasts until that transaction ends,
+# and Postgres reads ``synchronous_commit`` when it commits, before local settings are
+# undone. One round trip, as the plain statement; the connection's other statements keep
+# their synchronous commits. For rows nobody acts on until a synchronous commit cites them
+# (recommendations, planned paths): WAL is written in order, so that later commit makes
+# them durable first (CONTRACT.md, "Durability").
+ASYNC_COMMIT = "(SELECT set_config('synchronous_commit', 'off', true)) AS async_commit"
+
+
 class Database:
     """A service's pool plus its notifier.
 

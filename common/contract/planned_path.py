@@ -10,7 +10,7 @@ from typing import Any
 
 from common.contract import keys
 from common.contract.records import Executor
-from common.db import Database
+from common.db import ASYNC_COMMIT, Database
 
 
 @dataclass(frozen=True)
@@ -43,7 +43,8 @@ _PLANNED_PATH = (
 )
 _WRITE_PLANNED_PATH = (
     "INSERT INTO planned_path (" + ", ".join(PLANNED_PATH_COLUMNS) + ") "
-    "VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9) RETURNING id"
+    "SELECT $1::text, $2::float8, $3::bigint, $4::text, $5::float8, $6::float8, $7::float8[], "
+    f"$8::float8[], $9::float8 FROM {ASYNC_COMMIT} RETURNING id"
 )
 
 

@@ -19,26 +19,28 @@ from typing import Any
 import asyncpg
 
 from common.contract import keys
-from common.db import Database
+from common.db import ASYNC_COMMIT, Database
 
 logger = logging.getLogger("pnav.contract")
 
-_RECOMMEND = """
+_RECOMMEND = f"""
 INSERT INTO command_recommendation (robot_id, kind, source, priority, linear_mps, angular_rps,
     system_command, stamp, expires_stamp, inputs, reason)
-VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)
+SELECT $1::text, $2::text, $3::text, $4::int, $5::float8, $6::float8, $7::text, $8::float8,
+       $9::float8, $10::jsonb, $11::text
+  FROM {ASYNC_COMMIT}
 RETURNING id
 """
 # RETURNING's rows are paired with the batch's by (robot_id, source), which a batch holds
 # once each (common.writebehind splits a batch that would not); inputs go as JSON text, so
 # the jsonb codec is not asked to encode an array of them.
-_RECOMMEND_MANY = """
+_RECOMMEND_MANY = f"""
 INSERT INTO command_recommendation (robot_id, kind, source, priority, linear_mps, angular_rps,
     system_command, stamp, expires_stamp, inputs, reason)
 SELECT r, k, s, p, l, a, c, st, e, i::jsonb, why
 FROM unnest($1::text[], $2::text[], $3::text[], $4::int[], $5::float8[], $6::float8[],
             $7::text[], $8::float8[], $9::float8[], $10::text[], $11::text[])
-     AS u(r, k, s, p, l, a, c, st, e, i, why)
+     AS u(r, k, s, p, l, a, c, st, e, i, why), {ASYNC_COMMIT}
 RETURNING id, robot_id, source
 """
 # What a batch refused as data (a robot deleted meanwhile, a value a CHECK refuses): its

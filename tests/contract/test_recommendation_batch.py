@@ -21,6 +21,7 @@ from common.contract.recommendations import (
     write_recommendation,
     write_recommendations,
 )
+from common.db import ASYNC_COMMIT
 from common.errors import UsageError
 from common.runtime import Runtime
 from common.testing import eventually
@@ -111,3 +112,29 @@ async def test_a_batch_must_not_repeat_a_robot_and_source(client: Runtime) -> No
         await write_recommendations(
             client.database, [velocity("r1", "a", 0.1), velocity("r1", "a", 0.2)]
         )
+
+
+async def test_a_recommendation_commits_without_waiting_for_its_wal_and_nothing_else_does(
+    client: Runtime,
+) -> None:
+    # The FROM item the recommendation and planned-path INSERTs carry: the setting holds for
+    # the statement's own transaction (Postgres reads it when that transaction commits) and
+    # is gone for the next statement on the same connection, which may be a command.
+    conn = await client.database.pool.acquire()
+    try:
+        inside = await conn.fetchval(
+            f"SELECT current_setting('synchronous_commit') FROM {ASYNC_COMMIT}"
+        )
+        after = await conn.fetchval("SELECT current_setting('synchronous_commit')")
+    finally:
+        await client.database.pool.release(conn)
+    assert (inside, after) == ("off", "on")
+    # the statements themselves, on the service's lane: written, and the lane's next
+    # statement commits synchronously again
+    await add_robot(client, "r1")
+    ids = [await write_recommendation(client.database, velocity("r1", "avoid_left", 0.2))]
+    ids += await write_recommendations(
+        client.database, [velocity("r1", "safety_stop", 0.0), velocity("r1", "dwa", 0.3)]
+    )
+    assert [r["id"] for r in await rows(client)] == ids
+    assert await client.database.fetchval("SELECT current_setting('synchronous_commit')") == "on"

@@ -130,6 +130,10 @@ async def test_a_killed_postmaster_is_restarted_and_the_services_carry_on(
         restarted_at = await wait_for(lambda: newest_command(url), 30, "Postgres back")
         # commands flow again: rows written after the restart
         await wait_for(lambda: _grew(url, restarted_at), 30, "command2robot rows after the restart")
+        # recommendations commit without waiting for their WAL, commands wait for theirs:
+        # WAL is written in order, so every recommendation a command cites survived the crash
+        commands, missing = await _provenance(url)
+        assert commands > 0 and missing == [], missing
         after = records(tmp_path / "logs")
         for service, lines in after.items():
             new = lines[len(before.get(service, [])) :]
@@ -146,6 +150,24 @@ async def test_a_killed_postmaster_is_restarted_and_the_services_carry_on(
     new_pid = postmaster_pid(data_dir)
     assert new_pid is None or not alive(new_pid)
     assert not data_dir.exists()
+
+
+async def _provenance(url: str) -> tuple[int, list[tuple[int, int]]]:
+    """The commands, and each (command, recommendation) pair it cites that does not exist."""
+    conn = await asyncpg.connect(url, timeout=5)
+    try:
+        commands = int(await conn.fetchval("SELECT count(*) FROM command2robot"))
+        missing = await conn.fetch(
+            """
+            SELECT c.id, cited FROM command2robot c,
+                   unnest(c.considered_ids || c.recommendation_id) AS cited
+             WHERE cited IS NOT NULL
+               AND NOT EXISTS (SELECT 1 FROM command_recommendation r WHERE r.id = cited)
+            """
+        )
+    finally:
+        await conn.close()
+    return commands, [(int(r[0]), int(r[1])) for r in missing]
 
 
 async def _grew(url: str, than: int) -> bool:
