@@ -164,7 +164,7 @@ def unpack(payload: bytes) -> Any:
 class Notification:
     """A change hint: ``table`` changed for ``robot`` (None: not robot-scoped), newest ``id``.
 
-    Since contract version 3 (DESIGN.md section 7) a notification may carry ``row``, the image
+    Since contract version 3 (docs/ARCHITECTURE.md) a notification may carry ``row``, the image
     of the committed row ``id`` (its contract columns, CONTRACT.md "Row images"), so a reader
     can act on it and skip its query. ``src`` names the publisher (one per process) and ``seq``
     counts its notifications on this key: a reader that sees a ``seq`` skip (or no image)

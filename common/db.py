@@ -235,7 +235,7 @@ class Database:
         ``images`` and returns ``id`` and the ``pair_on`` columns per row; then notify
         ``table`` for each robot with its id and its image (the row's contract columns as
         written). One commit and one round trip for all the rows: batching across robots
-        (DESIGN.md section 7).
+        (docs/ARCHITECTURE.md, the data path).
 
         RETURNING's rows are paired with the images by their ``pair_on`` columns (the
         robot, by default), whatever order they come in, so those must be distinct across

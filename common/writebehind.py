@@ -4,7 +4,7 @@ An engine runs its rules one after another, so a store that wrote each rule's ro
 rule asked paid a round trip (and a commit) per row, and every robot later in the activation
 waited for the ones before. A :class:`WriteBehind` holds the rows instead and
 :meth:`WriteBehind.flush` writes them with one call of ``write_many`` (one multi-row INSERT
-in Postgres, DESIGN.md section 7: batching across robots). The service awaits ``flush`` at
+in Postgres, docs/ARCHITECTURE.md: batching across robots). The service awaits ``flush`` at
 the end of every activation (``Engine.at_activation_end``), so every row is committed and
 notified before the activation counts as ended: whoever waits for the activation under way
 (robot leases, a lockstep quiet report) still sees the rows written.

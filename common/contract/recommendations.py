@@ -4,7 +4,7 @@ Every row is written with its image (CONTRACT.md "Row images": the columns as wr
 its ``id``), notified after the commit, so the decision service keeps the live rows without
 reading them back. A batch (:func:`write_recommendations`) is one INSERT for rows of many
 robots and scenarios, one commit, then one notification per row: what a store that defers
-its rules' writes to the end of an activation sends (DESIGN.md section 7, batching across
+its rules' writes to the end of an activation sends (docs/ARCHITECTURE.md: batching across
 robots; common.writebehind).
 """
 

@@ -1,6 +1,6 @@
 """The rule-running system: two FIFO queues, N rules or F seconds per activation.
 
-Semantics (DESIGN.md section 3, thesis section 3.2; docs/ENGINE.md says it all in full):
+Semantics (thesis section 3.2; docs/ENGINE.md says it all in full):
 
 - ``current`` holds the rules of this activation, ``next`` the rules generated during it.
   An activation runs rules from the head of ``current`` until it is empty, N rules ran or F
@@ -107,7 +107,7 @@ class Engine(StepRunner):
         the activation counts as ended (:meth:`under_way`), in the order added.
 
         For a store that defers the writes its rules ask for (one multi-row INSERT for the
-        activation instead of a round trip per rule: DESIGN.md section 7, batching across
+        activation instead of a round trip per rule: docs/ARCHITECTURE.md, batching across
         robots). A hook owns its errors: one that raises is logged once per distinct error
         and counted (``counters.hook_errors``); the engine runs on.
         """

@@ -1,4 +1,4 @@
-"""The bridge: the one service that talks to the robot (DESIGN.md section 4, "bridge").
+"""The bridge: the one service that talks to the robot (docs/ARCHITECTURE.md, the data path).
 
 Wiring only; each concern lives in its own module:
 

@@ -1,4 +1,4 @@
-"""The bridge's own tunables, with the defaults DESIGN.md asks for.
+"""The bridge's own tunables, with the defaults docs/BRIDGE.md gives.
 
 The connections (Postgres, Zenoh) come from :class:`common.config.ServiceConfig`; these are
 the few knobs specific to the bridge, read from optional ``PNAV_BRIDGE_*`` variables:

@@ -16,7 +16,7 @@ does not by default), else one query for the odometry alone. Either falls back t
 as the contract says: no image, a ``seq`` gap (``common.freshness.Sequences``), or nothing
 heard for ``recheck_s`` (the scan cache's period, as without images).
 
-Batching across robots (DESIGN.md section 7): the odometry query asks, in the same round
+Batching across robots (docs/ARCHITECTURE.md): the odometry query asks, in the same round
 trip, for every other robot served whose scan came as an image and has none yet (their rules
 run later in the same activation); and in the service, recommendations are held until the
 activation ends and written in one statement (:meth:`ControllerStore.defer_recommendations`,
@@ -316,7 +316,7 @@ class ControllerStore:
     async def _read_odometry(self, robot_id: str, scan_id: int) -> Odometry | None:
         """Read the robot's odometry for ``scan_id``, and in the same round trip that of
         every other robot served whose scan from an image has none yet: their rules, later
-        in this activation, find it here (DESIGN.md section 7, one query for many robots).
+        in this activation, find it here (docs/ARCHITECTURE.md: one query for many robots).
         Read after every one of those scans was heard, it is what each robot's own query
         would have read."""
         wanted = {robot_id: scan_id}

@@ -243,7 +243,7 @@ class Simulation:
 
     def _sense(self) -> None:
         now, step = self.time, self.steps
-        # every robot that scans now, cast together (DESIGN.md 7, "Batching across robots")
+        # every robot that scans now, cast together (docs/ARCHITECTURE.md, batching across robots)
         scanning = [i for i, due in enumerate(self._schedule) if due[SCAN].due(step)]
         casts: dict[int, Cast] = {}
         if scanning:

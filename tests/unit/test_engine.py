@@ -1,4 +1,4 @@
-"""The Proactive Engine's semantics, activation by activation (DESIGN.md section 3).
+"""The Proactive Engine's semantics, activation by activation (docs/ARCHITECTURE.md, *The engine*).
 
 Each test writes the expected queue state beside each step. ``Probe`` rules append their name
 to a shared journal when their steps run, so a test reads exactly what ran and in what order.

@@ -1,4 +1,4 @@
-"""House rules that keep the services independent (DESIGN.md section 2)."""
+"""House rules that keep the services independent (docs/ARCHITECTURE.md, *The layout*)."""
 
 from __future__ import annotations
 

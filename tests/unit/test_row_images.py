@@ -1,4 +1,4 @@
-"""Notifications that carry the committed row (DESIGN.md section 7): encoding, the write that
+"""Notifications that carry the committed row (docs/ARCHITECTURE.md): encoding, the write that
 sends them, numbering per publisher and key, and the gap a reader sees."""
 
 from __future__ import annotations

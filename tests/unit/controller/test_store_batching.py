@@ -1,4 +1,4 @@
-"""Batching across robots in the controller's store (DESIGN.md section 7), step by step on
+"""Batching across robots in the controller's store (docs/ARCHITECTURE.md), step by step on
 the in-memory contract: one odometry query serves every robot served whose scan came as an
 image, and an activation's recommendations go in one write at its end."""
 
