@@ -12,6 +12,13 @@ what the decision meant). Every row sent feeds the :class:`Watchdog`; a robot wh
 stream goes quiet for ``watchdog_s`` of sim time is sent one zero velocity
 (``command_id`` nil), and every known robot is sent one on shutdown.
 
+An image is first held to command2robot's rules (common.contract.tables: the decision's
+velocities are a recommendation's, bounded; ids from a sequence; the robot of its key; the
+recommendation it cites among those it considered), and its id to what the table can hold:
+more than :data:`ID_HORIZON` beyond the newest id the relay has read from the table, no
+sequence got there yet. An image that fails is counted (``Counters.images_refused``), logged
+once per period, and the table is read instead, so a forged image moves no robot.
+
 At start-up the newest rows already in the table are not replayed blindly: a row written
 before this bridge started may be minutes old, and driving a robot on it would be a
 surprise. Only a row whose ``stamp`` is within ``watchdog_s`` of the current sim time counts.
@@ -34,6 +41,7 @@ from common import bus, lockstep, log
 from common.clock import SimClock
 from common.contract import keys
 from common.freshness import Sequences
+from common.images import ImageGuard
 from common.tasks import cancel_and_wait
 from services.bridge.counters import Counters, RateLimitedLog
 from services.bridge.limits import Limits, RobotLimits
@@ -55,6 +63,13 @@ CROSS JOIN LATERAL (
     WHERE c.robot_id = r.robot_id ORDER BY c.id DESC LIMIT 1
 ) c"""
 _NEWEST_OF = _NEWEST + "\nWHERE r.robot_id = ANY($1::text[])"
+
+
+# The most command2robot rows the decision can have committed since the relay's last read of
+# the table (it reads every command_period_s, 50 ms by default): thousands of times what 50
+# robots re-issued at 10 Hz commit meanwhile. An image whose id is further ahead names a row
+# no sequence gave yet: read the table.
+ID_HORIZON = 100_000
 
 
 def clamp(value: float, limit: float) -> float:
@@ -134,6 +149,8 @@ class CommandRelay:
         self.safety = SafetyLayer(settings.safety)
         self.notes = SafetyNotes(pool)
         self._sequences = Sequences()
+        self.images = ImageGuard(logger, refused=counters.images_refused)
+        self.newest_read = 0  # the highest command2robot id read from the table
         self._alerts = RateLimitedLog(logger)
         self._subscriber: zenoh.Subscriber[None] | None = None
         self._tasks: list[asyncio.Task[None]] = []
@@ -152,6 +169,7 @@ class CommandRelay:
         self.counters.command_reads += 1
         self.notes.start()
         for row in rows:
+            self._read_row(row["id"])
             self._consider(Command.from_row(row), at_start=True)
         self._tasks = [
             asyncio.create_task(self._poller(), name="command-poller"),
@@ -195,7 +213,7 @@ class CommandRelay:
         self.counters.command_notes_lost = self._sequences.lost
         if not gap and note.id is not None and note.id <= self.last_sent.get(robot, 0):
             return  # already sent
-        command = None if gap else self._from_image(robot, note.row)
+        command = None if gap else self._from_image(robot, note)
         if command is None:
             self._wanted.add(robot)
             self._wake.set()
@@ -203,11 +221,22 @@ class CommandRelay:
         self.counters.commands_from_images += 1
         self._consider(command)
 
-    def _from_image(self, robot: str, image: Mapping[str, Any] | None) -> Command | None:
+    def _from_image(self, robot: str, note: bus.Notification) -> Command | None:
+        image = self.images.image(note)  # None: none, or one the table's rules refuse
         if image is None:
+            return None
+        if note.id is not None and note.id > self.newest_read + ID_HORIZON:
+            self.images.refuse(
+                keys.COMMAND2ROBOT,
+                f"id {note.id} beyond the table's newest read ({self.newest_read}) + {ID_HORIZON}",
+            )
             return None
         limits = self.limits.of(robot)
         return None if limits is None else Command.from_image(robot, image, limits)
+
+    def _read_row(self, row_id: int) -> None:
+        if row_id > self.newest_read:
+            self.newest_read = row_id
 
     async def _poller(self) -> None:
         while True:
@@ -220,6 +249,7 @@ class CommandRelay:
             try:
                 rows = await self._read(wanted)
                 for row in rows:
+                    self._read_row(row["id"])
                     command = Command.from_row(row)
                     limits = (
                         command.max_linear,
