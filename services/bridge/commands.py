@@ -151,6 +151,9 @@ class CommandRelay:
         self._sequences = Sequences()
         self.images = ImageGuard(logger, refused=counters.images_refused)
         self.newest_read = 0  # the highest command2robot id read from the table
+        # per robot: the id of the last command sent from an image, and when it came; a read
+        # that started after it and finds an older newest row shows the table never had it
+        self._imaged: dict[str, tuple[int, float]] = {}
         self._alerts = RateLimitedLog(logger)
         self._subscriber: zenoh.Subscriber[None] | None = None
         self._tasks: list[asyncio.Task[None]] = []
@@ -219,6 +222,7 @@ class CommandRelay:
             self._wake.set()
             return
         self.counters.commands_from_images += 1
+        self._imaged[robot] = (command.id, time.monotonic())
         self._consider(command)
 
     def _from_image(self, robot: str, note: bus.Notification) -> Command | None:
@@ -234,6 +238,28 @@ class CommandRelay:
         limits = self.limits.of(robot)
         return None if limits is None else Command.from_image(robot, image, limits)
 
+    def _unless_phantom(self, newest: Command, read_started: float) -> None:
+        """The table's ``newest`` row of its robot, read from ``read_started``: if the last
+        command sent from an image came before that and is newer than the table's newest,
+        the table never had it (the writer commits before it notifies): count it refused and
+        take the table's row as the robot's last, so the decision's next rows are not held
+        back behind a forged id (the table's row itself is sent only if it is current)."""
+        robot = newest.robot_id
+        imaged = self._imaged.get(robot)
+        if imaged is None:
+            return
+        if newest.id >= imaged[0] or imaged[1] > read_started:
+            if newest.id >= imaged[0]:
+                del self._imaged[robot]  # the table has it
+            return
+        del self._imaged[robot]
+        self.images.refuse(
+            keys.COMMAND2ROBOT, f"command {imaged[0]} sent from an image is not in the table"
+        )
+        self.last_sent[robot] = newest.id - 1
+        if not self._current(newest):
+            self.last_sent[robot] = newest.id  # an old row: the watchdog stops the robot
+
     def _read_row(self, row_id: int) -> None:
         if row_id > self.newest_read:
             self.newest_read = row_id
@@ -247,10 +273,12 @@ class CommandRelay:
             self._wanted.clear()
             self._polling = True
             try:
+                started = time.monotonic()
                 rows = await self._read(wanted)
                 for row in rows:
                     self._read_row(row["id"])
                     command = Command.from_row(row)
+                    self._unless_phantom(command, started)
                     limits = (
                         command.max_linear,
                         command.max_angular,

@@ -17,8 +17,9 @@ import pytest
 
 from common.contract import keys
 from common.testing import eventually
+from services.bridge import BridgeSettings
 from services.bridge.commands import ID_HORIZON
-from tests.contract.bridge.conftest import BridgeFactory, FakeSim, vel
+from tests.contract.bridge.conftest import BridgeFactory, FakeSim, ready, vel
 from tests.contract.bridge.test_command_images import decided, publish, started
 
 pytestmark = pytest.mark.timeout(60)
@@ -60,3 +61,34 @@ async def test_a_forged_command_image_is_dropped_counted_and_the_table_read(
     after, image = await decided(conn, 0.1, 0.0)  # the decision's next row goes through
     publish(sim, after, image, seq=len(forgeries) + 2)
     assert vel((await cmd_vel.next())[1]) == (0.1, 0.0, after)
+
+
+async def test_a_command_sent_from_an_image_the_table_never_had_holds_nothing_back(
+    start_bridge: BridgeFactory, sim: FakeSim, conn: asyncpg.Connection
+) -> None:
+    """A forgery inside every rule, put as the decision, is sent once; the relay's next read
+    of the table (every 50 ms) does not find it: counted, and the decision's own rows,
+    with lower ids than the forgery's, are sent again from then on."""
+    settings = BridgeSettings(command_period_s=0.05, prune_period_s=30.0, world_retry_s=0.5)
+    bridge, cmd_vel = await ready(start_bridge, sim, settings=settings)
+    await eventually(lambda: bridge.commands.limits.of("r1") is not None, what="r1's limits")
+    real, image = await decided(conn, 0.0, 0.0)
+    publish(sim, real, image, seq=1)
+    assert vel((await cmd_vel.next())[1]) == (0.0, 0.0, real)
+    phantom = real + 1000
+    publish(sim, phantom, {**image, "id": phantom, "linear_mps": 0.1}, seq=2)
+    await eventually(
+        lambda: bridge.counters.images_refused.get(keys.COMMAND2ROBOT) == 1,
+        within=20,
+        what="the phantom found missing from the table",
+    )
+    after, image = await decided(conn, 0.05, 0.0)
+    publish(sim, after, image, seq=3)
+
+    async def sent_after() -> bool:
+        while True:
+            _, body = await cmd_vel.next(within=10)
+            if vel(body)[2] == after:
+                return True
+
+    assert await sent_after()
