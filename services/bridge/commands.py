@@ -12,12 +12,8 @@ what the decision meant). Every row sent feeds the :class:`Watchdog`; a robot wh
 stream goes quiet for ``watchdog_s`` of sim time is sent one zero velocity
 (``command_id`` nil), and every known robot is sent one on shutdown.
 
-An image is first held to command2robot's rules (common.contract.tables: the decision's
-velocities are a recommendation's, bounded; ids from a sequence; the robot of its key; the
-recommendation it cites among those it considered), and its id to what the table can hold:
-more than :data:`ID_HORIZON` beyond the newest id the relay has read from the table, no
-sequence got there yet. An image that fails is counted (``Counters.images_refused``), logged
-once per period, and the table is read instead, so a forged image moves no robot.
+An image is first held to command2robot's rules and the ids the table can hold (images.py):
+one that fails is counted, logged, and the table read instead: a forgery moves no robot.
 
 At start-up the newest rows already in the table are not replayed blindly: a row written
 before this bridge started may be minutes old, and driving a robot on it would be a
@@ -41,9 +37,9 @@ from common import bus, lockstep, log
 from common.clock import SimClock
 from common.contract import keys
 from common.freshness import Sequences
-from common.images import ImageGuard
 from common.tasks import cancel_and_wait
 from services.bridge.counters import Counters, RateLimitedLog
+from services.bridge.images import CommandImages
 from services.bridge.limits import Limits, RobotLimits
 from services.bridge.notes import SafetyNotes
 from services.bridge.safety import LIMITED, STOPPED, UNCHECKED, SafetyLayer, Verdict
@@ -63,13 +59,6 @@ CROSS JOIN LATERAL (
     WHERE c.robot_id = r.robot_id ORDER BY c.id DESC LIMIT 1
 ) c"""
 _NEWEST_OF = _NEWEST + "\nWHERE r.robot_id = ANY($1::text[])"
-
-
-# The most command2robot rows the decision can have committed since the relay's last read of
-# the table (it reads every command_period_s, 50 ms by default): thousands of times what 50
-# robots re-issued at 10 Hz commit meanwhile. An image whose id is further ahead names a row
-# no sequence gave yet: read the table.
-ID_HORIZON = 100_000
 
 
 def clamp(value: float, limit: float) -> float:
@@ -149,11 +138,7 @@ class CommandRelay:
         self.safety = SafetyLayer(settings.safety)
         self.notes = SafetyNotes(pool)
         self._sequences = Sequences()
-        self.images = ImageGuard(logger, refused=counters.images_refused)
-        self.newest_read = 0  # the highest command2robot id read from the table
-        # per robot: the id of the last command sent from an image, and when it came; a read
-        # that started after it and finds an older newest row shows the table never had it
-        self._imaged: dict[str, tuple[int, float]] = {}
+        self.images = CommandImages(logger, counters.images_refused)
         self._alerts = RateLimitedLog(logger)
         self._subscriber: zenoh.Subscriber[None] | None = None
         self._tasks: list[asyncio.Task[None]] = []
@@ -172,7 +157,7 @@ class CommandRelay:
         self.counters.command_reads += 1
         self.notes.start()
         for row in rows:
-            self._read_row(row["id"])
+            self.images.read(row["id"])
             self._consider(Command.from_row(row), at_start=True)
         self._tasks = [
             asyncio.create_task(self._poller(), name="command-poller"),
@@ -222,47 +207,15 @@ class CommandRelay:
             self._wake.set()
             return
         self.counters.commands_from_images += 1
-        self._imaged[robot] = (command.id, time.monotonic())
+        self.images.sent(robot, command.id)
         self._consider(command)
 
     def _from_image(self, robot: str, note: bus.Notification) -> Command | None:
-        image = self.images.image(note)  # None: none, or one the table's rules refuse
+        image = self.images.image(note)
         if image is None:
-            return None
-        if note.id is not None and note.id > self.newest_read + ID_HORIZON:
-            self.images.refuse(
-                keys.COMMAND2ROBOT,
-                f"id {note.id} beyond the table's newest read ({self.newest_read}) + {ID_HORIZON}",
-            )
             return None
         limits = self.limits.of(robot)
         return None if limits is None else Command.from_image(robot, image, limits)
-
-    def _unless_phantom(self, newest: Command, read_started: float) -> None:
-        """The table's ``newest`` row of its robot, read from ``read_started``: if the last
-        command sent from an image came before that and is newer than the table's newest,
-        the table never had it (the writer commits before it notifies): count it refused and
-        take the table's row as the robot's last, so the decision's next rows are not held
-        back behind a forged id (the table's row itself is sent only if it is current)."""
-        robot = newest.robot_id
-        imaged = self._imaged.get(robot)
-        if imaged is None:
-            return
-        if newest.id >= imaged[0] or imaged[1] > read_started:
-            if newest.id >= imaged[0]:
-                del self._imaged[robot]  # the table has it
-            return
-        del self._imaged[robot]
-        self.images.refuse(
-            keys.COMMAND2ROBOT, f"command {imaged[0]} sent from an image is not in the table"
-        )
-        self.last_sent[robot] = newest.id - 1
-        if not self._current(newest):
-            self.last_sent[robot] = newest.id  # an old row: the watchdog stops the robot
-
-    def _read_row(self, row_id: int) -> None:
-        if row_id > self.newest_read:
-            self.newest_read = row_id
 
     async def _poller(self) -> None:
         while True:
@@ -276,9 +229,12 @@ class CommandRelay:
                 started = time.monotonic()
                 rows = await self._read(wanted)
                 for row in rows:
-                    self._read_row(row["id"])
+                    self.images.read(row["id"])
                     command = Command.from_row(row)
-                    self._unless_phantom(command, started)
+                    if self.images.phantom(command.robot_id, command.id, started):
+                        # sent from a forged image: the table's row is the robot's last
+                        current = self._current(command)
+                        self.last_sent[command.robot_id] = command.id - int(current)
                     limits = (
                         command.max_linear,
                         command.max_angular,

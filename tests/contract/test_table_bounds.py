@@ -16,7 +16,7 @@ import asyncpg
 import pytest
 
 from common.contract import tables
-from common.contract.tables import FLOAT, ID, INT, Column, Table
+from common.contract.columns import FLOAT, ID, INT, Column, Table
 
 INF = math.inf
 
