@@ -121,6 +121,12 @@ class ScenarioService(ABC):
         stopped" line; None for a service that does not follow the numbering."""
         return None
 
+    def images_refused(self) -> dict[str, int] | None:
+        """Row images refused per table because they broke the table's rules (common.images:
+        the table was read instead), for the "engine stopped" line; None for a service that
+        acts on no image."""
+        return None
+
     # -- robot ownership (replicas) ---------------------------------------------------------
     def owns(self, robot_id: str) -> bool:
         """Whether this replica handles ``robot_id`` now: act (recommend, decide, plan) for a
@@ -331,7 +337,11 @@ class ScenarioService(ABC):
                     logger.error("engine did not drain in time; cancelled")
             await self.stop_leases()
             lost = self.notifications_lost()
-            extra = {} if lost is None else {"notifications_lost": lost}
+            extra: dict[str, object] = {} if lost is None else {"notifications_lost": lost}
+            refused = self.images_refused()
+            if refused is not None:
+                extra["images_refused"] = sum(refused.values())
+                extra.update({f"images_refused_{t}": n for t, n in sorted(refused.items())})
             log.event(
                 logger, logging.INFO, "engine stopped", **self.engine.counters.as_dict(), **extra
             )

@@ -12,6 +12,9 @@ what the decision meant). Every row sent feeds the :class:`Watchdog`; a robot wh
 stream goes quiet for ``watchdog_s`` of sim time is sent one zero velocity
 (``command_id`` nil), and every known robot is sent one on shutdown.
 
+An image is first held to command2robot's rules and the ids the table can hold (images.py):
+one that fails is counted, logged, and the table read instead: a forgery moves no robot.
+
 At start-up the newest rows already in the table are not replayed blindly: a row written
 before this bridge started may be minutes old, and driving a robot on it would be a
 surprise. Only a row whose ``stamp`` is within ``watchdog_s`` of the current sim time counts.
@@ -36,6 +39,7 @@ from common.contract import keys
 from common.freshness import Sequences
 from common.tasks import cancel_and_wait
 from services.bridge.counters import Counters, RateLimitedLog
+from services.bridge.images import CommandImages
 from services.bridge.limits import Limits, RobotLimits
 from services.bridge.notes import SafetyNotes
 from services.bridge.safety import LIMITED, STOPPED, UNCHECKED, SafetyLayer, Verdict
@@ -134,6 +138,7 @@ class CommandRelay:
         self.safety = SafetyLayer(settings.safety)
         self.notes = SafetyNotes(pool)
         self._sequences = Sequences()
+        self.images = CommandImages(logger, counters.images_refused)
         self._alerts = RateLimitedLog(logger)
         self._subscriber: zenoh.Subscriber[None] | None = None
         self._tasks: list[asyncio.Task[None]] = []
@@ -152,6 +157,7 @@ class CommandRelay:
         self.counters.command_reads += 1
         self.notes.start()
         for row in rows:
+            self.images.read(row["id"])
             self._consider(Command.from_row(row), at_start=True)
         self._tasks = [
             asyncio.create_task(self._poller(), name="command-poller"),
@@ -195,15 +201,17 @@ class CommandRelay:
         self.counters.command_notes_lost = self._sequences.lost
         if not gap and note.id is not None and note.id <= self.last_sent.get(robot, 0):
             return  # already sent
-        command = None if gap else self._from_image(robot, note.row)
+        command = None if gap else self._from_image(robot, note)
         if command is None:
             self._wanted.add(robot)
             self._wake.set()
             return
         self.counters.commands_from_images += 1
+        self.images.sent(robot, command.id)
         self._consider(command)
 
-    def _from_image(self, robot: str, image: Mapping[str, Any] | None) -> Command | None:
+    def _from_image(self, robot: str, note: bus.Notification) -> Command | None:
+        image = self.images.image(note)
         if image is None:
             return None
         limits = self.limits.of(robot)
@@ -218,9 +226,15 @@ class CommandRelay:
             self._wanted.clear()
             self._polling = True
             try:
+                started = time.monotonic()
                 rows = await self._read(wanted)
                 for row in rows:
+                    self.images.read(row["id"])
                     command = Command.from_row(row)
+                    if self.images.phantom(command.robot_id, command.id, started):
+                        # sent from a forged image: the table's row is the robot's last
+                        current = self._current(command)
+                        self.last_sent[command.robot_id] = command.id - int(current)
                     limits = (
                         command.max_linear,
                         command.max_angular,

@@ -35,6 +35,8 @@ class Counters:
     command_reads: int = 0  # queries of command2robot (start, notifications, period)
     # command2robot notifications that never arrived (a skip in their publisher's seq)
     command_notes_lost: int = 0
+    # row images refused per table (broke the table's rules, common.images): read instead
+    images_refused: Counter[str] = field(default_factory=Counter)
     watchdog_stops: int = 0
     shutdown_stops: int = 0
     # the safety layer: commands it stopped, slowed, or could not check (no fresh scan)
@@ -65,6 +67,7 @@ class Counters:
             "commands_from_images": self.commands_from_images,
             "command_reads": self.command_reads,
             "command_notes_lost": self.command_notes_lost,
+            "images_refused": dict(self.images_refused),
             "watchdog_stops": self.watchdog_stops,
             "shutdown_stops": self.shutdown_stops,
             "safety_stopped": self.safety_stopped,

@@ -43,6 +43,9 @@ class ControllerService(ScenarioService):
     def notifications_lost(self) -> int | None:
         return self.store.notifications_lost
 
+    def images_refused(self) -> dict[str, int] | None:
+        return self.store.images_refused
+
     def seed(self) -> None:
         scenarios = installed_scenarios()
         log.event(logger, logging.INFO, "controller scenarios", names=",".join(sorted(scenarios)))

@@ -37,6 +37,7 @@ from common.contract.recommendations import write_recommendation, write_recommen
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
 from common.db import Database
 from common.freshness import FreshCache, Sequences
+from common.images import ImageGuard
 from common.writebehind import WriteBehind
 from services.controller.scenario import Key, Recommendation
 
@@ -178,6 +179,8 @@ class ControllerStore:
         # last one is unusable, a gap or no image: read the table)
         self._odometry_images: dict[str, tuple[Odometry, float] | None] = {}
         self._seqs = Sequences()
+        # images held to their table's rules before they stand in for a query
+        self.images = ImageGuard(logger)
         # images that stood in for a query (tests, benchmarks)
         self.images_used = 0
         self.odometry_images_used = 0
@@ -190,6 +193,11 @@ class ControllerStore:
     def notifications_lost(self) -> int:
         """Notifications known lost on the way here (common.freshness.Sequences)."""
         return self._seqs.lost
+
+    @property
+    def images_refused(self) -> dict[str, int]:
+        """Row images refused per table (broke the table's rules): the table was read."""
+        return dict(self.images.refused)
 
     # -- what the service tells it ---------------------------------------------------------
     def note(self, note: Notification) -> None:
@@ -217,13 +225,9 @@ class ControllerStore:
         return note.row is not None and not gap
 
     def _odometry_image(self, robot_id: str, note: Notification) -> None:
-        if not self._usable(note) or note.row is None:
-            self._odometry_images[robot_id] = None
-            return
-        try:
-            odometry = records.odometry_of(note.row)
-        except (KeyError, TypeError, ValueError):
-            self._odometry_images[robot_id] = None  # not the contract's image: read the table
+        odometry = self.images.record(note, records.odometry_of) if self._usable(note) else None
+        if odometry is None:
+            self._odometry_images[robot_id] = None  # no image the table's rules allow: read it
             return
         held = self._odometry_images.get(robot_id)
         if held is None or odometry.id > held[0].id:
@@ -236,9 +240,8 @@ class ControllerStore:
         held = self.scans.peek(robot_id)
         if held is not None and held[0] is not None and held[0].id >= (note.id or 0):
             return True  # an older scan than the one held: nothing to do
-        try:
-            scan = records.laser_scan_of(note.row)
-        except (KeyError, TypeError, ValueError):
+        scan = self.images.record(note, records.laser_scan_of)
+        if scan is None:
             return False
         self.scans.put(robot_id, (scan, None))
         self._imaged.add(robot_id)
@@ -252,9 +255,8 @@ class ControllerStore:
         held = self.paths.peek(robot_id)
         if held is not None and held.id >= (note.id or 0):
             return True
-        try:
-            path = planned_path_of(note.row)
-        except (KeyError, TypeError, ValueError):
+        path = self.images.record(note, planned_path_of)
+        if path is None:
             return False
         self.paths.put(robot_id, path)
         return True

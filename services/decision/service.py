@@ -43,6 +43,9 @@ class DecisionService(ScenarioService):
     def notifications_lost(self) -> int | None:
         return self.store.notifications_lost
 
+    def images_refused(self) -> dict[str, int] | None:
+        return self.store.images_refused
+
     def seed(self) -> None:
         meta.seed(self.engine, self.store)
 

@@ -29,6 +29,7 @@ from common import log
 from common.bus import Notification
 from common.contract import keys
 from common.freshness import Sequences
+from common.images import ImageGuard
 from services.decision.arbitration import (
     Issued,
     Recommendation,
@@ -93,12 +94,19 @@ class DecisionStore:
         self._stale = True  # read the table at the next look
         self._read_at = -math.inf  # sim time of the last read of the table
         self._seqs = Sequences()
+        # images held to the table's rules (the safety band...) before they count as live
+        self.images = ImageGuard(logger)
         self.reads = 0  # reads of the live recommendations (tests, benchmarks)
 
     @property
     def notifications_lost(self) -> int:
         """Notifications known lost on the way here (common.freshness.Sequences)."""
         return self._seqs.lost
+
+    @property
+    def images_refused(self) -> dict[str, int]:
+        """Row images refused per table (broke the table's rules): the table was read."""
+        return dict(self.images.refused)
 
     # -- DecisionView ----------------------------------------------------------------------
     def sim_now(self) -> float | None:
@@ -163,10 +171,11 @@ class DecisionStore:
         if note.row is None or gap or note.robot is None:
             self._stale = True
             return
-        try:
-            rec = recommendation_of(note.row)
-        except (KeyError, TypeError, ValueError):
-            self._stale = True  # not the contract's image: the table says
+        # an image the table would refuse (a forward command in the safety band, another
+        # robot's row, a NaN stamp...) is not a row: counted, and the table says
+        rec = self.images.record(note, recommendation_of)
+        if rec is None:
+            self._stale = True
             return
         self._live.add(rec)
 

@@ -39,6 +39,9 @@ class PlannerService(ScenarioService):
     def notifications_lost(self) -> int | None:
         return self.store.notifications_lost
 
+    def images_refused(self) -> dict[str, int] | None:
+        return self.store.images_refused
+
     def seed(self) -> None:
         # the move scenarios installed now: a new one needs a restart, no edit here
         self.rules = meta.seed(self.engine, self.store, meta.move_scenarios(), owns=self.owns)

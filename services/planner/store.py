@@ -24,6 +24,7 @@ the table between every two reports).
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Awaitable, Callable, Iterable
 from typing import Any
@@ -33,6 +34,7 @@ import services.planner.obstacles as obstacles
 from common.bus import Notification
 from common.contract import keys, records
 from common.freshness import FreshCache, Sequences
+from common.images import ImageGuard
 from common.writebehind import WriteBehind
 from services.planner.paths import PathRow
 from services.planner.recommendation import Recommendation
@@ -40,6 +42,8 @@ from services.planner.routes import Router, Target
 from services.planner.source import PlannerSource
 from services.planner.tracking import Progress
 from services.planner.world import MapData, RobotInfo, RobotState, Station, World
+
+logger = logging.getLogger("pnav.planner")
 
 REFRESH_S = 2.0  # re-read robots, maps and stations at least this often (store clock)
 # Re-read the active strategies, and each robot's active goal, when a notification says they
@@ -86,6 +90,8 @@ class PlannerStore:
         self._odometry: dict[str, tuple[records.Odometry, float] | None] = {}
         self._battery: dict[str, tuple[records.Battery, float] | None] = {}  # the same
         self._seqs = Sequences()
+        # images held to their table's rules before they stand in for a query
+        self.images = ImageGuard(logger)
         # velocity recommendations held until the activation ends (defer_recommendations);
         # None: each written when a rule asks
         self.outbox: WriteBehind[Recommendation] | None = None
@@ -96,6 +102,11 @@ class PlannerStore:
     def notifications_lost(self) -> int:
         """Notifications known lost on the way here (common.freshness.Sequences)."""
         return self._seqs.lost
+
+    @property
+    def images_refused(self) -> dict[str, int]:
+        """Row images refused per table (broke the table's rules): the table was read."""
+        return dict(self.images.refused)
 
     # -- clocks ------------------------------------------------------------------------------
     def now(self) -> float:
@@ -136,12 +147,8 @@ class PlannerStore:
         """Keep ``note``'s image as the robot's newest row of its table in ``held`` (with the
         store clock when it came), or None when it cannot stand in for the table."""
         gap = self._seqs.gap(f"{note.table}/{robot_id}", note.src, note.seq)
-        row = None
-        if note.row is not None and not gap:
-            try:
-                row = parse(note.row)
-            except (KeyError, TypeError, ValueError):
-                row = None  # not the contract's image: read the table
+        # no image, or one the table's rules refuse (or that does not parse): read the table
+        row = None if gap else self.images.record(note, parse)
         if row is None:
             held[robot_id] = None
             return

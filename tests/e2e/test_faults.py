@@ -39,6 +39,19 @@ async def test_a_rogue_full_speed_recommendation_never_drives_into_anything(
     assert misses(r) == []
 
 
+async def test_forged_row_images_cite_nothing_and_move_nothing(tmp_path: Path) -> None:
+    r = await trial("forged-images", tmp_path)
+    assert r.outcome == "reached", r.notes
+    assert any("through their own credentials" in n for n in r.notes), r.notes
+    # the readers dropped every forgery: no command cites one, no cmd_vel relays one
+    assert any(
+        n == "command2robot rows citing a nonexistent recommendation: 0; "
+        "cmd_vel sent from a forged command: 0"
+        for n in r.notes
+    ), r.notes
+    assert misses(r) == []
+
+
 async def test_a_goal_of_nan_is_refused_at_the_door_and_the_mission_goes_on(
     tmp_path: Path,
 ) -> None:

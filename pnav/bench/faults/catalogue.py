@@ -24,7 +24,7 @@ MISSIONS: dict[str, tuple[float, float]] = {
 @dataclass(frozen=True)
 class Fault:
     name: str
-    kind: str  # kill | postgres | freeze | cut | spoof | rogue | cli | goal
+    kind: str  # kill | postgres | freeze | cut | spoof | rogue | forge | cli | goal
     what: str  # for the report
     target: str = ""  # the service concerned
     seconds: float = 0.0  # how long it lasts
@@ -72,6 +72,13 @@ def catalogue() -> tuple[Fault, ...]:
             "rogue-priority",
             "rogue",
             "a rogue writer recommends full speed ahead at priority 1000, then 99, for 5 s",
+            seconds=5,
+        ),
+        Fault(
+            "forged-images",
+            "forge",
+            "forged row images on r1's keys for 5 s: recommendations at priority 1000 straight "
+            "ahead (as the controller) and the commands they would make (as the decision)",
             seconds=5,
         ),
         *bad_goals,

@@ -16,6 +16,9 @@ What each kind means here:
   told apart afterwards).
 - ``rogue``: a rogue writer inserts a full-speed recommendation at priority 1000 (the safety
   band: refused by the database unless it is a stop), then at 99, every 0.1 s.
+- ``forge``: forged command_recommendation and command2robot row images on r1's keys, put
+  with the identities the Zenoh ACL lets put them (forge.py); a command citing a forgery, or
+  a cmd_vel relaying one, is a breach.
 - ``cli``: ``pnav goal`` with a value the door must refuse (exit 2, one line).
 - ``goal``: ``pnav goal`` to a point outside the map or inside a rack: accepted, then failed
   by the planner with its reason.
@@ -42,7 +45,9 @@ from common.contract import keys
 from common.errors import ConnectionFailure
 from common.postmaster import postmaster_pid
 from common.runtime import Runtime
+from common.stack import BusCredentials
 from pnav.bench.faults.catalogue import Fault
+from pnav.bench.faults.forge import forge
 from pnav.launcher import RunningStack
 
 ROBOT = "r1"
@@ -59,6 +64,8 @@ class Context:
     goal: tuple[float, float]
     goal_id: int
     bad_goals: dict[str, tuple[float, float]]
+    # the run's Zenoh users, to put as a service would (None: the bench's own session)
+    credentials: BusCredentials | None = None
 
 
 @dataclass
@@ -68,6 +75,7 @@ class Injection:
     exit_code: int | None = None
     follow_goal: int | None = None  # the goal the mission now follows, if it changed
     notes: list[str] = field(default_factory=list)
+    breach: str | None = None  # what got past a defence: the trial fails
 
 
 class Liveliness:
@@ -107,6 +115,7 @@ async def inject(fault: Fault, ctx: Context) -> Injection:
         "cut": _cut,
         "spoof": _spoof,
         "rogue": _rogue,
+        "forge": _forge,
         "cli": _bad_value,
         "goal": _bad_goal,
     }[fault.kind]
@@ -219,6 +228,10 @@ async def _rogue(fault: Fault, ctx: Context) -> Injection:
         await asyncio.sleep(0.1)
     out.notes.append(f"{sent} priority-99 recommendations of 0.22 m/s straight ahead")
     return out
+
+
+async def _forge(fault: Fault, ctx: Context) -> Injection:
+    return await forge(fault, ctx, ROBOT)
 
 
 def _cli_env(ctx: Context) -> dict[str, str]:

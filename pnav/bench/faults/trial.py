@@ -162,7 +162,7 @@ async def run_trial(
                 )
                 rt = await Runtime.open(config)
                 try:
-                    ctx = Context(stack, router, zenoh, rt, goal, 0, bad_goals)
+                    ctx = Context(stack, router, zenoh, rt, goal, 0, bad_goals, bus)
                     await _mission(fault, ctx, result)
                 finally:
                     await rt.close()
@@ -205,6 +205,8 @@ async def _mission(fault: Fault, ctx: Context, result: Result) -> None:
         )
     follow = injection.follow_goal or ctx.goal_id
     result.outcome, result.safe = await _follow(monitor, rt, fault, ctx, follow, injection)
+    if injection.breach:
+        result.outcome, result.safe = f"BREACHED: {injection.breach}; {result.outcome}", False
     await monitor.poll()
     result.collisions = monitor.log.collisions - collisions_before
 
