@@ -24,7 +24,7 @@ MISSIONS: dict[str, tuple[float, float]] = {
 @dataclass(frozen=True)
 class Fault:
     name: str
-    kind: str  # kill | postgres | freeze | cut | spoof | rogue | cli | goal
+    kind: str  # kill | postgres | freeze | cut | spoof | rogue | cli | goal | theft
     what: str  # for the report
     target: str = ""  # the service concerned
     seconds: float = 0.0  # how long it lasts
@@ -73,6 +73,12 @@ def catalogue() -> tuple[Fault, ...]:
             "rogue",
             "a rogue writer recommends full speed ahead at priority 1000, then 99, for 5 s",
             seconds=5,
+        ),
+        Fault(
+            "lease-theft",
+            "theft",
+            "pnav_user tries every lock and lease call on r1's leases, round after round, 8 s",
+            seconds=8,
         ),
         *bad_goals,
         Fault("goal-outside-map", "goal", "pnav goal to a point outside the map", goal="outside"),

@@ -19,6 +19,9 @@ What each kind means here:
 - ``cli``: ``pnav goal`` with a value the door must refuse (exit 2, one line).
 - ``goal``: ``pnav goal`` to a point outside the map or inside a rack: accepted, then failed
   by the planner with its reason.
+- ``theft``: as ``pnav_user``, every lock and lease call against r1's leases, round after
+  round (pnav.bench.faults.theft); a call not refused, or r1's owner in any service changing,
+  is a breach.
 """
 
 from __future__ import annotations
@@ -39,9 +42,11 @@ import zenoh
 from common import bus
 from common.config import ZenohSettings
 from common.contract import keys
+from common.contract.grants import USER
 from common.errors import ConnectionFailure
 from common.postmaster import postmaster_pid
 from common.runtime import Runtime
+from pnav.bench.faults import theft
 from pnav.bench.faults.catalogue import Fault
 from pnav.launcher import RunningStack
 
@@ -68,6 +73,7 @@ class Injection:
     exit_code: int | None = None
     follow_goal: int | None = None  # the goal the mission now follows, if it changed
     notes: list[str] = field(default_factory=list)
+    breaches: list[str] = field(default_factory=list)  # what an attack achieved: a miss
 
 
 class Liveliness:
@@ -109,6 +115,7 @@ async def inject(fault: Fault, ctx: Context) -> Injection:
         "rogue": _rogue,
         "cli": _bad_value,
         "goal": _bad_goal,
+        "theft": _lease_theft,
     }[fault.kind]
     return await handler(fault, ctx)
 
@@ -262,3 +269,10 @@ async def _bad_goal(fault: Fault, ctx: Context) -> Injection:
             f"SELECT max(id) FROM {keys.GOAL} WHERE robot_id = $1", ROBOT
         )
     return out
+
+
+async def _lease_theft(fault: Fault, ctx: Context) -> Injection:
+    url = ctx.stack.local.url_for(USER)
+    async with ctx.rt.database.pool.acquire() as watch:
+        stolen = await theft.steal(url, watch, ROBOT, fault.seconds)
+    return Injection(notes=[stolen.summary()], breaches=stolen.breaches())
