@@ -609,22 +609,33 @@ $$;
 
 -- Every robot with the backend that holds its lease of p_service (NULL: free, or held by a
 -- session that may not hold it), then one row (robot_id NULL) per live replica of
--- p_service. pg_locks is read once (the CTE is materialised), so the rows agree.
+-- p_service. pg_locks is read once (the CTE is materialised), so the rows agree; a holder's
+-- role is looked up once per backend, not per lock. PL/pgSQL keeps the plan for the session
+-- (a replica calls it every cycle on its lock connection).
 CREATE FUNCTION robot_lease_holders(p_service text)
 RETURNS TABLE (robot_id text, pid integer)
-LANGUAGE sql STABLE AS $$
-    WITH held AS MATERIALIZED (
-        SELECT l.objid::bigint AS k, l.pid, l.mode
+LANGUAGE plpgsql STABLE AS $$
+BEGIN
+    RETURN QUERY
+    WITH locks AS MATERIALIZED (
+        SELECT l.objid::bigint AS k, l.pid AS holder, l.mode
           FROM pg_locks l
-          JOIN pg_stat_activity a ON a.pid = l.pid
          WHERE l.locktype = 'advisory' AND l.granted AND l.objsubid = 2
-           AND l.database = (SELECT oid FROM pg_database WHERE datname = current_database())
+           AND l.database = (SELECT d.oid FROM pg_database d
+                              WHERE d.datname = current_database())
            AND l.classid = lease_key(p_service)::oid
-           AND lease_holder_may(p_service, a.usesysid)
+    ), allowed AS MATERIALIZED (
+        SELECT b.holder
+          FROM (SELECT DISTINCT locks.holder FROM locks) b
+         CROSS JOIN LATERAL pg_stat_get_activity(b.holder) a
+         WHERE lease_holder_may(p_service, a.usesysid)
+    ), held AS MATERIALIZED (
+        SELECT locks.* FROM locks WHERE locks.holder IN (SELECT allowed.holder FROM allowed)
     )
-    SELECT r.robot_id, h.pid
+    SELECT r.robot_id, h.holder
       FROM robot r
       LEFT JOIN held h ON h.k = lease_key(r.robot_id) AND h.mode = 'ExclusiveLock'
     UNION ALL
-    SELECT NULL, h.pid FROM held h WHERE h.k = 0 AND h.mode = 'ShareLock'
+    SELECT NULL, h.holder FROM held h WHERE h.k = 0 AND h.mode = 'ShareLock';
+END;
 $$;
