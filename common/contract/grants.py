@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from functools import cache
 from importlib import resources
 
+from common.contract.keys import ROBOT_LEASE
 from common.errors import InternalError
 
 ROLE_PREFIX = "pnav_"
@@ -131,4 +132,19 @@ def written_tables(role: str, grants: tuple[Grant, ...] | None = None) -> frozen
         g.name
         for g in role_grants(role, grants)
         if not g.is_function and g.privilege in ("INSERT", "UPDATE")
+    )
+
+
+def lease_holders(grants: tuple[Grant, ...] | None = None) -> tuple[str, ...]:
+    """The roles (short names) that may hold robot leases, and so take advisory locks at all:
+    those that may INSERT into robot_lease (its history is written by the holders only).
+    Every other login role is refused every advisory lock (common.contract.roles)."""
+    return tuple(
+        sorted(
+            {
+                g.role
+                for g in (grants or contract_grants())
+                if g.name == ROBOT_LEASE and g.privilege == "INSERT" and g.role != OWNER
+            }
+        )
     )

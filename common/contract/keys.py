@@ -167,6 +167,9 @@ def parse_lockstep_key(key: str) -> tuple[str, str]:
 LEASE_KEY_FN: Final = "lease_key"
 LEASE_ACQUIRE_FN: Final = "robot_lease_acquire"
 LEASE_RELEASE_FN: Final = "robot_lease_release"
+# robot -> holder, then the live replicas, counting only sessions that may hold leases
+# (migration 10)
+LEASE_HOLDERS_FN: Final = "robot_lease_holders"
 # The second key of the shared advisory lock every live replica of a service holds.
 LEASE_MEMBER_KEY: Final = 0
 

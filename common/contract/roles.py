@@ -5,7 +5,10 @@ on its embedded server, ``pnav migrate --roles`` in compose): it creates the rol
 ``pnav_owner`` own every table and function, applies the migrations *as* ``pnav_owner``, and
 grants each login role what common.contract.grants reads from CONTRACT.md, revoking what the
 table no longer grants. It is idempotent and run on every start, so a new migration's table
-gets its grants at once.
+gets its grants at once. It also keeps advisory locks for the lease holders: EXECUTE on the
+catalog functions that take one is revoked from PUBLIC and granted to the roles that may
+INSERT into robot_lease and to pnav_owner (CONTRACT.md, *Roles*: robot ownership is such a
+lock, and no people's client may take or block one).
 
 Roles are cluster-wide, GRANTs per database: several databases of one server share the roles
 (and their passwords) and each gets its own grants. Role creation is not a migration for that
@@ -25,6 +28,7 @@ from common.contract.grants import (
     OWNER,
     Grant,
     contract_grants,
+    lease_holders,
     role_name,
 )
 from common.contract.migrate import apply_migrations
@@ -50,6 +54,15 @@ SELECT 'FUNCTION ' || p.oid::regprocedure::text FROM pg_proc p
  WHERE p.pronamespace = 'public'::regnamespace AND pg_get_userbyid(p.proowner) <> $1
    AND NOT EXISTS (SELECT 1 FROM pg_depend d WHERE d.classid = 'pg_proc'::regclass
                    AND d.objid = p.oid AND d.deptype = 'e')
+"""
+
+# Every catalog function that takes an advisory lock (session or transaction, shared or not,
+# waiting or trying), whatever overloads this Postgres has.
+_ADVISORY_LOCKS = """
+SELECT p.oid::regprocedure::text FROM pg_proc p
+ WHERE p.pronamespace = 'pg_catalog'::regnamespace
+   AND p.proname ~ '^pg_(try_)?advisory_(xact_)?lock(_shared)?$'
+ ORDER BY 1
 """
 
 
@@ -136,6 +149,7 @@ async def apply_grants(conn: asyncpg.Connection, grants: tuple[Grant, ...] | Non
                 statements.append(
                     f"GRANT USAGE, UPDATE ON SEQUENCE {sequence} TO {role_name(grant.role)}"
                 )
+    statements += await _advisory_lock_grants(conn, grants)
     async with conn.transaction():
         for sql in statements:
             try:
@@ -143,6 +157,21 @@ async def apply_grants(conn: asyncpg.Connection, grants: tuple[Grant, ...] | Non
             except asyncpg.PostgresError as exc:
                 raise MigrationError(f"{sql}: {exc}") from exc
     return len(statements)
+
+
+async def _advisory_lock_grants(conn: asyncpg.Connection, grants: tuple[Grant, ...]) -> list[str]:
+    """Advisory locks for the lease holders only: EXECUTE on every function that takes one is
+    revoked from PUBLIC (so from every role, people's included) and granted to the roles that
+    may hold robot leases and to the owner (the migrations' lock). Robot ownership is such a
+    lock (CONTRACT.md, *Robot leases*); a role that could take one could block a robot, or
+    count as a replica and be given robots. Catalog privileges are per database."""
+    holders = ", ".join(role_name(r) for r in (OWNER, *lease_holders(grants)))
+    others = ", ".join(["PUBLIC", *(role_name(r) for r in LOGIN_ROLES)])
+    statements: list[str] = []
+    for (function,) in await conn.fetch(_ADVISORY_LOCKS):
+        statements.append(f"REVOKE EXECUTE ON FUNCTION {function} FROM {others}")
+        statements.append(f"GRANT EXECUTE ON FUNCTION {function} TO {holders}")
+    return statements
 
 
 async def bootstrap(

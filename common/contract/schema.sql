@@ -580,3 +580,62 @@ CREATE POLICY engine_stats_read ON engine_stats FOR SELECT USING (true);
 CREATE POLICY engine_stats_insert ON engine_stats FOR INSERT WITH CHECK (writes_as(service));
 CREATE POLICY engine_stats_update ON engine_stats FOR UPDATE
     USING (writes_as(service)) WITH CHECK (writes_as(service));
+
+-- migration 10: robot leases only the service roles can take or block
+--
+-- Any role could take an advisory lock of any key, and the lease keys are public
+-- (lease_key is sha256 of the names): a people's session holding (lease_key(S), 0) shared
+-- counted as a replica of S, so the real one gave half its robots back to it, and one
+-- holding (lease_key(S), lease_key(R)) kept robot R from every replica. Two defences:
+--
+-- 1. Taking an advisory lock is a privilege. common/contract/roles.py (run by the
+--    superuser who sets the database up) revokes EXECUTE on every pg_catalog function
+--    that takes one (pg_advisory_lock, _shared, _xact, pg_try_*...) from PUBLIC in this
+--    database and grants it to the roles that may hold leases (those CONTRACT.md's Roles
+--    table lets INSERT into robot_lease) and to pnav_owner (the migrations' lock). A
+--    catalog privilege is not a migration (it needs a superuser), hence there.
+-- 2. A lock counts only if its holder may hold leases of S: robot_lease_holders(S), the
+--    one read of pg_locks a replica makes per cycle, ignores locks of sessions whose role
+--    could not have written S's history (lease_holder_may: INSERT on robot_lease and,
+--    for a role of the pnav_<family> naming, the family S, as row security has it). Such
+--    a lock is neither a replica nor an owner: nobody gives a robot back for it.
+CREATE FUNCTION lease_holder_may(p_service text, p_role oid) RETURNS boolean
+LANGUAGE sql STABLE PARALLEL SAFE AS $$
+    SELECT coalesce((SELECT (r.rolname::text NOT LIKE 'pnav\_%'
+                             OR r.rolname::text = 'pnav_' || p_service)
+                            AND has_table_privilege(r.oid, 'robot_lease', 'INSERT')
+                       FROM pg_roles r WHERE r.oid = p_role), false)
+$$;
+
+-- Every robot with the backend that holds its lease of p_service (NULL: free, or held by a
+-- session that may not hold it), then one row (robot_id NULL) per live replica of
+-- p_service. pg_locks is read once (the CTE is materialised), so the rows agree; a holder's
+-- role is looked up once per backend, not per lock. PL/pgSQL keeps the plan for the session
+-- (a replica calls it every cycle on its lock connection).
+CREATE FUNCTION robot_lease_holders(p_service text)
+RETURNS TABLE (robot_id text, pid integer)
+LANGUAGE plpgsql STABLE AS $$
+BEGIN
+    RETURN QUERY
+    WITH locks AS MATERIALIZED (
+        SELECT l.objid::bigint AS k, l.pid AS holder, l.mode
+          FROM pg_locks l
+         WHERE l.locktype = 'advisory' AND l.granted AND l.objsubid = 2
+           AND l.database = (SELECT d.oid FROM pg_database d
+                              WHERE d.datname = current_database())
+           AND l.classid = lease_key(p_service)::oid
+    ), allowed AS MATERIALIZED (
+        SELECT b.holder
+          FROM (SELECT DISTINCT locks.holder FROM locks) b
+         CROSS JOIN LATERAL pg_stat_get_activity(b.holder) a
+         WHERE lease_holder_may(p_service, a.usesysid)
+    ), held AS MATERIALIZED (
+        SELECT locks.* FROM locks WHERE locks.holder IN (SELECT allowed.holder FROM allowed)
+    )
+    SELECT r.robot_id, h.holder
+      FROM robot r
+      LEFT JOIN held h ON h.k = lease_key(r.robot_id) AND h.mode = 'ExclusiveLock'
+    UNION ALL
+    SELECT NULL, h.holder FROM held h WHERE h.k = 0 AND h.mode = 'ShareLock';
+END;
+$$;

@@ -61,6 +61,36 @@ that robot (so a robot passed on cleanly by a replica that was still waiting for
 the first wait), and measured from the answer.
 All replicas of a service must run with the same ``timeout_s``.
 
+Who can take or block a lease
+-----------------------------
+The keys are public (``lease_key`` is sha256 of the names), so the locks themselves must be
+out of reach. Two rules (migration 10; CONTRACT.md, *Robot leases*):
+
+- **Taking an advisory lock is a privilege.** The superuser who sets the database up
+  (:func:`common.contract.roles.bootstrap`: ``pnav up``, ``pnav migrate --roles``) revokes
+  EXECUTE on every catalog function that takes one (``pg_advisory_lock``, ``_shared``,
+  ``_xact``, ``pg_try_*``) from PUBLIC, and grants it to the roles CONTRACT.md lets INSERT
+  into ``robot_lease`` (the services that hold leases) and to ``pnav_owner`` (the
+  migrations' lock). The people's role (``pnav_user``) cannot take any advisory lock, so it
+  can neither hold a robot nor join as a replica; ``robot_lease_acquire`` fails for it on
+  that privilege; it may not write ``robot_lease``, lock its rows (``FOR UPDATE``/``SHARE``
+  need UPDATE) or lock the table beyond ACCESS SHARE (which only DDL waits for), nor end or
+  cancel another role's session. Locks are taken with ``pg_try_*`` only, so nothing of ours
+  ever waits on a lock anyway.
+- **Another role's lock is ignored, not obeyed.** The cycle's one read of ``pg_locks`` is
+  the server's ``robot_lease_holders(S)``, which counts a lock only when its session's role
+  may hold leases of S (INSERT on ``robot_lease``, and for a ``pnav_<family>`` role the
+  family S, as row security has it). A planner holding the controller's membership lock is
+  not a controller replica; nobody gives a robot back for it.
+
+Residual risks: a superuser (and the tables' owner) can do anything, this included; a
+database not set up by a superuser (no roles: every process connects as one account) has no
+privilege to withhold, so every client there can take leases; a service role may take
+another family's robot locks (it holds the lock privilege for its own leases): it is not
+counted as an owner or a replica, but the robot stays unowned while it holds the lock
+(the services trust each other's roles as they trust each other's code); a client that
+exhausts Postgres' connections or shared lock table stalls every service alike.
+
 :class:`~common.service.ScenarioService` starts a :class:`LeaseManager` before the engine's
 first activation and exposes ``owns(robot_id)``.
 """

@@ -11,25 +11,10 @@ CONNECTION_LOST = "connection lost"
 ROBOT_GONE = "robot gone"
 HOLDER_GONE = "holder gone"  # written by robot_lease_acquire for a holder that vanished
 
-# The advisory locks of service $1: two-key locks (objsubid 2) whose first key is
-# lease_key($1). pg_locks is read once (the CTE is materialised), so all readers agree.
-HELD = f"""
-held AS (
-    SELECT l.objid::bigint AS k, l.pid, l.mode
-      FROM pg_locks l
-     WHERE l.locktype = 'advisory' AND l.granted AND l.objsubid = 2
-       AND l.database = (SELECT oid FROM pg_database WHERE datname = current_database())
-       AND l.classid = {keys.LEASE_KEY_FN}($1)::oid
-)"""
-# One read per cycle: every robot with the backend holding its lock, then the live replicas.
-SNAPSHOT = f"""
-WITH {HELD}
-SELECT r.robot_id, h.pid
-  FROM {keys.ROBOT} r
-  LEFT JOIN held h ON h.k = {keys.LEASE_KEY_FN}(r.robot_id) AND h.mode = 'ExclusiveLock'
-UNION ALL
-SELECT NULL, h.pid FROM held h WHERE h.k = {keys.LEASE_MEMBER_KEY} AND h.mode = 'ShareLock'
-"""
+# One read per cycle: every robot with the backend holding its lock, then the live replicas
+# (robot NULL). The server function reads pg_locks once and ignores a lock whose session's
+# role may not hold leases of $1 (migration 10): nobody else's lock is obeyed.
+SNAPSHOT = f"SELECT robot_id, pid FROM {keys.LEASE_HOLDERS_FN}($1)"
 JOIN = f"SELECT pg_try_advisory_lock_shared({keys.LEASE_KEY_FN}($1), {keys.LEASE_MEMBER_KEY})"
 LEAVE = f"SELECT pg_advisory_unlock_shared({keys.LEASE_KEY_FN}($1), {keys.LEASE_MEMBER_KEY})"
 # Only for a robot that still has its row: one deleted since the snapshot yields no row

@@ -6,21 +6,16 @@ from __future__ import annotations
 import asyncpg
 
 from common.contract import keys
-from common.lease.sql import HELD
 
 _OWNERSHIP = f"""
-WITH {HELD}
-SELECT r.robot_id, h.pid, l.instance
-  FROM {keys.ROBOT} r
-  LEFT JOIN held h ON h.k = {keys.LEASE_KEY_FN}(r.robot_id) AND h.mode = 'ExclusiveLock'
-  LEFT JOIN {keys.ROBOT_LEASE} l ON l.service = $1 AND l.robot_id = r.robot_id
+SELECT h.robot_id, h.pid, l.instance
+  FROM {keys.LEASE_HOLDERS_FN}($1) h
+  LEFT JOIN {keys.ROBOT_LEASE} l ON l.service = $1 AND l.robot_id = h.robot_id
                                 AND l.released_at IS NULL AND l.backend_pid = h.pid
- ORDER BY r.robot_id
+ WHERE h.robot_id IS NOT NULL
+ ORDER BY h.robot_id
 """
-_REPLICAS = f"""
-WITH {HELD}
-SELECT count(*) FROM held WHERE k = {keys.LEASE_MEMBER_KEY} AND mode = 'ShareLock'
-"""
+_REPLICAS = f"SELECT count(*) FROM {keys.LEASE_HOLDERS_FN}($1) WHERE robot_id IS NULL"
 _HISTORY = f"""
 SELECT robot_id, instance, acquired_at, released_at FROM {keys.ROBOT_LEASE}
  WHERE service = $1 ORDER BY robot_id, acquired_at, id

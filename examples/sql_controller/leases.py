@@ -10,9 +10,11 @@ nothing else:
 - robot R is ours exactly while that connection holds ``(lease_key('controller'),
   lease_key(R))``, taken with ``robot_lease_acquire`` and given back with
   ``robot_lease_release`` (each followed by a ``pnav/db/robot_lease/{R}`` notification);
-- every period, one read of ``robot`` and ``pg_locks`` gives the live replicas and the holder
-  of every robot; we take free robots up to our fair share and give back what is above it
-  once the excess has lasted two cycles (so ownership does not flap).
+- every period, one read of ``robot_lease_holders('controller')`` (``robot`` and
+  ``pg_locks``, counting only sessions of roles that may hold the controller's leases)
+  gives the live replicas and the holder of every robot; we take free robots up to our fair
+  share and give back what is above it once the excess has lasted two cycles (so ownership
+  does not flap).
 
 We stop acting for a robot *before* releasing it: :attr:`Leases.acting` is held by the
 controller while it decides and writes, and a release first waits for it.
@@ -46,18 +48,10 @@ from examples.sql_controller.config import SERVICE, Settings
 
 logger = logging.getLogger("sql_controller.leases")
 
-# The lock classid is lease_key(service); objsubid = 2 marks two-key advisory locks.
-_SNAPSHOT = """
-WITH locks AS (
-    SELECT objid::bigint AS key, pid, mode FROM pg_locks
-     WHERE locktype = 'advisory' AND granted AND objsubid = 2
-       AND database = (SELECT oid FROM pg_database WHERE datname = current_database())
-       AND classid = lease_key($1)::oid)
-SELECT r.robot_id, l.pid FROM robot r
-  LEFT JOIN locks l ON l.key = lease_key(r.robot_id) AND l.mode = 'ExclusiveLock'
-UNION ALL
-SELECT NULL, pid FROM locks WHERE key = 0 AND mode = 'ShareLock'
-"""
+# Every robot with the backend holding its lock, then one row (robot NULL) per live replica:
+# the contract's one read of pg_locks (migration 10), which ignores locks of sessions whose
+# role may not hold the controller's leases.
+_SNAPSHOT = "SELECT robot_id, pid FROM robot_lease_holders($1)"
 # A robot deleted since the snapshot yields no row rather than a foreign-key error.
 _ACQUIRE = "SELECT robot_lease_acquire($1, $2, $3) FROM robot WHERE robot_id = $2"
 # Seconds still to wait before acting for robot $2: $3 after its newest "holder gone" end.

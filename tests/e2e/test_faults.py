@@ -2,7 +2,7 @@
 of the benchmark itself on the warehouse world: the stack launched as ``pnav up`` does, r1
 sent across, the fault injected once it has driven a metre, the mission followed to its end.
 Every target of the benchmark is asserted: a safe outcome, no collision, at most 0.15 m
-driven after the last command, no committed row lost."""
+driven after the last command, no committed row lost, no breach."""
 
 from __future__ import annotations
 
@@ -76,4 +76,12 @@ async def test_a_controller_killed_mid_mission_is_restarted_and_the_goal_reached
     assert r.outcome == "reached"
     assert r.restart_s is not None and r.recovered_s is not None
     assert r.rows_checked > 0 and r.rows_lost == {}
+    assert misses(r) == []
+
+
+async def test_a_lease_theft_by_people_is_refused_and_moves_no_robot(tmp_path: Path) -> None:
+    r = await trial("lease-theft", tmp_path)
+    assert r.outcome == "reached"
+    assert r.breaches == [], r.breaches  # every call refused, r1's owners never changed
+    assert any("lock and lease calls refused" in n for n in r.notes), r.notes
     assert misses(r) == []

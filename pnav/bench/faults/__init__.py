@@ -8,7 +8,8 @@ rows during the mission, and the sim's own contact count), the most metres the r
 on one command after the stream stopped (measured by the sim), rows committed before the
 fault and missing after it (rows.py), and restart / recovery times. Targets: every mission
 completes or fails safely with a reason, 0 collisions, <= 0.15 m after the last command, 0
-committed rows lost. docs/BENCHMARKS.md ("Faults") has a run.
+committed rows lost, no breach (an attack that got anywhere: a lease-theft call not refused,
+an owner of r1 that moved). docs/BENCHMARKS.md ("Faults") has a run.
 """
 
 from __future__ import annotations

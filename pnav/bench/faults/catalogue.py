@@ -24,7 +24,7 @@ MISSIONS: dict[str, tuple[float, float]] = {
 @dataclass(frozen=True)
 class Fault:
     name: str
-    kind: str  # kill | postgres | freeze | cut | spoof | rogue | forge | cli | goal
+    kind: str  # kill | postgres | freeze | cut | spoof | rogue | forge | cli | goal | theft
     what: str  # for the report
     target: str = ""  # the service concerned
     seconds: float = 0.0  # how long it lasts
@@ -80,6 +80,12 @@ def catalogue() -> tuple[Fault, ...]:
             "forged row images on r1's keys for 5 s: recommendations at priority 1000 straight "
             "ahead (as the controller) and the commands they would make (as the decision)",
             seconds=5,
+        ),
+        Fault(
+            "lease-theft",
+            "theft",
+            "pnav_user tries every lock and lease call on r1's leases, round after round, 8 s",
+            seconds=8,
         ),
         *bad_goals,
         Fault("goal-outside-map", "goal", "pnav goal to a point outside the map", goal="outside"),

@@ -136,5 +136,7 @@ async def forge(fault: Fault, ctx: Context, robot: str) -> Injection:
         f"cmd_vel sent from a forged command: {len(relayed)}"
     )
     if cited or relayed:
-        out.breach = f"{cited} command(s) cited a forgery, {len(relayed)} cmd_vel relayed one"
+        out.breaches.append(
+            f"{cited} command(s) cited a forgery, {len(relayed)} cmd_vel relayed one"
+        )
     return out

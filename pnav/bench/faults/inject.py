@@ -22,6 +22,9 @@ What each kind means here:
 - ``cli``: ``pnav goal`` with a value the door must refuse (exit 2, one line).
 - ``goal``: ``pnav goal`` to a point outside the map or inside a rack: accepted, then failed
   by the planner with its reason.
+- ``theft``: as ``pnav_user``, every lock and lease call against r1's leases, round after
+  round (pnav.bench.faults.theft); a call not refused, or r1's owner in any service changing,
+  is a breach.
 """
 
 from __future__ import annotations
@@ -42,10 +45,12 @@ import zenoh
 from common import bus
 from common.config import ZenohSettings
 from common.contract import keys
+from common.contract.grants import USER
 from common.errors import ConnectionFailure
 from common.postmaster import postmaster_pid
 from common.runtime import Runtime
 from common.stack import BusCredentials
+from pnav.bench.faults import theft
 from pnav.bench.faults.catalogue import Fault
 from pnav.bench.faults.forge import forge
 from pnav.launcher import RunningStack
@@ -75,7 +80,7 @@ class Injection:
     exit_code: int | None = None
     follow_goal: int | None = None  # the goal the mission now follows, if it changed
     notes: list[str] = field(default_factory=list)
-    breach: str | None = None  # what got past a defence: the trial fails
+    breaches: list[str] = field(default_factory=list)  # what an attack achieved: a miss
 
 
 class Liveliness:
@@ -118,6 +123,7 @@ async def inject(fault: Fault, ctx: Context) -> Injection:
         "forge": _forge,
         "cli": _bad_value,
         "goal": _bad_goal,
+        "theft": _lease_theft,
     }[fault.kind]
     return await handler(fault, ctx)
 
@@ -275,3 +281,10 @@ async def _bad_goal(fault: Fault, ctx: Context) -> Injection:
             f"SELECT max(id) FROM {keys.GOAL} WHERE robot_id = $1", ROBOT
         )
     return out
+
+
+async def _lease_theft(fault: Fault, ctx: Context) -> Injection:
+    url = ctx.stack.local.url_for(USER)
+    async with ctx.rt.database.pool.acquire() as watch:
+        stolen = await theft.steal(url, watch, ROBOT, fault.seconds)
+    return Injection(notes=[stolen.summary()], breaches=stolen.breaches())

@@ -21,6 +21,8 @@ def misses(r: Result) -> list[str]:
         out.append("driven after the last command")
     if r.rows_lost:
         out.append("rows lost")
+    if r.breaches:
+        out.append("breached")
     return out
 
 
@@ -46,6 +48,8 @@ def table(results: list[Result]) -> str:
             lines.append(f"{'':<20}   note: {note[:100]}")
         if r.rows_lost:
             lines.append(f"{'':<20}   rows lost: {r.rows_lost}")
+        for breach in r.breaches:
+            lines.append(f"{'':<20}   BREACH: {breach[:100]}")
     failed = [r.fault for r in results if misses(r)]
     lines.append(
         f"{len(results) - len(failed)}/{len(results)} faults met every target"
@@ -62,6 +66,7 @@ def as_json(results: list[Result], meta: dict[str, Any]) -> dict[str, Any]:
             "collisions": 0,
             "max_after_command_m": MAX_AFTER_COMMAND_M,
             "rows_lost": 0,
+            "breaches": 0,
         },
         "faults": [{**asdict(r), "misses": misses(r)} for r in results],
     }

@@ -61,6 +61,7 @@ class Result:
     recovered_s: float | None = None  # fault over -> a new command2robot row after new odom
     wall_s: float = 0.0
     notes: list[str] = field(default_factory=list)
+    breaches: list[str] = field(default_factory=list)  # what an attack achieved
 
 
 async def _newest(rt: Runtime, table: str) -> int:
@@ -195,6 +196,7 @@ async def _mission(fault: Fault, ctx: Context, result: Result) -> None:
     ended = time.monotonic()
     result.restart_s = injection.restart_s
     result.notes += [n for n in injection.notes if n]
+    result.breaches = injection.breaches
     result.recovered_s = await _recovered(rt, ended)
     result.rows_lost = await _reachable(rt, lambda: _rows_lost(rt, snapshot))
     result.rows_checked = snapshot.rows
@@ -205,8 +207,6 @@ async def _mission(fault: Fault, ctx: Context, result: Result) -> None:
         )
     follow = injection.follow_goal or ctx.goal_id
     result.outcome, result.safe = await _follow(monitor, rt, fault, ctx, follow, injection)
-    if injection.breach:
-        result.outcome, result.safe = f"BREACHED: {injection.breach}; {result.outcome}", False
     await monitor.poll()
     result.collisions = monitor.log.collisions - collisions_before
 
