@@ -87,13 +87,13 @@ class Fleet:
 
 
 @contextlib.contextmanager
-def local_router(directory: Path) -> Iterator[tuple[str, dict[str, str]]]:
+def local_router(directory: Path) -> Iterator[tuple[str, dict[str, str], zenoh.Session]]:
     """The router of a local stack, started as common.stack.local_stack starts it."""
     creds = BusCredentials.create(directory)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = bus.start_router((endpoint,), str(creds.users_file))
     try:
-        yield endpoint, dict(creds.passwords)
+        yield endpoint, dict(creds.passwords), router
     finally:
         router.close()
 
@@ -109,7 +109,7 @@ def fleet(
             endpoint = stack.enter_context(acl_router(ROUTER_CONFIG, PASSWORDS, directory))
             passwords = PASSWORDS
         else:
-            endpoint, passwords = stack.enter_context(local_router(directory))
+            endpoint, passwords, _ = stack.enter_context(local_router(directory))
         fleet = Fleet(endpoint, passwords)
         try:
             yield fleet
@@ -276,3 +276,25 @@ def test_a_client_without_valid_credentials_gets_no_session(
         password = fleet.passwords["sim"]
     with pytest.raises(ConnectionFailure):
         bus.open_session(fleet.settings(user, password)).close()
+
+
+def test_the_launchers_report_is_put_by_the_local_routers_own_session(tmp_path: Path) -> None:
+    """pnav/supervisor/<launcher> (pnav.supervisor_report) is put by the launcher on its
+    router's own session, which is not a client: the access control, which lets no client
+    put it, does not stop it."""
+    with local_router(tmp_path) as (endpoint, passwords, router):
+        heard = Heard()
+        listener = bus.open_session(
+            ZenohSettings(mode="client", connect=(endpoint,), user=USER, password=passwords[USER])
+        )
+        subscriber = listener.declare_subscriber(keys.SUPERVISOR_WATCH, heard)
+        try:
+            key = keys.supervisor_key("launcher-1")
+            deadline = time.monotonic() + 10
+            while (key, b"report") not in heard.samples:
+                assert time.monotonic() < deadline, "the launcher's report never arrived"
+                router.put(key, b"report")
+                time.sleep(0.05)
+        finally:
+            subscriber.undeclare()
+            listener.close()
