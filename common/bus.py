@@ -23,7 +23,7 @@ import msgpack
 import zenoh
 
 from common.config import DATA_QUEUE_BATCHES, ZenohSettings
-from common.contract import keys
+from common.contract import acl, keys
 from common.errors import ConfigError, ConnectionFailure
 
 if TYPE_CHECKING:
@@ -76,17 +76,18 @@ def open_session(settings: ZenohSettings) -> zenoh.Session:
 def start_router(
     listen: tuple[str, ...], users_file: str | None = None, *, data_queue: int = DATA_QUEUE_BATCHES
 ) -> zenoh.Session:
-    """Run a Zenoh router inside this process, listening on ``listen`` endpoints; with
-    ``users_file``, it accepts only sessions whose user/password is in that file."""
-    return open_session(
-        ZenohSettings(
-            mode="router",
-            connect=(),
-            listen=listen,
-            users_file=users_file,
-            data_queue=data_queue,
-        )
-    )
+    """Run a Zenoh router inside this process, listening on ``listen`` endpoints. With
+    ``users_file`` it is the compose router (common.contract.acl.router_config, one source):
+    it accepts only sessions whose user/password is in that file, and lets each user put only
+    its own keys. Without, it checks nothing (a test's or a benchmark's loopback router)."""
+    if users_file is None:
+        settings = ZenohSettings(mode="router", connect=(), listen=listen, data_queue=data_queue)
+        return open_session(settings)
+    config = acl.router_config(listen, users_file, data_queue)
+    try:
+        return zenoh.open(zenoh.Config.from_json5(json.dumps(config)))
+    except Exception as exc:
+        raise ConnectionFailure(f"cannot open a Zenoh router on {','.join(listen)}: {exc}") from exc
 
 
 def subscribe(

@@ -16,20 +16,25 @@ password (scram-sha-256).
 
 Zenoh between the local processes (:class:`LocalZenoh`, ``PNAV_LOCAL_ZENOH``): by default
 each process is a *client* of the launcher's router, as in compose, and the router is the
-one door: it checks every session's user and password (:class:`BusCredentials`). As
-Postgres's roles get passwords made for the run, so does every identity on the bus (the sim,
-each service, ``user`` for people's tools), in a user/password file only this OS user can
-read, so a process not given a password cannot join: it can publish neither sensors nor
-notifications. The trust boundary is the OS user, as for the Postgres socket; compose adds
-the router's access control per identity (common.contract.acl).
+one door: it checks every session's user and password (:class:`BusCredentials`) and lets
+each identity put only its own keys, with the compose router's access control
+(common.contract.acl.router_config: one source for both). As Postgres's roles get passwords
+made for the run, so does every identity on the bus (the sim, each service, ``user`` for
+people's tools), in a user/password file only this OS user can read: a process not given a
+password cannot join, and one given ``user``'s (the CLI's, ``pnav env user``) can put goals,
+user commands and strategies, never a sensor message, a ``cmd_vel`` or a service's
+notification. The trust boundary for joining is the OS user, as for the Postgres socket.
 
 ``PNAV_LOCAL_ZENOH=peer`` makes each process a *peer* that learns the others' loopback
 endpoints from the router (gossip) and sends to them directly: one TCP link instead of two
-(docs/BENCHMARKS.md, "Peer-to-peer Zenoh"). It runs WITHOUT authentication: with user and
-password on every peer, zenoh 1.x sometimes never completes a gossiped peer-to-peer link
-while the machine is busy (2 of 14 pairs never linked with both cores loaded, silently;
-0 of 12 without authentication, 0 of 12 as clients of an authenticating router), which
-left a service deaf to the sim. The launcher says so in its log.
+(docs/BENCHMARKS.md, "Peer-to-peer Zenoh"). It is an explicit opt-out of the bus's
+defences: peers run WITHOUT authentication and so WITHOUT access control (a peer-to-peer
+link does not go through the router; a peer's rules could only name identities nobody
+proved). With user and password on every peer, zenoh 1.x sometimes never completes a
+gossiped peer-to-peer link while the machine is busy (2 of 14 pairs never linked with both
+cores loaded, silently; 0 of 12 without authentication, 0 of 12 as clients of an
+authenticating router), which left a service deaf to the sim. Any process on the machine
+may then put any key, ``cmd_vel`` included; the launcher says so in a warning.
 """
 
 from __future__ import annotations
@@ -66,8 +71,9 @@ PEER_LISTEN: tuple[str, ...] = ("tcp/127.0.0.1:0",)
 class LocalZenoh:
     """How the processes of a local stack reach each other over Zenoh."""
 
-    # client: every message through the router, which authenticates each session; peer:
-    # directly, the router as rendezvous, without authentication (see the module docstring)
+    # client: every message through the router, which authenticates each session and applies
+    # the access control; peer: directly, the router as rendezvous, with neither (see the
+    # module docstring)
     mode: str = "client"
     # every link's data queue, the router's included (PNAV_ZENOH_DATA_QUEUE, common.config)
     data_queue: int = DATA_QUEUE_BATCHES
@@ -86,7 +92,8 @@ class LocalZenoh:
 
     @property
     def authenticated(self) -> bool:
-        """Whether the stack's router checks users and passwords in this mode."""
+        """Whether the stack's router checks users and passwords, and what each may put,
+        in this mode."""
         return self.mode == "client"
 
     def settings(self, router: str) -> ZenohSettings:
@@ -145,7 +152,8 @@ class LocalStack:
     # role (short name: "planner", "user") -> the DSN to connect as it; empty when the
     # server's account given could not set roles up (every process then uses database_url)
     role_urls: dict[str, str] = field(default_factory=dict)
-    bus: BusCredentials | None = None  # None: the router accepts anyone (peer mode)
+    # None: the router accepts anyone and checks no put (peer mode)
+    bus: BusCredentials | None = None
 
     def env(self) -> dict[str, str]:
         """The variables a process needs to join this stack (as the setup account: tests and
@@ -229,8 +237,9 @@ async def local_stack(
             bus = BusCredentials.create(secret_dir)
         elif bus is None:
             logging.getLogger("pnav.stack").warning(
-                "PNAV_LOCAL_ZENOH=peer: the local Zenoh runs without authentication "
-                "(any process on this machine may join it; docs/DEPLOY.md)"
+                "PNAV_LOCAL_ZENOH=peer: the local Zenoh runs without authentication and "
+                "without access control: any process on this machine may join it and put any "
+                "key, sensor messages and cmd_vel included (docs/DEPLOY.md)"
             )
         endpoint = f"tcp/127.0.0.1:{zenoh_port or free_port()}"
         router = start_router(

@@ -5,6 +5,9 @@ table records: how often it restarted each process. :class:`SupervisorReport` pu
 (msgpack, CONTRACT.md "Supervisor reports") when the stack starts, after every exit and
 restart, and every ``period_s`` so a reader that joins late hears it within a period. The
 dashboard's ``/metrics`` turns it into ``pnav_supervisor_restarts_total``.
+
+It is put on the launcher's router's own session, not a client's: the router's access control
+(common.contract.acl), which lets no client put ``pnav/supervisor/*``, does not apply to it.
 """
 
 from __future__ import annotations

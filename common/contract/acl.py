@@ -6,7 +6,8 @@ dictionary) and the router lets it put only its own keys:
 
 - the change notifications ``pnav/db/{table}/*`` of the tables CONTRACT.md lets it write
   (common.contract.grants.written_tables), so nobody can announce a row it could not write;
-- its liveliness token ``pnav/alive/{name}/*`` and lockstep report ``pnav/lockstep/{name}/*``;
+- its liveliness token ``pnav/alive/{name}/*`` and lockstep report ``pnav/lockstep/{name}/*``
+  (``user``: under the names of people's tools, :data:`USER_SERVICES`);
 - the ``sim`` alone: sensor messages, the clock, the world (and answers on its queryable);
 - the ``bridge`` alone: ``cmd_vel`` and the acknowledgements of collision events.
 
@@ -14,6 +15,11 @@ Everyone may subscribe to, and receive, everything under ``pnav/``: reading is o
 Postgres. Anything else is denied; a client with no valid user/password is refused its
 session. ``python -m common.contract.acl`` prints the router's whole config
 (deploy/zenoh/router.json5, which a test compares with this output).
+
+The local stack's router (``pnav up``: common.stack, common.bus.start_router) is opened from
+the same :func:`router_config`, only its endpoint, dictionary file and queue size being its
+own, so one access control holds in compose and on one machine. A router's own session (the
+launcher's supervisor report) is not a client of it and is not checked.
 """
 
 from __future__ import annotations
@@ -28,8 +34,12 @@ from common.contract.grants import BUS_IDENTITIES, USER, written_tables
 
 # Where the compose file mounts the router's user/password dictionary (a secret).
 DICTIONARY_FILE = "/run/secrets/zenoh_users"
-# Services on the bus that speak for people under the user identity (pnav/alive/cli/...).
-USER_SERVICES = ("cli", "dashboard", "demo")
+# The names the processes acting for people go by under the user identity: their liveliness
+# tokens (pnav/alive/cli/...) and, for a benchmark runner taking part in a lockstep run,
+# their lockstep reports. The CLI, the dashboard, the demo, the recorder, the benchmarks
+# (pnav bench latency / startup, pnav bench nav, pnav bench faults) and the end-to-end
+# tests. No service's name: people cannot pass for a service.
+USER_SERVICES = ("cli", "dashboard", "demo", "recorder", "bench", "navbench", "faults", "e2e")
 EVERYTHING = f"{keys.PREFIX}/**"
 _EGRESS = [
     "put",
@@ -52,14 +62,17 @@ def put_keys(identity: str) -> list[str]:
         own += [keys.SIM_CLOCK, keys.SIM_WORLD]
     elif identity == "bridge":
         own += [keys.robot_watch(keys.CMD_VEL), keys.robot_watch(keys.COLLISION_ACK)]
-    if identity != USER:
-        own.append(keys.lockstep_key(identity, "*"))
+    own += [keys.lockstep_key(name, "*") for name in _names(identity)]
     return own
 
 
+def _names(identity: str) -> tuple[str, ...]:
+    """The service names ``identity``'s processes go by on the bus."""
+    return USER_SERVICES if identity == USER else (identity,)
+
+
 def alive_keys(identity: str) -> list[str]:
-    names = USER_SERVICES if identity == USER else (identity,)
-    return [keys.alive_key(name, "*") for name in names]
+    return [keys.alive_key(name, "*") for name in _names(identity)]
 
 
 def _rule(rule_id: str, messages: list[str], flow: str, key_exprs: list[str]) -> dict[str, Any]:
@@ -135,14 +148,20 @@ HEADER = """\
 """
 
 
-def router_config() -> dict[str, Any]:
+def router_config(
+    listen: tuple[str, ...] = ("tcp/0.0.0.0:7447",),
+    dictionary_file: str = DICTIONARY_FILE,
+    data_queue: int = DATA_QUEUE_BATCHES,
+) -> dict[str, Any]:
+    """The router's whole config: compose's by default; the local stack's router gives its
+    loopback endpoint, its run's user/password file and its queue size."""
     return {
         "mode": "router",
-        "listen": {"endpoints": ["tcp/0.0.0.0:7447"]},
+        "listen": {"endpoints": list(listen)},
         "scouting": {"multicast": {"enabled": False}},
         "transport": {
-            "auth": {"usrpwd": {"dictionary_file": DICTIONARY_FILE}},
-            "link": {"tx": {"queue": {"size": {"data": DATA_QUEUE_BATCHES}}}},
+            "auth": {"usrpwd": {"dictionary_file": dictionary_file}},
+            "link": {"tx": {"queue": {"size": {"data": data_queue}}}},
         },
         "access_control": access_control(),
     }

@@ -52,6 +52,25 @@ async def test_forged_row_images_cite_nothing_and_move_nothing(tmp_path: Path) -
     assert misses(r) == []
 
 
+async def test_spoofed_odometry_is_refused_by_the_router_and_never_stored(
+    tmp_path: Path,
+) -> None:
+    r = await trial("spoof-odom", tmp_path)
+    assert "the router refused the session of a client without a password" in r.notes, r.notes
+    assert any(n.endswith("odometry messages forged as user") for n in r.notes), r.notes
+    assert r.forged_believed == 0  # people's identity may not put sensor messages
+    assert r.outcome == "reached"  # where r1 truly is, by the sim's own odometry
+    assert misses(r) == []
+
+
+async def test_a_cmd_vel_forged_as_people_never_reaches_the_sim(tmp_path: Path) -> None:
+    r = await trial("forged-cmd-vel", tmp_path)
+    assert any(n.endswith("cmd_vel forged as user, straight to the sim") for n in r.notes)
+    assert r.forged_believed == 0, r.notes  # the sim's trace: none applied
+    assert r.outcome == "reached" and r.collisions == 0 and r.contacts == 0
+    assert misses(r) == []
+
+
 async def test_a_goal_of_nan_is_refused_at_the_door_and_the_mission_goes_on(
     tmp_path: Path,
 ) -> None:

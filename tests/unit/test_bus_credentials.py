@@ -1,6 +1,7 @@
 """A local stack's Zenoh users (common.stack.BusCredentials): a process that was not given
 this run's password cannot join; the stack's own processes hear each other through the
-router that checks them."""
+router that checks them; and that router lets each identity put only its own keys, as the
+compose router does (every key family: tests/deploy/test_zenoh_acl.py)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import pytest
 
 from common import bus
 from common.config import ZenohSettings
+from common.contract import keys
 from common.errors import ConnectionFailure, UsageError
 from common.stack import BusCredentials, LocalZenoh, local_stack
 from common.testing import eventually
@@ -94,6 +96,57 @@ async def test_the_stacks_processes_hear_each_other_through_the_authenticating_r
                 session.close()
 
 
+async def test_on_the_stacks_router_people_put_goals_and_nothing_a_robot_obeys(
+    db_url: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("PNAV_DATABASE_URL", db_url)
+    heard: list[tuple[str, bytes]] = []
+    lock = threading.Lock()
+
+    def on(key: str, payload: bytes) -> None:
+        with lock:
+            heard.append((key, payload))
+
+    def got(key: str, payload: bytes) -> bool:
+        with lock:
+            return (key, payload) in heard
+
+    cmd_vel = keys.robot_key("r1", keys.CMD_VEL)
+    async with local_stack() as stack:
+        # people's: what `pnav env user` and the stack file give the CLI and the dashboard
+        people = await asyncio.to_thread(bus.open_session, stack.zenoh)
+        bridge = await asyncio.to_thread(bus.open_session, stack.zenoh_for("bridge"))
+        sim = await asyncio.to_thread(bus.open_session, stack.zenoh_for("sim"))
+        sub = bus.subscribe_threaded(sim, "pnav/**", on)
+        try:
+
+            def bridge_heard() -> bool:
+                bridge.put(cmd_vel, b"the bridge's")
+                return got(cmd_vel, b"the bridge's")
+
+            await eventually(bridge_heard, what="the bridge's cmd_vel at the sim")
+            forged = [
+                cmd_vel,
+                keys.robot_key("r1", keys.ODOM),
+                keys.SIM_CLOCK,
+                keys.notify_key(keys.COMMAND_RECOMMENDATION, "r1"),
+                keys.notify_key(keys.COMMAND2ROBOT, "r1"),
+            ]
+            for key in forged:
+                people.put(key, b"forged")
+            # one session's puts arrive in order: once its goal is in, the rest would be
+            people.put(keys.notify_key(keys.GOAL, "r1"), b"a goal")
+            await eventually(
+                lambda: got(keys.notify_key(keys.GOAL, "r1"), b"a goal"), what="people's goal"
+            )
+            with lock:
+                assert [key for key, payload in heard if payload == b"forged"] == []
+        finally:
+            sub.undeclare()
+            for session in (people, bridge, sim):
+                session.close()
+
+
 async def test_peer_mode_is_the_documented_exception_without_authentication(
     db_url: str, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
@@ -103,7 +156,7 @@ async def test_peer_mode_is_the_documented_exception_without_authentication(
         outsider = dataclasses.replace(stack.zenoh, mode="client", listen=())
         session = await asyncio.to_thread(bus.open_session, outsider)
         session.close()
-    assert "runs without authentication" in caplog.text
+    assert "runs without authentication and without access control" in caplog.text
 
 
 def test_the_stack_file_gives_a_process_started_by_hand_its_identity() -> None:

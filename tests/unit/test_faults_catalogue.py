@@ -9,19 +9,24 @@ import pytest
 from common.errors import UsageError
 from pnav import cli
 from pnav.bench.faults.catalogue import catalogue, mission_goal, select
+from pnav.bench.faults.inject import FORGED_COMMAND_ID
+from pnav.bench.faults.report import as_json, misses
+from pnav.bench.faults.trial import Result, forged_commands_applied
 from pnav.bench.faults.world import bad_goals
+from services.sim.trace import CMD_VEL, Tracer
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_every_fault_of_the_issue_is_in_the_catalogue_once() -> None:
     names = [f.name for f in catalogue()]
-    assert len(names) == len(set(names)) == 22
+    assert len(names) == len(set(names)) == 23
     for service in ("sim", "bridge", "strategy", "planner", "controller", "decision"):
         assert f"kill-{service}" in names
     assert {"kill-postgres", "freeze-router-3s", "freeze-router-10s", "spoof-odom"} <= set(names)
     assert "forged-images" in names
     assert "lease-theft" in names
+    assert "forged-cmd-vel" in names
     assert [f.argv for f in catalogue() if f.kind == "cli"] == [
         ("nan", "1"),
         ("inf", "1"),
@@ -61,3 +66,21 @@ def test_a_bad_option_is_one_line_and_exit_2(
     assert code == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and err.startswith("pnav")
+
+
+def test_a_forged_message_that_had_an_effect_misses_a_target() -> None:
+    untouched = Result("spoof-odom", "", outcome="reached", safe=True, forged_believed=0)
+    assert misses(untouched) == []
+    believed = Result("spoof-odom", "", outcome="reached", safe=True, forged_believed=3)
+    assert misses(believed) == ["forged messages believed"]
+    assert as_json([untouched], {})["targets"]["forged_believed"] == 0
+
+
+def test_the_forged_commands_are_counted_from_the_sims_own_trace(tmp_path: Path) -> None:
+    tracer = Tracer(tmp_path / "trace.csv")
+    tracer.record(CMD_VEL, "r1", 41)  # the bridge's, from command2robot ids
+    tracer.record(CMD_VEL, "r1", FORGED_COMMAND_ID + 7)
+    tracer.record("odom", "r1", FORGED_COMMAND_ID + 1)  # a sensor seq, not a command
+    tracer.close()
+    assert forged_commands_applied(tmp_path / "trace.csv") == 1
+    assert forged_commands_applied(tmp_path / "none.csv") is None

@@ -6,10 +6,12 @@ fault goes in (inject.py). Per fault: the mission's outcome (reached; failed wit
 goal's reason; a bad value refused at the door with exit 2), collisions (collision_event
 rows during the mission, and the sim's own contact count), the most metres the robot drove
 on one command after the stream stopped (measured by the sim), rows committed before the
-fault and missing after it (rows.py), and restart / recovery times. Targets: every mission
-completes or fails safely with a reason, 0 collisions, <= 0.15 m after the last command, 0
-committed rows lost, no breach (an attack that got anywhere: a lease-theft call not refused,
-an owner of r1 that moved). docs/BENCHMARKS.md ("Faults") has a run.
+fault and missing after it (rows.py), restart / recovery times, and for a forgery (spoofed
+odometry, a forged cmd_vel) how many forged messages had an effect (stored, or applied by
+the sim). Targets: every mission completes or fails safely with a reason, 0 collisions,
+<= 0.15 m after the last command, 0 committed rows lost, 0 forged messages believed, no
+breach (an attack that got anywhere: a lease-theft call not refused, an owner of r1 that
+moved, a command citing a forged image). docs/BENCHMARKS.md ("Faults") has a run.
 """
 
 from __future__ import annotations

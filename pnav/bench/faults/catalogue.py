@@ -24,7 +24,9 @@ MISSIONS: dict[str, tuple[float, float]] = {
 @dataclass(frozen=True)
 class Fault:
     name: str
-    kind: str  # kill | postgres | freeze | cut | spoof | rogue | forge | cli | goal | theft
+    kind: (
+        str  # kill | postgres | freeze | cut | spoof | cmd_vel | rogue | forge | cli | goal | theft
+    )
     what: str  # for the report
     target: str = ""  # the service concerned
     seconds: float = 0.0  # how long it lasts
@@ -65,7 +67,15 @@ def catalogue() -> tuple[Fault, ...]:
         Fault(
             "spoof-odom",
             "spoof",
-            "a rogue Zenoh client publishes r1's odometry at its goal, 30 Hz for 3 s",
+            "a rogue Zenoh client publishes r1's odometry at its goal, 30 Hz for 3 s, "
+            "without a password, then as people (the CLI's identity)",
+            seconds=3,
+        ),
+        Fault(
+            "forged-cmd-vel",
+            "cmd_vel",
+            "people's Zenoh identity (the CLI's) puts cmd_vel for r1 straight to the sim, "
+            "full speed and a hard turn, 30 Hz for 3 s",
             seconds=3,
         ),
         Fault(

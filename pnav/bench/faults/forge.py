@@ -45,17 +45,12 @@ WHERE c.id > $1 AND c.recommendation_id IS NOT NULL AND NOT EXISTS (
 
 @contextmanager
 def _sessions(ctx: Context, *identities: str) -> Iterator[tuple[dict[str, zenoh.Session], str]]:
-    """A session per identity, with its own credentials when the bench has them."""
+    """A session per identity, with its own credentials (the ACL lets it put its keys)."""
     opened: dict[str, zenoh.Session] = {}
     how = "their own credentials"
     try:
         for who in identities:
-            settings = ctx.zenoh
-            if ctx.credentials is not None:
-                settings = ctx.credentials.apply(ctx.zenoh, who)
-            else:
-                how = "the bench's session (no credentials: past the ACL)"
-            opened[who] = bus.open_session(settings)
+            opened[who] = bus.open_session(ctx.bus.apply(ctx.zenoh, who))
         yield opened, how
     finally:
         for session in opened.values():

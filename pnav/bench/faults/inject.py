@@ -11,11 +11,20 @@ What each kind means here:
   points every service at it, so the router alone is frozen.
 - ``cut``: SIGSTOP, then SIGCONT, of one service's process: its links to the router and to
   Postgres are cut (sockets open, nothing moves) as a pulled cable would, and come back.
-- ``spoof``: a rogue Zenoh client, a process not given this run's Zenoh password, tries to
-  publish odometry for r1 at its goal (seq from 10^9, so its rows, if any got in, can be
-  told apart afterwards).
-- ``rogue``: a rogue writer inserts a full-speed recommendation at priority 1000 (the safety
-  band: refused by the database unless it is a stop), then at 99, every 0.1 s.
+- ``spoof``: a rogue Zenoh client tries to publish odometry for r1 at its goal (seq from
+  10^9, so its rows, if any got in, can be told apart afterwards): first as a process not
+  given this run's Zenoh password (the router refuses its session), then with people's
+  identity, the CLI's (``pnav env user``): the router's access control drops every message
+  (only the sim puts sensor messages). The forged rows stored are counted 2 s after the last
+  one was sent (before retention could prune them): none.
+- ``cmd_vel``: people's identity puts ``cmd_vel`` for r1 straight to the sim (a hard
+  turn at full speed, ``command_id`` from 10^9): only the bridge may, so the router drops
+  them. The trial reads the sim's own trace (PNAV_SIM_TRACE) for a forged command it
+  applied: none.
+- ``rogue``: a rogue writer with the controller's database role and Zenoh identity (a
+  compromised controller: people's identity may not announce a recommendation) inserts a
+  full-speed recommendation at priority 1000 (the safety band: refused by the database
+  unless it is a stop), then at 99, every 0.1 s.
 - ``forge``: forged command_recommendation and command2robot row images on r1's keys, put
   with the identities the Zenoh ACL lets put them (forge.py); a command citing a forgery, or
   a cmd_vel relaying one, is a breach.
@@ -30,12 +39,14 @@ What each kind means here:
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import dataclasses
 import os
 import signal
 import subprocess
 import sys
 import time
+from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -46,6 +57,7 @@ from common import bus
 from common.config import ZenohSettings
 from common.contract import keys
 from common.contract.grants import USER
+from common.db import Database, create_pool
 from common.errors import ConnectionFailure
 from common.postmaster import postmaster_pid
 from common.runtime import Runtime
@@ -56,8 +68,13 @@ from pnav.bench.faults.forge import forge
 from pnav.launcher import RunningStack
 
 ROBOT = "r1"
+# the first seq of spoofed odometry, and the first command_id of a forged cmd_vel: above
+# anything the sim or the database numbers in a mission, so what got in can be told apart
 SPOOF_SEQ = 10**9
+FORGED_COMMAND_ID = 10**9
 _WAIT_S = 60.0  # the longest wait for a restart
+# the bridge stores a sensor message within milliseconds; retention keeps 30 sim seconds
+_STORED_WITHIN_S = 2.0
 
 
 @dataclass
@@ -69,8 +86,7 @@ class Context:
     goal: tuple[float, float]
     goal_id: int
     bad_goals: dict[str, tuple[float, float]]
-    # the run's Zenoh users, to put as a service would (None: the bench's own session)
-    credentials: BusCredentials | None = None
+    bus: BusCredentials  # the run's Zenoh users: a forger uses people's, a rogue a service's
 
 
 @dataclass
@@ -79,6 +95,7 @@ class Injection:
     refused: str | None = None  # the door's one line, for a refused value
     exit_code: int | None = None
     follow_goal: int | None = None  # the goal the mission now follows, if it changed
+    forged_believed: int | None = None  # forged messages that had an effect (spoof)
     notes: list[str] = field(default_factory=list)
     breaches: list[str] = field(default_factory=list)  # what an attack achieved: a miss
 
@@ -119,6 +136,7 @@ async def inject(fault: Fault, ctx: Context) -> Injection:
         "freeze": _freeze,
         "cut": _cut,
         "spoof": _spoof,
+        "cmd_vel": _forged_cmd_vel,
         "rogue": _rogue,
         "forge": _forge,
         "cli": _bad_value,
@@ -184,26 +202,86 @@ async def _cut(fault: Fault, ctx: Context) -> Injection:
     return Injection()
 
 
+async def _as(ctx: Context, identity: str) -> zenoh.Session:
+    """A Zenoh session of the stack's ``identity``, with its password (USER: what
+    ``pnav env user`` gives the CLI and the dashboard)."""
+    return await asyncio.to_thread(bus.open_session, ctx.bus.apply(ctx.zenoh, identity))
+
+
+async def _at_30_hz(seconds: float, put: Any) -> int:
+    """Call ``put(i)`` 30 times a second for ``seconds``; how many times."""
+    end, sent = time.monotonic() + seconds, 0
+    while time.monotonic() < end:
+        put(sent)
+        sent += 1
+        await asyncio.sleep(1 / 30)
+    return sent
+
+
 async def _spoof(fault: Fault, ctx: Context) -> Injection:
+    out = Injection()
     # a process on the machine that was not given a password (common.stack.BusCredentials)
     outsider = dataclasses.replace(ctx.zenoh, user=None, password=None, users_file=None)
     try:
-        rogue = await asyncio.to_thread(bus.open_session, outsider)
-    except ConnectionFailure as exc:
-        return Injection(notes=[f"the router refused the spoofer's session: {exc}"])
+        (await asyncio.to_thread(bus.open_session, outsider)).close()
+        out.notes.append("the router gave a session to a client without a password")
+    except ConnectionFailure:
+        out.notes.append("the router refused the session of a client without a password")
+    # people's identity: a password every CLI of the run has, and no right to sensors
+    rogue = await _as(ctx, USER)
     try:
         key = keys.robot_key(ROBOT, keys.ODOM)
         x, y = ctx.goal
-        end = time.monotonic() + fault.seconds
-        seq = SPOOF_SEQ
-        while time.monotonic() < end:
-            body = {"stamp": ctx.rt.clock.now(), "seq": seq, "x": x, "y": y, "yaw": 0.0}
-            rogue.put(key, bus.pack({**body, "linear": 0.0, "angular": 0.0}))
-            seq += 1
-            await asyncio.sleep(1 / 30)
-        return Injection(notes=[f"{seq - SPOOF_SEQ} spoofed odometry messages"])
+
+        def put(i: int) -> None:
+            body = {"stamp": ctx.rt.clock.now(), "seq": SPOOF_SEQ + i, "x": x, "y": y}
+            rogue.put(key, bus.pack({**body, "yaw": 0.0, "linear": 0.0, "angular": 0.0}))
+
+        sent = await _at_30_hz(fault.seconds, put)
+        out.notes.append(f"{sent} odometry messages forged as {USER}")
     finally:
         rogue.close()
+    await asyncio.sleep(_STORED_WITHIN_S)
+    stored = await ctx.rt.database.pool.fetchval(
+        f"SELECT count(*) FROM {keys.ODOMETRY} WHERE robot_id = $1 AND seq >= $2",
+        ROBOT,
+        SPOOF_SEQ,
+    )
+    out.forged_believed = int(stored)
+    out.notes.append(f"{stored} forged odometry rows stored")
+    return out
+
+
+async def _forged_cmd_vel(fault: Fault, ctx: Context) -> Injection:
+    rogue = await _as(ctx, USER)
+    try:
+        key = keys.robot_key(ROBOT, keys.CMD_VEL)
+
+        def put(i: int) -> None:
+            # full speed and a hard turn: off the path, into the racks, if it were obeyed
+            body = {"stamp": ctx.rt.clock.now(), "linear": 0.22, "angular": 2.5}
+            rogue.put(key, bus.pack({**body, "command_id": FORGED_COMMAND_ID + i}))
+
+        sent = await _at_30_hz(fault.seconds, put)
+        return Injection(notes=[f"{sent} cmd_vel forged as {USER}, straight to the sim"])
+    finally:
+        rogue.close()
+
+
+@contextlib.asynccontextmanager
+async def _writer_as(ctx: Context, identity: str) -> AsyncIterator[Database]:
+    """A writer with ``identity``'s database role and Zenoh identity (no liveliness token:
+    not a replica, nothing a lease or ``pnav status`` counts)."""
+    session = await _as(ctx, identity)
+    try:
+        pool = await create_pool(ctx.stack.local.url_for(identity), max_size=1)
+        db = Database(pool, bus.Notifier(session))
+        try:
+            yield db
+        finally:
+            await db.close()
+    finally:
+        session.close()
 
 
 _RECOMMEND = f"""
@@ -214,24 +292,25 @@ VALUES ($1, 'robot', 'rogue', $2, 0.22, 0.0, $3::float8, $3::float8 + 0.5, '{{}}
 RETURNING id"""
 
 
-async def _recommend(rt: Runtime, priority: int) -> Any:
-    return await rt.database.write(
+async def _recommend(db: Database, rt: Runtime, priority: int) -> Any:
+    return await db.write(
         keys.COMMAND_RECOMMENDATION, ROBOT, _RECOMMEND, ROBOT, priority, rt.clock.now()
     )
 
 
 async def _rogue(fault: Fault, ctx: Context) -> Injection:
     out = Injection()
-    try:
-        await _recommend(ctx.rt, 1000)
-        out.notes.append("priority 1000 accepted by the database")
-    except asyncpg.CheckViolationError as exc:
-        out.notes.append(f"priority 1000 refused by the database ({exc.constraint_name})")
-    end, sent = time.monotonic() + fault.seconds, 0
-    while time.monotonic() < end:
-        await _recommend(ctx.rt, 99)
-        sent += 1
-        await asyncio.sleep(0.1)
+    async with _writer_as(ctx, "controller") as db:
+        try:
+            await _recommend(db, ctx.rt, 1000)
+            out.notes.append("priority 1000 accepted by the database")
+        except asyncpg.CheckViolationError as exc:
+            out.notes.append(f"priority 1000 refused by the database ({exc.constraint_name})")
+        end, sent = time.monotonic() + fault.seconds, 0
+        while time.monotonic() < end:
+            await _recommend(db, ctx.rt, 99)
+            sent += 1
+            await asyncio.sleep(0.1)
     out.notes.append(f"{sent} priority-99 recommendations of 0.22 m/s straight ahead")
     return out
 

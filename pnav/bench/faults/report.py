@@ -21,6 +21,8 @@ def misses(r: Result) -> list[str]:
         out.append("driven after the last command")
     if r.rows_lost:
         out.append("rows lost")
+    if r.forged_believed:
+        out.append("forged messages believed")
     if r.breaches:
         out.append("breached")
     return out
@@ -66,6 +68,7 @@ def as_json(results: list[Result], meta: dict[str, Any]) -> dict[str, Any]:
             "collisions": 0,
             "max_after_command_m": MAX_AFTER_COMMAND_M,
             "rows_lost": 0,
+            "forged_believed": 0,
             "breaches": 0,
         },
         "faults": [{**asdict(r), "misses": misses(r)} for r in results],

@@ -31,9 +31,10 @@ from common.testing import router_process
 from pnav import commands
 from pnav.bench.faults import rows
 from pnav.bench.faults.catalogue import Fault
-from pnav.bench.faults.inject import ROBOT, SPOOF_SEQ, Context, inject
+from pnav.bench.faults.inject import FORGED_COMMAND_ID, ROBOT, SPOOF_SEQ, Context, inject
 from pnav.launcher import StackOptions, launched
 from pnav.mission import GoalEnded, MissionMonitor
+from services.sim.trace import CMD_VEL, read_trace
 
 T = TypeVar("T")
 
@@ -59,6 +60,9 @@ class Result:
     rows_checked: int = 0
     restart_s: float | None = None
     recovered_s: float | None = None  # fault over -> a new command2robot row after new odom
+    # forged messages that had an effect: spoofed odometry rows stored, forged cmd_vel the
+    # sim applied (None: the fault forges nothing)
+    forged_believed: int | None = None
     wall_s: float = 0.0
     notes: list[str] = field(default_factory=list)
     breaches: list[str] = field(default_factory=list)  # what an attack achieved
@@ -120,6 +124,15 @@ def sim_figures(sim_log: Path) -> dict[str, float]:
     return out
 
 
+def forged_commands_applied(trace: Path) -> int | None:
+    """The forged cmd_vel the sim applied, by its own trace (services/sim/trace.py); None
+    without a trace (the sim never ran)."""
+    if not trace.is_file():
+        return None
+    events = read_trace(trace)
+    return sum(1 for e in events if e.kind == CMD_VEL and e.ref >= FORGED_COMMAND_ID)
+
+
 async def _true_distance(rt: Runtime, goal: tuple[float, float]) -> float:
     """r1's distance to ``goal`` by the sim's own odometry (spoofed rows left out)."""
     row = await rt.database.pool.fetchrow(
@@ -141,20 +154,24 @@ async def run_trial(
 ) -> Result:
     result = Result(fault.name, fault.what)
     started = time.monotonic()
-    # the stack's Zenoh users, checked by the router process too: the spoofer meets the
-    # same defence as on a `pnav up` stack (common.stack.BusCredentials)
+    # the stack's Zenoh users, checked by the router process too, with the same access
+    # control: a forger meets the same defence as on a `pnav up` stack (common.stack)
     secrets_dir = Path(tempfile.mkdtemp(prefix="pnav-bus-"))
     bus = BusCredentials.create(secrets_dir)
     try:
         with router_process(bus.users_file) as (router, plain):
             zenoh = bus.apply(plain, USER)
+            trace = (
+                {"PNAV_SIM_TRACE": str(log_dir / "trace.csv")} if fault.kind == "cmd_vel" else {}
+            )
             options = StackOptions(
                 world=str(world),
                 rate=rate,
                 robots=1,
                 zenoh_port=None,
                 log_dir=log_dir,
-                extra_env=plain.to_env(),  # the router process; each service keeps its user
+                # the router process; each service keeps its user
+                extra_env={**plain.to_env(), **trace},
                 bus=bus,
             )
             async with launched(options) as stack:
@@ -169,6 +186,10 @@ async def run_trial(
                     await rt.close()
     finally:
         shutil.rmtree(secrets_dir, ignore_errors=True)
+    if fault.kind == "cmd_vel":  # the sim's trace is complete once it stopped
+        result.forged_believed = forged_commands_applied(log_dir / "trace.csv")
+        applied = "no trace" if result.forged_believed is None else result.forged_believed
+        result.notes.append(f"{applied} forged cmd_vel applied by the sim")
     figures = sim_figures(log_dir / "sim.log")
     result.contacts = int(figures["contacts"]) if "contacts" in figures else None
     result.max_after_command_m = figures.get("max_after_command_m")
@@ -195,6 +216,7 @@ async def _mission(fault: Fault, ctx: Context, result: Result) -> None:
     injection = await inject(fault, ctx)
     ended = time.monotonic()
     result.restart_s = injection.restart_s
+    result.forged_believed = injection.forged_believed
     result.notes += [n for n in injection.notes if n]
     result.breaches = injection.breaches
     result.recovered_s = await _recovered(rt, ended)
