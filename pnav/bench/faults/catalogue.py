@@ -24,7 +24,7 @@ MISSIONS: dict[str, tuple[float, float]] = {
 @dataclass(frozen=True)
 class Fault:
     name: str
-    kind: str  # kill | postgres | freeze | cut | spoof | rogue | cli | goal
+    kind: str  # kill | postgres | freeze | cut | spoof | rogue | cli | goal | dashboard
     what: str  # for the report
     target: str = ""  # the service concerned
     seconds: float = 0.0  # how long it lasts
@@ -77,6 +77,17 @@ def catalogue() -> tuple[Fault, ...]:
         *bad_goals,
         Fault("goal-outside-map", "goal", "pnav goal to a point outside the map", goal="outside"),
         Fault("goal-in-obstacle", "goal", "pnav goal to a point inside a rack", goal="obstacle"),
+        # attacks on the dashboard (the stack is launched with one for these)
+        Fault(
+            "deep-params",
+            "dashboard",
+            "a strategy with params nested 500 deep, through the dashboard and by INSERT",
+        ),
+        Fault(
+            "dns-rebinding",
+            "dashboard",
+            "a goal POST and a websocket to the dashboard with another site's Host and Origin",
+        ),
     )
 
 

@@ -32,7 +32,7 @@ from pnav import commands
 from pnav.bench.faults import rows
 from pnav.bench.faults.catalogue import Fault
 from pnav.bench.faults.inject import ROBOT, SPOOF_SEQ, Context, inject
-from pnav.launcher import StackOptions, launched
+from pnav.launcher import DashboardOptions, StackOptions, launched
 from pnav.mission import GoalEnded, MissionMonitor
 
 T = TypeVar("T")
@@ -155,6 +155,8 @@ async def run_trial(
                 log_dir=log_dir,
                 extra_env=plain.to_env(),  # the router process; each service keeps its user
                 bus=bus,
+                # the dashboard's attacks need one; the other faults run without
+                dashboard=DashboardOptions(port=None) if fault.kind == "dashboard" else None,
             )
             async with launched(options) as stack:
                 config = ServiceConfig(
@@ -213,6 +215,10 @@ async def _follow(
     monitor: MissionMonitor, rt: Runtime, fault: Fault, ctx: Context, goal_id: int, inj: Any
 ) -> tuple[str, bool]:
     prefix = ""
+    if inj.let_through:
+        return f"NOT refused: {'; '.join(inj.let_through)}", False
+    if fault.kind == "dashboard":
+        prefix = f"refused: {inj.refused}; then "
     if fault.kind == "cli":
         if inj.exit_code != 2:
             return f"NOT refused (exit {inj.exit_code}): {inj.refused}", False
