@@ -21,6 +21,11 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: {message} (see `{self.prog} --help`)\n")
 
 
+def _shown(text: str) -> str:
+    """``text`` as a refusal quotes it: a 400-digit number is named by its length."""
+    return repr(text) if len(text) <= 30 else f"{text[:20]!r}... ({len(text)} characters)"
+
+
 def number(
     meaning: str, accepts: Callable[[float], bool], convert: Callable[[str], float] = float
 ) -> Callable[[str], float]:
@@ -33,7 +38,7 @@ def number(
         except (ValueError, OverflowError):
             value = math.nan
         if not (math.isfinite(value) and accepts(value)):
-            raise argparse.ArgumentTypeError(f"must be {meaning}, got {text!r}")
+            raise argparse.ArgumentTypeError(f"must be {meaning}, got {_shown(text)}")
         return value
 
     return parse
@@ -57,7 +62,13 @@ def strategy_code(text: str) -> str:
     code = text.strip().upper()
     if not code or not all(c.isascii() and (c.isalnum() or c == "_") for c in code):
         raise argparse.ArgumentTypeError(
-            f"must be a strategy code of letters, digits and _ (e.g. GOTO_AVOID), got {text!r}"
+            "must be a strategy code of letters, digits and _ (e.g. GOTO_AVOID), "
+            f"got {_shown(text)}"
+        )
+    if len(code) > limits.MAX_STRATEGY_CODE_CHARS:
+        raise argparse.ArgumentTypeError(
+            f"a strategy code is at most {limits.MAX_STRATEGY_CODE_CHARS} characters, "
+            f"got {len(code)}"
         )
     return code
 

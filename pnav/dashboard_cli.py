@@ -21,6 +21,22 @@ def _port(text: str) -> int:
     return value
 
 
+def _host_name(text: str) -> str:
+    """A host name as PNAV_DASHBOARD_ALLOWED_HOSTS takes it (checked by the dashboard's own
+    settings, so both refuse the same)."""
+    from common.errors import ConfigError
+    from services.dashboard.settings import DashboardSettings
+
+    name = text.strip().lower()
+    try:
+        DashboardSettings(allowed_hosts=(name,))
+    except ConfigError:
+        raise argparse.ArgumentTypeError(
+            f"must be a host name or address (no scheme, port or path), got {text!r}"
+        ) from None
+    return name
+
+
 def add_dashboard_options(parser: argparse.ArgumentParser, default_port: int | None) -> None:
     """--http-port, --http-host and --no-dashboard; ``default_port`` None: a free port."""
     where = "a free port, printed" if default_port is None else str(default_port)
@@ -33,6 +49,15 @@ def add_dashboard_options(parser: argparse.ArgumentParser, default_port: int | N
         help="dashboard address (127.0.0.1: this machine only; 0.0.0.0 serves a page that "
         "sends robots, with no login, to the whole network)",
     )
+    parser.add_argument(
+        "--http-allow-host",
+        action="append",
+        type=_host_name,
+        default=[],
+        metavar="NAME",
+        help="a host name the page may also be reached by (besides 127.0.0.1, localhost, "
+        "[::1] and --http-host); any other name is refused, as DNS rebinding would use one",
+    )
     parser.add_argument("--no-dashboard", action="store_true", help="serve no dashboard")
 
 
@@ -41,4 +66,5 @@ def dashboard_options(args: argparse.Namespace) -> DashboardOptions | None:
 
     if args.no_dashboard:
         return None
-    return DashboardOptions(host=args.http_host, port=args.http_port)
+    allowed = tuple(args.http_allow_host)
+    return DashboardOptions(host=args.http_host, port=args.http_port, allowed_hosts=allowed)

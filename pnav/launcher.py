@@ -48,6 +48,9 @@ class DashboardOptions:
 
     host: str = "127.0.0.1"
     port: int | None = DEFAULT_HTTP_PORT  # None: a free port, chosen at launch
+    # host names the page may be reached by besides the loopback ones and ``host``
+    # (PNAV_DASHBOARD_ALLOWED_HOSTS, services/dashboard/gate.py)
+    allowed_hosts: tuple[str, ...] = ()
 
     @property
     def url(self) -> str:
@@ -247,6 +250,8 @@ def dashboard_spec(env: dict[str, str], dashboard: DashboardOptions) -> ProcessS
     if dashboard.port is None:
         raise UsageError("the dashboard's port is chosen by the launcher (resolve_dashboard)")
     address = {"PNAV_DASHBOARD_HOST": dashboard.host, "PNAV_DASHBOARD_PORT": str(dashboard.port)}
+    if dashboard.allowed_hosts:
+        address["PNAV_DASHBOARD_ALLOWED_HOSTS"] = ",".join(dashboard.allowed_hosts)
     argv = [sys.executable, "-m", "services.dashboard"]
     return ProcessSpec("dashboard", argv, {**env, **address})
 

@@ -277,17 +277,23 @@ async def newest_battery(db: Executor, robot_id: str) -> Battery | None:
 
 
 def _strategy(row: asyncpg.Record) -> Strategy:
+    params = row["params"]
     return Strategy(
         code=row["code"],
         planner_scenario=row["planner_scenario"],
         controller_scenarios=tuple(row["controller_scenarios"]),
-        params=dict(row["params"] or {}),
+        params=dict(params) if isinstance(params, dict) else {},
     )
+
+
+# params beyond migration 11's bounds (a row older than it) read as NULL, so every scenario
+# takes its defaults: decoding them could fail the whole read (a parser's recursion limit)
+_PARAMS = "CASE WHEN strategy_params_bounded(s.params) THEN s.params END AS params"
 
 
 async def strategies(db: Executor) -> dict[str, Strategy]:
     rows = await db.fetch(
-        "SELECT code, planner_scenario, controller_scenarios, params FROM strategy"
+        f"SELECT code, planner_scenario, controller_scenarios, {_PARAMS} FROM strategy s"
     )
     return {r["code"]: _strategy(r) for r in rows}
 
@@ -296,7 +302,7 @@ async def active_strategies(db: Executor) -> dict[str, ActiveStrategy]:
     """Robot id -> the strategy it follows now (robots with no row are absent)."""
     rows = await db.fetch(
         "SELECT a.robot_id, a.resume_code, a.source, s.code, s.planner_scenario, "
-        "s.controller_scenarios, s.params FROM active_strategy a "
+        f"s.controller_scenarios, {_PARAMS} FROM active_strategy a "
         "JOIN strategy s ON s.code = a.strategy_code"
     )
     return {

@@ -639,3 +639,57 @@ BEGIN
     SELECT NULL, h.holder FROM held h WHERE h.k = 0 AND h.mode = 'ShareLock';
 END;
 $$;
+
+-- migration 11: a strategy row is bounded: params depth, size and numbers, short names
+--
+-- A strategy's params nested 500 deep made every reader that walks them recursively fail
+-- (the dashboard stopped listing strategies, pushing and starting); a JSON reader in most
+-- languages gives up a few thousand levels down, and a number of 5 000 digits is refused by
+-- some (Python's int) and silently rounded by others. From here on params must be a JSON
+-- object (migration 3) that is at most 16 deep (the object itself counting one), at most
+-- 16 384 bytes as text, and whose every number, however deep, lies within a 64-bit integer's
+-- range (+-9223372036854775807); the top-level bound of migration 3 stays. The code is at
+-- most 64 characters and the description at most 1 000. common.contract.limits mirrors every
+-- bound for tools that refuse first. Rows already present keep their values (the strategy is
+-- referenced by active_strategy, see migration 3): the constraints are added NOT VALID, and
+-- readers treat params beyond the bounds as unreadable (CONTRACT.md, "Refused values").
+
+-- how deeply objects and arrays nest in p: 0 for a scalar, 1 for {} or {"k": 1}, 2 for
+-- {"k": []}... Counted level by level (a recursive CTE, no recursion on the server's stack);
+-- with stop_at, no deeper than stop_at + 1, so "deeper than N" costs N levels, not the value's.
+CREATE FUNCTION jsonb_depth(p jsonb, stop_at integer DEFAULT NULL) RETURNS integer
+LANGUAGE sql IMMUTABLE PARALLEL SAFE AS $$
+    WITH RECURSIVE item(v, level) AS (
+        SELECT p, 0
+        UNION ALL
+        SELECT c.v, i.level + 1
+          FROM item i CROSS JOIN LATERAL (
+              SELECT e.value FROM jsonb_each(
+                  CASE jsonb_typeof(i.v) WHEN 'object' THEN i.v ELSE '{}' END) AS e
+              UNION ALL
+              SELECT a.value FROM jsonb_array_elements(
+                  CASE jsonb_typeof(i.v) WHEN 'array' THEN i.v ELSE '[]' END) AS a
+          ) AS c(v)
+         WHERE stop_at IS NULL OR i.level < stop_at
+    )
+    SELECT coalesce(max(level + 1) FILTER (WHERE jsonb_typeof(v) IN ('object', 'array')), 0)
+      FROM item
+$$;
+
+-- true when strategy params are within this migration's bounds (size first: the depth and the
+-- numbers are looked at only in a value small enough to look at). Top-level numbers are
+-- strategy_params_sane's (a tighter bound), so a refused one is named by that constraint.
+CREATE FUNCTION strategy_params_bounded(p jsonb) RETURNS boolean
+LANGUAGE sql IMMUTABLE STRICT PARALLEL SAFE AS $$
+    SELECT CASE
+        WHEN octet_length(p::text) > 16384 THEN false
+        WHEN jsonb_depth(p, 16) > 16 THEN false
+        ELSE NOT jsonb_path_exists(p, 'strict $.**{2 to last} ? (@.type() == "number" &&
+            (@ > 9223372036854775807 || @ < -9223372036854775807))')
+    END
+$$;
+
+ALTER TABLE strategy
+    ADD CONSTRAINT strategy_params_bounded CHECK (strategy_params_bounded(params)) NOT VALID,
+    ADD CONSTRAINT strategy_text_bounded
+        CHECK (char_length(code) <= 64 AND char_length(description) <= 1000) NOT VALID;

@@ -18,6 +18,7 @@ from typing import Any
 import asyncpg
 from starlette.applications import Starlette
 from starlette.exceptions import HTTPException
+from starlette.middleware import Middleware
 from starlette.requests import Request
 from starlette.responses import FileResponse, JSONResponse, Response
 from starlette.routing import BaseRoute, Mount, Route, WebSocketRoute
@@ -25,18 +26,19 @@ from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 import services.dashboard.provenance as provenance
-from common.contract import keys
+from common.contract import keys, limits
 from common.errors import ConnectionFailure
+from services.dashboard.gate import LOOPBACK_NAMES, AllowedHosts, Gate
 from services.dashboard.hub import Hub
 from services.dashboard.orders import Orders
 from services.dashboard.requests import (
+    MAX_BODY_BYTES,
     GoalRequest,
     NewStrategy,
     Refused,
     StrategyChoice,
     check_scenarios,
     json_object,
-    same_origin,
 )
 from services.dashboard.store import DashboardStore
 
@@ -69,8 +71,18 @@ class Endpoints:
 
     @staticmethod
     async def body(request: Request) -> dict[str, Any]:
-        same_origin(request.headers)
-        return json_object(await request.body(), request.headers.get("content-type"))
+        """The request's JSON object, read no further than MAX_BODY_BYTES (413 past it)."""
+        content_type = request.headers.get("content-type")
+        declared = request.headers.get("content-length", "")
+        if declared.isdigit() and int(declared) > MAX_BODY_BYTES:
+            raise Refused(413, f"the body is over {MAX_BODY_BYTES} bytes")
+        chunks, size = [], 0
+        async for chunk in request.stream():
+            size += len(chunk)
+            if size > MAX_BODY_BYTES:
+                raise Refused(413, f"the body is over {MAX_BODY_BYTES} bytes")
+            chunks.append(chunk)
+        return json_object(b"".join(chunks), content_type)
 
     @staticmethod
     def robot_of(request: Request) -> str:
@@ -98,7 +110,6 @@ class Endpoints:
         return JSONResponse(body, status_code=201)
 
     async def cancel_goal(self, request: Request) -> Response:
-        same_origin(request.headers)
         robot = self.robot_of(request)
         return JSONResponse({"robot": robot, "cancelled": await self.orders.cancel_goal(robot)})
 
@@ -120,15 +131,12 @@ class Endpoints:
         table = {"decisions": keys.COMMAND2ROBOT, "system-commands": keys.SYSTEM_COMMAND}
         kind = request.url.path.strip("/").split("/")[1]
         row_id = request.path_params["id"]
+        if not 0 < row_id <= limits.MAX_INT64:
+            raise Refused(404, f"no {table[kind]} row {str(row_id)[:30]}: ids are 64-bit")
         return JSONResponse(await provenance.provenance(self.store.source, table[kind], row_id))
 
     async def websocket(self, websocket: WebSocket) -> None:
-        try:
-            same_origin(websocket.headers)
-        except Refused as refused:
-            logger.warning("%s", refused.reason)
-            await websocket.close(code=1008)  # policy violation
-            return
+        # its Host and Origin were checked at the gate (services.dashboard.gate)
         await websocket.accept()
         browser = self.hub.join(self.store.snapshot())
         reader = asyncio.create_task(_drain(websocket), name="ws-reader")
@@ -179,8 +187,12 @@ async def _unreachable(request: Request, exc: Exception) -> Response:
 
 
 def create_app(
-    store: DashboardStore, hub: Hub, extra_routes: Sequence[BaseRoute] = ()
+    store: DashboardStore,
+    hub: Hub,
+    extra_routes: Sequence[BaseRoute] = (),
+    allowed: AllowedHosts | None = None,
 ) -> Starlette:
+    """The app; ``allowed``: the Host names it answers (loopback only by default)."""
     api = Endpoints(store, hub)
     routes: list[BaseRoute] = [
         Route("/", api.index),
@@ -204,4 +216,5 @@ def create_app(
         asyncpg.PostgresConnectionError: _unreachable,
         asyncpg.InterfaceError: _unreachable,
     }
-    return Starlette(routes=routes, exception_handlers=handlers)
+    gate = Middleware(Gate, allowed=allowed or AllowedHosts(frozenset(LOOPBACK_NAMES)))
+    return Starlette(routes=routes, exception_handlers=handlers, middleware=[gate])

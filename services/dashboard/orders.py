@@ -9,6 +9,7 @@ request's fault: 422 with the database's one-line reason, never a 500.
 from __future__ import annotations
 
 import asyncio
+import logging
 import time
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -17,15 +18,22 @@ from typing import Any
 import asyncpg
 
 from common.contract import keys
+from common.errors import ConnectionFailure
 from services.dashboard.requests import NewStrategy, Refused
 from services.dashboard.store import DashboardStore
+
+logger = logging.getLogger("pnav.dashboard.orders")
 
 
 @asynccontextmanager
 async def refusal_as_4xx() -> AsyncIterator[None]:
     try:
         yield
-    except (asyncpg.IntegrityConstraintViolationError, asyncpg.DataError) as exc:
+    except (
+        asyncpg.IntegrityConstraintViolationError,
+        asyncpg.DataError,
+        asyncpg.ProgramLimitExceededError,  # e.g. a value too large for an index
+    ) as exc:
         detail = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         raise Refused(422, f"the database refused the row: {detail}") from None
 
@@ -68,10 +76,15 @@ class Orders:
         async with refusal_as_4xx():
             command_id = await self.source.user_command(robot, "SET_STRATEGY", code)
         deadline = time.monotonic() + wait_s
-        row = await self.source.row(keys.USER_COMMAND, command_id)
-        while row is not None and row["status"] == "pending" and time.monotonic() < deadline:
-            await asyncio.sleep(0.05)
+        try:
             row = await self.source.row(keys.USER_COMMAND, command_id)
+            while row is not None and row["status"] == "pending" and time.monotonic() < deadline:
+                await asyncio.sleep(0.05)
+                row = await self.source.row(keys.USER_COMMAND, command_id)
+        except (OSError, ConnectionFailure, asyncpg.PostgresError, asyncpg.InterfaceError) as exc:
+            # the command is written: its verdict comes to the page's timeline later
+            logger.warning("no verdict read for user_command %s: %s", command_id, exc)
+            row = None
         status = "pending" if row is None else row["status"]
         reason = "" if row is None else row["reason"] or ""
         return {"command_id": command_id, "status": status, "reason": reason}
@@ -79,4 +92,8 @@ class Orders:
     async def add_strategy(self, request: NewStrategy) -> None:
         async with refusal_as_4xx():
             await self.source.add_strategy(request)
-        await self.store.read_globals()
+        try:
+            await self.store.read_globals()  # the page lists it at once...
+        except Exception as exc:
+            # ...or at the next push: the row is committed, the request succeeded
+            logger.warning("strategy %s added, the list not read again yet: %s", request.code, exc)

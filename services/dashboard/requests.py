@@ -2,8 +2,9 @@
 
 A request that cannot be obeyed is refused at the door with :class:`Refused`: an HTTP status
 and one line saying why (docs/DASHBOARD.md lists them). The bounds are the contract's own
-(common.contract.limits, the CHECK constraints of migration 3), so the page refuses exactly
-what the database would, and says so in the same words as ``pnav goal``.
+(common.contract.limits, the CHECK constraints of migrations 3 and 11), so the page refuses
+exactly what the database would, and says so in the same words as ``pnav goal``. Who may ask
+at all (the Host and Origin of a request) is services.dashboard.gate's to check.
 """
 
 from __future__ import annotations
@@ -11,17 +12,19 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
-from urllib.parse import urlsplit
 
 from common.contract import limits
 from common.errors import ContractError, UsageError
 
 _CODE = re.compile(r"^[A-Z0-9_]+$")
 _SCENARIO = re.compile(r"^[A-Za-z0-9_]+$")
+_JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
 MAX_BODY_BYTES = 64 * 1024
+# how deeply a body may nest: above the params bound (+ the body object holding them), so a
+# strategy whose params are a little too deep hears the params' own reason
+MAX_BODY_DEPTH = limits.MAX_PARAMS_DEPTH + 8
 
 
 class Refused(UsageError):
@@ -37,30 +40,60 @@ def _no_constant(name: str) -> Any:
     raise ValueError(f"{name} is not a JSON number")
 
 
-def same_origin(headers: Mapping[str, str]) -> None:
-    """403 for a request a page of another site made: a browser names that page's origin,
-    and the dashboard's own page has the dashboard's host. (Another site's page may send a
-    form to 127.0.0.1 and send a robot; a client that is not a browser sends no Origin.)"""
-    origin = headers.get("origin")
-    if origin is None:
-        return
-    host = headers.get("host", "")
-    if urlsplit(origin).netloc != host:
-        raise Refused(403, f"cross-origin request from {origin} refused: use the dashboard's page")
+def _int64(text: str) -> int:
+    """A JSON integer, refused beyond 64 bits (Postgres' bigint; a browser's JSON rounds
+    past 2^53 already): a 400-digit x is a mistake, not a coordinate."""
+    if (
+        len(text.lstrip("-")) > 19
+        or not -limits.MAX_INT64 <= (value := int(text)) <= limits.MAX_INT64
+    ):
+        raise Refused(
+            422, f"a {len(text.lstrip('-'))}-digit integer is beyond 64 bits (+-{limits.MAX_INT64})"
+        )
+    return value
+
+
+def _float64(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        shown = text if len(text) <= 24 else f"{text[:20]}... ({len(text)} characters)"
+        raise Refused(422, f"the number {shown} is beyond a 64-bit float")
+    return value
+
+
+def json_depth(text: str) -> int:
+    """How deeply the JSON ``text`` nests (brackets outside strings), found before parsing
+    it: a parser recurses once per level, and Python's gives up near 1 000 with a
+    RecursionError, not a ValueError."""
+    depth = deepest = 0
+    for bracket in re.sub(r"[^\[\]{}]", "", _JSON_STRING.sub("", text)):
+        depth += 1 if bracket in "[{" else -1
+        deepest = max(deepest, depth)
+    return deepest
 
 
 def json_object(body: bytes, content_type: str | None = "application/json") -> dict[str, Any]:
     """The body as a JSON object; 415 unless it is sent as application/json (what a form of
-    another site cannot send without asking first), 400 for anything but a JSON object (NaN
-    and Infinity included: they are not JSON, though Python's parser accepts them)."""
+    another site cannot send without asking first), 413 over MAX_BODY_BYTES, 400 for
+    anything but a JSON object (NaN and Infinity included: they are not JSON, though
+    Python's parser accepts them) or one nested deeper than MAX_BODY_DEPTH, 422 for a number
+    beyond 64 bits."""
     media = (content_type or "").split(";")[0].strip().lower()
     if media != "application/json":
         raise Refused(415, f"send the body as application/json, not {media or 'nothing'}")
     if len(body) > MAX_BODY_BYTES:
         raise Refused(413, f"the body is over {MAX_BODY_BYTES} bytes")
     try:
-        value = json.loads(body.decode("utf-8"), parse_constant=_no_constant)
-    except (UnicodeDecodeError, ValueError) as exc:
+        text = body.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise Refused(400, f"the body is not valid JSON: {exc}") from None
+    if (depth := json_depth(text)) > MAX_BODY_DEPTH:
+        raise Refused(400, f"the body nests {depth} deep, at most {MAX_BODY_DEPTH}")
+    try:
+        value = json.loads(
+            text, parse_constant=_no_constant, parse_int=_int64, parse_float=_float64
+        )
+    except (ValueError, RecursionError) as exc:
         raise Refused(400, f"the body is not valid JSON: {exc}") from None
     if not isinstance(value, dict):
         raise Refused(400, f"the body must be a JSON object, got {type(value).__name__}")
@@ -150,26 +183,26 @@ class NewStrategy:
         description = body.get("description") or ""
         if not isinstance(description, str):
             raise Refused(422, "'description' must be text")
+        code = strategy_code(body.get("code"))
+        try:
+            limits.check_strategy_text(code, description.strip())
+        except ContractError as exc:
+            raise Refused(422, str(exc)) from None
         return cls(
-            strategy_code(body.get("code")),
-            planner,
-            tuple(controllers),
-            _params(body.get("params")),
-            description.strip(),
+            code, planner, tuple(controllers), _params(body.get("params")), description.strip()
         )
 
 
 def _params(value: Any) -> dict[str, Any]:
-    """A JSON object whose top-level numbers are within the contract's bound."""
+    """A JSON object within the contract's bounds (common.contract.limits.check_params)."""
     if value is None:
         return {}
     if not isinstance(value, dict):
         raise Refused(422, f"'params' must be a JSON object, got {type(value).__name__}")
-    bound = limits.MAX_ABS_PARAM
-    for key, item in value.items():
-        number = isinstance(item, int | float) and not isinstance(item, bool)
-        if number and not (math.isfinite(item) and abs(item) <= bound):
-            raise Refused(422, f"params.{key} must be within +-{bound:.0e}, got {item!r}")
+    try:
+        limits.check_params(value)
+    except ContractError as exc:
+        raise Refused(422, str(exc)) from None
     return value
 
 

@@ -166,12 +166,39 @@ def decision(row: Row, weighed: Sequence[Row]) -> dict[str, Any]:
     }
 
 
-def jsonable(value: Any) -> Any:
-    """``value`` with every non-finite float turned into None (JSON has no NaN)."""
+def strategy(row: Row) -> dict[str, Any]:
+    """A strategy row; params the contract's bounds refuse (``readable`` false: a row older
+    than migration 11) are not sent, and the strategy says it is unreadable."""
+    readable = row.get("readable", True) is not False
+    return {
+        "code": row["code"],
+        "planner_scenario": row["planner_scenario"],
+        "controller_scenarios": list(row["controller_scenarios"] or []),
+        "params": jsonable(row["params"]) if readable else None,
+        "description": row["description"],
+        "unreadable": None if readable else UNREADABLE_PARAMS,
+    }
+
+
+UNREADABLE_PARAMS = (
+    "params beyond the contract's bounds (nested too deep, too large, or a number beyond "
+    "64 bits): not shown; CONTRACT.md, Refused values"
+)
+# deeper than this, jsonable gives a mark instead of the value: what the page shows comes
+# from rows anyone may have written, and a recursive walk must stay far from Python's limit
+MAX_DEPTH = 32
+TOO_DEEP = f"(nested deeper than {MAX_DEPTH}: not shown)"
+
+
+def jsonable(value: Any, depth: int = 0) -> Any:
+    """``value`` with every non-finite float turned into None (JSON has no NaN), and what
+    lies deeper than :data:`MAX_DEPTH` replaced by :data:`TOO_DEEP`."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
+    if isinstance(value, Mapping | list | tuple) and depth >= MAX_DEPTH:
+        return TOO_DEEP
     if isinstance(value, Mapping):
-        return {str(k): jsonable(v) for k, v in value.items()}
+        return {str(k): jsonable(v, depth + 1) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [jsonable(v) for v in value]
+        return [jsonable(v, depth + 1) for v in value]
     return value

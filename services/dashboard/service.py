@@ -28,6 +28,7 @@ from common.contract import keys
 from common.errors import ConnectionFailure
 from common.runtime import Runtime, run_service
 from services.dashboard.app import create_app
+from services.dashboard.gate import AllowedHosts
 from services.dashboard.hub import Hub
 from services.dashboard.metrics import Metrics, MetricsConfig
 from services.dashboard.settings import DashboardSettings
@@ -76,7 +77,7 @@ class Dashboard:
         self.store = DashboardStore(PgDashboardSource(runtime.database))
         self.hub = Hub()
         self.observers = list(observers)
-        self.app = create_app(self.store, self.hub, extra_routes)
+        self.app = create_app(self.store, self.hub, extra_routes, AllowedHosts.of(settings))
         self.port = settings.port
 
     def on_message(self, key: str, payload: bytes) -> None:

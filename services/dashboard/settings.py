@@ -5,12 +5,16 @@ from __future__ import annotations
 
 import ipaddress
 import os
+import re
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from common.errors import ConfigError
 
 Env = Mapping[str, str]
+
+# a DNS name or an IPv4 address, or an IPv6 address in brackets or not
+_HOST_NAME = re.compile(r"^(?:[a-z0-9_]([a-z0-9_.-]*[a-z0-9_.])?|\[?[0-9a-f:.]+\]?)$")
 
 
 @dataclass(frozen=True)
@@ -29,6 +33,9 @@ class DashboardSettings:
     push_period_s: float = 0.1
     # every table is read again this often (wall s), so a lost notification only delays
     refresh_period_s: float = 5.0
+    # host names the page may be loaded from besides 127.0.0.1, localhost, [::1] and
+    # ``host`` (services.dashboard.gate): the names a deployment reaches it by
+    allowed_hosts: tuple[str, ...] = field(default=())
 
     def __post_init__(self) -> None:
         try:
@@ -42,6 +49,12 @@ class DashboardSettings:
             raise ConfigError(f"PNAV_DASHBOARD_PORT={self.port} must be from 0 to 65535")
         if not self.push_period_s > 0 or not self.refresh_period_s > 0:
             raise ConfigError("the dashboard's periods must be positive")
+        for name in self.allowed_hosts:
+            if not _HOST_NAME.match(name):
+                raise ConfigError(
+                    f"PNAV_DASHBOARD_ALLOWED_HOSTS: {name!r} is not a host name or address "
+                    "(give names only, comma-separated: no scheme, port or path)"
+                )
 
     @classmethod
     def from_env(cls, env: Env | None = None) -> DashboardSettings:
@@ -52,7 +65,9 @@ class DashboardSettings:
             port = int(raw)
         except ValueError:
             raise ConfigError(f"PNAV_DASHBOARD_PORT={raw!r} is not a port number") from None
-        return cls(host=host, port=port)
+        allowed = env.get("PNAV_DASHBOARD_ALLOWED_HOSTS", "")
+        names = tuple(n.strip().lower() for n in allowed.split(",") if n.strip())
+        return cls(host=host, port=port, allowed_hosts=names)
 
     @property
     def url(self) -> str:

@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import asyncio
+import logging
 import time
 from collections.abc import Mapping, Sequence
 from typing import Any, Final, Protocol
@@ -21,13 +22,14 @@ import asyncpg
 
 import services.dashboard.scene as scene
 from common.bus import Notification
-from common.contract import keys, people
+from common.contract import keys, limits, people
 from common.db import Database
 from services.dashboard.fleet import Fleet
 from services.dashboard.requests import NewStrategy, Refused
 from services.dashboard.timeline import Timeline, command_event, goal_event, strategy_event
 
 Row = Mapping[str, Any]
+logger = logging.getLogger("pnav.dashboard.store")
 
 # the newest row of a robot-scoped table, for every robot
 _NEWEST = """
@@ -51,6 +53,27 @@ PROVENANCE_TABLES: Final = (
     keys.PLANNED_PATH,
 )
 DECISION_TABLES: Final = (keys.COMMAND2ROBOT, keys.SYSTEM_COMMAND)
+# A row is read as the page can draw it, whatever it holds: JSON beyond migration 11's bounds
+# comes as NULL with ``readable`` false (a row written before the bound, or by an owner,
+# would otherwise fail the whole read: a parser's recursion, a number of 5 000 digits), and
+# text is cut to what a page shows.
+_STRATEGIES = f"""
+SELECT s.code, left(s.planner_scenario, 64) AS planner_scenario,
+       s.controller_scenarios[1:32] AS controller_scenarios,
+       CASE WHEN b.readable THEN s.params END AS params, b.readable,
+       left(s.description, {limits.MAX_STRATEGY_DESCRIPTION_CHARS}) AS description
+FROM strategy s CROSS JOIN LATERAL (SELECT strategy_params_bounded(s.params) AS readable) b
+ORDER BY s.code
+"""
+_RECOMMENDATIONS = f"""
+SELECT id, robot_id, kind, source, priority, linear_mps, angular_rps, system_command, stamp,
+       expires_stamp, reason, treated_by, created_at,
+       CASE WHEN octet_length(inputs::text) <= {limits.MAX_PARAMS_BYTES}
+                 AND jsonb_depth(inputs, {limits.MAX_PARAMS_DEPTH}) <= {limits.MAX_PARAMS_DEPTH}
+            THEN inputs ELSE '{{"unreadable": "beyond the bounds of strategy params"}}' END
+       AS inputs
+FROM command_recommendation WHERE id = ANY($1::bigint[])
+"""
 TIMELINE_TABLES: Final = (keys.GOAL, keys.USER_COMMAND, keys.SYSTEM_COMMAND)
 _SEED_ROWS = 100
 
@@ -90,11 +113,7 @@ class PgDashboardSource:
         return grid, list(chargers)
 
     async def strategies(self) -> list[Row]:
-        sql = (
-            "SELECT code, planner_scenario, controller_scenarios, params, description "
-            "FROM strategy ORDER BY code"
-        )
-        return list(await self.db.pool.fetch(sql))
+        return list(await self.db.pool.fetch(_STRATEGIES))
 
     async def newest(self, table: str) -> list[Row]:
         if table not in NEWEST_TABLES:
@@ -123,8 +142,7 @@ class PgDashboardSource:
         return list(await self.db.pool.fetch(sql, robot, limit))
 
     async def recommendations(self, ids: Sequence[int]) -> list[Row]:
-        sql = "SELECT * FROM command_recommendation WHERE id = ANY($1::bigint[])"
-        return list(await self.db.pool.fetch(sql, list(ids)))
+        return list(await self.db.pool.fetch(_RECOMMENDATIONS, list(ids)))
 
     async def set_goal(self, robot: str, x: float, y: float, tolerance: float | None) -> int:
         return await people.set_goal(self.db, robot, x, y, tolerance)
@@ -146,10 +164,30 @@ class PgDashboardSource:
                 request.planner_scenario,
                 list(request.controller_scenarios),
                 request.params,
-                request.description or None,
+                request.description,  # '' when none: the column is NOT NULL
             )
         except asyncpg.UniqueViolationError:
             raise Refused(409, f"strategy {request.code!r} exists already") from None
+
+
+def _strategy(row: Row) -> dict[str, Any]:
+    """A strategy as the page lists it; one it cannot draw is listed as unreadable, so the
+    others still are."""
+    try:
+        return scene.strategy(row)
+    except Exception as exc:
+        logger.warning("strategy %r cannot be shown: %r", row.get("code"), exc)
+        return {"code": str(row.get("code")), "unreadable": f"cannot be shown: {exc!r}"[:200]}
+
+
+def _event(table: str, row: Row, *, seeded: bool = False) -> dict[str, Any] | None:
+    """The timeline event of a goal or command row; None (logged) for one that cannot be
+    drawn: one bad row must not stop the timeline."""
+    try:
+        return goal_event(row, seeded=seeded) if table == keys.GOAL else command_event(table, row)
+    except Exception as exc:
+        logger.warning("%s row %r cannot be shown: %r", table, row.get("id"), exc)
+        return None
 
 
 class DashboardStore:
@@ -207,7 +245,7 @@ class DashboardStore:
         world = {"map": scene.world_map(grid), "chargers": [scene.charger(c) for c in chargers]}
         if world != self.world:
             self.world, self.world_changed = world, True
-        strategies = [scene.jsonable(dict(r)) for r in await source.strategies()]
+        strategies = [_strategy(r) for r in await source.strategies()]
         if strategies != self.strategies:
             self.strategies, self.strategies_changed = strategies, True
 
@@ -215,10 +253,9 @@ class DashboardStore:
         events = []
         for table in TIMELINE_TABLES:
             for row in await self.source.recent(table, None, _SEED_ROWS):
-                if table == keys.GOAL:
-                    events.append(goal_event(row, seeded=True))
-                else:
-                    events.append(command_event(table, row))
+                event = _event(table, row, seeded=True)
+                if event is not None:
+                    events.append(event)
         events += [strategy_event(row) for row in await self.source.active_strategies()]
         self.timeline.seed(events)
 
@@ -259,8 +296,9 @@ class DashboardStore:
             for found in rows:
                 if found is None:
                     continue
-                event = goal_event(found) if table == keys.GOAL else command_event(table, found)
-                self.timeline.add(event)
+                event = _event(table, found)
+                if event is not None:
+                    self.timeline.add(event)
                 if table == keys.GOAL:
                     self.fleet.set_row(table, found)
 

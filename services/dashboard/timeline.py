@@ -18,6 +18,13 @@ Row = Mapping[str, Any]
 Event = dict[str, Any]
 
 KEEP = 300
+# the longest argument or reason an event quotes: anyone may write a user_command's argument
+TEXT_CHARS = 200
+
+
+def _short(value: Any) -> str:
+    text = str(value)
+    return text if len(text) <= TEXT_CHARS else text[: TEXT_CHARS - 3] + "..."
 
 
 def _epoch(value: Any) -> float:
@@ -31,7 +38,7 @@ def goal_event(row: Row, *, seeded: bool = False) -> Event:
     where = f"({row['x']:.2f}, {row['y']:.2f})"
     text = f"goal {row['id']} {where} " + ("set" if status == "active" else status)
     if row.get("reason") and status != "active":
-        text += f": {row['reason']}"
+        text += f": {_short(row['reason'])}"
     return {
         "key": f"goal:{row['id']}:{status}",
         "t": _epoch(row["created_at"]) if status == "active" or seeded else time.time(),
@@ -46,15 +53,15 @@ def command_event(table: str, row: Row) -> Event:
     """A user_command or system_command row: one event when written, one when treated."""
     status = row["status"]
     who = "user" if table == "user_command" else "system"
-    argument = f" {row['argument']}" if row.get("argument") else ""
+    argument = f" {_short(row['argument'])}" if row.get("argument") else ""
     text = f"{who}: {row['command']}{argument}"
     when = row["created_at"]
     if status != "pending":
         reason = row.get("reason") if table == "user_command" else row.get("status_reason")
-        text += f" {status}" + (f": {reason}" if reason else "")
+        text += f" {status}" + (f": {_short(reason)}" if reason else "")
         when = row.get("treated_at") or when
     elif table == "system_command" and row.get("reason"):
-        text += f" ({row['reason']})"
+        text += f" ({_short(row['reason'])})"
     return {
         "key": f"{table}:{row['id']}:{status}",
         "t": _epoch(when),

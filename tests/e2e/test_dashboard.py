@@ -231,6 +231,36 @@ async def test_the_page_draws_the_robot_sends_a_goal_switches_strategy_and_expla
                 within=30,
             )
 
+            # 5. the page's form adds a strategy with no description (stored empty)
+            form = browser.find_element(By.ID, "strategy-form")
+            form.find_element(By.NAME, "code").send_keys("calm")
+            form.find_element(By.CSS_SELECTOR, "button[type=submit]").click()
+            await until(
+                lambda: "strategy CALM added" in browser.find_element(By.ID, "message").text,
+                "the page to say the strategy was added",
+                within=30,
+            )
+            assert await pool.fetchval("SELECT description FROM strategy WHERE code = 'CALM'") == ""
+
+            # 6. a row older than the contract's bounds (an owner's, params 3000 deep) is
+            # listed as unreadable, and the page goes on
+            await pool.execute(
+                "ALTER TABLE strategy DROP CONSTRAINT strategy_params_bounded;"
+                "INSERT INTO strategy (code, params) VALUES "
+                "('DEEP', ('{\"k\": ' || repeat('[', 3000) || repeat(']', 3000) || '}')::jsonb);"
+                "ALTER TABLE strategy ADD CONSTRAINT strategy_params_bounded "
+                "CHECK (strategy_params_bounded(params)) NOT VALID"
+            )
+            option = "#strategy-select option[value=DEEP]"
+            await until(
+                lambda: browser.find_elements(By.CSS_SELECTOR, option),
+                "the unreadable strategy in the list (the dashboard reads every table again)",
+                within=30,
+            )
+            deep = browser.find_element(By.CSS_SELECTOR, option)
+            assert deep.text == "DEEP (unreadable)" and not deep.is_enabled()
+            assert drawn(browser) is not None
+
             shot = tmp_path / "dashboard.png"
             assert browser.save_screenshot(str(shot))
             assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

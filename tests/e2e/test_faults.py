@@ -104,3 +104,21 @@ async def test_a_lease_theft_by_people_is_refused_and_moves_no_robot(tmp_path: P
     assert r.breaches == [], r.breaches  # every call refused, r1's owners never changed
     assert any("lock and lease calls refused" in n for n in r.notes), r.notes
     assert misses(r) == []
+
+
+async def test_params_nested_500_deep_are_refused_and_the_dashboard_still_serves(
+    tmp_path: Path,
+) -> None:
+    r = await trial("deep-params", tmp_path)
+    assert r.outcome.startswith("refused: POST 400 "), r.outcome
+    assert "INSERT refused (strategy_params_bounded)" in r.outcome
+    assert r.outcome.endswith("; then reached")
+    assert misses(r) == []
+
+
+async def test_a_dns_rebinding_page_is_refused_for_goals_and_websockets(tmp_path: Path) -> None:
+    r = await trial("dns-rebinding", tmp_path)
+    assert r.outcome == (
+        "refused: goal POST 403; websocket 403; https-origin websocket 403; then reached"
+    ), r.outcome
+    assert misses(r) == []

@@ -65,3 +65,19 @@ def test_a_port_in_use_is_refused_before_anything_starts() -> None:
     refused = f"cannot listen on 127.0.0.1:{port}.*--http-port"
     with socket.create_server(("127.0.0.1", port)), pytest.raises(UsageError, match=refused):
         resolve_dashboard(StackOptions(dashboard=DashboardOptions(port=port)))
+
+
+def test_up_allows_the_host_names_it_is_told_and_passes_them_to_the_dashboard(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    parse = build_parser().parse_args
+    told = parse(["up", "--http-allow-host", "Robots.LAN", "--http-allow-host", "10.0.0.7"])
+    options = dashboard_options(told)
+    assert options == DashboardOptions("127.0.0.1", 8080, ("robots.lan", "10.0.0.7"))
+    stack = StackOptions(dashboard=DashboardOptions(port=free_port(), allowed_hosts=("a.lan",)))
+    specs = {s.name: s for s in service_specs(local(), stack, Path("worlds/warehouse.yaml"))}
+    assert specs["dashboard"].env["PNAV_DASHBOARD_ALLOWED_HOSTS"] == "a.lan"
+    with pytest.raises(SystemExit) as exit_:
+        parse(["up", "--http-allow-host", "http://evil.example:80"])
+    assert exit_.value.code == 2
+    assert "--http-allow-host: must be a host name" in capsys.readouterr().err

@@ -24,9 +24,9 @@ MISSIONS: dict[str, tuple[float, float]] = {
 @dataclass(frozen=True)
 class Fault:
     name: str
-    kind: (
-        str  # kill | postgres | freeze | cut | spoof | cmd_vel | rogue | forge | cli | goal | theft
-    )
+    # kill | postgres | freeze | cut | spoof | cmd_vel | rogue | forge | cli | goal | theft |
+    # dashboard
+    kind: str
     what: str  # for the report
     target: str = ""  # the service concerned
     seconds: float = 0.0  # how long it lasts
@@ -100,6 +100,17 @@ def catalogue() -> tuple[Fault, ...]:
         *bad_goals,
         Fault("goal-outside-map", "goal", "pnav goal to a point outside the map", goal="outside"),
         Fault("goal-in-obstacle", "goal", "pnav goal to a point inside a rack", goal="obstacle"),
+        # attacks on the dashboard (the stack is launched with one for these)
+        Fault(
+            "deep-params",
+            "dashboard",
+            "a strategy with params nested 500 deep, through the dashboard and by INSERT",
+        ),
+        Fault(
+            "dns-rebinding",
+            "dashboard",
+            "a goal POST and a websocket to the dashboard with another site's Host and Origin",
+        ),
     )
 
 

@@ -32,7 +32,7 @@ from pnav import commands
 from pnav.bench.faults import rows
 from pnav.bench.faults.catalogue import Fault
 from pnav.bench.faults.inject import FORGED_COMMAND_ID, ROBOT, SPOOF_SEQ, Context, inject
-from pnav.launcher import StackOptions, launched
+from pnav.launcher import DashboardOptions, StackOptions, launched
 from pnav.mission import GoalEnded, MissionMonitor
 from services.sim.trace import CMD_VEL, read_trace
 
@@ -173,6 +173,8 @@ async def run_trial(
                 # the router process; each service keeps its user
                 extra_env={**plain.to_env(), **trace},
                 bus=bus,
+                # the dashboard's attacks need one; the other faults run without
+                dashboard=DashboardOptions(port=None) if fault.kind == "dashboard" else None,
             )
             async with launched(options) as stack:
                 config = ServiceConfig(
@@ -237,6 +239,10 @@ async def _follow(
     monitor: MissionMonitor, rt: Runtime, fault: Fault, ctx: Context, goal_id: int, inj: Any
 ) -> tuple[str, bool]:
     prefix = ""
+    if fault.kind == "dashboard":
+        if inj.breaches:
+            return f"NOT refused: {'; '.join(inj.breaches)}", False
+        prefix = f"refused: {inj.refused}; then "
     if fault.kind == "cli":
         if inj.exit_code != 2:
             return f"NOT refused (exit {inj.exit_code}): {inj.refused}", False

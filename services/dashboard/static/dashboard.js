@@ -225,7 +225,10 @@ function renderSelected() {
 function renderStrategies() {
   const select = $("strategy-select");
   const current = select.value;
-  select.replaceChildren(...state.strategies.map((s) => el("option", { value: s.code }, s.code)));
+  // a strategy whose row the dashboard cannot draw is listed, marked, and not offered
+  select.replaceChildren(...state.strategies.map((s) => s.unreadable
+    ? el("option", { value: s.code, disabled: "", title: s.unreadable }, `${s.code} (unreadable)`)
+    : el("option", { value: s.code, title: s.description || "" }, s.code)));
   if (current) select.value = current;
 }
 

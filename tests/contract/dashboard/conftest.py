@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import json
 from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -174,8 +175,11 @@ async def extra(request: Any) -> Any:
     return PlainTextResponse("mounted")
 
 
-@pytest.fixture
-async def running(db_url: str, zenoh_settings: ZenohSettings) -> AsyncIterator[Running]:
+@asynccontextmanager
+async def serving(
+    db_url: str, zenoh_settings: ZenohSettings, settings: DashboardSettings | None = None
+) -> AsyncIterator[Running]:
+    """The dashboard as ``running`` serves it, with ``settings`` (a free port by default)."""
     config = ServiceConfig(
         service="dashboard", database_url=db_url, zenoh=zenoh_settings, instance="dashboard-1"
     )
@@ -183,7 +187,7 @@ async def running(db_url: str, zenoh_settings: ZenohSettings) -> AsyncIterator[R
     observed: list[Notification] = []
     dashboard = Dashboard(
         runtime,
-        DashboardSettings(port=0, push_period_s=0.05),
+        settings or DashboardSettings(port=0, push_period_s=0.05),
         extra_routes=[Route("/extra", extra)],
         observers=[observed.append],
     )
@@ -203,6 +207,12 @@ async def running(db_url: str, zenoh_settings: ZenohSettings) -> AsyncIterator[R
             await asyncio.wait_for(task, 15)
         finally:
             await runtime.close()
+
+
+@pytest.fixture
+async def running(db_url: str, zenoh_settings: ZenohSettings) -> AsyncIterator[Running]:
+    async with serving(db_url, zenoh_settings) as served:
+        yield served
 
 
 @pytest.fixture
