@@ -101,7 +101,7 @@ class BudgetLog:
             later = f"later ones: one line per {self.window_s:.0f} s"
             text = f"{who} over its time budget: {times} ({later})"
         else:
-            last = f"{runs} times in the last {window:.1f} s"
+            last = f"{runs} time{'s' if runs != 1 else ''} in the last {window:.1f} s"
             text = f"{who} over its time budget {last}: longest {times}"
         extra = {
             "rule": rule,

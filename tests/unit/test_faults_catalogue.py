@@ -16,10 +16,11 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def test_every_fault_of_the_issue_is_in_the_catalogue_once() -> None:
     names = [f.name for f in catalogue()]
-    assert len(names) == len(set(names)) == 20
+    assert len(names) == len(set(names)) == 21
     for service in ("sim", "bridge", "strategy", "planner", "controller", "decision"):
         assert f"kill-{service}" in names
     assert {"kill-postgres", "freeze-router-3s", "freeze-router-10s", "spoof-odom"} <= set(names)
+    assert "dwa-stall" in names  # issue 28: a strategy row stalling the controller
     assert [f.argv for f in catalogue() if f.kind == "cli"] == [
         ("nan", "1"),
         ("inf", "1"),

@@ -24,7 +24,7 @@ MISSIONS: dict[str, tuple[float, float]] = {
 @dataclass(frozen=True)
 class Fault:
     name: str
-    kind: str  # kill | postgres | freeze | cut | spoof | rogue | cli | goal
+    kind: str  # kill | postgres | freeze | cut | spoof | rogue | cli | goal | stall
     what: str  # for the report
     target: str = ""  # the service concerned
     seconds: float = 0.0  # how long it lasts
@@ -77,6 +77,14 @@ def catalogue() -> tuple[Fault, ...]:
         *bad_goals,
         Fault("goal-outside-map", "goal", "pnav goal to a point outside the map", goal="outside"),
         Fault("goal-in-obstacle", "goal", "pnav goal to a point inside a rack", goal="obstacle"),
+        Fault(
+            "dwa-stall",
+            "stall",
+            "r1 switched to GOTO_FAST with dwa's heaviest params (50 x 100 samples x 50 steps, "
+            "10 s horizon) for the rest of the mission",
+            "controller",
+            10,
+        ),
     )
 
 
