@@ -13,9 +13,9 @@ Silent without a fresh scan, odometry or a path; on an empty path (the target re
 failed or gone) it recommends one stop, so its own last command does not outlive the path.
 
 One decision's work is bounded whatever the strategy row, the scan and the path say: at
-most params.POSE_BUDGET poses rolled out, trajectories.MAX_OBSTACLES hits and
-trajectories.MAX_PATH_POINTS path points, computed trajectories.PAIRS_PER_PRODUCT pairs at
-a time (docs/CONTROLLER.md, *dwa*, "Bounded work").
+most params.POSE_BUDGET poses rolled out, bounds.MAX_OBSTACLES hits and
+bounds.MAX_PATH_POINTS path points, computed bounds.PAIRS_PER_PRODUCT pairs at a time
+(docs/CONTROLLER.md, *dwa*, "Bounded work").
 """
 
 from __future__ import annotations

@@ -37,22 +37,14 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
-FloatArray = npt.NDArray[np.float64]
-BoolArray = npt.NDArray[np.bool_]
+from pnav_local.bounds import MAX_OBSTACLES, MAX_PATH_POINTS, PAIRS_PER_PRODUCT, nearest, thin
+from pnav_local.bounds import BoolArray as BoolArray  # the arrays' types, for the scenario
+from pnav_local.bounds import FloatArray as FloatArray
 
 # Obstacles are merged onto a grid this fine before the distance test: a 720-beam scan of a
 # cluttered world has many hits a few millimetres apart, which tell nothing more.
 MERGE_M = 0.04
-# The work of one decision is bounded whatever the params, the scan and the path (a row may
-# say anything): the nearest MAX_OBSTACLES merged hits are kept (more than the shipped
-# lidars' 720 beams), a pose x obstacle (or trajectory x path segment) product holds at
-# most PAIRS_PER_PRODUCT pairs at a time (4 MB of float32), and a path is tested against
-# the lidar at most MAX_PATH_POINTS points along it. The poses are params.POSE_BUDGET's.
-MAX_OBSTACLES = 1024
-PAIRS_PER_PRODUCT = 1 << 16
-MAX_PATH_POINTS = 1000
 
 
 @dataclass(frozen=True)
@@ -148,15 +140,6 @@ def merge_obstacles(points: FloatArray, cell_m: float = MERGE_M) -> FloatArray:
     return nearest(merged, MAX_OBSTACLES)
 
 
-def nearest(points: FloatArray, most: int) -> FloatArray:
-    """The ``most`` points nearest the origin, in their order (all of them if fewer)."""
-    if len(points) <= most:
-        return points
-    keep = np.argpartition(np.hypot(points[:, 0], points[:, 1]), most - 1)[:most]
-    kept: FloatArray = points[np.sort(keep)]
-    return kept
-
-
 def distances(xs: FloatArray, ys: FloatArray, obstacles: FloatArray) -> FloatArray:
     """Per pose, the distance to the nearest obstacle point (inf with none)."""
     if len(obstacles) == 0:
@@ -243,15 +226,6 @@ def localise(path_xy: FloatArray, lookahead_m: float) -> Local | None:
         carrot = ahead[k - 1] + f * (ahead[k] - ahead[k - 1])
         kept = np.vstack([ahead[:k], carrot])
     return Local(thin(kept, MAX_PATH_POINTS), (float(carrot[0]), float(carrot[1])), remaining)
-
-
-def thin(points: FloatArray, most: int) -> FloatArray:
-    """At most ``most`` of ``points``, evenly spread, the first and the last kept (a path of
-    a point every few millimetres tells no more than one every few centimetres)."""
-    if len(points) <= most:
-        return points
-    thinned: FloatArray = points[np.linspace(0, len(points) - 1, most).astype(np.int64)]
-    return thinned
 
 
 def densify(points: FloatArray, step_m: float = 0.05) -> FloatArray:

@@ -15,6 +15,7 @@ import pytest
 import pnav_local.trajectories as tr
 from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
+from pnav_local.bounds import MAX_OBSTACLES, MAX_PATH_POINTS, PAIRS_PER_PRODUCT, nearest
 from pnav_local.dwa import choose, command_for
 from pnav_local.params import POSE_BUDGET, DwaParams, fit_budget, poses
 
@@ -71,12 +72,10 @@ def test_the_worst_documented_params_roll_out_within_the_budget() -> None:
         assert choice is not None
         # rollouts x steps: the budget (clear_for rolls out at most as many again)
         assert len(choice.window.v) * p.steps <= POSE_BUDGET
-        assert len(choice.local.points) <= tr.MAX_PATH_POINTS
+        assert len(choice.local.points) <= MAX_PATH_POINTS
         # the scan alone holds 100,000 float64 ranges, angles and points: a few MB
         assert peak < 48 * 2**20, peak
-    assert len(tr.merge_obstacles(np.column_stack([scan.ranges, scan.ranges]))) <= (
-        tr.MAX_OBSTACLES
-    )
+    assert len(tr.merge_obstacles(np.column_stack([scan.ranges, scan.ranges]))) <= (MAX_OBSTACLES)
 
 
 def test_the_reason_and_the_log_say_the_params_were_scaled(
@@ -104,7 +103,7 @@ def test_distances_in_slices_are_the_distances_at_once() -> None:
     rng = np.random.default_rng(5)
     xs, ys = rng.uniform(-5, 5, (100, 40)), rng.uniform(-5, 5, (100, 40))
     obstacles = rng.uniform(-8, 8, (300, 2))
-    assert xs.size * len(obstacles) > 8 * tr.PAIRS_PER_PRODUCT  # many slices
+    assert xs.size * len(obstacles) > 8 * PAIRS_PER_PRODUCT  # many slices
     naive = np.hypot(
         xs.ravel()[:, None] - obstacles[None, :, 0], ys.ravel()[:, None] - obstacles[None, :, 1]
     ).min(axis=1)
@@ -119,7 +118,7 @@ def test_distances_in_slices_are_the_distances_at_once() -> None:
 def test_the_nearest_hits_are_kept_when_there_are_too_many() -> None:
     far = np.column_stack([np.linspace(5, 50, 3000), np.full(3000, 1.0)])
     near = np.array([[0.3, 0.0], [0.0, -0.4]])
-    kept = tr.nearest(np.vstack([far, near]), tr.MAX_OBSTACLES)
-    assert len(kept) == tr.MAX_OBSTACLES
+    kept = nearest(np.vstack([far, near]), MAX_OBSTACLES)
+    assert len(kept) == MAX_OBSTACLES
     assert {tuple(p) for p in near} <= {tuple(p) for p in kept}
-    assert np.hypot(*kept.T).max() < np.hypot(*far[tr.MAX_OBSTACLES].T)
+    assert np.hypot(*kept.T).max() < np.hypot(*far[MAX_OBSTACLES].T)
