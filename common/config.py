@@ -24,6 +24,8 @@ PNAV_ZENOH_USERS_FILE      user:password lines this process      (none: accepts 
 PNAV_ENGINE_PERIOD_MS      F: activation period and bound        50
 PNAV_ENGINE_MAX_RULES      N: most rules run per activation      1000
 PNAV_ENGINE_PAUSE_MS       P: least pause between activations    0
+PNAV_ENGINE_RULE_BUDGET_MS a rule run longer than this is logged  50
+                           (once per rule type per 10 s)
 PNAV_STATS_PERIOD_S        how often engine_stats is written     2.0
 PNAV_INSTANCE              this process's instance id            <hostname>-<pid>
 PNAV_LEASES                replicas split the robots through     on
@@ -169,6 +171,8 @@ class EngineSettings:
     period_s: float = 0.050
     max_rules: int = 1000
     pause_s: float = 0.0
+    # one rule's run longer than this is logged (docs/ENGINE.md, "Bounded work")
+    rule_budget_s: float = 0.050
 
     def __post_init__(self) -> None:
         if self.period_s <= 0:
@@ -177,6 +181,8 @@ class EngineSettings:
             raise ConfigError(f"N (most rules per activation) must be >= 1, got {self.max_rules}")
         if self.pause_s < 0:
             raise ConfigError(f"the pause P must not be negative, got {self.pause_s}")
+        if self.rule_budget_s <= 0:
+            raise ConfigError(f"a rule's time budget must be positive, got {self.rule_budget_s}")
 
     @classmethod
     def from_env(cls, env: Env | None = None) -> EngineSettings:
@@ -185,6 +191,10 @@ class EngineSettings:
             period_s=_float(env, "PNAV_ENGINE_PERIOD_MS", cls.period_s * 1000, minimum=0.1) / 1000,
             max_rules=_int(env, "PNAV_ENGINE_MAX_RULES", cls.max_rules, minimum=1),
             pause_s=_float(env, "PNAV_ENGINE_PAUSE_MS", cls.pause_s * 1000) / 1000,
+            rule_budget_s=_float(
+                env, "PNAV_ENGINE_RULE_BUDGET_MS", cls.rule_budget_s * 1000, minimum=0.1
+            )
+            / 1000,
         )
 
 

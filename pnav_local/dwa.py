@@ -11,6 +11,11 @@ the path in force (``planned_path``), distance from it, heading, clearance and s
 
 Silent without a fresh scan, odometry or a path; on an empty path (the target reached,
 failed or gone) it recommends one stop, so its own last command does not outlive the path.
+
+One decision's work is bounded whatever the strategy row, the scan and the path say: at
+most params.POSE_BUDGET poses rolled out, bounds.MAX_OBSTACLES hits and
+bounds.MAX_PATH_POINTS path points, computed bounds.PAIRS_PER_PRODUCT pairs at a time
+(docs/CONTROLLER.md, *dwa*, "Bounded work").
 """
 
 from __future__ import annotations
@@ -159,11 +164,13 @@ def choose(
     return Choice(win, ok, scores, best, local, v_cap, blocked)
 
 
-def command_for(choice: Choice, path: PlannedPath) -> Command:
+def command_for(choice: Choice, path: PlannedPath, note: str = "") -> Command:
+    """The winner as a command; ``note`` ends its reason (params scaled to the budget)."""
     inputs = {"planned_path": path.id}
     n, admitted = len(choice.window.v), int(choice.ok.sum())
     if choice.best is None or choice.scores is None:
-        return Command(0.0, 0.0, f"dwa: none of {n} trajectories is admissible: brake", inputs)
+        reason = f"dwa: none of {n} trajectories is admissible: brake{note}"
+        return Command(0.0, 0.0, reason, inputs)
     i, s = choice.best, choice.scores
     v, w = float(choice.window.v[i]), float(choice.window.w[i])
     return Command(
@@ -172,7 +179,8 @@ def command_for(choice: Choice, path: PlannedPath) -> Command:
         f"dwa: best of {admitted}/{n} admissible trajectories: progress {s.progress[i]:+.2f},"
         f" path {s.path[i]:.2f}, heading {s.heading[i]:.2f}, clearance {s.clearance[i]:.2f},"
         f" speed {s.speed[i]:.2f}; {choice.local.remaining_m:.2f} m of path left"
-        + (" (blocked ahead: rounding it)" if choice.blocked else ""),
+        + (" (blocked ahead: rounding it)" if choice.blocked else "")
+        + note,
         inputs,
     )
 
@@ -210,5 +218,6 @@ class Dwa(ControllerScenario):
             return Command(
                 0.0, 0.0, f"dwa: no path ({path.target}): stop", {"planned_path": path.id}
             )
-        choice = choose(scan, odom, self.spec.robot, path, DwaParams.read(self.spec.params))
-        return None if choice is None else command_for(choice, path)
+        params = DwaParams.read(self.spec.params)
+        choice = choose(scan, odom, self.spec.robot, path, params)
+        return None if choice is None else command_for(choice, path, params.scaled)

@@ -4,16 +4,53 @@
 A missing key takes its default; a value that is not a number in range is logged once and
 takes its default (services.controller.params.number), so a typo never stops the robot's
 local controller. The speeds, accelerations and footprint are the robot row's, never here.
+
+A strategy row is people's, and each size within its range still multiplies the others:
+50 linear x 100 angular samples x 50 steps rolled out 255,000 poses, 0.5 to 2.4 s and a
+gigabyte per decision, while every other rule of the controller waited. So the window's
+grid and the steps are fitted to :data:`POSE_BUDGET` together (:func:`fit_budget`): the
+shape asked, scaled down, logged once and named in every recommendation's reason.
 """
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from common import log
 from pnav_local.trajectories import Weights
 from services.controller.params import number
+
+logger = logging.getLogger("pnav.controller")
+
+# The most poses one decision rolls out: trajectories (linear x (angular + 2) samples: the
+# window adds w = 0 and the turn rate facing the carrot) x steps. The defaults use 1,710
+# (9 x 19 x 10); 6,000 keeps a decision within a few milliseconds (docs/BENCHMARKS.md).
+POSE_BUDGET = 6000
+MIN_STEPS = 2
+_DEFAULT_GRID = (9, 17, 10)  # linear, angular samples, steps: what the budget scales from
+
+_warned: set[tuple[int, int, int]] = set()
+
+
+def poses(linear: int, angular: int, steps: int) -> int:
+    """The most poses a window of ``linear`` x ``angular`` samples rolls out in ``steps``."""
+    return linear * (angular + 2) * steps
+
+
+def fit_budget(linear: int, angular: int, steps: int) -> tuple[int, int, int]:
+    """(linear, angular, steps) within :data:`POSE_BUDGET`: as asked when they fit, else
+    scaled down toward the defaults' proportions, one at a time the one farthest above its
+    default (so 50 x 100 x 50 becomes 14 x 26 x 15, each about 1.5 x its default)."""
+    grid = [linear, angular, steps]
+    lowest = (1, 1, MIN_STEPS)
+    while poses(*grid) > POSE_BUDGET:
+        at = zip(grid, _DEFAULT_GRID, lowest, strict=True)
+        shares = [g / d if g > low else 0.0 for g, d, low in at]
+        grid[shares.index(max(shares))] -= 1
+    return grid[0], grid[1], grid[2]
 
 
 @dataclass(frozen=True)
@@ -36,6 +73,17 @@ class DwaParams:
     safety_margin_m: float = 0.06
     safety_lookahead_s: float = 0.2
     weights: Weights = field(default_factory=Weights)
+    # (linear, angular, steps) the strategy asked for when over POSE_BUDGET (None: as asked)
+    asked: tuple[int, int, int] | None = None
+
+    @property
+    def scaled(self) -> str:
+        """For the recommendation's reason: how the grid was fitted to the budget, if it was."""
+        if self.asked is None:
+            return ""
+        grid = f"{self.linear_samples} x {self.angular_samples} samples x {self.steps} steps"
+        asked = " x ".join(str(n) for n in self.asked)
+        return f"; params scaled to {grid} (asked {asked}: over the {POSE_BUDGET}-pose budget)"
 
     @classmethod
     def read(cls, params: Mapping[str, Any]) -> DwaParams:
@@ -44,11 +92,19 @@ class DwaParams:
         def get(key: str, default: float, low: float = 0.0, high: float = 1e3) -> float:
             return number(params, key, default, low=low, high=high)
 
+        asked = (
+            int(get("dwa_linear_samples", d.linear_samples, 1, 50)),
+            int(get("dwa_angular_samples", d.angular_samples, 1, 100)),
+            int(get("dwa_steps", d.steps, MIN_STEPS, 50)),
+        )
+        linear, angular, steps = fit_budget(*asked)
+        if (linear, angular, steps) != asked:
+            _warn_scaled(asked, (linear, angular, steps))
         return cls(
             horizon_s=get("dwa_horizon_s", d.horizon_s, 0.2, 10.0),
-            steps=int(get("dwa_steps", d.steps, 2, 50)),
-            linear_samples=int(get("dwa_linear_samples", d.linear_samples, 1, 50)),
-            angular_samples=int(get("dwa_angular_samples", d.angular_samples, 1, 100)),
+            steps=steps,
+            linear_samples=linear,
+            angular_samples=angular,
             window_s=get("dwa_window_s", d.window_s, 0.01, 5.0),
             delay_s=get("dwa_delay_s", d.delay_s, 0.0, 2.0),
             margin_m=get("dwa_margin_m", d.margin_m, 0.0, 2.0),
@@ -66,4 +122,21 @@ class DwaParams:
                 clearance=get("dwa_clearance_weight", w.clearance),
                 speed=get("dwa_speed_weight", w.speed),
             ),
+            asked=None if (linear, angular, steps) == asked else asked,
         )
+
+
+def _warn_scaled(asked: tuple[int, int, int], used: tuple[int, int, int]) -> None:
+    """Log once per grid asked that it was scaled to the budget (a row read on every scan)."""
+    if asked in _warned:
+        return
+    _warned.add(asked)
+    log.event(
+        logger,
+        logging.WARNING,
+        "dwa params over the work budget; scaled down",
+        asked="dwa_linear_samples={} dwa_angular_samples={} dwa_steps={}".format(*asked),
+        used="dwa_linear_samples={} dwa_angular_samples={} dwa_steps={}".format(*used),
+        poses_asked=poses(*asked),
+        budget=POSE_BUDGET,
+    )

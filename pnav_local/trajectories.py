@@ -37,10 +37,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
-FloatArray = npt.NDArray[np.float64]
-BoolArray = npt.NDArray[np.bool_]
+from pnav_local.bounds import MAX_OBSTACLES, MAX_PATH_POINTS, PAIRS_PER_PRODUCT, nearest, thin
+from pnav_local.bounds import BoolArray as BoolArray  # the arrays' types, for the scenario
+from pnav_local.bounds import FloatArray as FloatArray
 
 # Obstacles are merged onto a grid this fine before the distance test: a 720-beam scan of a
 # cluttered world has many hits a few millimetres apart, which tell nothing more.
@@ -137,7 +137,7 @@ def merge_obstacles(points: FloatArray, cell_m: float = MERGE_M) -> FloatArray:
     key = cells[:, 0] * 1_000_003 + cells[:, 1]  # one integer per cell: a 1-D unique
     _, first = np.unique(key, return_index=True)
     merged: FloatArray = points[np.sort(first)]
-    return merged
+    return nearest(merged, MAX_OBSTACLES)
 
 
 def distances(xs: FloatArray, ys: FloatArray, obstacles: FloatArray) -> FloatArray:
@@ -148,8 +148,16 @@ def distances(xs: FloatArray, ys: FloatArray, obstacles: FloatArray) -> FloatArr
     # obstacle array per coordinate; float32 is centimetre-exact at these ranges
     poses = np.column_stack([xs.ravel(), ys.ravel()]).astype(np.float32)
     obs = obstacles.astype(np.float32)
-    d2 = (poses @ (-2.0 * obs.T)) + (obs * obs).sum(axis=1)[None, :]
-    nearest = d2.min(axis=1) + (poses * poses).sum(axis=1)
+    across = -2.0 * obs.T
+    squares = (obs * obs).sum(axis=1)[None, :]
+    # at most PAIRS_PER_PRODUCT pose x obstacle pairs in memory at once, however many
+    # poses and hits a decision has
+    rows = max(1, PAIRS_PER_PRODUCT // len(obs))
+    nearest = np.empty(len(poses), dtype=np.float32)
+    for i in range(0, len(poses), rows):
+        part = poses[i : i + rows]
+        nearest[i : i + rows] = ((part @ across) + squares).min(axis=1)
+    nearest += (poses * poses).sum(axis=1)
     out: FloatArray = np.sqrt(np.maximum(nearest, 0.0)).astype(np.float64).reshape(xs.shape)
     return out
 
@@ -217,13 +225,17 @@ def localise(path_xy: FloatArray, lookahead_m: float) -> Local | None:
         f = (lookahead_m - cumulative[k - 1]) / max(steps[k - 1], 1e-12)
         carrot = ahead[k - 1] + f * (ahead[k] - ahead[k - 1])
         kept = np.vstack([ahead[:k], carrot])
-    return Local(kept, (float(carrot[0]), float(carrot[1])), remaining)
+    return Local(thin(kept, MAX_PATH_POINTS), (float(carrot[0]), float(carrot[1])), remaining)
 
 
 def densify(points: FloatArray, step_m: float = 0.05) -> FloatArray:
-    """The polyline ``points`` as points at most ``step_m`` apart (its vertices kept)."""
+    """The polyline ``points`` as points at most ``step_m`` apart (its vertices kept), or
+    farther apart where that would make more than MAX_PATH_POINTS (a long path)."""
     if len(points) < 2:
         return points
+    points = thin(points, MAX_PATH_POINTS)
+    length = float(np.hypot(*np.diff(points, axis=0).T).sum())
+    step_m = max(step_m, length / MAX_PATH_POINTS)
     parts = [points[:1]]
     for a, b in itertools.pairwise(points):
         n = max(1, math.ceil(float(np.hypot(*(b - a))) / step_m))
@@ -250,12 +262,16 @@ def to_path(xs: FloatArray, ys: FloatArray, points: FloatArray) -> FloatArray:
     a, b = points[:-1], points[1:]
     ab = b - a
     length2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12)
-    rx = xs[:, None] - a[None, :, 0]
-    ry = ys[:, None] - a[None, :, 1]
-    t = np.clip((rx * ab[None, :, 0] + ry * ab[None, :, 1]) / length2[None, :], 0.0, 1.0)
-    dx = rx - t * ab[None, :, 0]
-    dy = ry - t * ab[None, :, 1]
-    return np.asarray(np.hypot(dx, dy).min(axis=1), dtype=np.float64)
+    rows = max(1, PAIRS_PER_PRODUCT // len(a))  # memory bounded, however long the path
+    out: FloatArray = np.empty(len(xs), dtype=np.float64)
+    for i in range(0, len(xs), rows):
+        rx = xs[i : i + rows, None] - a[None, :, 0]
+        ry = ys[i : i + rows, None] - a[None, :, 1]
+        t = np.clip((rx * ab[None, :, 0] + ry * ab[None, :, 1]) / length2[None, :], 0.0, 1.0)
+        dx = rx - t * ab[None, :, 0]
+        dy = ry - t * ab[None, :, 1]
+        out[i : i + rows] = np.hypot(dx, dy).min(axis=1)
+    return out
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,15 @@ Our additions to the thesis:
   at least every F under a stream of one robot's wakes. A focused activation that passed
   over no rule ran what a full one would have, and counts as full for F. An activation cut
   by N or F makes the next one full: what the cut left runs first, as in the thesis.
+- Safety rules first (``Rule.safety``): an activation runs the safety rules it holds (in its
+  focus) before any other rule but the meta rules at the head of the queue (they say which
+  scenarios run: the controller's ends a dropped safety_stop before it reads a new scan),
+  in queue order, and N and F never cut them; then the others as above, the first of them
+  always running. So no robot's safety_stop waits behind another scenario's computation of
+  that activation, and one that runs over F cuts the rest, not the safety rules of the next.
+- A rule run over ``settings.rule_budget_s`` is counted and logged, once per rule type per
+  10 s (common.engine.budget): the engine cannot stop synchronous Python, so a rule's work
+  is bounded by construction, and F cuts what comes after it.
 """
 
 from __future__ import annotations
@@ -39,6 +48,7 @@ from collections import deque
 from collections.abc import Awaitable, Callable, Iterable
 
 from common.config import EngineSettings
+from common.engine.budget import BudgetLog
 from common.engine.errorlog import ErrorLog, error_key
 from common.engine.rule import Rule
 from common.engine.stats import EngineCounters, RuleStats
@@ -76,6 +86,7 @@ class Engine(StepRunner):
         self._running = False
         # errors are counted every time (stats), logged once per distinct error + a count
         self.error_log = ErrorLog(log)
+        self.budget_log = BudgetLog(log, name)
         # When the last full activation started, on ``clock`` (None: none yet): F counts
         # from it (see the module's docstring).
         self.full_started: float | None = None
@@ -148,6 +159,7 @@ class Engine(StepRunner):
         self.counters.activations += 1
         self.counters.rules_run += ran
         self.error_log.flush()
+        self.budget_log.flush()
         return ran
 
     async def _run_hook(self, hook: ActivationEnd) -> None:
@@ -170,49 +182,87 @@ class Engine(StepRunner):
         """
         return self._ending
 
+    async def _run_safety(self, focus: frozenset[str] | None) -> int:
+        """Run the safety rules of ``current`` (those of ``focus`` and the robot-less ones;
+        None: all) first, in queue order, uncut; the others keep their order. How many ran."""
+        current = self.current
+        if not any(rule.safety for rule in current):
+            return 0
+        first: list[Rule] = []
+        rest: list[Rule] = []
+        for rule in current:
+            robot = rule.robot_id
+            due = focus is None or robot is None or robot in focus
+            (first if rule.safety and due else rest).append(rule)
+        if first:
+            current.clear()
+            current.extend(rest)
+            for rule in first:
+                await self.run_rule(rule)
+            self.counters.safety_run += len(first)
+        return len(first)
+
     async def _run_all(self, deadline: float) -> int:
-        """The thesis' activation: rules from the head of ``current`` until N or F."""
+        """The thesis' activation: rules from the head of ``current`` until N or F (the
+        safety rules moved up behind the meta rules at the head, and uncut)."""
         max_rules = self.settings.max_rules
         current = self.current
-        ran = 0
+        ran = others = 0  # the first rule that is not a safety rule always runs
+        safety_ran = False
         while current:
-            if ran >= max_rules:
+            if not safety_ran and not current[0].meta:
+                ran += await self._run_safety(None)
+                safety_ran = True
+                continue
+            if others and ran >= max_rules:
                 self.counters.capped_by_n += 1
                 self.cut = True
                 break
-            if ran and self.clock() >= deadline:
+            if others and self.clock() >= deadline:
                 self.counters.capped_by_f += 1
                 self.cut = True
                 break
             await self.run_rule(current.popleft())
             ran += 1
+            others += 1
+        if not safety_ran:
+            ran += await self._run_safety(None)
         return ran
 
     async def _run_focused(self, focus: frozenset[str], deadline: float) -> tuple[int, int]:
         """A focused activation: the rules of ``focus`` and the robot-less ones, in queue
-        order, until N or F; return (rules run, rules passed over). A rule passed over goes
-        back to the head of ``current`` in its order, ahead of the rules not reached."""
+        order (the safety rules moved up behind the meta rules at the head, and uncut),
+        until N or F; return (rules run, rules passed over). A rule passed over goes back to
+        the head of ``current`` in its order, ahead of the rules not reached."""
         max_rules = self.settings.max_rules
         current = self.current
         passed: list[Rule] = []
-        ran = 0
+        ran = others = 0
+        safety_ran = False
         while current:
             rule = current[0]
+            if not safety_ran and not rule.meta:
+                ran += await self._run_safety(focus)
+                safety_ran = True
+                continue
             robot = rule.robot_id
             if robot is not None and robot not in focus:
                 passed.append(current.popleft())
                 continue
-            if ran >= max_rules:
+            if others and ran >= max_rules:
                 self.counters.capped_by_n += 1
                 self.cut = True
                 break
-            if ran and self.clock() >= deadline:
+            if others and self.clock() >= deadline:
                 self.counters.capped_by_f += 1
                 self.cut = True
                 break
             current.popleft()
             await self.run_rule(rule)
             ran += 1
+            others += 1
+        if not safety_ran:
+            ran += await self._run_safety(focus)
         current.extendleft(reversed(passed))
         return ran, len(passed)
 
@@ -297,6 +347,7 @@ class Engine(StepRunner):
             self._running = False
             signals.stopping = False
             self.error_log.flush(force=True)  # the counts not yet logged
+            self.budget_log.flush(force=True)
 
     def stop(self) -> None:
         """Ask :meth:`run` to return after the activation under way (drain, don't cut)."""

@@ -30,6 +30,9 @@ Class attributes:
   target-scenario rules). The engine re-seeds a meta rule lost to an error.
 - ``watches``: contract tables whose change notifications should wake the engine. Only
   meta rules need to declare them; the service subscribes to every table they name.
+- ``safety``: True for a rule that keeps robots safe (the controller's safety_stop): the
+  engine runs the safety rules of an activation first and never cuts them by N or F
+  (docs/ENGINE.md, "Safety rules first"); its work must be small and bounded.
 """
 
 from __future__ import annotations
@@ -46,6 +49,8 @@ class Rule:
     scenario: ClassVar[str] = ""
     meta: ClassVar[bool] = False
     watches: ClassVar[tuple[str, ...]] = ()
+    # Runs first in every activation it is in, never cut by N or F (docs/ENGINE.md).
+    safety: ClassVar[bool] = False
     # The robot this rule works for (None: every robot, or none; meta rules): an activation
     # woken by one robot's notifications runs that robot's rules and the robot-less ones.
     robot_id: str | None = None

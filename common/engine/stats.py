@@ -61,6 +61,8 @@ class EngineCounters:
     capped_by_f: int = 0
     meta_reseeded: int = 0
     hook_errors: int = 0  # activation-end hooks that raised (Engine.at_activation_end)
+    safety_run: int = 0  # safety rules run first in their activation (Rule.safety)
+    over_budget: int = 0  # rule runs longer than EngineSettings.rule_budget_s
 
     def woken_by(self, reason: str) -> None:
         """Count an activation started by ``reason`` (common.engine.trigger: NOTIFICATION,

@@ -5,7 +5,8 @@ acquisition, activation guards, conditions, actions, rule generation; a test tha
 bool (or raises) counts as false; an error in acquisition, actions or generation discards
 the rule (``Rule.discarded`` is told; a meta rule is re-seeded from its factory). Errors are
 counted every time and logged once per distinct error, then as a count now and then
-(common.engine.errorlog). The queues and when activations run are the Engine's.
+(common.engine.errorlog). A run longer than the settings' rule budget is counted and logged
+the same way (common.engine.budget). The queues and when activations run are the Engine's.
 """
 
 from __future__ import annotations
@@ -18,6 +19,8 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any
 
+from common.config import EngineSettings
+from common.engine.budget import BudgetLog
 from common.engine.errorlog import ErrorLog, error_key
 from common.engine.rule import Rule
 from common.engine.stats import EngineCounters, RuleStats
@@ -29,9 +32,11 @@ class StepRunner:
     """Runs rules' five steps; the Engine provides the state below."""
 
     name: str
+    settings: EngineSettings
     next: deque[Rule]
     counters: EngineCounters
     error_log: ErrorLog
+    budget_log: BudgetLog
     _stats: dict[type[Rule], RuleStats]
     _meta_factories: dict[type[Rule], RuleFactory]
 
@@ -54,7 +59,7 @@ class StepRunner:
             raise
         except Exception:
             self._discard_on_error(rule, stats, "data acquisition")
-            stats.record_time(time.perf_counter() - started)
+            self._timed(rule, stats, started)
             return
 
         rule.activated = self._tests(rule, stats, rule.activation_guards, "activation guard")
@@ -71,12 +76,21 @@ class StepRunner:
                     raise
                 except Exception:
                     self._discard_on_error(rule, stats, "actions")
-                    stats.record_time(time.perf_counter() - started)
+                    self._timed(rule, stats, started)
                     return
                 stats.acted += 1
 
         self._generate(rule, stats)
-        stats.record_time(time.perf_counter() - started)
+        self._timed(rule, stats, started)
+
+    def _timed(self, rule: Rule, stats: RuleStats, started: float) -> None:
+        """File the run's time; a run over the rule budget is counted and logged."""
+        seconds = time.perf_counter() - started
+        stats.record_time(seconds)
+        budget = self.settings.rule_budget_s
+        if seconds > budget:
+            self.counters.over_budget += 1
+            self.budget_log.over(rule.name, rule.scenario, rule.robot_id, seconds, budget)
 
     def _tests(self, rule: Rule, stats: RuleStats, step: Callable[[], Any], what: str) -> bool:
         """Evaluate AND-ed tests; anything but True (or an exception) counts as false."""

@@ -21,6 +21,10 @@ When it fires it recommends zero linear velocity and a turn in place that swings
 direction of travel toward the freer side (``safety_turn_rps``): the robot recovers instead
 of freezing with an obstacle in front of it forever. Priority 100: above every other
 shipped scenario, so nothing overrides it while it is live.
+
+A safety rule of the engine (``safety = True``): in every activation the engine runs every
+robot's safety_stop before any other scenario, dwa's heavy decisions included, and never
+cuts it by N or F (docs/ENGINE.md, "Safety rules first").
 """
 
 from __future__ import annotations
@@ -63,6 +67,7 @@ class SafetyStop(ControllerScenario):
     scenario = "safety_stop"
     priority = 100
     needs_odometry = True
+    safety = True  # runs first in each activation, uncut (docs/ENGINE.md)
 
     @classmethod
     def decide(

@@ -51,6 +51,9 @@ def clearance_cells(occupied: BoolGrid, cap_cells: int) -> FloatGrid:
     """
     h, w = occupied.shape
     cap = max(1, int(cap_cells))
+    # no column is more than w away: a larger cap (a footprint row of any size) changes no
+    # distance, only the work (one pass over the grid per column within it)
+    reach = min(cap, w)
     far = float(cap + 1)
     column = np.where(occupied, 0.0, far)
     for r in range(1, h):
@@ -58,11 +61,11 @@ def clearance_cells(occupied: BoolGrid, cap_cells: int) -> FloatGrid:
     for r in range(h - 2, -1, -1):
         np.minimum(column[r], column[r + 1] + 1.0, out=column[r])
     squared = column * column
-    padded = np.pad(squared, ((0, 0), (cap, cap)), constant_values=far * far)
+    padded = np.pad(squared, ((0, 0), (reach, reach)), constant_values=far * far)
     best = squared.copy()
-    for dx in range(1, cap + 1):
-        np.minimum(best, padded[:, cap + dx : cap + dx + w] + dx * dx, out=best)
-        np.minimum(best, padded[:, cap - dx : cap - dx + w] + dx * dx, out=best)
+    for dx in range(1, reach + 1):
+        np.minimum(best, padded[:, reach + dx : reach + dx + w] + dx * dx, out=best)
+        np.minimum(best, padded[:, reach - dx : reach - dx + w] + dx * dx, out=best)
     return np.asarray(np.minimum(np.sqrt(best), float(cap)), dtype=np.float64)
 
 

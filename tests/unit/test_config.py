@@ -30,13 +30,16 @@ def test_variables_are_read_by_name() -> None:
         "PNAV_ENGINE_PERIOD_MS": "20",
         "PNAV_ENGINE_MAX_RULES": "50",
         "PNAV_ENGINE_PAUSE_MS": "1.5",
+        "PNAV_ENGINE_RULE_BUDGET_MS": "30",
         "PNAV_INSTANCE": "ctl-2",
     }
     config = ServiceConfig.from_env("controller", env)
     assert config.zenoh.mode == "peer"
     assert config.zenoh.connect == ("tcp/10.0.0.1:7447", "tcp/10.0.0.2:7447")
     assert config.zenoh.multicast is True
-    assert config.engine == EngineSettings(period_s=0.02, max_rules=50, pause_s=0.0015)
+    assert config.engine == EngineSettings(
+        period_s=0.02, max_rules=50, pause_s=0.0015, rule_budget_s=0.03
+    )
     assert config.instance == "ctl-2"
 
 
@@ -46,6 +49,7 @@ def test_variables_are_read_by_name() -> None:
         ("PNAV_ENGINE_PERIOD_MS", "fast", "PNAV_ENGINE_PERIOD_MS='fast' is not a number"),
         ("PNAV_ENGINE_PERIOD_MS", "0", "PNAV_ENGINE_PERIOD_MS='0' must be at least"),
         ("PNAV_ENGINE_MAX_RULES", "0", "PNAV_ENGINE_MAX_RULES='0' must be at least 1"),
+        ("PNAV_ENGINE_RULE_BUDGET_MS", "0", "PNAV_ENGINE_RULE_BUDGET_MS='0' must be at least"),
         ("PNAV_ZENOH_MULTICAST", "maybe", "PNAV_ZENOH_MULTICAST='maybe' is not a boolean"),
         ("PNAV_ZENOH_MODE", "server", "must be client, peer or router"),
         ("PNAV_ZENOH_DATA_QUEUE", "0", "PNAV_ZENOH_DATA_QUEUE='0' must be at least 1"),

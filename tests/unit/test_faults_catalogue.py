@@ -31,6 +31,7 @@ def test_every_fault_of_the_issue_is_in_the_catalogue_once() -> None:
         "deep-params",
         "dns-rebinding",
     ]
+    assert "dwa-stall" in names  # issue 28: a strategy row stalling the controller
     assert [f.argv for f in catalogue() if f.kind == "cli"] == [
         ("nan", "1"),
         ("inf", "1"),

@@ -25,7 +25,7 @@ MISSIONS: dict[str, tuple[float, float]] = {
 class Fault:
     name: str
     # kill | postgres | freeze | cut | spoof | cmd_vel | rogue | forge | cli | goal | theft |
-    # dashboard
+    # dashboard | stall
     kind: str
     what: str  # for the report
     target: str = ""  # the service concerned
@@ -110,6 +110,13 @@ def catalogue() -> tuple[Fault, ...]:
             "dns-rebinding",
             "dashboard",
             "a goal POST and a websocket to the dashboard with another site's Host and Origin",
+        Fault(
+            "dwa-stall",
+            "stall",
+            "r1 switched to GOTO_FAST with dwa's heaviest params (50 x 100 samples x 50 steps, "
+            "10 s horizon) for the rest of the mission",
+            "controller",
+            10,
         ),
     )
 

@@ -39,6 +39,10 @@ What each kind means here:
   whose params nest 500 deep and inserts one as a database client would (refused by the
   dashboard, 4xx, and by the strategy table's CHECK); ``dns-rebinding`` posts a goal and
   opens the websocket as a page of evil.example pointed at 127.0.0.1 would (403 both).
+- ``stall``: a strategy row asking dwa for its heaviest decisions (GOTO_FAST with
+  :data:`DWA_STALL`: each size within its documented range), r1 switched to it for the rest of
+  the mission; after ``seconds`` the controller's engine_stats say its longest rule run and
+  how often safety_stop ran and recommended meanwhile.
 """
 
 from __future__ import annotations
@@ -68,6 +72,7 @@ from common.postmaster import postmaster_pid
 from common.runtime import Runtime
 from common.stack import BusCredentials
 from pnav.bench.faults import theft
+from pnav import commands
 from pnav.bench.faults.catalogue import Fault
 from pnav.bench.faults.forge import forge
 from pnav.launcher import RunningStack
@@ -77,6 +82,10 @@ ROBOT = "r1"
 # anything the sim or the database numbers in a mission, so what got in can be told apart
 SPOOF_SEQ = 10**9
 FORGED_COMMAND_ID = 10**9
+# the hostile tester's strategy params (issue 28): 255,000 poses a decision as asked
+DWA_STALL = {"dwa_steps": 50, "dwa_linear_samples": 50, "dwa_angular_samples": 100,
+             "dwa_horizon_s": 10}  # fmt: skip
+STALL_CODE = "DWA_STALL"
 _WAIT_S = 60.0  # the longest wait for a restart
 # the bridge stores a sensor message within milliseconds; retention keeps 30 sim seconds
 _STORED_WITHIN_S = 2.0
@@ -148,6 +157,7 @@ async def inject(fault: Fault, ctx: Context) -> Injection:
         "goal": _bad_goal,
         "theft": _lease_theft,
         "dashboard": _attack_dashboard,
+        "stall": _stall,
     }[fault.kind]
     return await handler(fault, ctx)
 
@@ -484,3 +494,45 @@ async def _dns_rebinding(port: int, ctx: Context, out: Injection, refused: list[
     after = await ctx.rt.database.pool.fetchval(f"SELECT count(*) FROM {keys.GOAL}")
     if after != before:
         out.breaches.append(f"{after - before} goal row(s) written")
+
+
+_STALL_STRATEGY = f"""
+INSERT INTO {keys.STRATEGY} (code, planner_scenario, controller_scenarios, params, description)
+SELECT $1, planner_scenario, controller_scenarios, params || $2::jsonb,
+       'GOTO_FAST asking dwa for its heaviest decisions (pnav bench faults, dwa-stall)'
+FROM {keys.STRATEGY} WHERE code = 'GOTO_FAST'
+ON CONFLICT (code) DO NOTHING"""
+
+_CONTROLLER_RULES = f"""
+SELECT rule_type, sum(executed) AS executed, sum(acted) AS acted, max(max_time_s) AS max_s
+FROM {keys.ENGINE_STATS} WHERE service = 'controller' GROUP BY rule_type"""
+
+
+async def _controller_rules(rt: Runtime) -> dict[str, Any]:
+    return {r["rule_type"]: r for r in await rt.database.pool.fetch(_CONTROLLER_RULES)}
+
+
+async def _stall(fault: Fault, ctx: Context) -> Injection:
+    rt = ctx.rt
+    await rt.database.write(keys.STRATEGY, None, _STALL_STRATEGY, STALL_CODE, DWA_STALL)
+    before = await _controller_rules(rt)
+    verdict, reason = await commands.send_user_command(rt, ROBOT, "SET_STRATEGY", STALL_CODE)
+    out = Injection(notes=[f"SET_STRATEGY {STALL_CODE}: {verdict} {reason}".strip()])
+    # the mission drives on under it; engine_stats are written every 2 s (PNAV_STATS_PERIOD_S)
+    await asyncio.sleep(fault.seconds)
+    after = await _controller_rules(rt)
+    if after:
+        longest = max(after.values(), key=lambda r: r["max_s"])
+        out.notes.append(
+            f"controller's longest rule run: {longest['rule_type']} "
+            f"{longest['max_s'] * 1e3:.1f} ms (rule budget 50 ms)"
+        )
+    stop, was = after.get("SafetyStop"), before.get("SafetyStop")
+    ran = (stop["executed"] - (was["executed"] if was else 0)) if stop else 0
+    acted = (stop["acted"] - (was["acted"] if was else 0)) if stop else 0
+    out.notes.append(
+        f"safety_stop ran {ran} times ({acted} recommendations) in the {fault.seconds:.0f} s"
+        if ran
+        else "safety_stop did NOT run during the stall"
+    )
+    return out

@@ -176,11 +176,12 @@ async def example_ready(
 
 
 class Feeder:
-    """Writes what the controller reads, as a client in any language would."""
+    """Writes what the controller reads about ``robot``, as a client in any language would."""
 
-    def __init__(self, conn: asyncpg.Connection, session: Any) -> None:
+    def __init__(self, conn: asyncpg.Connection, session: Any, robot: str = ROBOT) -> None:
         self.conn = conn
         self.session = session
+        self.robot = robot
         self.notifier = bus.Notifier(session)
         self.started = time.monotonic()
 
@@ -194,8 +195,10 @@ class Feeder:
             await asyncio.sleep(0.05)
 
     async def add_robot(self) -> None:
-        await self.conn.execute("INSERT INTO robot (robot_id, world) VALUES ($1, 'test')", ROBOT)
-        self.notifier.notify(keys.ROBOT, ROBOT, None)
+        await self.conn.execute(
+            "INSERT INTO robot (robot_id, world) VALUES ($1, 'test')", self.robot
+        )
+        self.notifier.notify(keys.ROBOT, self.robot, None)
 
     async def set_strategy(self, code: str) -> None:
         await self.conn.execute(
@@ -203,11 +206,11 @@ class Feeder:
             "VALUES ($1, $2, 'user', $3) ON CONFLICT (robot_id) DO UPDATE SET "
             "strategy_code = EXCLUDED.strategy_code, source = 'user', stamp = EXCLUDED.stamp, "
             "updated_at = now()",
-            ROBOT,
+            self.robot,
             code,
             self.now(),
         )
-        self.notifier.notify(keys.ACTIVE_STRATEGY, ROBOT, None)
+        self.notifier.notify(keys.ACTIVE_STRATEGY, self.robot, None)
 
     async def add_strategy(self, code: str, scenarios: list[str], params: dict[str, Any]) -> None:
         await self.conn.execute(
@@ -223,16 +226,17 @@ class Feeder:
         row_id: int = await self.conn.fetchval(
             "INSERT INTO odometry (robot_id, stamp, x, y, yaw, linear_mps, angular_rps) "
             "VALUES ($1, $2, 0, 0, 0, $3, $4) RETURNING id",
-            ROBOT,
+            self.robot,
             self.now(),
             linear,
             angular,
         )
-        self.notifier.notify(keys.ODOMETRY, ROBOT, row_id)
+        self.notifier.notify(keys.ODOMETRY, self.robot, row_id)
         return row_id
 
-    async def scan(self, *obstacles: Obstacle, age_s: float = 0.0) -> int:
-        """A 360-beam sweep (beam 0 ahead, CCW), inf except the obstacles; returns its id."""
+    async def scan(self, *obstacles: Obstacle, age_s: float = 0.0, notify: bool = True) -> int:
+        """A 360-beam sweep (beam 0 ahead, CCW), inf except the obstacles; returns its id.
+        ``notify`` False: no notification (the caller sends one for several robots)."""
         ranges = [math.inf] * BEAMS
         for beam in range(BEAMS):
             angle = beam if beam <= 180 else beam - 360
@@ -242,12 +246,13 @@ class Feeder:
         row_id: int = await self.conn.fetchval(
             "INSERT INTO laser_scan (robot_id, stamp, angle_min, angle_increment, range_min, "
             "range_max, ranges) VALUES ($1, $2, 0, $3, 0.12, 3.5, $4) RETURNING id",
-            ROBOT,
+            self.robot,
             self.now() - age_s,
             2 * math.pi / BEAMS,
             ranges,
         )
-        self.notifier.notify(keys.LASER_SCAN, ROBOT, row_id)
+        if notify:
+            self.notifier.notify(keys.LASER_SCAN, self.robot, row_id)
         return row_id
 
     async def recommendations(self, *sources: str) -> list[asyncpg.Record]:
@@ -255,7 +260,7 @@ class Feeder:
             await self.conn.fetch(
                 "SELECT * FROM command_recommendation WHERE robot_id = $1 "
                 "AND (cardinality($2::text[]) = 0 OR source = ANY($2)) ORDER BY id",
-                ROBOT,
+                self.robot,
                 list(sources),
             )
         )

@@ -149,6 +149,10 @@ def test_clearance_cells_is_the_euclidean_distance_up_to_the_cap() -> None:
     rr, cc = np.indices(occupied.shape)
     exact = np.min(np.hypot(rr[..., None] - rows, cc[..., None] - cols), axis=-1)
     assert np.allclose(got, np.minimum(exact, 6.0))
+    # a cap beyond the grid (a robot row's footprint of any size) is the exact distance,
+    # worked out in one pass per column of the grid, not per cell of the cap
+    assert np.allclose(clearance_cells(occupied, 10**9), exact)
+    assert clearance_cells(np.zeros((3, 4), dtype=bool), 10**9).min() == 10**9
 
 
 def aisle_map() -> np.ndarray:

@@ -1,0 +1,126 @@
+"""Benchmark: one dwa decision, with the default params and with the heaviest a strategy row
+may ask for.
+
+``python -m pnav.bench.dwa [--scenes N] [--json FILE]`` decides ``N`` made-up scenes (the
+Jackal, its 720-beam 270-degree lidar in clutter 0.5 to 6 m away, a path 10 m ahead, driving
+at 1 m/s) with each params set, and prints per set the milliseconds per decision (best of
+the passes, wall and CPU), the trajectories and poses rolled out, the peak memory of one decision
+(tracemalloc: numpy reports its arrays to it) and a digest of every command decided, so two
+trees can be compared for speed *and* for giving the same decisions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import math
+import time
+import tracemalloc
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from common.contract.planned_path import PlannedPath
+from common.contract.records import LaserScan, Odometry, Robot
+from pnav.bench.report import emit, machine
+from pnav_local.dwa import choose, command_for
+from pnav_local.params import DwaParams
+
+JACKAL = Robot("r1", 2.0, 4.0, 0.22, 270.0, max_linear_accel_mps2=10.0, max_angular_accel_rps2=20.0)
+BEAMS = 720
+FOV = math.radians(270.0)
+PATH = PlannedPath(1, "r1", 0.0, 1, "goal", 10.0, 0.0, (0.0, 10.0), (0.0, 0.0), 10.0)
+
+# the params of the issue's stalled controller: each within its documented range
+WORST: dict[str, Any] = {
+    "dwa_steps": 50,
+    "dwa_linear_samples": 50,
+    "dwa_angular_samples": 100,
+    "dwa_horizon_s": 10,
+}
+PARAMS: dict[str, Mapping[str, Any]] = {"default": {}, "worst": WORST}
+
+
+def scenes(n: int, seed: int) -> list[tuple[LaserScan, Odometry]]:
+    """``n`` cluttered scans with the odometry read with them."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        ranges = rng.uniform(3.0, 12.0, BEAMS)
+        for _ in range(rng.integers(4, 12)):  # posts and crates, a few to 40 beams wide
+            at, width = int(rng.integers(0, BEAMS)), int(rng.integers(3, 40))
+            ranges[np.arange(at, at + width) % BEAMS] = rng.uniform(0.5, 6.0)
+        ranges[ranges > 10.0] = np.inf
+        scan = LaserScan(
+            i + 1, "r1", 0.1 * i, -FOV / 2, FOV / (BEAMS - 1), 0.1, 10.0, ranges.astype("f4")
+        )
+        odom = Odometry(i + 1, "r1", 0.1 * i, 0.0, 0.0, float(rng.uniform(-0.2, 0.2)), 1.0, 0.0)
+        out.append((scan, odom))
+    return out
+
+
+def run(name: str, raw: Mapping[str, Any], n: int, seed: int, repeat: int) -> dict[str, Any]:
+    data = scenes(n, seed)
+    params = DwaParams.read(raw)
+    digest = hashlib.sha256()
+    best = best_cpu = math.inf
+    trajectories = poses = 0
+    for attempt in range(repeat):
+        started, cpu = time.perf_counter(), time.process_time()
+        choices = [choose(s, o, JACKAL, PATH, params) for s, o in data]
+        best = min(best, time.perf_counter() - started)
+        best_cpu = min(best_cpu, time.process_time() - cpu)
+        if attempt == 0:
+            for choice in choices:
+                assert choice is not None
+                trajectories = max(trajectories, len(choice.window.v))
+                cmd = command_for(choice, PATH)
+                digest.update(repr((cmd.linear, cmd.angular, cmd.reason)).encode())
+    poses = trajectories * params.steps
+    tracemalloc.start()
+    choose(*data[0], JACKAL, PATH, params)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    return {
+        "params": name,
+        "asked": dict(raw),
+        "steps": params.steps,
+        "samples": [params.linear_samples, params.angular_samples],
+        "trajectories": trajectories,
+        "poses": poses,
+        "ms_per_decision": round(best / n * 1e3, 2),
+        # the process's CPU time (every thread's: numpy's BLAS may use more than one):
+        # steadier than the wall on a shared machine
+        "cpu_ms_per_decision": round(best_cpu / n * 1e3, 2),
+        "peak_mb": round(peak / 2**20, 1),
+        "digest": digest.hexdigest()[:16],
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m pnav.bench.dwa")
+    parser.add_argument("--scenes", type=int, default=50)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--repeat", type=int, default=3, help="best of this many passes")
+    parser.add_argument("--only", choices=sorted(PARAMS), help="one params set")
+    parser.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
+    args = parser.parse_args(argv)
+    results = []
+    for name, raw in PARAMS.items():
+        if args.only and name != args.only:
+            continue
+        r = run(name, raw, args.scenes, args.seed, args.repeat)
+        results.append(r)
+        print(
+            f"{name:<8} {r['ms_per_decision']:8.2f} ms per decision "
+            f"({r['cpu_ms_per_decision']:.2f} ms CPU), {r['trajectories']} "
+            f"trajectories x {r['steps']} steps = {r['poses']} poses, peak {r['peak_mb']} MB, "
+            f"digest {r['digest']}"
+        )
+    emit({"benchmark": "dwa decision", "machine": machine(), "results": results}, args.json)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
