@@ -110,6 +110,7 @@ def catalogue() -> tuple[Fault, ...]:
             "dns-rebinding",
             "dashboard",
             "a goal POST and a websocket to the dashboard with another site's Host and Origin",
+        ),
         Fault(
             "dwa-stall",
             "stall",
