@@ -71,8 +71,8 @@ from common.errors import ConnectionFailure
 from common.postmaster import postmaster_pid
 from common.runtime import Runtime
 from common.stack import BusCredentials
-from pnav.bench.faults import theft
 from pnav import commands
+from pnav.bench.faults import theft
 from pnav.bench.faults.catalogue import Fault
 from pnav.bench.faults.forge import forge
 from pnav.launcher import RunningStack
