@@ -32,7 +32,7 @@ import yaml
 from common import yamldoc
 from common.contract import keys
 from common.errors import ModelError, WorldError
-from common.robotmodel import DEFAULT_MODEL, RobotModel, load_model
+from common.robotmodel import DEFAULT_MODEL, ROBOT_FIELDS, RobotModel, load_model
 from services.sim.mapserver import FREE, OccupancyGrid, load_map
 from services.sim.mapserver import REQUIRED_KEYS as MAP_KEYS
 from services.sim.robot import BURGER
@@ -40,6 +40,16 @@ from services.sim.robot import BURGER
 DEFAULT_STATION_RADIUS_M = 0.3
 DEFAULT_CHARGE_POWER_W = 20.0
 DEFAULT_WALL_HEIGHT_M = 0.3
+
+# The keys of each mapping of a world file: any other is refused, naming the closest one.
+# ``benchmark`` is the navigation benchmark's block (docs/NAVBENCH.md), read by pnav.navbench.
+WORLD_KEYS = ("name", "map", "robots", "charging_stations", "obstacles", "wall_height", "benchmark")
+ROBOT_KEYS = ("id", "x", "y", "yaw", "battery", "model")
+STATION_KEYS = ("id", "x", "y", "radius", "power")
+_OBSTACLE = ("name", "type", "x", "y", "yaw")
+OBSTACLE_KEYS = {"box": (*_OBSTACLE, "size"), "cylinder": (*_OBSTACLE, "radius", "height")}
+# a robot model's fields, written on a robot entry instead of in its ``model``
+MODEL_KEYS = frozenset((*ROBOT_FIELDS, "lidar"))
 
 
 @dataclass(frozen=True)
@@ -193,6 +203,13 @@ class _Reader:
     def error(self, problem: str) -> WorldError:
         return WorldError(f"{self.path}: {self.where}: {problem}")
 
+    def only(self, known: tuple[str, ...], hint: str = "") -> None:
+        """Refuse a key not in ``known`` (a typo is an error, never silently ignored),
+        naming the closest known one; ``hint`` is added after the problem."""
+        key = yamldoc.unknown_key(self.doc, known)
+        if key is not None:
+            raise self.error(yamldoc.unknown_key_problem(key, known) + hint)
+
     def number(self, key: str, default: float | None = None) -> float:
         if key not in self.doc:
             if default is None:
@@ -230,6 +247,13 @@ def _list(path: Path, doc: dict[str, Any], key: str) -> list[Any]:
 
 def _robot(path: Path, i: int, doc: Any, default: RobotModel) -> RobotSpec:
     r = _Reader(path, doc, f"robots[{i}]")
+    key = yamldoc.unknown_key(r.doc, ROBOT_KEYS)
+    if key in MODEL_KEYS:
+        raise r.error(
+            f"{key!r} is a field of the robot model, not of the robot entry: write it in "
+            f"'model' (model: {{name: {DEFAULT_MODEL}, {key}: ...}}; docs/SIM.md)"
+        )
+    r.only(ROBOT_KEYS)
     battery = r.doc.get("battery")
     if battery is not None:
         battery = r.number("battery")
@@ -267,6 +291,7 @@ def resolve_default_model(name: str | None) -> RobotModel:
 
 def _station(path: Path, i: int, doc: Any) -> StationSpec:
     r = _Reader(path, doc, f"charging_stations[{i}]")
+    r.only(STATION_KEYS)
     return StationSpec(
         r.ident("id"),
         r.number("x"),
@@ -279,6 +304,8 @@ def _station(path: Path, i: int, doc: Any) -> StationSpec:
 def _obstacle(path: Path, i: int, doc: Any) -> ObstacleSpec:
     r = _Reader(path, doc, f"obstacles[{i}]")
     shape = r.doc.get("type", "box")
+    if shape in OBSTACLE_KEYS:
+        r.only(OBSTACLE_KEYS[shape], f": a {shape} has no such key")
     name = r.ident("name", f"{shape}_{i}")
     x, y, yaw = r.number("x"), r.number("y"), r.number("yaw", 0.0)
     if shape == "box":
@@ -341,6 +368,9 @@ def load_world(path: str | Path, model: str | None = None) -> World:
         bare = World(name=path.stem, source=str(path), grid=grid, robots=(), default_model=default)
         return bare.with_robot_count(1)
 
+    key = yamldoc.unknown_key(doc, WORLD_KEYS)
+    if key is not None:
+        raise WorldError(f"{path}: {yamldoc.unknown_key_problem(key, WORLD_KEYS)}")
     if "map" not in doc:
         raise WorldError(f"{path}: missing required key 'map' (a map_server YAML file)")
     if not isinstance(doc["map"], str):
