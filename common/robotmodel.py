@@ -7,7 +7,12 @@ the body and the lidar from it, the bridge writes it into the ``robot`` row
 Every field is required in a model file, so a model never silently inherits the Burger's
 figures; a world file may override some of them (``overrides``). Every refusal is a
 :class:`~common.errors.ModelError` naming the file and the field, e.g.
-``models/jackal.yaml: lidar.beams: must be an integer, got 'many'``.
+``models/jackal.yaml: lidar.beams: must be an integer, got 'many'``. Every figure is bounded
+to physical values (``ROBOT_BOUNDS``; the lidar's by the robot table's CHECKs) and a refusal
+names the bound and why: ``max_linear_mps: must be at most 10 m/s (the fastest velocity a
+command may carry, CONTRACT.md), got 1e+308``. A field the format does not know (a typo) is
+refused with difflib's closest known name: ``unknown field 'battry_capacity_wh' (did you mean
+'battery_capacity_wh'? known: ...)``.
 
 Beam spacing (the one rule, CONTRACT.md ``robot.lidar_fov_rad``): a lidar whose field of view
 is a full turn spaces its beams ``fov / beams`` apart (the last beam does not repeat the first);
@@ -26,6 +31,7 @@ from typing import Any
 import yaml
 
 from common import yamldoc
+from common.contract import limits
 from common.errors import ModelError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -43,6 +49,30 @@ MAX_BEAMS = 100_000
 MAX_RANGE_M = 1000.0
 MAX_NOISE_M = 10.0
 MAX_RATE_HZ = 1000.0
+
+# Upper bounds of a model's figures: physical values, far above any ground robot's, so that
+# a slip (1e308, a value in mm) is refused at load, naming the bound, instead of reaching
+# the robot row and every scenario's arithmetic. field -> (bound, unit, why this bound).
+ROBOT_BOUNDS: dict[str, tuple[float, str, str]] = {
+    "footprint_radius_m": (5.0, "m", "a ground robot 10 m across"),
+    "wheel_radius_m": (2.0, "m", "a wheel 4 m high"),
+    "wheel_separation_m": (10.0, "m", "a ground robot 10 m across"),
+    "max_linear_mps": (
+        limits.MAX_ABS_LINEAR_MPS,
+        "m/s",
+        "the fastest velocity a command may carry, CONTRACT.md",
+    ),
+    "max_angular_rps": (
+        limits.MAX_ABS_ANGULAR_RPS,
+        "rad/s",
+        "the fastest turn a command may carry, CONTRACT.md",
+    ),
+    "max_linear_accel_mps2": (MAX_ACCEL, "m/s^2", "the robot table's bound, CONTRACT.md"),
+    "max_angular_accel_rps2": (MAX_ACCEL, "rad/s^2", "the robot table's bound, CONTRACT.md"),
+    "battery_capacity_wh": (100_000.0, "Wh", "100 kWh, a large industrial vehicle's"),
+    "height_m": (10.0, "m", "a ground robot 10 m high"),
+}
+LIDAR_HEIGHT_BOUND = (10.0, "m", "a lidar 10 m above the floor")
 
 
 @dataclass(frozen=True)
@@ -195,8 +225,8 @@ def parse_model(doc: Mapping[str, Any], where: str) -> RobotModel:
     if not isinstance(lidar_doc, Mapping):
         raise ModelError(f"{where}: lidar: must be a mapping, got {lidar_doc!r}")
     values = {key: _positive(doc, key, where, "") for key in ROBOT_FIELDS}
-    for key in ("max_linear_accel_mps2", "max_angular_accel_rps2"):
-        _at_most(values[key], MAX_ACCEL, where, key)
+    for key, bound in ROBOT_BOUNDS.items():
+        _at_most(values[key], bound[0], where, key, bound)
     return RobotModel(name=name, lidar=_lidar(lidar_doc, where), **values)
 
 
@@ -208,12 +238,21 @@ def _lidar(doc: Mapping[str, Any], where: str) -> LidarModel:
     if isinstance(beams, bool) or not isinstance(beams, int):
         raise ModelError(f"{where}: lidar.beams: must be an integer, got {beams!r}")
     if not 1 <= beams <= MAX_BEAMS:
-        raise ModelError(f"{where}: lidar.beams: must be within [1, {MAX_BEAMS}], got {beams}")
+        raise ModelError(
+            f"{where}: lidar.beams: must be within [1, {MAX_BEAMS}] (the robot table's bound, "
+            f"CONTRACT.md), got {beams}"
+        )
     angle_min = _number(doc, "angle_min_rad", where, "lidar.")
     if abs(angle_min) > FULL_TURN:
         raise ModelError(f"{where}: lidar.angle_min_rad: must be within +-2 pi, got {angle_min}")
     fov = _positive(doc, "fov_rad", where, "lidar.")
-    _at_most(fov, FULL_TURN + FULL_TURN_TOLERANCE, where, "lidar.fov_rad")
+    _at_most(
+        fov,
+        FULL_TURN + FULL_TURN_TOLERANCE,
+        where,
+        "lidar.fov_rad",
+        (FULL_TURN, "rad", "a full turn"),
+    )
     range_min = _number(doc, "range_min_m", where, "lidar.")
     if range_min < 0:
         raise ModelError(f"{where}: lidar.range_min_m: must be >= 0, got {range_min}")
@@ -223,13 +262,15 @@ def _lidar(doc: Mapping[str, Any], where: str) -> LidarModel:
             f"{where}: lidar.range_max_m: must be greater than range_min_m ({range_min}), "
             f"got {range_max}"
         )
-    _at_most(range_max, MAX_RANGE_M, where, "lidar.range_max_m")
+    _at_most(range_max, MAX_RANGE_M, where, "lidar.range_max_m", (MAX_RANGE_M, "m", _TABLE))
     noise = _number(doc, "noise_m", where, "lidar.")
     if noise < 0:
         raise ModelError(f"{where}: lidar.noise_m: must be >= 0, got {noise}")
-    _at_most(noise, MAX_NOISE_M, where, "lidar.noise_m")
+    _at_most(noise, MAX_NOISE_M, where, "lidar.noise_m", (MAX_NOISE_M, "m", _TABLE))
     rate = _positive(doc, "rate_hz", where, "lidar.")
-    _at_most(rate, MAX_RATE_HZ, where, "lidar.rate_hz")
+    _at_most(rate, MAX_RATE_HZ, where, "lidar.rate_hz", (MAX_RATE_HZ, "Hz", _TABLE))
+    height = _positive(doc, "height_m", where, "lidar.")
+    _at_most(height, LIDAR_HEIGHT_BOUND[0], where, "lidar.height_m", LIDAR_HEIGHT_BOUND)
     lidar = LidarModel(
         beams=beams,
         angle_min_rad=angle_min,
@@ -238,7 +279,7 @@ def _lidar(doc: Mapping[str, Any], where: str) -> LidarModel:
         range_max_m=range_max,
         noise_m=noise,
         rate_hz=rate,
-        height_m=_positive(doc, "height_m", where, "lidar."),
+        height_m=height,
     )
     _check_spacing(lidar, doc, where)
     return lidar
@@ -266,11 +307,10 @@ def _check_spacing(lidar: LidarModel, doc: Mapping[str, Any], where: str) -> Non
 
 # -- field readers ----------------------------------------------------------------------------
 def _no_unknown(doc: Mapping[str, Any], where: str, prefix: str, known: tuple[str, ...]) -> None:
-    for key in doc:
-        if key not in known:
-            raise ModelError(
-                f"{where}: {prefix}{key}: unknown field (known: {', '.join(sorted(known))})"
-            )
+    key = yamldoc.unknown_key(doc, known)
+    if key is not None:
+        problem = yamldoc.unknown_key_problem(key, known, "field")
+        raise ModelError(f"{where}: {prefix}{key}: {problem}")
 
 
 def _number(doc: Mapping[str, Any], key: str, where: str, prefix: str) -> float:
@@ -291,6 +331,15 @@ def _positive(doc: Mapping[str, Any], key: str, where: str, prefix: str) -> floa
     return value
 
 
-def _at_most(value: float, bound: float, where: str, field: str) -> None:
-    if value > bound:
-        raise ModelError(f"{where}: {field}: must be at most {bound:.6g}, got {value}")
+_TABLE = "the robot table's bound, CONTRACT.md"
+
+
+def _at_most(
+    value: float, limit: float, where: str, field: str, bound: tuple[float, str, str]
+) -> None:
+    """Refuse ``value`` above ``limit``, naming the bound, its unit and why it is that."""
+    if value > limit:
+        figure, unit, why = bound
+        raise ModelError(
+            f"{where}: {field}: must be at most {figure:.6g} {unit} ({why}), got {value:.6g}"
+        )

@@ -19,9 +19,12 @@ Lifecycle of a :class:`ScenarioService`:
    ``self.service.owns(robot_id)``. Every change of ownership wakes the engine
    (:meth:`ScenarioService.on_ownership_change`).
 5. The engine runs; every ``stats_period_s`` its statistics are upserted into engine_stats.
+   A service that runs scenarios a strategy names (planner, controller:
+   :meth:`ScenarioService.offered_scenarios`) publishes them in scenario_offer before the
+   engine starts and refreshes them every few seconds (common.contract.offers).
 6. On SIGINT/SIGTERM: the engine finishes the activation under way (it is never cut in the
-   middle of a rule), the robots are given back, the statistics are written one last time,
-   the connections close.
+   middle of a rule), the offers are withdrawn, the robots are given back, the statistics
+   are written one last time, the connections close.
 
 A service module ends with ``if __name__ == "__main__": sys.exit(MyService.main())``.
 """
@@ -32,6 +35,7 @@ import asyncio
 import contextlib
 import logging
 from abc import ABC, abstractmethod
+from collections.abc import Collection
 from typing import ClassVar
 
 import zenoh
@@ -39,7 +43,7 @@ import zenoh
 from common import bus, log
 from common.bus import Notification
 from common.config import ServiceConfig
-from common.contract import keys
+from common.contract import keys, offers
 from common.engine import Engine
 from common.lease import LeaseManager
 from common.lockstep import Ledger, LockstepTrigger
@@ -114,6 +118,12 @@ class ScenarioService(ABC):
     @abstractmethod
     def seed(self) -> None:
         """Add this service's meta rules to ``self.engine`` with ``engine.add_meta``."""
+
+    def offered_scenarios(self) -> Collection[str] | None:
+        """The scenarios this service can run, published in scenario_offer while it runs
+        (common.contract.offers; the planner and the controller), after :meth:`seed`;
+        None: it offers none."""
+        return None
 
     def notifications_lost(self) -> int | None:
         """How many change notifications from other processes never reached this one (a skip
@@ -304,6 +314,13 @@ class ScenarioService(ABC):
         """Seed, watch, lease, and run the engine until ``stop`` is set; then drain."""
         self.seed()
         self.watch()
+        offered, config = self.offered_scenarios(), self.config
+        offer = None
+        if offered is not None:
+            offer = offers.Publisher(
+                self.runtime.database, config.service, config.instance, offered
+            )
+            await offer.publish()  # before the engine runs: switches are judged on them
         await self.start_leases()
         log.event(
             logger,
@@ -316,6 +333,7 @@ class ScenarioService(ABC):
         )
         engine_task = asyncio.create_task(self.engine.run(), name="engine")
         stats_task = asyncio.create_task(self._stats_loop(), name="engine-stats")
+        offers_task = None if offer is None else asyncio.create_task(offer.refresh())
         stop_task = asyncio.create_task(stop.wait(), name="stop")
         try:
             done, _ = await asyncio.wait(
@@ -329,12 +347,18 @@ class ScenarioService(ABC):
             stats_task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await stats_task
+            if offers_task is not None:
+                offers_task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await offers_task
             if not engine_task.done():
                 # Drain: let the activation under way finish, within a bound.
                 try:
                     await asyncio.wait_for(engine_task, self.config.engine.period_s * 4 + 5.0)
                 except TimeoutError:
                     logger.error("engine did not drain in time; cancelled")
+            if offer is not None:
+                await offer.withdraw()
             await self.stop_leases()
             lost = self.notifications_lost()
             extra: dict[str, object] = {} if lost is None else {"notifications_lost": lost}

@@ -47,6 +47,7 @@ ENGINE_STATS: Final = "engine_stats"
 RETENTION_POLICY: Final = "retention_policy"
 ROBOT_LEASE: Final = "robot_lease"
 PLANNED_PATH: Final = "planned_path"
+SCENARIO_OFFER: Final = "scenario_offer"
 
 TABLES: Final = (
     SCHEMA_VERSION,
@@ -68,6 +69,7 @@ TABLES: Final = (
     RETENTION_POLICY,
     ROBOT_LEASE,
     PLANNED_PATH,
+    SCENARIO_OFFER,
 )
 
 # Tables written at sensor rate; the retention policy keeps them bounded.

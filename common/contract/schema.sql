@@ -693,3 +693,27 @@ ALTER TABLE strategy
     ADD CONSTRAINT strategy_params_bounded CHECK (strategy_params_bounded(params)) NOT VALID,
     ADD CONSTRAINT strategy_text_bounded
         CHECK (char_length(code) <= 64 AND char_length(description) <= 1000) NOT VALID;
+
+-- migration 12: planners and controllers offer the scenarios they can run
+--
+-- A strategy names its scenarios by name (planner_scenario, controller_scenarios), and only a
+-- planner or controller process knows which it can run: the entry points installed where it
+-- runs. A strategy naming one that none can run stopped the robot with its goal `active` and
+-- no reason. Each live planner and controller instance now lists what it can run here, one
+-- row per scenario, at its start; it refreshes `updated_at` every few seconds and deletes its
+-- rows at a clean stop. A reader counts an offer only while it is fresh (CONTRACT.md,
+-- scenario_offer): the rows of an instance that died are stale within seconds, and the next
+-- instance of its family to publish deletes them. Each family writes only its own rows.
+CREATE TABLE scenario_offer (
+    service    text NOT NULL CHECK (service IN ('planner', 'controller')),
+    instance   text NOT NULL CHECK (length(instance) BETWEEN 1 AND 200),
+    scenario   text NOT NULL CHECK (length(scenario) BETWEEN 1 AND 200),
+    updated_at timestamptz NOT NULL DEFAULT now(),
+    PRIMARY KEY (service, instance, scenario)
+);
+ALTER TABLE scenario_offer ENABLE ROW LEVEL SECURITY;
+CREATE POLICY scenario_offer_read ON scenario_offer FOR SELECT USING (true);
+CREATE POLICY scenario_offer_insert ON scenario_offer FOR INSERT WITH CHECK (writes_as(service));
+CREATE POLICY scenario_offer_update ON scenario_offer FOR UPDATE
+    USING (writes_as(service)) WITH CHECK (writes_as(service));
+CREATE POLICY scenario_offer_delete ON scenario_offer FOR DELETE USING (writes_as(service));

@@ -14,10 +14,11 @@ stack. Sensor tables keep as many rows per robot as the contract's retention pol
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
 from common.contract import keys
+from common.contract.offers import Offers
 
 Row = dict[str, Any]
 # (table, robot, row id): what a write announces; the monolith's stand-in for Zenoh
@@ -100,6 +101,7 @@ class MemoryContract:
                 keys.SYSTEM_COMMAND,
                 keys.USER_COMMAND,
                 keys.PLANNED_PATH,
+                keys.SCENARIO_OFFER,
             )
         }
         self.listeners: list[Listener] = []
@@ -134,6 +136,19 @@ class MemoryContract:
             image = dict(row) if row is not None and row_id is not None else None
             for row_listener in self.row_listeners:
                 row_listener(table, robot, row_id, image)
+
+    def offer(self, service: str, scenarios: Iterable[str]) -> None:
+        """What a planner's or controller's start writes in scenario_offer: the scenarios it
+        can run. The monolith's services live as long as it does: its offers stay live."""
+        for name in scenarios:
+            row = {"service": service, "instance": "monolith", "scenario": name}
+            self.insert(keys.SCENARIO_OFFER, row, notify=False)
+        self.changed(keys.SCENARIO_OFFER, None, None)  # announced once, as the service does
+
+    def offers(self) -> Offers:
+        """The live offers (common.contract.offers.LIVE_OFFERS_SQL's answer)."""
+        rows = self[keys.SCENARIO_OFFER].all_rows()
+        return Offers.of((row["service"], row["scenario"]) for row in rows)
 
     def live_recommendations(self, robot: str, now: float) -> list[Row]:
         """The robot's command_recommendation rows with ``expires_stamp > now``, id order."""

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from common.contract import keys
+from common.contract import keys, offers
 from common.contract.planned_path import PlannedPath, planned_path_of
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot, Strategy
 from common.engine import Engine
@@ -111,5 +111,7 @@ def controller_engine(
     the contract announces (``store.note``). ``scenarios``: the installed ones if None."""
     store = ControllerStore(MemoryControllerSource(contract), clock=now)
     engine.at_activation_end(store.defer_recommendations())
-    seed_controller(engine, store, installed_scenarios() if scenarios is None else scenarios)
+    found = installed_scenarios() if scenarios is None else scenarios
+    seed_controller(engine, store, found)
+    contract.offer(offers.CONTROLLER, found)  # as the service's start publishes them
     return store

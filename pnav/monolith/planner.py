@@ -16,7 +16,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from common.contract import keys, records
+from common.contract import keys, offers, records
 from common.engine import Engine
 from pnav.monolith.contract import MemoryContract, Row
 from services.planner import meta
@@ -154,6 +154,9 @@ class MemoryPlannerSource:
     async def publish_path(self, path: PathRow) -> int:
         return self.contract.insert(keys.PLANNED_PATH, dict(path))
 
+    async def live_offers(self) -> offers.Offers:
+        return self.contract.offers()
+
 
 def planner_engine(
     contract: MemoryContract, engine: Engine, now: Callable[[], float]
@@ -164,5 +167,6 @@ def planner_engine(
     announces (``store.note``)."""
     store = PlannerStore(MemoryPlannerSource(contract), now, now, lambda: True)
     engine.at_activation_end(store.defer_recommendations())
-    meta.seed(engine, store, meta.move_scenarios())
+    rules = meta.seed(engine, store, meta.move_scenarios())
+    contract.offer(offers.PLANNER, rules.scenarios)  # as the service's start publishes them
     return store

@@ -20,6 +20,7 @@ from common.engine import Engine
 from pnav.monolith.contract import MemoryContract, Row
 from services.strategy import meta
 from services.strategy.commands import Outcome
+from services.strategy.runnable import Needs
 from services.strategy.store import COMMAND_TABLES, CommandTable, StrategyStore
 from services.strategy.view import CommandSnapshot, Pending, StaleState
 
@@ -78,6 +79,13 @@ class MemoryStrategySource:
             strategy_code=active.get("strategy_code"),
             resume_code=active.get("resume_code"),
             strategies=self._codes(),
+            needs={
+                r["code"]: Needs(
+                    r.get("planner_scenario"), tuple(r.get("controller_scenarios") or ())
+                )
+                for r in self.contract[keys.STRATEGY].all_rows()
+            },
+            offers=self.contract.offers(),
         )
 
     async def strategy_exists(self, code: str) -> bool:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Collection
 
 from common import log
 from common.bus import Notification
@@ -39,6 +40,7 @@ class ControllerService(ScenarioService):
         self.store = ControllerStore(source, clock, sim_now, serves=self.owns)
         # one INSERT per activation for every recommendation its rules made
         self.engine.at_activation_end(self.store.defer_recommendations())
+        self.scenarios: tuple[str, ...] | None = None  # found at seed
 
     def notifications_lost(self) -> int | None:
         return self.store.notifications_lost
@@ -50,6 +52,11 @@ class ControllerService(ScenarioService):
         scenarios = installed_scenarios()
         log.event(logger, logging.INFO, "controller scenarios", names=",".join(sorted(scenarios)))
         seed_controller(self.engine, self.store, scenarios, owns=self.owns)
+        self.scenarios = tuple(scenarios)
+
+    def offered_scenarios(self) -> Collection[str] | None:
+        # what a strategy's controller_scenarios may name (scenario_offer)
+        return self.scenarios
 
     def on_notification(self, note: Notification) -> None:
         self.store.note(note)

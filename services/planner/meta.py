@@ -7,7 +7,9 @@ wants alive, per robot this replica owns (docs/REPLICAS.md):
 - (robot, "move"): the strategy's ``planner_scenario``, one of the move scenarios found at
   start under the ``pnav.planner.scenarios`` entry points (``turn_then_move``,
   ``move_while_turning``, or a plug-in's: docs/PLANNER.md); none for a strategy without one
-  (IDLE). An unknown name is logged once and ignored.
+  (IDLE). A strategy this stack cannot run (a planner scenario not installed here, or
+  controller scenarios no live controller offers: scenario_offer) gets ``Unrunnable``
+  instead, which fails the robot's goals with the reason (unrunnable.py).
 - (robot, "battery"): ``BatteryCheck`` when the strategy drives to the goal,
   ``ChargeComplete`` when it drives to the nearest charger.
 
@@ -24,7 +26,7 @@ import logging
 from collections.abc import Callable, Iterable, Mapping
 
 from common import log
-from common.contract import keys
+from common.contract import keys, offers, records
 from common.engine import Engine, Rule
 from common.engine.supervisor import Supervisor, Ticket
 from common.plugins import load_scenarios
@@ -32,6 +34,7 @@ from services.planner.battery import BatteryCheck, ChargeComplete
 from services.planner.recovery_rule import Recovery
 from services.planner.scenario import MoveScenario
 from services.planner.target import RuleKey, Spec, TargetRule
+from services.planner.unrunnable import Unrunnable
 from services.planner.view import PlannerStoreView, PlannerView
 from services.planner.world import RobotState
 
@@ -133,6 +136,12 @@ class MetaPlanner(Rule):
             if not self.owns(robot_id):
                 continue  # another replica's robot: its rules end here (docs/REPLICAS.md)
             strategy = robot.strategy
+            why = None if strategy is None else self.unrunnable(strategy)
+            if strategy is not None and why is not None:
+                # nothing would drive it: its goals fail with the reason (unrunnable.py)
+                wanted[(robot_id, MOVE)] = Spec(Unrunnable, strategy.code, why)
+                robot.station = None
+                continue
             move, battery = self.wanted(robot)
             for kind, rule in ((MOVE, move), (BATTERY, battery)):
                 if rule is not None and strategy is not None:
@@ -143,6 +152,25 @@ class MetaPlanner(Rule):
                 robot.station = None  # the next CHARGE session chooses its charger afresh
         self.spawned = self.rules.supervisor.reconcile(wanted)
 
+    def unrunnable(self, strategy: records.Strategy) -> str | None:
+        """Why ``strategy`` cannot run (None: it can): it names a planner scenario this
+        planner does not have, or controller scenarios no live controller offers."""
+        name = strategy.planner_scenario
+        if name is not None and name not in self.rules.scenarios:
+            self.store.warn_once(
+                f"scenario-{name}",
+                "unknown planner scenario: the goals of its robots fail",
+                scenario=name,
+                strategy=strategy.code,
+            )
+            return (
+                f"strategy {strategy.code} names planner scenario {name!r} that this planner "
+                f"cannot run; it runs: {', '.join(self.rules.scenarios) or 'none'}"
+            )
+        return offers.unoffered(
+            strategy.code, offers.CONTROLLER, strategy.controller_scenarios, self.store.offers()
+        )
+
     def wanted(self, robot: RobotState) -> tuple[type[TargetRule] | None, type[TargetRule] | None]:
         """The robot's move and battery rules under its strategy (None: none)."""
         strategy = robot.strategy
@@ -150,12 +178,6 @@ class MetaPlanner(Rule):
             return None, None
         move = self.rules.scenarios.get(strategy.planner_scenario)
         if move is None:
-            self.store.warn_once(
-                f"scenario-{strategy.planner_scenario}",
-                "unknown planner scenario: ignored",
-                scenario=strategy.planner_scenario,
-                strategy=strategy.code,
-            )
             return None, None
         target = strategy.params.get("target")
         if target not in TARGETS:

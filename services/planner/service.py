@@ -10,9 +10,11 @@ a package registers under ``pnav.planner.scenarios``), system recommendations
 from __future__ import annotations
 
 import time
+from collections.abc import Collection
 
 import services.planner.meta as meta
 from common.bus import Notification
+from common.contract import keys
 from common.runtime import Runtime
 from common.service import ScenarioService
 from services.planner.meta import PlannerRules
@@ -22,6 +24,8 @@ from services.planner.store import PlannerStore
 
 class PlannerService(ScenarioService):
     service = "planner"
+    # the controllers' offers: a strategy naming one none offers fails its goals (meta.py)
+    listens = frozenset({keys.SCENARIO_OFFER})
 
     def __init__(self, runtime: Runtime) -> None:
         super().__init__(runtime)
@@ -45,6 +49,10 @@ class PlannerService(ScenarioService):
     def seed(self) -> None:
         # the move scenarios installed now: a new one needs a restart, no edit here
         self.rules = meta.seed(self.engine, self.store, meta.move_scenarios(), owns=self.owns)
+
+    def offered_scenarios(self) -> Collection[str] | None:
+        # the move scenarios a strategy's planner_scenario may name (scenario_offer)
+        return None if self.rules is None else tuple(self.rules.scenarios)
 
     def on_ownership_change(self, gained: frozenset[str], lost: frozenset[str]) -> None:
         # A robot given up or taken over starts from a blank state (route, charger, poses,

@@ -8,7 +8,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Protocol
 
-from common.contract import keys, planned_path, records
+from common.contract import keys, offers, planned_path, records
+from common.contract.offers import Offers
 from common.contract.recommendations import write_recommendation, write_recommendations
 from common.db import Database
 from services.planner.paths import PathRow
@@ -80,6 +81,9 @@ class PlannerSource(Protocol):
     async def publish_path(self, path: PathRow) -> int:
         """Write a planned_path row (``path``: its contract columns) and notify; its id."""
 
+    async def live_offers(self) -> Offers:
+        """What the live planners and controllers offer (scenario_offer)."""
+
 
 class PgPlannerSource:
     """:class:`PlannerSource` on Postgres: ``Database.write`` notifies after each write."""
@@ -138,3 +142,6 @@ class PgPlannerSource:
 
     async def publish_path(self, path: PathRow) -> int:
         return await planned_path.write_planned_path(self.db, path)
+
+    async def live_offers(self) -> Offers:
+        return await offers.live_offers(self.db)

@@ -9,10 +9,11 @@
   rules the Protocols of view.py.
 
 The caches are read again when a notification says their table changed, and at least every
-REFRESH_S (the world: robots, maps, stations) or FAST_REFRESH_S (strategies, goals) of the
-store's clock in case one was lost. Goal rows change in place (a status), so a goal
-notification always means "read it again", whatever id it names; the planner hears every
-odometry row (30 Hz per robot) and reads neither the world nor the strategies for those.
+REFRESH_S (the world: robots, maps, stations; the live scenario offers) or FAST_REFRESH_S
+(strategies, goals) of the store's clock in case one was lost. Goal rows change in place (a
+status), so a goal notification always means "read it again", whatever id it names; the
+planner hears every odometry row (30 Hz per robot) and reads neither the world nor the
+strategies for those.
 
 Row images (CONTRACT.md "Row images"): an odometry notification's image becomes the robot's
 newest odometry without a query; the table is read instead when the newest notification had
@@ -33,6 +34,7 @@ import services.planner.chargers as chargers
 import services.planner.obstacles as obstacles
 from common.bus import Notification
 from common.contract import keys, records
+from common.contract.offers import Offers
 from common.freshness import FreshCache, Sequences
 from common.images import ImageGuard
 from common.writebehind import WriteBehind
@@ -52,7 +54,7 @@ FAST_REFRESH_S = 0.5
 
 _WORLD_TABLES = (keys.ROBOT, keys.MAP, keys.CHARGING_STATION)
 _STRATEGY_TABLES = (keys.ACTIVE_STRATEGY, keys.STRATEGY)
-_WORLD, _ACTIVE = "world", "active"  # the keys of the two whole-table caches
+_WORLD, _ACTIVE, _OFFERS = "world", "active", "offers"  # the keys of the whole-table caches
 
 
 def _recommendation_key(rec: Recommendation) -> tuple[str, str]:
@@ -84,6 +86,8 @@ class PlannerStore:
         self._goals = FreshCache[str, records.Goal | None](
             clock, math.nextafter(FAST_REFRESH_S, math.inf)
         )
+        # what the live controllers offer (scenario_offer), read as often as the world
+        self._offers = FreshCache[str, Offers](clock, math.nextafter(REFRESH_S, math.inf))
         self._odometry_notes: dict[str, int] = {}
         # per robot: the newest odometry image and the store clock when it came (None: the
         # newest notification could not stand in for the table)
@@ -126,6 +130,8 @@ class PlannerStore:
             self._world.announce(_WORLD)
         elif note.table in _STRATEGY_TABLES:
             self._active.announce(_ACTIVE)
+        elif note.table == keys.SCENARIO_OFFER:
+            self._offers.announce(_OFFERS)
         elif note.table == keys.GOAL:
             if note.robot is None:
                 self._goals.announce_all()
@@ -176,6 +182,13 @@ class PlannerStore:
             for robot_id, state in self.world.robots.items():
                 entry = active.get(robot_id)
                 state.strategy = entry.strategy if entry else None
+
+        if self._offers.stale(_OFFERS):
+            await self._offers.get(_OFFERS, self.source.live_offers)
+
+    def offers(self) -> Offers:
+        """The live planners' and controllers' offers, as last read (none before)."""
+        return self._offers.peek(_OFFERS) or Offers()
 
     async def _read_world(self) -> None:
         world = self.world

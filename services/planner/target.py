@@ -25,6 +25,7 @@ RuleKey = tuple[str, str]  # (robot_id, kind)
 class Spec(NamedTuple):
     rule: type[TargetRule]
     strategy: str  # the strategy code that wants it
+    why: str = ""  # why the strategy cannot run (unrunnable.py); "" for any other rule
 
 
 class TargetRule(Supervised[RuleKey, Spec]):

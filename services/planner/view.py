@@ -12,6 +12,7 @@ from collections.abc import Iterable
 from typing import Any, Protocol
 
 from common.contract import records
+from common.contract.offers import Offers
 from services.planner.paths import PathRow
 from services.planner.routes import Target
 from services.planner.tracking import Progress
@@ -121,6 +122,9 @@ class MetaView(Protocol):
         """Read what changed: robots, maps and stations; the active strategies."""
 
     def robots(self) -> Iterable[RobotState]: ...
+
+    def offers(self) -> Offers:
+        """What the live planners and controllers offer (scenario_offer), as last read."""
 
     def warn_once(self, what: str, message: str, **fields: Any) -> None: ...
 

@@ -39,6 +39,8 @@ OCCUPIED = 100
 UNKNOWN = 255
 
 REQUIRED_KEYS = ("image", "resolution", "origin", "occupied_thresh", "free_thresh", "negate")
+# what map_server's YAML may hold besides: any other key is refused, naming the closest one
+KNOWN_KEYS = (*REQUIRED_KEYS, "mode")
 
 
 # -- PGM -------------------------------------------------------------------------------------
@@ -271,6 +273,9 @@ def _read_yaml(path: Path) -> dict[str, Any]:
     missing = [k for k in REQUIRED_KEYS if k not in doc]
     if missing:
         raise WorldError(f"{path}: missing required key(s) {', '.join(missing)}")
+    key = yamldoc.unknown_key(doc, KNOWN_KEYS)
+    if key is not None:
+        raise WorldError(f"{path}: {yamldoc.unknown_key_problem(key, KNOWN_KEYS)}")
     return doc
 
 

@@ -32,7 +32,8 @@ import yaml
 from common import yamldoc
 from common.contract import keys
 from common.errors import ModelError, WorldError
-from common.robotmodel import DEFAULT_MODEL, RobotModel, load_model
+from common.robotmodel import DEFAULT_MODEL, ROBOT_FIELDS, RobotModel, load_model
+from services.sim.entry import EntryReader
 from services.sim.mapserver import FREE, OccupancyGrid, load_map
 from services.sim.mapserver import REQUIRED_KEYS as MAP_KEYS
 from services.sim.robot import BURGER
@@ -40,6 +41,16 @@ from services.sim.robot import BURGER
 DEFAULT_STATION_RADIUS_M = 0.3
 DEFAULT_CHARGE_POWER_W = 20.0
 DEFAULT_WALL_HEIGHT_M = 0.3
+
+# The keys of each mapping of a world file: any other is refused, naming the closest one.
+# ``benchmark`` is the navigation benchmark's block (docs/NAVBENCH.md), read by pnav.navbench.
+WORLD_KEYS = ("name", "map", "robots", "charging_stations", "obstacles", "wall_height", "benchmark")
+ROBOT_KEYS = ("id", "x", "y", "yaw", "battery", "model")
+STATION_KEYS = ("id", "x", "y", "radius", "power")
+_OBSTACLE = ("name", "type", "x", "y", "yaw")
+OBSTACLE_KEYS = {"box": (*_OBSTACLE, "size"), "cylinder": (*_OBSTACLE, "radius", "height")}
+# a robot model's fields, written on a robot entry instead of in its ``model``
+MODEL_KEYS = frozenset((*ROBOT_FIELDS, "lidar"))
 
 
 @dataclass(frozen=True)
@@ -182,45 +193,6 @@ class World:
 
 
 # -- loading ---------------------------------------------------------------------------------
-class _Reader:
-    """Typed access to one YAML mapping, with errors that name the file and the entry."""
-
-    def __init__(self, path: Path, doc: Any, where: str) -> None:
-        if not isinstance(doc, dict):
-            raise WorldError(f"{path}: {where} must be a mapping, got {doc!r}")
-        self.path, self.doc, self.where = path, doc, where
-
-    def error(self, problem: str) -> WorldError:
-        return WorldError(f"{self.path}: {self.where}: {problem}")
-
-    def number(self, key: str, default: float | None = None) -> float:
-        if key not in self.doc:
-            if default is None:
-                raise self.error(f"missing required key '{key}'")
-            return default
-        value = self.doc[key]
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise self.error(f"'{key}' must be a number, got {value!r}")
-        if not math.isfinite(value):
-            raise self.error(f"'{key}' must be finite, got {value!r}")
-        return float(value)
-
-    def positive(self, key: str, default: float | None = None) -> float:
-        value = self.number(key, default)
-        if value <= 0:
-            raise self.error(f"'{key}' must be positive, got {value}")
-        return value
-
-    def ident(self, key: str, default: str | None = None) -> str:
-        value = self.doc.get(key, default)
-        if value is None:
-            raise self.error(f"missing required key '{key}'")
-        value = str(value)
-        if not keys.valid_id(value):
-            raise self.error(f"'{key}' {value!r} must match [A-Za-z0-9_-]+")
-        return value
-
-
 def _list(path: Path, doc: dict[str, Any], key: str) -> list[Any]:
     value = doc.get(key) or []
     if not isinstance(value, list):
@@ -229,7 +201,14 @@ def _list(path: Path, doc: dict[str, Any], key: str) -> list[Any]:
 
 
 def _robot(path: Path, i: int, doc: Any, default: RobotModel) -> RobotSpec:
-    r = _Reader(path, doc, f"robots[{i}]")
+    r = EntryReader(path, doc, f"robots[{i}]")
+    key = yamldoc.unknown_key(r.doc, ROBOT_KEYS)
+    if key in MODEL_KEYS:
+        raise r.error(
+            f"{key!r} is a field of the robot model, not of the robot entry: write it in "
+            f"'model' (model: {{name: {DEFAULT_MODEL}, {key}: ...}}; docs/SIM.md)"
+        )
+    r.only(ROBOT_KEYS)
     battery = r.doc.get("battery")
     if battery is not None:
         battery = r.number("battery")
@@ -240,7 +219,7 @@ def _robot(path: Path, i: int, doc: Any, default: RobotModel) -> RobotSpec:
     return RobotSpec(r.ident("id"), x, y, yaw, battery, model)
 
 
-def _model(r: _Reader, default: RobotModel) -> RobotModel:
+def _model(r: EntryReader, default: RobotModel) -> RobotModel:
     """A robot entry's ``model``: a name (``jackal``), or a mapping of a ``name`` and the
     fields it overrides (``{name: jackal, max_linear_mps: 1.5, lidar: {rate_hz: 10}}``)."""
     spec = r.doc.get("model")
@@ -266,7 +245,8 @@ def resolve_default_model(name: str | None) -> RobotModel:
 
 
 def _station(path: Path, i: int, doc: Any) -> StationSpec:
-    r = _Reader(path, doc, f"charging_stations[{i}]")
+    r = EntryReader(path, doc, f"charging_stations[{i}]")
+    r.only(STATION_KEYS)
     return StationSpec(
         r.ident("id"),
         r.number("x"),
@@ -277,8 +257,10 @@ def _station(path: Path, i: int, doc: Any) -> StationSpec:
 
 
 def _obstacle(path: Path, i: int, doc: Any) -> ObstacleSpec:
-    r = _Reader(path, doc, f"obstacles[{i}]")
+    r = EntryReader(path, doc, f"obstacles[{i}]")
     shape = r.doc.get("type", "box")
+    if shape in OBSTACLE_KEYS:
+        r.only(OBSTACLE_KEYS[shape], f": a {shape} has no such key")
     name = r.ident("name", f"{shape}_{i}")
     x, y, yaw = r.number("x"), r.number("y"), r.number("yaw", 0.0)
     if shape == "box":
@@ -341,6 +323,9 @@ def load_world(path: str | Path, model: str | None = None) -> World:
         bare = World(name=path.stem, source=str(path), grid=grid, robots=(), default_model=default)
         return bare.with_robot_count(1)
 
+    key = yamldoc.unknown_key(doc, WORLD_KEYS)
+    if key is not None:
+        raise WorldError(f"{path}: {yamldoc.unknown_key_problem(key, WORLD_KEYS)}")
     if "map" not in doc:
         raise WorldError(f"{path}: missing required key 'map' (a map_server YAML file)")
     if not isinstance(doc["map"], str):
@@ -352,7 +337,7 @@ def load_world(path: str | Path, model: str | None = None) -> World:
     name = str(doc.get("name") or path.stem)
     if not keys.valid_id(name):
         raise WorldError(f"{path}: name {name!r} must match [A-Za-z0-9_-]+")
-    wall_height = _Reader(path, doc, "world").positive("wall_height", DEFAULT_WALL_HEIGHT_M)
+    wall_height = EntryReader(path, doc, "world").positive("wall_height", DEFAULT_WALL_HEIGHT_M)
 
     robot_docs = _list(path, doc, "robots")
     if not robot_docs:

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from common import log
 from common.engine import Rule
 from services.strategy.commands import DEFAULT_STRATEGY, RobotState, decide
+from services.strategy.runnable import refusal
 from services.strategy.view import CommandSnapshot, StaleState, StrategyView
 
 logger = logging.getLogger("pnav.strategy")
@@ -81,7 +82,13 @@ class ApplyCommand(Rule):
         snap = self.snap
         assert snap is not None  # guaranteed by the guards
         state = RobotState(snap.known_robot, snap.strategy_code, snap.resume_code)
-        outcome = decide(snap.command, snap.argument, state, snap.strategies)
+        outcome = decide(
+            snap.command,
+            snap.argument,
+            state,
+            snap.strategies,
+            lambda code: refusal(code, snap.needs, snap.offers),
+        )
         try:
             await self.store.treat(self.table, snap, outcome)
         except StaleState as exc:

@@ -15,11 +15,15 @@ CMD_RESUME      resume_code is set                               switch to resum
                                                                  clear it
 anything else   never                                            rejected, nothing changes
 ==============  ===============================================  ============================
+
+A command that would switch the robot to a strategy that cannot run now (it names a scenario
+no live planner or controller offers: runnable.py) is rejected with that reason instead, and
+nothing changes.
 """
 
 from __future__ import annotations
 
-from collections.abc import Collection
+from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from typing import Final
 
@@ -56,10 +60,30 @@ class Outcome:
         return cls(False, reason)
 
 
+def _can_run(_code: str) -> str | None:
+    return None
+
+
 def decide(
+    command: str,
+    argument: str | None,
+    state: RobotState,
+    strategies: Collection[str],
+    refusal: Callable[[str], str | None] = _can_run,
+) -> Outcome:
+    """Apply ``command`` to ``state`` given the strategy codes that exist now; ``refusal``
+    says why a strategy cannot run now (None: it can), and a switch to it is rejected."""
+    outcome = _decide(command, argument, state, strategies)
+    if outcome.accepted and outcome.strategy_code is not None:
+        why = refusal(outcome.strategy_code)
+        if why is not None:
+            return Outcome.reject(why)
+    return outcome
+
+
+def _decide(
     command: str, argument: str | None, state: RobotState, strategies: Collection[str]
 ) -> Outcome:
-    """Apply ``command`` to ``state`` given the strategy codes that exist now."""
     name = command.strip().upper()
     if not state.known_robot:
         return Outcome.reject("unknown robot")

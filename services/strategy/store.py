@@ -20,8 +20,10 @@ from typing import Final, Protocol
 
 from common.bus import Notification
 from common.contract import keys
+from common.contract.offers import LIVE_OFFERS_SQL, Offers
 from common.db import Database
 from services.strategy.commands import Outcome
+from services.strategy.runnable import Needs
 from services.strategy.view import CommandSnapshot, Pending, StaleState
 
 
@@ -44,7 +46,12 @@ class CommandTable:
 SELECT c.id, c.robot_id, c.command, {argument} AS argument, c.status,
        EXISTS (SELECT 1 FROM robot r WHERE r.robot_id = c.robot_id) AS known_robot,
        a.strategy_code, a.resume_code,
-       ARRAY(SELECT code FROM strategy ORDER BY code) AS strategies
+       ARRAY(SELECT code FROM strategy ORDER BY code) AS strategies,
+       (SELECT jsonb_object_agg(code, jsonb_build_array(planner_scenario,
+                                                        controller_scenarios))
+        FROM strategy) AS needs,
+       (SELECT jsonb_agg(jsonb_build_array(o.service, o.scenario))
+        FROM ({LIVE_OFFERS_SQL}) o) AS offers
 FROM {self.table} c LEFT JOIN active_strategy a ON a.robot_id = c.robot_id
 WHERE c.id = $1
 """
@@ -161,6 +168,11 @@ class PgStrategySource:
             return None
         fields = dict(row)
         fields["strategies"] = frozenset(fields["strategies"] or ())
+        fields["needs"] = {
+            code: Needs(planner, tuple(controller or ()))
+            for code, (planner, controller) in (fields["needs"] or {}).items()
+        }
+        fields["offers"] = Offers.of((service, name) for service, name in fields["offers"] or ())
         return CommandSnapshot(**fields)
 
     async def treat(

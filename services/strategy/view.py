@@ -8,11 +8,14 @@ command table is named by its contract name (``user_command``, ``system_command`
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Protocol
 
+from common.contract.offers import Offers
 from services.strategy.commands import Outcome
+from services.strategy.runnable import Needs
 
 
 @dataclass(frozen=True)
@@ -40,6 +43,9 @@ class CommandSnapshot:
     strategy_code: str | None
     resume_code: str | None
     strategies: frozenset[str]
+    # what each strategy names, and what the live planners and controllers offer
+    needs: Mapping[str, Needs] = field(default_factory=dict)
+    offers: Offers = field(default_factory=Offers)
 
 
 class StaleState(Exception):

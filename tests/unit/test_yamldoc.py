@@ -1,5 +1,6 @@
 """common.yamldoc reads the same documents as ``yaml.safe_load`` (faster, with libyaml where
-PyYAML has it), and refuses what it refuses."""
+PyYAML has it), and refuses what it refuses, but for one thing: a number in exponent
+notation that YAML 1.1 reads as text (``1.0e308``, ``1e308``) is a number."""
 
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ def test_every_shipped_yaml_file_reads_as_safe_load_reads_it() -> None:
     "text",
     [
         "a: yes\nb: No\nc: on\nd: OFF\ne: ~\nf: null\n",  # YAML 1.1 booleans and nulls
-        "i: 010\nj: 0x1f\nk: 1_000\nl: 1e3\nm: 1.5e-3\nn: .inf\no: -.Inf\np: 12:30\n",
+        "i: 010\nj: 0x1f\nk: 1_000\nm: 1.5e-3\nn: .inf\no: -.Inf\np: 12:30\nq: 6.02e+23\n",
         "t: 2026-11-27\nu: 2026-11-27T20:13:00Z\nv: '2026-11-27'\n",
         "base: &b {x: 1, y: [1, 2]}\nderived:\n  <<: *b\n  y: [3]\n",  # anchors, merge keys
         "- [1, 2.5, 'three']\n- {a: [], b: {}}\n- !!str 42\n- !!float 1\n",
@@ -43,3 +44,30 @@ def test_what_safe_load_refuses_is_refused(text: str) -> None:
         yaml.safe_load(text)
     with pytest.raises(yaml.YAMLError):
         yamldoc.load(text)
+
+
+@pytest.mark.parametrize(
+    ("text", "number"),
+    [
+        ("1.0e308", 1.0e308),  # YAML 1.1 wants a signed exponent
+        ("1e308", 1.0e308),  # and a dot
+        ("2e-3", 0.002),
+        ("-1E+3", -1000.0),
+        (".5e3", 500.0),
+        ("1_0e2", 1000.0),
+    ],
+)
+def test_exponent_notation_is_read_as_the_number_it_is(text: str, number: float) -> None:
+    assert isinstance(yaml.safe_load(f"v: {text}")["v"], str)  # what YAML 1.1 would read
+    assert yamldoc.load(f"v: {text}") == {"v": number}
+    assert yamldoc.load(f"- {text}\n- [{text}]\n") == [number, [number]]
+
+
+@pytest.mark.parametrize("text", ["'1e3'", '"1e3"', "!!str 1e3", "e3", "1e", "1e3x", "1.0.0e3"])
+def test_what_is_not_a_plain_number_in_exponent_notation_stays_text(text: str) -> None:
+    assert isinstance(yamldoc.load(f"v: {text}")["v"], str)
+
+
+def test_the_safe_loader_itself_is_left_as_it_was() -> None:
+    yamldoc.load("v: 1e3")
+    assert yaml.safe_load("v: 1e3") == {"v": "1e3"}

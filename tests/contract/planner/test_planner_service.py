@@ -180,22 +180,36 @@ async def test_charge_drives_to_the_nearest_station_then_resumes_once(
     assert status == "active"
 
 
-async def test_idle_and_unknown_scenarios_recommend_nothing(
+async def test_idle_recommends_nothing_and_an_unknown_scenario_fails_the_goal_with_why(
     world: World, planner: PlannerService
 ) -> None:
     await world.db.pool.execute(
         "INSERT INTO strategy (code, planner_scenario, params) VALUES "
         "('TELEPORT', 'teleport', '{\"target\": \"goal\"}')"
     )
-    await world.goal(2.0, 0.0)
+    goal_id = await world.goal(2.0, 0.0)
     await world.battery(0.01)  # far too low, but IDLE has no planner and no battery check
     await world.strategy("IDLE")
     await asyncio.sleep(0.8)
-    await world.strategy("TELEPORT")  # logged and ignored, no crash
-    await asyncio.sleep(0.8)
+    assert await world.db.pool.fetchval("SELECT status FROM goal WHERE id = $1", goal_id) == (
+        "active"
+    )
+    await world.strategy("TELEPORT")  # no such scenario here: the goal fails, no crash
+    row = await eventually(
+        lambda: world.db.pool.fetchrow(
+            "SELECT status, reason FROM goal WHERE id = $1 AND status <> 'active'", goal_id
+        ),
+        what="the goal marked failed",
+    )
+    assert row["status"] == "failed"
+    assert row["reason"].startswith(
+        "strategy TELEPORT names planner scenario 'teleport' that this planner cannot run; "
+        "it runs: turn_then_move, move_while_turning"
+    )
     assert await world.recommendations() == []
     assert await world.recommendations(kind="system") == []
     await world.strategy("GOTO_DIRECT")  # still alive: a known scenario starts at once
+    await world.goal(2.0, 0.0)
     await world.next_recommendation(lambda r: r["source"] == "turn_then_move")
 
 

@@ -129,9 +129,14 @@ def test_shipped_model_errors_name_the_file_as_models_slash_name() -> None:
         ({"wheel_radius_m": "big"}, "wheel_radius_m", "must be a number"),
         ({"max_linear_mps": float("nan")}, "max_linear_mps", "must be finite"),
         ({"max_angular_rps": True}, "max_angular_rps", "must be a number"),
-        ({"max_linear_accel_mps2": 500}, "max_linear_accel_mps2", "at most 100"),
+        ({"max_linear_accel_mps2": 500}, "max_linear_accel_mps2", "at most 100 m/s^2"),
         ({"name": "bad name"}, "name", "must be a name"),
         ({"speed": 1}, "speed", "unknown field"),
+        (
+            {"battry_capacity_wh": 5},
+            "battry_capacity_wh",
+            "unknown field 'battry_capacity_wh' (did you mean 'battery_capacity_wh'?",
+        ),
     ],
 )
 def test_a_bad_robot_field_is_refused_naming_file_and_field(
@@ -193,6 +198,12 @@ def test_a_model_without_lidar_is_refused(tmp_path: Path) -> None:
         ({"rate_hz": 0}, "rate_hz", "must be positive"),
         ({"height_m": -1}, "height_m", "must be positive"),
         ({"colour": "red"}, "colour", "unknown field"),
+        ({"rangemax_m": 3.0}, "rangemax_m", "(did you mean 'range_max_m'?"),
+        ({"height_m": 50.0}, "height_m", "must be at most 10 m (a lidar 10 m above the floor)"),
+        ({"range_max_m": 5000.0}, "range_max_m", "must be at most 1000 m"),
+        ({"rate_hz": 1e6}, "rate_hz", "must be at most 1000 Hz"),
+        ({"noise_m": 20.0}, "noise_m", "must be at most 10 m"),
+        ({"beams": 10**6}, "beams", "within [1, 100000]"),
         # beams not matching the field of view
         ({"angle_increment_rad": 0.01}, "beams", "360 beams over a 360 deg field of view"),
         ({"fov_rad": 3.0, "beams": 1}, "beams", "one beam cannot span"),
@@ -229,3 +240,48 @@ def test_a_bad_override_is_refused_naming_the_field() -> None:
         load_model("jackal", {"max_linear_mps": -1})
     with pytest.raises(ModelError, match=r"\(overridden\): lidar: must be a mapping"):
         load_model("jackal", {"lidar": 3})
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "bound"),
+    [
+        ("footprint_radius_m", 6.0, "at most 5 m (a ground robot 10 m across)"),
+        ("wheel_radius_m", 3.0, "at most 2 m (a wheel 4 m high)"),
+        ("wheel_separation_m", 11.0, "at most 10 m (a ground robot 10 m across)"),
+        ("max_linear_mps", 1e308, "at most 10 m/s (the fastest velocity a command may carry"),
+        ("max_angular_rps", 21.0, "at most 20 rad/s (the fastest turn a command may carry"),
+        ("max_linear_accel_mps2", 101.0, "at most 100 m/s^2"),
+        ("max_angular_accel_rps2", 101.0, "at most 100 rad/s^2"),
+        ("battery_capacity_wh", 1e6, "at most 100000 Wh"),
+        ("height_m", 11.0, "at most 10 m (a ground robot 10 m high)"),
+    ],
+)
+def test_each_robot_limit_is_bounded_and_the_refusal_names_the_bound(
+    tmp_path: Path, field: str, value: float, bound: str
+) -> None:
+    doc = {**_burger_doc(), field: value}
+    message = _refusal(_write(tmp_path, doc))
+    assert message.startswith(f"{tmp_path / 'bot.yaml'}: {field}: must be {bound}")
+    assert message.endswith(f"got {value:.6g}")
+
+
+def test_every_robot_limit_has_a_bound() -> None:
+    from common.robotmodel import ROBOT_BOUNDS, ROBOT_FIELDS
+
+    assert set(ROBOT_BOUNDS) == set(ROBOT_FIELDS)
+
+
+@pytest.mark.parametrize("written", ["1.0e308", "1e308"])
+def test_a_number_yaml_1_1_reads_as_text_is_read_as_a_number_and_bounded(
+    tmp_path: Path, written: str
+) -> None:
+    text = (MODELS / "turtlebot3_burger.yaml").read_text()
+    text = text.replace("max_linear_mps: 0.22", f"max_linear_mps: {written}")
+    path = tmp_path / "bot.yaml"
+    path.write_text(text)
+    message = _refusal(path)
+    assert "max_linear_mps: must be at most 10 m/s" in message
+    assert "must be a number" not in message
+    # and the same written small is the number it says
+    path.write_text(text.replace(f"max_linear_mps: {written}", "max_linear_mps: 5e-1"))
+    assert load_model(path).max_linear_mps == 0.5

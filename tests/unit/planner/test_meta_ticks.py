@@ -6,10 +6,7 @@ tickets); ``queue``: the rules the next activation runs, in order."""
 
 from __future__ import annotations
 
-import logging
 from typing import Any
-
-import pytest
 
 from services.planner import meta
 from services.planner.routes import Target
@@ -159,23 +156,6 @@ async def test_forgetting_a_robot_ends_its_rules_before_they_run_again() -> None
     await p.tick()  # the old clones stop; the meta-planner starts new ones (still owned)
     assert p.running() == GOTO and p.live_rule("move") is not old
     assert len(p.recommendations()) == said
-
-
-async def test_an_unknown_planner_scenario_is_warned_about_once(
-    caplog: pytest.LogCaptureFixture,
-) -> None:
-    unknown = {"code": "ODD", "planner_scenario": "no_such_scenario", "params": {"target": "goal"}}
-    p = Planner(extra_strategies=(unknown,))
-    p.strategy("ODD")
-    p.goal(2.0, 0.0)
-    with caplog.at_level(logging.WARNING, logger="pnav.planner"):
-        for _ in range(4):
-            await p.tick()
-            assert p.running() == {}
-            assert p.queue() == ["MetaPlanner"]
-    warned = [r for r in caplog.records if r.getMessage() == "unknown planner scenario: ignored"]
-    assert len(warned) == 1
-    assert p.recommendations() == []
 
 
 def test_the_shipped_scenarios_come_from_the_entry_points_the_planners_own_first() -> None:
