@@ -7,6 +7,7 @@ command to :meth:`Simulation.set_command` (thread-safe) or reply with bytes buil
 
 from __future__ import annotations
 
+import functools
 import logging
 import threading
 import time
@@ -18,10 +19,13 @@ import services.sim.messages as messages
 from common.bus import pack, subscribe_threaded, unpack
 from common.contract import keys
 from common.log import event
+from common.robotlink import NATIVE, RobotLinkSettings
 from services.sim.clock import Pacer
 from services.sim.gate import Gate
 from services.sim.lockstep import Barrier
 from services.sim.outbox import CollisionOutbox
+from services.sim.ros2wire import TOPICS as ROS2_TOPICS
+from services.sim.ros2wire import Ros2Wire
 from services.sim.sim import SimConfig, Simulation
 from services.sim.trace import CMD_VEL, Tracer
 from services.sim.world import World
@@ -60,9 +64,16 @@ class SimNode:
         tracer: Tracer | None = None,
         gate: Gate | None = None,
         lockstep: tuple[str, ...] = (),
+        robot_link: RobotLinkSettings | None = None,
+        ros2_session: zenoh.Session | None = None,
     ) -> None:
+        """``robot_link``: ROS 2 puts scan, odom, battery and cmd_vel on ``ros2_session``
+        (ros2wire.py); clock, world and collisions stay here."""
         if gate is not None and lockstep:
             raise ValueError("--max-lag and --lockstep exclude each other: lockstep waits always")
+        ros2 = robot_link is not None and robot_link.link != NATIVE
+        if ros2 and (lockstep or gate is not None):
+            raise ValueError("--lockstep and --max-lag run only on the native robot link")
         self.session = session
         self.rate = rate
         self.tracer = tracer
@@ -73,8 +84,19 @@ class SimNode:
         self._publishers: dict[tuple[str, str], zenoh.Publisher] = {}
         # collision events are held until acknowledged and resent meanwhile (outbox.py)
         self.outbox = CollisionOutbox()
+        self.wire: Ros2Wire | None = None
+        if ros2 and robot_link is not None:
+            self.wire = Ros2Wire(
+                robot_link,
+                ros2_session or session,
+                [spec.robot_id for spec in world.robots],
+                self._ros2_command,
+                functools.partial(self._complain, msg="malformed ROS 2 cmd_vel ignored"),
+            )
         for spec in world.robots:
             for topic in keys.SENSOR_TOPICS:
+                if self.wire is not None and topic in ROS2_TOPICS:
+                    continue
                 # Every topic drops under congestion rather than stall the sim: a reading is
                 # replaced by the next, a collision event is resent until acknowledged (a
                 # blocking put would stop the physics for as long as a router is frozen).
@@ -92,8 +114,10 @@ class SimNode:
         self.sim = Simulation(world, config, self._publish)
         self._world_payload = pack(world.message())
         self._bad_logged: dict[str, float] = {}
-        self._subscriber = subscribe_threaded(
-            session, keys.robot_watch(keys.CMD_VEL), self._on_cmd_vel
+        self._subscriber = (
+            None
+            if self.wire is not None
+            else subscribe_threaded(session, keys.robot_watch(keys.CMD_VEL), self._on_cmd_vel)
         )
         self._ack_subscriber = subscribe_threaded(
             session, keys.robot_watch(keys.COLLISION_ACK), self.outbox.on_ack
@@ -114,10 +138,10 @@ class SimNode:
         try:
             cmd = messages.parse_cmd_vel(unpack(payload))
         except ValueError as exc:
-            self._complain(robot, "malformed cmd_vel ignored", str(exc))
+            self._complain(robot, str(exc), "malformed cmd_vel ignored")
             return
         if not self.sim.set_command(robot, cmd.linear, cmd.angular):
-            self._complain(robot, "cmd_vel for an unknown robot ignored", robot)
+            self._complain(robot, robot, "cmd_vel for an unknown robot ignored")
             return
         if self.tracer is not None and cmd.command_id is not None:
             self.tracer.record(CMD_VEL, robot, cmd.command_id)
@@ -127,7 +151,14 @@ class SimNode:
         if self.barrier is not None:
             self.barrier.on_cmd_vel(key)
 
-    def _complain(self, robot: str, msg: str, problem: str) -> None:
+    def _ros2_command(self, robot: str, linear: float, angular: float) -> None:
+        """A ROS 2 cmd_vel (ros2wire.py checked it): no command id, no decided stamp."""
+        if not self.sim.set_command(robot, linear, angular):
+            self._complain(robot, robot, "cmd_vel for an unknown robot ignored")
+            return
+        self.commands_received += 1
+
+    def _complain(self, robot: str, problem: str, msg: str = "") -> None:
         now = time.monotonic()
         if now - self._bad_logged.get(robot, -1e9) >= BAD_COMMAND_LOG_PERIOD_S:
             self._bad_logged[robot] = now
@@ -147,10 +178,12 @@ class SimNode:
         if topic == keys.COLLISION:
             message = {**message, "run": self.outbox.run}
             self.outbox.sent(robot, message)
-        payload = pack(message)
         if self.tracer is not None:
             self.tracer.record(topic, robot, message["seq"])
-        self._publishers[(robot, topic)].put(payload)
+        if self.wire is not None and topic in ROS2_TOPICS:
+            self.wire.publish(robot, topic, message)
+            return
+        self._publishers[(robot, topic)].put(pack(message))
 
     def resend_collisions(
         self, barrier: Barrier | None = None, stop: threading.Event | None = None
@@ -383,7 +416,11 @@ class SimNode:
             self._world_pub,
             *self._publishers.values(),
         ]
+        if self.wire is not None:
+            self.wire.close()
         for entity in entities:
+            if entity is None:
+                continue
             try:
                 entity.undeclare()
             except Exception:  # the session is already closed
