@@ -25,7 +25,7 @@ import zenoh
 from common import ros2types
 from common.contract import keys
 from common.contract import rmw_zenoh as rz
-from common.robotlink import TWIST_STAMPED, RobotLinkSettings, RobotTopics
+from common.robotlink import NATIVE, TWIST_STAMPED, RobotLinkSettings, RobotTopics
 from common.ros2node import Publisher, Ros2Node, type_of_key
 
 NODE_NAME: Final = "pnav_sim"
@@ -201,3 +201,21 @@ class Ros2Wire:
 
     def close(self) -> None:
         self.node.close()
+
+
+def make_wire(
+    settings: RobotLinkSettings | None,
+    session: zenoh.Session,
+    robots: Iterable[str],
+    on_command: OnCommand,
+    on_bad_command: OnBadCommand,
+    *,
+    paced: bool,
+) -> Ros2Wire | None:
+    """The sim's ROS 2 wire, or None on the native link; ``paced`` (lockstep or --max-lag)
+    is refused with ROS 2: neither counts nor gates what crosses it."""
+    if settings is None or settings.link == NATIVE:
+        return None
+    if paced:
+        raise ValueError("--lockstep and --max-lag run only on the native robot link")
+    return Ros2Wire(settings, session, robots, on_command, on_bad_command)

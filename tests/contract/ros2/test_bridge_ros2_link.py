@@ -133,7 +133,6 @@ async def test_hostile_ros2_input_is_counted_and_dropped(
     started = time.monotonic()
     for _ in range(10_000):
         robot.put_raw(odom_key, flood)
-    seconds = time.monotonic() - started
     malformed = ros2_bridge.counters.malformed
     await eventually(
         lambda: (
@@ -148,6 +147,11 @@ async def test_hostile_ros2_input_is_counted_and_dropped(
         within=30,
         what="every kind counted",
     )
+    await eventually(
+        lambda: ros2_bridge.counters.messages_in["ros2/odom"] >= 10_000, what="the flood read"
+    )
+    # the bridge reads the flood after the puts, over as many seconds as it takes
+    seconds = time.monotonic() - started
     rows = await _rows(db_url, "odometry")
     assert all(math.isfinite(r["x"]) for r in rows)
     # beyond MAX_RATE_HZ in any one second the flood never became rows
