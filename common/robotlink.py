@@ -8,7 +8,8 @@ it for both), so the two sides of the robot link agree on every name:
 - ``PNAV_ROS2_CONNECT``: the rmw_zenoh router the ROS 2 session connects to
   (``tcp/localhost:7447`` is where ``ros2 run rmw_zenoh_cpp rmw_zenohd`` listens); empty (the
   default): the stack's own router, as the service itself (its user and password);
-- ``PNAV_ROS2_LINK_FILE``: a robot-link file, per robot its namespace and topic names.
+- ``PNAV_ROS2_LINK_FILE``: a robot-link file, per robot its namespace and topic names, and
+  where the stack's clock comes from.
 
 A robot-link file (YAML) names, per robot id, what differs from the defaults: a robot's
 namespace is ``/<robot id>`` (Nav2's multi-robot namespacing), its topics ``scan``, ``odom``,
@@ -18,6 +19,11 @@ namespace is ``/<robot id>`` (Nav2's multi-robot namespacing), its topics ``scan
     robots:
       r1: {namespace: "", cmd_vel_type: twist_stamped}   # a lone TurtleBot3 on Jazzy
     default: {cmd_vel_type: twist}
+    clock: ros           # no pybullet sim: the bridge publishes pnav/sim/clock in ROS time
+    use_sim_time: false  # ROS time is the system clock (true: ROS /clock)
+
+``clock: sim`` (the default) leaves ``pnav/sim/clock`` to the pybullet sim, as ``pnav up``
+runs it; ``clock: ros`` is a robot with no pybullet sim, whose stamps are ROS time.
 """
 
 from __future__ import annotations
@@ -39,6 +45,10 @@ ROS2: Final = "ros2"
 LINKS: Final = (NATIVE, ROS2)
 TWIST: Final = "twist"
 TWIST_STAMPED: Final = "twist_stamped"
+# who publishes pnav/sim/clock: the pybullet sim, or the bridge's ROS 2 link in ROS time
+CLOCK_SIM: Final = "sim"
+CLOCK_ROS: Final = "ros"
+FILE_KEYS: Final = ("robots", "default", "clock", "use_sim_time")
 
 
 @dataclass(frozen=True)
@@ -101,6 +111,13 @@ class RobotLinkSettings:
     connect: str = ""
     default: RobotTopics = field(default_factory=RobotTopics)
     robots: Mapping[str, RobotTopics] = field(default_factory=dict)
+    clock: str = CLOCK_SIM
+    use_sim_time: bool = False  # with clock ros: ROS time is /clock, else the system clock
+
+    @property
+    def bridge_clock(self) -> bool:
+        """The bridge publishes the stack's clock (no pybullet sim on the ROS 2 link)."""
+        return self.link == ROS2 and self.clock == CLOCK_ROS
 
     def topics(self, robot: str) -> RobotTopics:
         return self.robots.get(robot, self.default)
@@ -126,18 +143,25 @@ class RobotLinkSettings:
                 f"PNAV_ROS_DOMAIN_ID={raw!r} must be 0 to {rz.MAX_DOMAIN_ID}"
             ) from None
         path = env.get("PNAV_ROS2_LINK_FILE", "").strip()
-        default, robots = (RobotTopics(), {}) if not path else load_link_file(Path(path))
         connect = env.get("PNAV_ROS2_CONNECT", "").strip()
-        return cls(link, domain, connect, default, robots)
+        settings = cls(link, domain, connect)
+        return settings if not path else load_link_file(Path(path), settings)
 
 
-def load_link_file(path: Path) -> tuple[RobotTopics, dict[str, RobotTopics]]:
+def load_link_file(path: Path, base: RobotLinkSettings | None = None) -> RobotLinkSettings:
+    """``base`` (the defaults if None) with what the robot-link file at ``path`` says."""
     try:
         body = yaml.safe_load(path.read_text()) or {}
     except (OSError, yaml.YAMLError) as exc:
         raise ConfigError(f"robot-link file {path}: {exc}") from None
-    if not isinstance(body, Mapping) or set(body) - {"robots", "default"}:
-        raise ConfigError(f"robot-link file {path}: a map with 'robots' and 'default'")
+    if not isinstance(body, Mapping) or set(body) - set(FILE_KEYS):
+        raise ConfigError(f"robot-link file {path}: a map of {', '.join(FILE_KEYS)}")
+    clock = body.get("clock", CLOCK_SIM)
+    if clock not in (CLOCK_SIM, CLOCK_ROS):
+        raise ConfigError(f"{path}: clock must be {CLOCK_SIM} or {CLOCK_ROS}, not {clock!r}")
+    use_sim_time = body.get("use_sim_time", False)
+    if not isinstance(use_sim_time, bool):
+        raise ConfigError(f"{path}: use_sim_time must be true or false")
     default = _topics(RobotTopics(), body.get("default"), f"{path}: default")
     robots_body = body.get("robots") or {}
     if not isinstance(robots_body, Mapping):
@@ -146,4 +170,10 @@ def load_link_file(path: Path) -> tuple[RobotTopics, dict[str, RobotTopics]]:
         str(robot): _topics(default, topics, f"{path}: robots.{robot}")
         for robot, topics in robots_body.items()
     }
-    return default, robots
+    return replace(
+        base or RobotLinkSettings(),
+        default=default,
+        robots=robots,
+        clock=clock,
+        use_sim_time=use_sim_time,
+    )

@@ -30,6 +30,7 @@ TWIST_STAMPED: Final = "geometry_msgs/msg/TwistStamped"
 POSE_STAMPED: Final = "geometry_msgs/msg/PoseStamped"
 PATH: Final = "nav_msgs/msg/Path"
 OCCUPANCY_GRID: Final = "nav_msgs/msg/OccupancyGrid"
+CLOCK: Final = "rosgraph_msgs/msg/Clock"
 
 # sensor_msgs/BatteryState.power_supply_status
 POWER_SUPPLY_STATUS_CHARGING: Final = 1

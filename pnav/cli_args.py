@@ -11,7 +11,7 @@ from typing import NoReturn
 
 from common.contract import limits
 from common.errors import UsageError
-from common.robotlink import load_link_file
+from common.robotlink import CLOCK_ROS, load_link_file
 
 
 class Parser(argparse.ArgumentParser):
@@ -170,6 +170,12 @@ def robot_link_env(args: argparse.Namespace) -> dict[str, str]:
     if args.ros_link_file is not None:
         if not args.ros_link_file.is_file():
             raise UsageError(f"--ros-link-file {args.ros_link_file}: no such file")
-        load_link_file(args.ros_link_file)  # a bad file is refused now, not by each process
+        # a bad file is refused now, not by each process
+        link = load_link_file(args.ros_link_file)
+        if link.clock == CLOCK_ROS and not link.use_sim_time:
+            raise UsageError(
+                f"--ros-link-file {args.ros_link_file}: the sim's stamps are sim time; with "
+                "clock: ros it needs use_sim_time: true (docs/ROS2.md, The clock)"
+            )
         env["PNAV_ROS2_LINK_FILE"] = str(args.ros_link_file.resolve())
     return env

@@ -44,6 +44,7 @@ from services.bridge.messages import (
     SensorRecord,
     parse_sensor,
 )
+from services.bridge.ros2clock import Ros2Clock
 from services.bridge.ros2link import Ros2Link, native_topics
 from services.bridge.settings import BridgeSettings
 from services.bridge.world import World
@@ -71,6 +72,8 @@ class Bridge:
         if self.link_settings.link != NATIVE and runtime.ledger is not None:
             raise ConfigError("lockstep runs only on the native robot link")
         self.ros2: Ros2Link | None = None
+        # the stack's clock in ROS time, for a ROS 2 robot with no pybullet sim (ros2clock.py)
+        self.ros2_clock: Ros2Clock | None = None
         self._ros2_session: zenoh.Session | None = None
         self.counters = Counters()
         # robot ids sensors may come from: the robot table, kept up to date
@@ -162,6 +165,8 @@ class Bridge:
         await self.world.close()
         # the robots' stop first: it must not wait behind a slow Postgres draining sensor rows
         await self.commands.close(self.robots)
+        if self.ros2_clock is not None:
+            await self.ros2_clock.close()
         if self.ros2 is not None:
             self.ros2.close()
         if self._ros2_session is not None:
@@ -211,6 +216,14 @@ class Bridge:
         )
         self.ros2.start()
         self.commands.send_out = self.ros2.send_cmd_vel
+        if self.link_settings.bridge_clock:
+            self.ros2_clock = Ros2Clock(
+                self.runtime.zenoh,
+                self.ros2.node,
+                self.link_settings.use_sim_time,
+                self._malformed,
+            )
+            self.ros2_clock.start()
 
     def _malformed(self, topic: str, reason: str, detail: str, key: str) -> None:
         self.counters.malformed[(topic, reason)] += 1

@@ -193,6 +193,8 @@ class SimNode:
                 barrier.wait(stop or threading.Event())
 
     def publish_clock(self) -> None:
+        if self.wire is not None and self.wire.publish_clock(self.sim.time):
+            return  # a ROS /clock instead (clock: ros, ros2wire.py)
         # in lockstep the clock stands still between messages: rate 0, no extrapolation
         rate = 0.0 if self.barrier is not None else self.rate
         self._clock_pub.put(pack(messages.clock(self.sim.time, rate)))

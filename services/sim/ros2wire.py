@@ -5,8 +5,10 @@ robot ``scan`` (sensor_msgs/LaserScan), ``odom`` (nav_msgs/Odometry), ``battery_
 (sensor_msgs/BatteryState) and ``/tf`` (odom -> base_footprint), and subscribes ``cmd_vel``
 (Twist or TwistStamped, as the robot-link file says), under each robot's namespace, as a
 TurtleBot3 with rmw_zenoh would. Stamps are sim time (a ROS robot with ``use_sim_time``).
-The clock, the world and collision events stay on the native wire: they are the sim's own
-(a real robot has no collision message), and the bridge keeps listening to them there.
+The world and collision events stay on the native wire: they are the sim's own (a real robot
+has no collision message), and the bridge keeps listening to them there. So does the clock,
+unless the robot-link file says ``clock: ros`` (with ``use_sim_time: true``): the sim then
+publishes ROS ``/clock`` as Gazebo does, and the bridge turns it into ``pnav/sim/clock``.
 
 The battery has no voltage in the sim; it is published at a nominal ``VOLTS`` with charge,
 capacity and current in A h and A, so the bridge gets the sim's Wh and W back.
@@ -25,7 +27,7 @@ import zenoh
 from common import ros2types
 from common.contract import keys
 from common.contract import rmw_zenoh as rz
-from common.robotlink import NATIVE, TWIST_STAMPED, RobotLinkSettings, RobotTopics
+from common.robotlink import CLOCK_ROS, NATIVE, TWIST_STAMPED, RobotLinkSettings, RobotTopics
 from common.ros2node import Publisher, Ros2Node, type_of_key
 
 NODE_NAME: Final = "pnav_sim"
@@ -144,6 +146,11 @@ class Ros2Wire:
         self._topics: dict[str, RobotTopics] = {}
         self._cmd_type: dict[str, ros2types.RosType] = {}
         self._tf = self.node.publisher("/tf", ros2types.TF_MESSAGE)
+        self._clock = (
+            self.node.publisher("/clock", ros2types.CLOCK, rz.QoS(reliability=2, depth=1))
+            if settings.clock == CLOCK_ROS
+            else None
+        )
         for robot in robots:
             self._declare(robot)
 
@@ -182,6 +189,13 @@ class Ros2Wire:
             msg = battery_msg(message, base)
         self._publishers[(robot, topic)].put(msg)
 
+    def publish_clock(self, stamp: float) -> bool:
+        """Publish sim time as ROS ``/clock`` if the link says so (``clock: ros``)."""
+        if self._clock is None:
+            return False
+        self._clock.put(ros2types.message(ros2types.CLOCK, clock=ros2types.time_msg(stamp)))
+        return True
+
     def _on_cmd_vel(self, robot: str, key: str, payload: bytes, att: bytes | None) -> None:
         """On Zenoh's thread: a Twist (or TwistStamped) -> the robot's command."""
         expected = self._cmd_type[robot]
@@ -218,4 +232,7 @@ def make_wire(
         return None
     if paced:
         raise ValueError("--lockstep and --max-lag run only on the native robot link")
+    if settings.clock == CLOCK_ROS and not settings.use_sim_time:
+        # the sim stamps in sim time: the bridge's wall clock would leave every reading stale
+        raise ValueError("the sim with clock: ros needs use_sim_time: true (its /clock)")
     return Ros2Wire(settings, session, robots, on_command, on_bad_command)

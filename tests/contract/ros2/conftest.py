@@ -83,22 +83,30 @@ async def sim(zenoh_settings: ZenohSettings) -> AsyncIterator[FakeSim]:
         fake.close()
 
 
-@pytest.fixture
-async def ros2_bridge(
-    db_url: str, zenoh_settings: ZenohSettings, sim: FakeSim
-) -> AsyncIterator[Bridge]:
-    """A bridge on the ROS 2 link (robot r1 takes TwistStamped, r2 Twist), with a world."""
+async def start_ros2_bridge(
+    db_url: str, zenoh_settings: ZenohSettings, sim: FakeSim, link: RobotLinkSettings
+) -> tuple[Bridge, Runtime]:
+    """A started bridge on the ROS 2 link ``link``, its world (r1, r2) served by ``sim``."""
     role_url = await as_service_role(db_url, "bridge")
     config = ServiceConfig(
         service="bridge", database_url=role_url, zenoh=zenoh_settings, instance="test-bridge"
     )
-    link = RobotLinkSettings(link="ros2", robots={"r1": RobotTopics(cmd_vel_type="twist_stamped")})
     sim.serve_world(payloads.world(robots=("r1", "r2")))
     await asyncio.sleep(SETTLE_S)
     runtime = await Runtime.open(config)
     bridge = Bridge(runtime, FAST, link)
     await bridge.start()
     await eventually(lambda: bridge.counters.worlds_applied >= 1, what="the world")
+    return bridge, runtime
+
+
+@pytest.fixture
+async def ros2_bridge(
+    db_url: str, zenoh_settings: ZenohSettings, sim: FakeSim
+) -> AsyncIterator[Bridge]:
+    """A bridge on the ROS 2 link (robot r1 takes TwistStamped, r2 Twist), with a world."""
+    link = RobotLinkSettings(link="ros2", robots={"r1": RobotTopics(cmd_vel_type="twist_stamped")})
+    bridge, runtime = await start_ros2_bridge(db_url, zenoh_settings, sim, link)
     sim.clock(10.0)
     await eventually(lambda: bridge.runtime.clock.now() == 10.0, what="the sim clock")
     try:
@@ -112,4 +120,4 @@ def finite(values: list[float]) -> bool:
     return all(math.isfinite(v) for v in values)
 
 
-__all__ = ["Robot", "battery_msg", "finite", "np", "odom_msg", "scan_msg"]
+__all__ = ["Robot", "battery_msg", "finite", "np", "odom_msg", "scan_msg", "start_ros2_bridge"]

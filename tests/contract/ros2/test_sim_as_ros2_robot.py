@@ -5,6 +5,7 @@ it, and the graph (rmw_zenoh's liveliness tokens) shows both nodes and their top
 from __future__ import annotations
 
 import asyncio
+from pathlib import Path
 
 import asyncpg
 import pytest
@@ -23,13 +24,24 @@ INSERT = (
 )
 
 
-async def test_the_sim_drives_as_a_ros2_robot_and_both_nodes_are_in_the_graph() -> None:
+@pytest.mark.parametrize("clock", ["sim", "ros"])
+async def test_the_sim_drives_as_a_ros2_robot_and_both_nodes_are_in_the_graph(
+    clock: str, tmp_path: Path
+) -> None:
+    """``clock: ros``: the sim publishes ROS /clock as Gazebo does, and the bridge makes it
+    the stack's clock (use_sim_time), as it would for a simulated robot of another sim."""
+    link = tmp_path / "link.yaml"
+    link.write_text(f"clock: {clock}\nuse_sim_time: true\n")
     options = StackOptions(
         world="open_room",
         rate="1",
         zenoh_port=None,
         services=("sim", "bridge"),
-        extra_env={"PNAV_ROBOT_LINK": "ros2", "PNAV_ROS_DOMAIN_ID": "7"},
+        extra_env={
+            "PNAV_ROBOT_LINK": "ros2",
+            "PNAV_ROS_DOMAIN_ID": "7",
+            "PNAV_ROS2_LINK_FILE": str(link),
+        },
     )
     async with launched(options) as stack:
         conn = await asyncpg.connect(stack.local.database_url)
@@ -56,6 +68,10 @@ async def test_the_sim_drives_as_a_ros2_robot_and_both_nodes_are_in_the_graph() 
             assert ("pnav_bridge", rz.SUBSCRIPTION, "/r1/odom", ros2types.ODOMETRY) in endpoints
             assert ("pnav_bridge", rz.PUBLISHER, "/r1/cmd_vel", ros2types.TWIST) in endpoints
             assert ("pnav_sim", rz.SUBSCRIPTION, "/r1/cmd_vel", ros2types.TWIST) in endpoints
+            clock_topic = ("pnav_sim", rz.PUBLISHER, "/clock", ros2types.CLOCK)
+            assert (clock_topic in endpoints) == (clock == "ros")
+            if clock == "ros":
+                assert ("pnav_bridge", rz.SUBSCRIPTION, "/clock", ros2types.CLOCK) in endpoints
         finally:
             session.close()
             await conn.close()

@@ -59,3 +59,24 @@ def test_bad_link_files_are_refused(tmp_path: Path, body: str) -> None:
     path.write_text(body)
     with pytest.raises(ConfigError):
         RobotLinkSettings.from_env({"PNAV_ROS2_LINK_FILE": str(path)})
+
+
+def test_the_clock_is_the_sims_unless_the_link_file_says_ros(tmp_path: Path) -> None:
+    path = tmp_path / "link.yaml"
+    env = {"PNAV_ROBOT_LINK": "ros2", "PNAV_ROS2_LINK_FILE": str(path)}
+    path.write_text("robots: {r1: {namespace: ''}}\n")
+    settings = RobotLinkSettings.from_env(env)
+    assert (settings.clock, settings.use_sim_time, settings.bridge_clock) == ("sim", False, False)
+    path.write_text("clock: ros\nuse_sim_time: true\n")
+    settings = RobotLinkSettings.from_env(env)
+    assert (settings.clock, settings.use_sim_time, settings.bridge_clock) == ("ros", True, True)
+    # the native link has no ROS time to publish
+    assert not RobotLinkSettings.from_env({**env, "PNAV_ROBOT_LINK": "native"}).bridge_clock
+
+
+@pytest.mark.parametrize("body", ["clock: wall", "use_sim_time: 'yes'", "clocks: ros"])
+def test_bad_clock_settings_are_refused(tmp_path: Path, body: str) -> None:
+    path = tmp_path / "link.yaml"
+    path.write_text(body)
+    with pytest.raises(ConfigError):
+        RobotLinkSettings.from_env({"PNAV_ROS2_LINK_FILE": str(path)})
