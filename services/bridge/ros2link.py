@@ -12,7 +12,8 @@ the event loop and there:
 2. refused if its key names another type (``wrong_type``) or another hash of the type
    (``wrong_type_hash``), or it is too large, or it is not CDR of the type (``bad_cdr``);
 3. converted (:mod:`.ros2msgs`) into the body the sim would have sent and validated by the
-   same parsers (:mod:`.messages`): NaN, ranges, beam counts, all as for the sim.
+   same parsers (:mod:`.messages`): NaN, ranges, beam counts, all as for the sim (a scan's
+   NaN and infinite ranges first become what the contract's row means, REP 117).
 
 What passes goes to ``on_record``, what fails to ``on_malformed`` (counted per topic and reason,
 one log line per kind per period: the bridge's own path).
@@ -193,7 +194,11 @@ class Ros2Link:
         msg = self._decode(type_name, self._expected[(robot, topic)], key, payload)
         seq = self._sequence(robot, topic, att)
         if topic == keys.SCAN:
-            return messages.parse_scan(robot, ros2msgs.scan_body(msg, seq), self.robots.get(robot))
+            beams: Counter[str] = Counter()
+            body = ros2msgs.scan_body(msg, seq, beams)
+            record = messages.parse_scan(robot, body, self.robots.get(robot))
+            self.counters.ros2_beams.update(beams)  # of the scans stored only
+            return record
         if topic == keys.ODOM:
             body = ros2msgs.odom_body(msg, seq, self.map_odom.get(robot))
             return messages.parse_odom(robot, body)

@@ -5,7 +5,8 @@ and then goes through the very parsers the sim's messages do: one validation, on
 reason codes, whatever the wire. The conversions:
 
 - LaserScan: header stamp, angle_min, angle_increment, range_min, range_max, ranges (float32
-  on the wire, float64 here); ``seq`` is the publisher's attachment sequence number.
+  on the wire, float64 here), each range as the contract means it (:func:`contract_ranges`:
+  REP 117's NaN and infinities); ``seq`` is the publisher's attachment sequence number.
 - Odometry: pose.pose position and heading, twist.twist linear.x and angular.z; composed with
   map -> odom when a localizer publishes it (:class:`MapOdom`).
 - BatteryState: energy = charge x voltage, capacity = capacity (or design_capacity) x voltage,
@@ -18,22 +19,72 @@ reason codes, whatever the wire. The conversions:
 from __future__ import annotations
 
 import math
+from collections import Counter
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Final
+
+import numpy as np
+import numpy.typing as npt
 
 from common import ros2types
 from services.bridge.messages import NOT_FINITE, MalformedMessage
 
+# the beams a ROS scan's ranges may hold that the contract's row has no value of (REP 117)
+NAN: Final = "nan"  # an invalid measurement
+TOO_CLOSE: Final = "too_close"  # -inf: something nearer than range_min
+BELOW_RANGE: Final = "below_range"  # finite, < range_min: ROS says discard (LDS-01's 0.0)
+BEYOND_RANGE: Final = "beyond_range"  # finite, > range_max: ROS says discard
+BeamCounts = Counter[str]
 
-def scan_body(msg: Any, seq: int) -> dict[str, Any]:
+
+def contract_ranges(
+    ranges: npt.NDArray[np.float64], range_min: float, range_max: float, counts: BeamCounts
+) -> npt.NDArray[np.float64]:
+    """A ROS scan's ranges as the contract's row means them (CONTRACT.md, laser_scan):
+
+    - ``+inf`` (REP 117: no return within range_max) stays ``inf``;
+    - ``-inf`` (REP 117: too close to measure) reads ``range_min``, as the sim's too-close
+      hits do: an obstacle there is real, ``inf`` would say "clear";
+    - ``NaN`` (REP 117: an invalid measurement), and finite values outside
+      [range_min, range_max] (which LaserScan says to discard), read ``inf``: the row has no
+      "unknown", and a beam with no information must not stop a robot for ever (an LDS-01
+      reports 0.0 for every beam without a return). Nav2's costmap ignores them the same way.
+
+    ``counts`` gains the beams changed, per kind. A bad range_min or range_max is left for the
+    parser to refuse."""
+    out = ranges.copy()
+    with np.errstate(invalid="ignore"):
+        nan = np.isnan(ranges)
+        too_close = ranges == -math.inf
+        finite = np.isfinite(ranges)
+        below = finite & (ranges < range_min)
+        beyond = finite & (ranges > range_max)
+    for kind, mask in ((NAN, nan), (TOO_CLOSE, too_close), (BELOW_RANGE, below)):
+        n = int(mask.sum())
+        if n:
+            counts[kind] += n
+    n_beyond = int(beyond.sum())
+    if n_beyond:
+        counts[BEYOND_RANGE] += n_beyond
+    if math.isfinite(range_min):
+        out[too_close] = range_min
+    out[nan | below | beyond] = math.inf
+    return out
+
+
+def scan_body(msg: Any, seq: int, counts: BeamCounts | None = None) -> dict[str, Any]:
+    range_min, range_max = float(msg.range_min), float(msg.range_max)
+    ranges = contract_ranges(
+        msg.ranges.astype("float64"), range_min, range_max, Counter() if counts is None else counts
+    )
     return {
         "stamp": ros2types.seconds_of(msg.header.stamp),
         "seq": seq,
         "angle_min": float(msg.angle_min),
         "angle_increment": float(msg.angle_increment),
-        "range_min": float(msg.range_min),
-        "range_max": float(msg.range_max),
-        "ranges": msg.ranges.astype("float64").tolist(),
+        "range_min": range_min,
+        "range_max": range_max,
+        "ranges": ranges.tolist(),
     }
 
 

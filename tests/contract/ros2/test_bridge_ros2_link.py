@@ -163,3 +163,22 @@ async def test_hostile_ros2_input_is_counted_and_dropped(
     robot.put(robot.scan, scan_msg(stamp=3.0))
     await eventually(lambda: ros2_bridge.counters.rows_written["laser_scan"] >= 1, what="a scan")
     robot.node.close()
+
+
+async def test_a_mostly_nan_ros2_scan_is_stored_as_the_contract_means_it(
+    ros2_bridge: Bridge, ros_session, db_url: str
+) -> None:
+    robot = Robot(ros_session)
+    await asyncio.sleep(SETTLE_S)
+    ranges = [math.nan] * 300 + [1.0] * 58 + [-math.inf, math.inf]  # REP 117
+    robot.put(robot.scan, scan_msg(stamp=4.0, ranges=ranges))
+    await eventually(lambda: ros2_bridge.counters.rows_written["laser_scan"] >= 1, what="a scan")
+    (scan,) = await _rows(db_url, "laser_scan")
+    stored = list(scan["ranges"])
+    assert stored[:300] == [math.inf] * 300  # no return, not an obstacle
+    assert stored[300:358] == [1.0] * 58
+    assert stored[358] == pytest.approx(0.12)  # too close: range_min, an obstacle
+    assert stored[359] == math.inf
+    assert ros2_bridge.counters.ros2_beams == {"nan": 300, "too_close": 1}
+    assert ros2_bridge.counters.malformed_total() == 0
+    robot.node.close()
