@@ -62,12 +62,13 @@ async def test_the_sim_drives_as_a_ros2_robot_and_both_nodes_are_in_the_graph(
             )
             tokens = [rz.parse_token(str(r.ok.key_expr)) for r in replies if r.ok is not None]
             nodes = {t.node for t in tokens if t.kind == rz.NODE}
-            assert {"pnav_sim", "pnav_bridge"} <= nodes
+            assert {"pnav_sim", "pnav_bridge", "pnav_rviz"} <= nodes
             endpoints = {(t.node, t.kind, t.topic, t.type_name) for t in tokens}
             assert ("pnav_sim", rz.PUBLISHER, "/r1/scan", ros2types.LASER_SCAN) in endpoints
             assert ("pnav_bridge", rz.SUBSCRIPTION, "/r1/odom", ros2types.ODOMETRY) in endpoints
             assert ("pnav_bridge", rz.PUBLISHER, "/r1/cmd_vel", ros2types.TWIST) in endpoints
             assert ("pnav_sim", rz.SUBSCRIPTION, "/r1/cmd_vel", ros2types.TWIST) in endpoints
+            assert ("pnav_rviz", rz.PUBLISHER, "/r1/plan", ros2types.PATH) in endpoints
             clock_topic = ("pnav_sim", rz.PUBLISHER, "/clock", ros2types.CLOCK)
             assert (clock_topic in endpoints) == (clock == "ros")
             if clock == "ros":
