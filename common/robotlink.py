@@ -21,6 +21,7 @@ namespace is ``/<robot id>`` (Nav2's multi-robot namespacing), its topics ``scan
     default: {cmd_vel_type: twist}
     clock: ros           # no pybullet sim: the bridge publishes pnav/sim/clock in ROS time
     use_sim_time: false  # ROS time is the system clock (true: ROS /clock)
+    map: /map            # the map is a map server's OccupancyGrid, not the world's map file
 
 ``clock: sim`` (the default) leaves ``pnav/sim/clock`` to the pybullet sim, as ``pnav up``
 runs it; ``clock: ros`` is a robot with no pybullet sim, whose stamps are ROS time.
@@ -48,7 +49,7 @@ TWIST_STAMPED: Final = "twist_stamped"
 # who publishes pnav/sim/clock: the pybullet sim, or the bridge's ROS 2 link in ROS time
 CLOCK_SIM: Final = "sim"
 CLOCK_ROS: Final = "ros"
-FILE_KEYS: Final = ("robots", "default", "clock", "use_sim_time")
+FILE_KEYS: Final = ("robots", "default", "clock", "use_sim_time", "map")
 
 
 @dataclass(frozen=True)
@@ -113,6 +114,8 @@ class RobotLinkSettings:
     robots: Mapping[str, RobotTopics] = field(default_factory=dict)
     clock: str = CLOCK_SIM
     use_sim_time: bool = False  # with clock ros: ROS time is /clock, else the system clock
+    # a nav_msgs/OccupancyGrid topic (``/map``) whose grid is the world's map; "": the map file
+    map_topic: str = ""
 
     @property
     def bridge_clock(self) -> bool:
@@ -162,6 +165,12 @@ def load_link_file(path: Path, base: RobotLinkSettings | None = None) -> RobotLi
     use_sim_time = body.get("use_sim_time", False)
     if not isinstance(use_sim_time, bool):
         raise ConfigError(f"{path}: use_sim_time must be true or false")
+    map_topic = str(body.get("map") or "")
+    try:
+        if map_topic:
+            rz.fully_qualified("/", map_topic)
+    except ValueError as exc:
+        raise ConfigError(f"{path}: map: {exc}") from None
     default = _topics(RobotTopics(), body.get("default"), f"{path}: default")
     robots_body = body.get("robots") or {}
     if not isinstance(robots_body, Mapping):
@@ -176,4 +185,5 @@ def load_link_file(path: Path, base: RobotLinkSettings | None = None) -> RobotLi
         robots=robots,
         clock=clock,
         use_sim_time=use_sim_time,
+        map_topic=map_topic,
     )

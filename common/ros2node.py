@@ -20,10 +20,13 @@ from dataclasses import dataclass
 from typing import Any
 
 import zenoh
+import zenoh.ext as zenoh_ext
 
 from common import ros2types
 from common.contract import rmw_zenoh as rz
 
+# a transient-local publisher's heartbeat, which lets subscriptions see a missed last sample
+HEARTBEAT_S = 1.0
 # (key, payload, attachment or None), on Zenoh's thread
 SampleHandler = Callable[[str, bytes, bytes | None], None]
 
@@ -37,6 +40,8 @@ class Publisher:
     _token: Any
     _seq: itertools.count[int]
     _lock: threading.Lock
+    # a transient-local publisher's: keeps its last samples for late subscriptions
+    _advanced: Any = None
 
     def put(self, msg: Any, *, reliable: bool = False) -> None:
         """Send ``msg`` (a rosbags message of this publisher's type) as CDR."""
@@ -46,6 +51,9 @@ class Publisher:
         with self._lock:
             seq = next(self._seq)
         attachment = rz.Attachment(seq, time.time_ns(), self.gid).encode()
+        if self._advanced is not None:
+            self._advanced.put(payload, attachment=attachment)
+            return
         # session puts, not a declared publisher: a client's fresh publisher drops its first
         # puts until the router has answered its interest (common/bus.py, Notifier)
         self._session.put(
@@ -87,15 +95,34 @@ class Ros2Node:
         return token, declared
 
     def publisher(self, topic: str, type_name: str, qos: rz.QoS = rz.RELIABLE) -> Publisher:
+        """A publisher; a TRANSIENT_LOCAL one (a map server's ``/map``) keeps its last
+        ``depth`` samples for subscriptions that come later, as rmw_zenoh's does (Zenoh's
+        advanced publisher: a cache, and publisher detection)."""
         token, declared = self._token(rz.PUBLISHER, topic, type_name, qos)
+        key = self.key(topic, type_name)
+        advanced = None
+        if qos.durability == rz.TRANSIENT_LOCAL:
+            advanced = zenoh_ext.declare_advanced_publisher(
+                self.session,
+                key,
+                cache=zenoh_ext.CacheConfig(max(qos.depth, 1)),
+                # sequence numbers, as rmw_zenoh's reliable transient-local publisher: the
+                # cache then needs no timestamping in the session's configuration
+                sample_miss_detection=zenoh_ext.MissDetectionConfig(
+                    heartbeat=HEARTBEAT_S, sporadic_heartbeat=None
+                ),
+                publisher_detection=True,
+            )
+            self._entities.append(advanced)
         return Publisher(
-            self.key(topic, type_name),
+            key,
             rz.gid_of(token),
             type_name,
             self.session,
             declared,
             itertools.count(1),
             threading.Lock(),
+            advanced,
         )
 
     def subscription(
@@ -115,9 +142,19 @@ class Ros2Node:
                 None if attachment is None else attachment.to_bytes(),
             )
 
-        self._entities.append(
-            self.session.declare_subscriber(f"{self.domain_id}/{fqn}/*/*", on_sample)
-        )
+        key_expr = f"{self.domain_id}/{fqn}/*/*"
+        if qos.durability == rz.TRANSIENT_LOCAL:
+            # a late joiner: asks every transient-local publisher, now and later, for what it
+            # kept (rmw_zenoh's transient-local subscription is this advanced subscriber)
+            history = zenoh_ext.HistoryConfig(
+                detect_late_publishers=True, max_samples=max(qos.depth, 1)
+            )
+            subscriber: Any = zenoh_ext.declare_advanced_subscriber(
+                self.session, key_expr, on_sample, history=history, subscriber_detection=True
+            )
+        else:
+            subscriber = self.session.declare_subscriber(key_expr, on_sample)
+        self._entities.append(subscriber)
         return self.key(topic, type_name)
 
     def close(self) -> None:

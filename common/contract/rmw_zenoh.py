@@ -140,6 +140,7 @@ class QoS:
         )
 
 
+TRANSIENT_LOCAL: Final = 1  # QoS.durability
 RELIABLE: Final = QoS(depth=10)
 SENSOR_DATA: Final = QoS(reliability=2, depth=5)  # rclcpp's SensorDataQoS
 LATCHED: Final = QoS(durability=1, depth=1)  # a map server's /map

@@ -46,6 +46,7 @@ from services.bridge.messages import (
 )
 from services.bridge.ros2clock import Ros2Clock
 from services.bridge.ros2link import Ros2Link, native_topics
+from services.bridge.ros2map import Ros2Map
 from services.bridge.settings import BridgeSettings
 from services.bridge.world import World
 from services.bridge.world_sync import WorldSync
@@ -74,6 +75,8 @@ class Bridge:
         self.ros2: Ros2Link | None = None
         # the stack's clock in ROS time, for a ROS 2 robot with no pybullet sim (ros2clock.py)
         self.ros2_clock: Ros2Clock | None = None
+        # the world's map from a ROS map server's /map, when the robot-link file asks
+        self.ros2_map: Ros2Map | None = None
         self._ros2_session: zenoh.Session | None = None
         self.counters = Counters()
         # robot ids sensors may come from: the robot table, kept up to date
@@ -167,6 +170,8 @@ class Bridge:
         await self.commands.close(self.robots)
         if self.ros2_clock is not None:
             await self.ros2_clock.close()
+        if self.ros2_map is not None:
+            await self.ros2_map.close()
         if self.ros2 is not None:
             self.ros2.close()
         if self._ros2_session is not None:
@@ -224,6 +229,14 @@ class Bridge:
                 self._malformed,
             )
             self.ros2_clock.start()
+        if self.link_settings.map_topic:
+            self.ros2_map = Ros2Map(
+                self.ros2.node,
+                self.runtime.database,
+                self.link_settings.map_topic,
+                self._malformed,
+            )
+            self.ros2_map.start()
 
     def _malformed(self, topic: str, reason: str, detail: str, key: str) -> None:
         self.counters.malformed[(topic, reason)] += 1
@@ -241,6 +254,8 @@ class Bridge:
         self.robots = self.robots | {r.robot_id: r.lidar_beams for r in world.robots}
         if self.ros2 is not None:
             self.ros2.ensure(self.robots)
+        if self.ros2_map is not None:
+            self.ros2_map.world_applied(world.name)
         # a robot-table read under way may have started before the world's rows were in
         self._reload_again = self._reload is not None and not self._reload.done()
 
