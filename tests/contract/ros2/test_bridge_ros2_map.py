@@ -3,7 +3,6 @@ published TRANSIENT_LOCAL before the bridge starts, replaces the world map's gri
 
 from __future__ import annotations
 
-import asyncio
 import math
 from typing import Any
 
