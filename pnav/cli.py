@@ -24,6 +24,8 @@ from pnav.cli_args import (
     positive,
     record_option,
     record_parser,
+    robot_link_env,
+    robot_link_options,
     stack_options,
     strategy_code,
     tolerance,
@@ -66,6 +68,7 @@ def build_parser() -> argparse.ArgumentParser:
         "controller='python -m examples.sql_controller' (docs/SWAP.md; repeatable)",
     )
     add_dashboard_options(up, 8080)
+    robot_link_options(up)
 
     record_option(up)
 
@@ -117,6 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
     record_parser(cast("argparse._SubParsersAction[argparse.ArgumentParser]", commands))
     add_dashboard_options(demo, None)
     model_option(demo)
+    robot_link_options(demo)
 
     bench = commands.add_parser("bench", help="benchmarks: print figures and JSON")
     benches = bench.add_subparsers(dest="bench", metavar="BENCH", required=True)
@@ -242,7 +246,8 @@ def dispatch(args: argparse.Namespace) -> int:
         from pnav import demo
 
         record = launcher_record(args.record)
-        return demo.run(args.json, args.rate, record, dashboard_options(args), args.model)
+        link = robot_link_env(args)
+        return demo.run(args.json, args.rate, record, dashboard_options(args), args.model, link)
     if args.command == "record":
         from pnav.record import info
 
@@ -295,7 +300,10 @@ def _up(args: argparse.Namespace) -> int:
         dashboard=dashboard_options(args),
     )
     if args.lockstep:
+        if args.robot_link != "native":
+            raise UsageError("--lockstep runs only on the native robot link")
         options.extra_env.update(lockstep_env(options))
+    options.extra_env.update(robot_link_env(args))
     return uvloop.run(up(options))
 
 

@@ -11,6 +11,7 @@ from typing import NoReturn
 
 from common.contract import limits
 from common.errors import UsageError
+from common.robotlink import CLOCK_ROS, load_link_file
 
 
 class Parser(argparse.ArgumentParser):
@@ -135,3 +136,57 @@ def parse_counts(text: str, option: str) -> list[int]:
     if not counts or min(counts) < 1:
         raise UsageError(f"{option} {text!r}: at least one count, each 1 or more")
     return counts
+
+
+def robot_link_options(parser: argparse.ArgumentParser) -> None:
+    """--robot-link and its ROS 2 settings (docs/ROS2.md), for `pnav up` and `pnav demo`."""
+    parser.add_argument(
+        "--robot-link",
+        choices=("native", "ros2"),
+        default="native",
+        help="the wire between the robots and the bridge: native (default) or ros2 (the "
+        "robots' topics on rmw_zenoh; the sim plays a ROS 2 robot)",
+    )
+    parser.add_argument(
+        "--ros-domain-id", type=ros_domain, default=0, help="ROS_DOMAIN_ID (0 to 232, default 0)"
+    )
+    parser.add_argument(
+        "--ros-router",
+        metavar="ENDPOINT",
+        default="",
+        help="the rmw_zenoh router to join, e.g. tcp/localhost:7447 (default: the stack's own)",
+    )
+    parser.add_argument(
+        "--ros-link-file", type=Path, help="per-robot namespaces and topic names (YAML)"
+    )
+
+
+def ros_domain(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if not 0 <= value <= 232:
+        raise argparse.ArgumentTypeError(f"{value} is not within 0 to 232")
+    return value
+
+
+def robot_link_env(args: argparse.Namespace) -> dict[str, str]:
+    """The variables common.robotlink reads, for the sim and the bridge."""
+    if args.robot_link == "native":
+        return {}
+    env = {"PNAV_ROBOT_LINK": args.robot_link, "PNAV_ROS_DOMAIN_ID": str(args.ros_domain_id)}
+    if args.ros_router:
+        env["PNAV_ROS2_CONNECT"] = args.ros_router
+    if args.ros_link_file is not None:
+        if not args.ros_link_file.is_file():
+            raise UsageError(f"--ros-link-file {args.ros_link_file}: no such file")
+        # a bad file is refused now, not by each process
+        link = load_link_file(args.ros_link_file)
+        if link.clock == CLOCK_ROS and not link.use_sim_time:
+            raise UsageError(
+                f"--ros-link-file {args.ros_link_file}: the sim's stamps are sim time; with "
+                "clock: ros it needs use_sim_time: true (docs/ROS2.md, The clock)"
+            )
+        env["PNAV_ROS2_LINK_FILE"] = str(args.ros_link_file.resolve())
+    return env

@@ -163,7 +163,9 @@ async def demo(
     record: Path | None = None,
     dashboard: DashboardOptions | None = None,
     model: str | None = None,
+    robot_link: dict[str, str] | None = None,
 ) -> dict[str, Any]:
+    """``robot_link``: the robot link's variables (pnav.cli_args.robot_link_env); none: native."""
     wall_start = time.monotonic()
     what = f"robot {ROBOT}" if model is None else f"robot {ROBOT} ({model})"
     print(f"proactive-nav demo: {WORLD} world, sim rate {rate}, {what}")
@@ -177,6 +179,9 @@ async def demo(
         model=model,
     )
     options.record = record
+    options.extra_env.update(robot_link or {})
+    if robot_link:
+        print(f"  robot link: {robot_link.get('PNAV_ROBOT_LINK')} (the robot's topics on ROS 2)")
     async with launched(options) as stack:
         print(f"  stack up in {time.monotonic() - wall_start:.1f} s; logs in {stack.log_dir}")
         if stack.dashboard_url:
@@ -223,8 +228,9 @@ def run(
     record: Path | None = None,
     dashboard: DashboardOptions | None = None,
     model: str | None = None,
+    robot_link: dict[str, str] | None = None,
 ) -> int:
-    summary = uvloop.run(demo(rate or RATE, record, dashboard, model))
+    summary = uvloop.run(demo(rate or RATE, record, dashboard, model, robot_link))
     if json_path:
         Path(json_path).write_text(json.dumps(summary, indent=2, default=str) + "\n")
     return 0 if summary["outcome"] == "success" else 1

@@ -241,6 +241,10 @@ def service_specs(local: LocalStack, options: StackOptions, world: Path) -> list
         # the page writes only people's rows: it acts as people do (pnav_user)
         people = {**local.env(), "PNAV_DATABASE_URL": local.url_for("user"), **options.extra_env}
         specs.append(dashboard_spec(people, options.dashboard))
+    if options.extra_env.get("PNAV_ROBOT_LINK") == "ros2" and "bridge" in options.services:
+        # RViz's goals are people's rows: written as pnav_user (pnav/ros2), not by the bridge
+        people = {**local.env(), "PNAV_DATABASE_URL": local.url_for("user"), **options.extra_env}
+        specs.append(ProcessSpec("rviz", [sys.executable, "-m", "pnav.ros2"], people))
     return specs
 
 

@@ -27,14 +27,26 @@ import time
 import zenoh
 
 from common import bus, lockstep, log
+from common.bus import open_session
 from common.config import ServiceConfig
 from common.contract import keys
+from common.errors import ConfigError
+from common.robotlink import NATIVE, RobotLinkSettings
 from common.runtime import Runtime, run_service
 from common.tasks import cancel_and_wait
 from services.bridge.acks import CollisionAcks
 from services.bridge.commands import CommandRelay
 from services.bridge.counters import Counters, RateLimitedLog
-from services.bridge.messages import UNKNOWN_ROBOT, LaserScan, MalformedMessage, parse_sensor
+from services.bridge.messages import (
+    UNKNOWN_ROBOT,
+    LaserScan,
+    MalformedMessage,
+    SensorRecord,
+    parse_sensor,
+)
+from services.bridge.ros2clock import Ros2Clock
+from services.bridge.ros2link import Ros2Link, native_topics
+from services.bridge.ros2map import Ros2Map
 from services.bridge.settings import BridgeSettings
 from services.bridge.world import World
 from services.bridge.world_sync import WorldSync
@@ -48,9 +60,24 @@ _ROBOT_RELOAD_S = 1.0
 
 
 class Bridge:
-    def __init__(self, runtime: Runtime, settings: BridgeSettings | None = None) -> None:
+    def __init__(
+        self,
+        runtime: Runtime,
+        settings: BridgeSettings | None = None,
+        link: RobotLinkSettings | None = None,
+    ) -> None:
         self.runtime = runtime
         self.settings = settings or BridgeSettings()
+        # the robot link: native (the sim's msgpack, default) or ROS 2 (ros2link.py)
+        self.link_settings = link or RobotLinkSettings()
+        if self.link_settings.link != NATIVE and runtime.ledger is not None:
+            raise ConfigError("lockstep runs only on the native robot link")
+        self.ros2: Ros2Link | None = None
+        # the stack's clock in ROS time, for a ROS 2 robot with no pybullet sim (ros2clock.py)
+        self.ros2_clock: Ros2Clock | None = None
+        # the world's map from a ROS map server's /map, when the robot-link file asks
+        self.ros2_map: Ros2Map | None = None
+        self._ros2_session: zenoh.Session | None = None
         self.counters = Counters()
         # robot ids sensors may come from: the robot table, kept up to date
         # the known robots, each with its lidar's beam count (robot.lidar_beams): a scan
@@ -92,9 +119,11 @@ class Bridge:
     # -- lifecycle -----------------------------------------------------------------------
     async def start(self) -> None:
         session, ledger = self.runtime.zenoh, self.runtime.ledger
+        if self.link_settings.link != NATIVE:
+            self._start_ros2()
         await self._load_robots()
         await self.writer.start()
-        for topic in keys.SENSOR_TOPICS:
+        for topic in native_topics(self.link_settings.link):
             handler = functools.partial(self._on_sensor, topic)
             self._subscribers.append(
                 bus.subscribe(session, keys.robot_watch(topic), handler, ledger=ledger)
@@ -119,6 +148,7 @@ class Bridge:
             logger,
             logging.INFO,
             "bridge started",
+            robot_link=self.link_settings.link,
             robots=",".join(sorted(self.robots)),
             watchdog_s=self.settings.watchdog_s,
             safety="on" if self.settings.safety.enabled else "off",
@@ -138,6 +168,15 @@ class Bridge:
         await self.world.close()
         # the robots' stop first: it must not wait behind a slow Postgres draining sensor rows
         await self.commands.close(self.robots)
+        if self.ros2_clock is not None:
+            await self.ros2_clock.close()
+        if self.ros2_map is not None:
+            await self.ros2_map.close()
+        if self.ros2 is not None:
+            self.ros2.close()
+        if self._ros2_session is not None:
+            with contextlib.suppress(Exception):
+                self._ros2_session.close()
         await self.writer.close()
         log.event(logger, logging.INFO, "bridge counters", **self.counters.snapshot())
 
@@ -161,9 +200,43 @@ class Bridge:
         except Exception as exc:  # a bug in validation: still never let it through
             self._malformed(topic, "internal_error", repr(exc), key)
             return
+        self._accept(record)
+
+    def _accept(self, record: SensorRecord) -> None:
+        """A valid reading from either link: into the safety layer and the writer."""
         if isinstance(record, LaserScan):
             self.commands.safety.scan(record)  # before any command decided from it comes
         self.writer.add(record)
+
+    def _start_ros2(self) -> None:
+        """The ROS 2 link's own session (the rmw_zenoh router's, or ours as the bridge)."""
+        zenoh_settings = self.link_settings.session_settings(self.runtime.config.zenoh)
+        self._ros2_session = open_session(zenoh_settings)
+        self.ros2 = Ros2Link(
+            self.link_settings,
+            self._ros2_session,
+            self.counters,
+            self._accept,
+            self._malformed,
+        )
+        self.ros2.start()
+        self.commands.send_out = self.ros2.send_cmd_vel
+        if self.link_settings.bridge_clock:
+            self.ros2_clock = Ros2Clock(
+                self.runtime.zenoh,
+                self.ros2.node,
+                self.link_settings.use_sim_time,
+                self._malformed,
+            )
+            self.ros2_clock.start()
+        if self.link_settings.map_topic:
+            self.ros2_map = Ros2Map(
+                self.ros2.node,
+                self.runtime.database,
+                self.link_settings.map_topic,
+                self._malformed,
+            )
+            self.ros2_map.start()
 
     def _malformed(self, topic: str, reason: str, detail: str, key: str) -> None:
         self.counters.malformed[(topic, reason)] += 1
@@ -179,6 +252,10 @@ class Bridge:
     # -- robots --------------------------------------------------------------------------
     def _on_world(self, world: World) -> None:
         self.robots = self.robots | {r.robot_id: r.lidar_beams for r in world.robots}
+        if self.ros2 is not None:
+            self.ros2.ensure(self.robots)
+        if self.ros2_map is not None:
+            self.ros2_map.world_applied(world.name)
         # a robot-table read under way may have started before the world's rows were in
         self._reload_again = self._reload is not None and not self._reload.done()
 
@@ -201,6 +278,8 @@ class Bridge:
         async with self.runtime.database.pool.acquire() as conn:
             rows = await conn.fetch(f"SELECT robot_id, lidar_beams FROM {keys.ROBOT}")
         self.robots = {r[0]: r[1] for r in rows}
+        if self.ros2 is not None:
+            self.ros2.ensure(self.robots)
 
     async def _load_robots_safely(self) -> None:
         again = True
@@ -275,9 +354,10 @@ class Bridge:
 
 async def serve(config: ServiceConfig, stop: asyncio.Event) -> None:
     settings = BridgeSettings.from_env()
+    link = RobotLinkSettings.from_env()
     runtime = await Runtime.open(config)
     try:
-        await Bridge(runtime, settings).run(stop)
+        await Bridge(runtime, settings, link).run(stop)
     finally:
         await runtime.close()
 

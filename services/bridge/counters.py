@@ -47,6 +47,8 @@ class Counters:
     worlds_unchanged: int = 0
     worlds_malformed: int = 0
     collision_acks: int = 0  # collision events acknowledged to the robot (acks.py)
+    # ROS 2 scans' beams the contract has no value of, mapped per kind (ros2msgs.py)
+    ros2_beams: Counter[str] = field(default_factory=Counter)
 
     def malformed_total(self, topic: str | None = None) -> int:
         return sum(n for (t, _), n in self.malformed.items() if topic is None or t == topic)
@@ -77,6 +79,7 @@ class Counters:
             "worlds_unchanged": self.worlds_unchanged,
             "worlds_malformed": self.worlds_malformed,
             "collision_acks": self.collision_acks,
+            "ros2_beams": dict(self.ros2_beams),
         }
 
 

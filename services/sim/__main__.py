@@ -26,6 +26,7 @@ from common.config import ZenohSettings, default_instance, lockstep_from_env
 from common.errors import ConfigError, ConnectionFailure, UsageError
 from common.lifeline import die_with_parent
 from common.log import event, setup
+from common.robotlink import NATIVE, RobotLinkSettings
 from services.sim.bench import report, run_bench
 from services.sim.clock import parse_rate
 from services.sim.signals import SignalStop
@@ -211,8 +212,13 @@ def serve(
 
     stop = threading.Event()
     signals = SignalStop(stop)  # SIGINT and SIGTERM set ``stop`` (signals.py says how)
+    link = RobotLinkSettings.from_env()
+    ros2_session = None
     try:
-        session = open_session(ZenohSettings.from_env())
+        own = ZenohSettings.from_env()
+        session = open_session(own)
+        if link.link != NATIVE and link.connect:  # an rmw_zenoh router of its own
+            ros2_session = open_session(link.session_settings(own))
         try:
             instance = _env("PNAV_INSTANCE") or default_instance()
             tracer = Tracer(Path(trace)) if trace else None
@@ -226,12 +232,16 @@ def serve(
                 tracer=tracer,
                 gate=gate,
                 lockstep=lockstep,
+                robot_link=link,
+                ros2_session=ros2_session,
             )
             try:
                 node.run(stop)
             finally:
                 node.close()
         finally:
+            if ros2_session is not None:
+                ros2_session.close()
             session.close()
     finally:
         signals.close()  # stopped in time: no stack dump

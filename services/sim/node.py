@@ -7,10 +7,11 @@ command to :meth:`Simulation.set_command` (thread-safe) or reply with bytes buil
 
 from __future__ import annotations
 
+import functools
 import logging
 import threading
 import time
-from typing import Any, cast
+from typing import Any
 
 import zenoh
 
@@ -18,10 +19,14 @@ import services.sim.messages as messages
 from common.bus import pack, subscribe_threaded, unpack
 from common.contract import keys
 from common.log import event
+from common.robotlink import RobotLinkSettings
 from services.sim.clock import Pacer
 from services.sim.gate import Gate
 from services.sim.lockstep import Barrier
+from services.sim.matching import await_listeners, warn_unmatched
 from services.sim.outbox import CollisionOutbox
+from services.sim.ros2wire import TOPICS as ROS2_TOPICS
+from services.sim.ros2wire import make_wire
 from services.sim.sim import SimConfig, Simulation
 from services.sim.trace import CMD_VEL, Tracer
 from services.sim.world import World
@@ -38,8 +43,6 @@ GATE_CLOCK_SIM_S = 0.02
 # sim seconds: the engines' F (0.05 s) and the bridge's watchdog run on it. Odometry at
 # 30 Hz already brings one every 0.033 s; each clock costs a wait for the whole stack.
 LOCKSTEP_CLOCK_S = 0.05
-# at start, the longest wait for a sensor subscriber before the first reading (wall s)
-LISTENERS_WAIT_S = 1.0
 # and the world every this many wall seconds, besides the queryable
 WORLD_PERIOD_S = 1.0
 # at most one log line per robot per this many seconds about bad cmd_vel
@@ -60,6 +63,8 @@ class SimNode:
         tracer: Tracer | None = None,
         gate: Gate | None = None,
         lockstep: tuple[str, ...] = (),
+        robot_link: RobotLinkSettings | None = None,
+        ros2_session: zenoh.Session | None = None,
     ) -> None:
         if gate is not None and lockstep:
             raise ValueError("--max-lag and --lockstep exclude each other: lockstep waits always")
@@ -73,8 +78,19 @@ class SimNode:
         self._publishers: dict[tuple[str, str], zenoh.Publisher] = {}
         # collision events are held until acknowledged and resent meanwhile (outbox.py)
         self.outbox = CollisionOutbox()
+        # ROS 2 (ros2wire.py): scan, odom, battery and cmd_vel; clock, world, collisions here
+        self.wire = make_wire(
+            robot_link,
+            ros2_session or session,
+            [spec.robot_id for spec in world.robots],
+            self._ros2_command,
+            functools.partial(self._complain, msg="malformed ROS 2 cmd_vel ignored"),
+            paced=bool(lockstep) or gate is not None,
+        )
         for spec in world.robots:
             for topic in keys.SENSOR_TOPICS:
+                if self.wire is not None and topic in ROS2_TOPICS:
+                    continue
                 # Every topic drops under congestion rather than stall the sim: a reading is
                 # replaced by the next, a collision event is resent until acknowledged (a
                 # blocking put would stop the physics for as long as a router is frozen).
@@ -92,8 +108,10 @@ class SimNode:
         self.sim = Simulation(world, config, self._publish)
         self._world_payload = pack(world.message())
         self._bad_logged: dict[str, float] = {}
-        self._subscriber = subscribe_threaded(
-            session, keys.robot_watch(keys.CMD_VEL), self._on_cmd_vel
+        self._subscriber = (
+            None
+            if self.wire is not None
+            else subscribe_threaded(session, keys.robot_watch(keys.CMD_VEL), self._on_cmd_vel)
         )
         self._ack_subscriber = subscribe_threaded(
             session, keys.robot_watch(keys.COLLISION_ACK), self.outbox.on_ack
@@ -101,7 +119,7 @@ class SimNode:
         self._queryable = session.declare_queryable(keys.SIM_WORLD, self._on_world_query)
         self._token = session.liveliness().declare_token(keys.alive_key(SERVICE, instance))
         self.commands_received = 0
-        self._matching_checked = False  # _check_matching ran
+        self._matching_checked = False  # warn_unmatched ran
         # paced by the stack, the sim time of the next clock the gate owes (_pass_gate)
         self._next_gate_clock = 0.0
 
@@ -114,10 +132,10 @@ class SimNode:
         try:
             cmd = messages.parse_cmd_vel(unpack(payload))
         except ValueError as exc:
-            self._complain(robot, "malformed cmd_vel ignored", str(exc))
+            self._complain(robot, str(exc), "malformed cmd_vel ignored")
             return
         if not self.sim.set_command(robot, cmd.linear, cmd.angular):
-            self._complain(robot, "cmd_vel for an unknown robot ignored", robot)
+            self._complain(robot, robot, "cmd_vel for an unknown robot ignored")
             return
         if self.tracer is not None and cmd.command_id is not None:
             self.tracer.record(CMD_VEL, robot, cmd.command_id)
@@ -127,7 +145,14 @@ class SimNode:
         if self.barrier is not None:
             self.barrier.on_cmd_vel(key)
 
-    def _complain(self, robot: str, msg: str, problem: str) -> None:
+    def _ros2_command(self, robot: str, linear: float, angular: float) -> None:
+        """A ROS 2 cmd_vel (ros2wire.py checked it): no command id, no decided stamp."""
+        if not self.sim.set_command(robot, linear, angular):
+            self._complain(robot, robot, "cmd_vel for an unknown robot ignored")
+            return
+        self.commands_received += 1
+
+    def _complain(self, robot: str, problem: str, msg: str = "") -> None:
         now = time.monotonic()
         if now - self._bad_logged.get(robot, -1e9) >= BAD_COMMAND_LOG_PERIOD_S:
             self._bad_logged[robot] = now
@@ -147,10 +172,12 @@ class SimNode:
         if topic == keys.COLLISION:
             message = {**message, "run": self.outbox.run}
             self.outbox.sent(robot, message)
-        payload = pack(message)
         if self.tracer is not None:
             self.tracer.record(topic, robot, message["seq"])
-        self._publishers[(robot, topic)].put(payload)
+        if self.wire is not None and topic in ROS2_TOPICS:
+            self.wire.publish(robot, topic, message)
+            return
+        self._publishers[(robot, topic)].put(pack(message))
 
     def resend_collisions(
         self, barrier: Barrier | None = None, stop: threading.Event | None = None
@@ -166,6 +193,8 @@ class SimNode:
                 barrier.wait(stop or threading.Event())
 
     def publish_clock(self) -> None:
+        if self.wire is not None and self.wire.publish_clock(self.sim.time):
+            return  # a ROS /clock instead (clock: ros, ros2wire.py)
         # in lockstep the clock stands still between messages: rate 0, no extrapolation
         rate = 0.0 if self.barrier is not None else self.rate
         self._clock_pub.put(pack(messages.clock(self.sim.time, rate)))
@@ -187,7 +216,7 @@ class SimNode:
         next_world = time.monotonic() + WORLD_PERIOD_S
         next_clock = next_resend = 0.0
         self._next_gate_clock = 0.0
-        self._await_listeners(stop)
+        await_listeners(self._publishers, stop)
         self._log_running(max_lag=None if self.gate is None else self.gate.max_lag_s)
         while not stop.is_set() and not _reached(sim, until_sim_s):
             now = time.monotonic()
@@ -195,7 +224,8 @@ class SimNode:
                 self.publish_clock()
                 next_clock = now + clock_period
             if now >= next_world:
-                self._check_matching()  # a world period after the start, once
+                # a world period after the start, once
+                self._matching_checked = self._matching_checked or warn_unmatched(self._publishers)
                 self.publish_world()
                 next_world = now + WORLD_PERIOD_S
             if now >= next_resend:
@@ -324,40 +354,6 @@ class SimNode:
         barrier.published(keys.SIM_CLOCK)
         self.publish_clock()
 
-    def _await_listeners(self, stop: threading.Event) -> None:
-        """Before the first reading, wait (at most LISTENERS_WAIT_S) until the sensor
-        publishers know of a subscriber: a Zenoh client drops a publication sent before the
-        router's interest reaches it, and the readings of sim time 0 would be lost to
-        listeners that were there all along. Nobody listening: start anyway."""
-        deadline = time.monotonic() + LISTENERS_WAIT_S
-        while not stop.is_set() and time.monotonic() < deadline:
-            if len(self.unmatched()) < len(self._publishers):
-                return
-            stop.wait(0.01)
-
-    def unmatched(self) -> list[str]:
-        """Keys of the sensor publishers Zenoh knows no subscriber for: what is put on them
-        is dropped at the sim (a client's publisher filters on the router's answer)."""
-        # the stubs say bool; zenoh 1.x returns a MatchingStatus with .matching
-        return sorted(
-            keys.robot_key(robot, topic)
-            for (robot, topic), pub in self._publishers.items()
-            if not cast(Any, pub.matching_status).matching
-        )
-
-    def _check_matching(self) -> None:
-        """Once, a world period after the start: warn if some sensor publishers found a
-        subscriber and some did not. Every shipped stack hears all of a robot's topics (the
-        bridge), and a stream that never flows is otherwise silent (a fault trial once saw
-        no scan for 20 s while odometry and battery flowed)."""
-        if self._matching_checked:
-            return
-        self._matching_checked = True
-        unmatched = self.unmatched()
-        if unmatched and len(unmatched) < len(self._publishers):
-            message = "sensor publishers without a subscriber: their readings are dropped"
-            event(log, logging.WARNING, message, keys=",".join(unmatched))
-
     def gate_figures(self) -> dict[str, Any]:
         """How often and how long the sim waited for the stack (empty without a gate)."""
         if self.barrier is not None:
@@ -383,7 +379,11 @@ class SimNode:
             self._world_pub,
             *self._publishers.values(),
         ]
+        if self.wire is not None:
+            self.wire.close()
         for entity in entities:
+            if entity is None:
+                continue
             try:
                 entity.undeclare()
             except Exception:  # the session is already closed

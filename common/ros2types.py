@@ -1,0 +1,105 @@
+"""ROS 2 message types for the ROS 2 link: names, RIHS01 hashes, CDR (de)serialisation.
+
+All from ``rosbags``, which ships the message definitions of every ROS 2 distribution and
+computes the type hashes REP-2016 defines; no ROS installation is needed. The link speaks
+Jazzy's types (its hashes are in every key expression; Humble has none and Kilted's of the
+types used here are Jazzy's). Time stamps convert between a header's (sec, nanosec) and the
+contract's float seconds here.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+from typing import Any, Final
+
+from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys.store import Typestore
+
+from common.contract import rmw_zenoh
+
+DISTRO: Final = Stores.ROS2_JAZZY
+
+LASER_SCAN: Final = "sensor_msgs/msg/LaserScan"
+ODOMETRY: Final = "nav_msgs/msg/Odometry"
+BATTERY_STATE: Final = "sensor_msgs/msg/BatteryState"
+TF_MESSAGE: Final = "tf2_msgs/msg/TFMessage"
+TWIST: Final = "geometry_msgs/msg/Twist"
+TWIST_STAMPED: Final = "geometry_msgs/msg/TwistStamped"
+POSE_STAMPED: Final = "geometry_msgs/msg/PoseStamped"
+PATH: Final = "nav_msgs/msg/Path"
+OCCUPANCY_GRID: Final = "nav_msgs/msg/OccupancyGrid"
+CLOCK: Final = "rosgraph_msgs/msg/Clock"
+
+# sensor_msgs/BatteryState.power_supply_status
+POWER_SUPPLY_STATUS_CHARGING: Final = 1
+POWER_SUPPLY_STATUS_DISCHARGING: Final = 2
+
+
+@functools.cache
+def store() -> Typestore:
+    return get_typestore(DISTRO)
+
+
+@dataclass(frozen=True)
+class RosType:
+    name: str  # pkg/msg/Name
+    hash: str  # RIHS01_<64 hex>
+
+    @property
+    def dds(self) -> str:
+        return rmw_zenoh.dds_type(self.name)
+
+
+@functools.cache
+def ros_type(name: str) -> RosType:
+    """The type named ``name`` (KeyError if the distribution has none of that name)."""
+    if name not in store().types:
+        raise KeyError(f"no ROS 2 type {name!r} in {DISTRO.value}")
+    return RosType(name, store().hash_rihs01(name))
+
+
+def message(name: str, **fields: Any) -> Any:
+    """A message object of type ``name`` (fields left out are an error, as in rosbags)."""
+    return store().types[name](**fields)
+
+
+def encode(name: str, msg: Any) -> bytes:
+    """A message as CDR (little-endian, with the 4-byte encapsulation header)."""
+    return bytes(store().serialize_cdr(msg, name))
+
+
+def decode(name: str, data: bytes) -> Any:
+    """CDR bytes -> a message of type ``name``; any exception means the bytes are not one."""
+    return store().deserialize_cdr(data, name)
+
+
+def time_msg(seconds: float) -> Any:
+    """``builtin_interfaces/msg/Time`` of ``seconds`` (>= 0)."""
+    sec = math.floor(seconds)
+    nanosec = min(round((seconds - sec) * 1e9), 999_999_999)
+    return message("builtin_interfaces/msg/Time", sec=int(sec), nanosec=int(nanosec))
+
+
+def seconds_of(stamp: Any) -> float:
+    return float(stamp.sec) + float(stamp.nanosec) * 1e-9
+
+
+def header(seconds: float, frame_id: str) -> Any:
+    return message("std_msgs/msg/Header", stamp=time_msg(seconds), frame_id=frame_id)
+
+
+def yaw_of(q: Any) -> float:
+    """The heading of a quaternion (rotation about z; roll and pitch ignored)."""
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def quaternion(yaw: float) -> Any:
+    return message(
+        "geometry_msgs/msg/Quaternion",
+        x=0.0,
+        y=0.0,
+        z=math.sin(yaw / 2.0),
+        w=math.cos(yaw / 2.0),
+    )

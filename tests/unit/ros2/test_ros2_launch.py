@@ -1,0 +1,43 @@
+"""`pnav up --robot-link ros2`: the processes it adds, and the link files it refuses."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from common.config import ZenohSettings
+from common.errors import UsageError
+from common.stack import LocalStack
+from pnav.cli import build_parser
+from pnav.cli_args import robot_link_env
+from pnav.launcher import StackOptions, service_specs
+
+
+def _local() -> LocalStack:
+    router: Any = None  # not used to build the specs
+    return LocalStack(
+        "postgresql://x/y", ZenohSettings(connect=("tcp/127.0.0.1:7447",)), router, None
+    )
+
+
+def test_the_ros2_link_adds_the_rviz_process_acting_for_people() -> None:
+    world = Path("worlds/open_room.yaml")
+    native = [s.name for s in service_specs(_local(), StackOptions(), world)]
+    assert "rviz" not in native
+    options = StackOptions(extra_env={"PNAV_ROBOT_LINK": "ros2"})
+    specs = {s.name: s for s in service_specs(_local(), options, world)}
+    rviz = specs["rviz"]
+    assert rviz.argv[1:] == ["-m", "pnav.ros2"]
+    assert rviz.env["PNAV_ROBOT_LINK"] == "ros2"
+
+
+def test_pnav_up_refuses_a_ros_clock_on_wall_time_since_it_runs_the_sim(tmp_path: Path) -> None:
+    link = tmp_path / "link.yaml"
+    link.write_text("clock: ros\n")
+    args = build_parser().parse_args(["up", "--robot-link", "ros2", "--ros-link-file", str(link)])
+    with pytest.raises(UsageError, match="use_sim_time: true"):
+        robot_link_env(args)
+    link.write_text("clock: ros\nuse_sim_time: true\n")
+    assert robot_link_env(args)["PNAV_ROS2_LINK_FILE"] == str(link.resolve())
