@@ -74,16 +74,21 @@ def open_session(settings: ZenohSettings) -> zenoh.Session:
 
 
 def start_router(
-    listen: tuple[str, ...], users_file: str | None = None, *, data_queue: int = DATA_QUEUE_BATCHES
+    listen: tuple[str, ...],
+    users_file: str | None = None,
+    *,
+    data_queue: int = DATA_QUEUE_BATCHES,
+    ros_domains: tuple[int, ...] = (),
 ) -> zenoh.Session:
     """Run a Zenoh router inside this process, listening on ``listen`` endpoints. With
     ``users_file`` it is the compose router (common.contract.acl.router_config, one source):
     it accepts only sessions whose user/password is in that file, and lets each user put only
-    its own keys. Without, it checks nothing (a test's or a benchmark's loopback router)."""
+    its own keys (and, in ``ros_domains``, the ROS 2 identities speak ROS 2). Without, it
+    checks nothing (a test's or a benchmark's loopback router)."""
     if users_file is None:
         settings = ZenohSettings(mode="router", connect=(), listen=listen, data_queue=data_queue)
         return open_session(settings)
-    config = acl.router_config(listen, users_file, data_queue)
+    config = acl.router_config(listen, users_file, data_queue, ros_domains)
     try:
         return zenoh.open(zenoh.Config.from_json5(json.dumps(config)))
     except Exception as exc:

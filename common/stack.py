@@ -204,11 +204,13 @@ async def local_stack(
     zenoh_port: int | None = None,
     local_zenoh: LocalZenoh | None = None,
     bus: BusCredentials | None = None,
+    ros_domains: tuple[int, ...] = (),
 ) -> AsyncIterator[LocalStack]:
     """Start Postgres (embedded unless PNAV_DATABASE_URL is set) and a router; migrate.
     ``local_zenoh``: how the stack's processes use Zenoh (default: PNAV_LOCAL_ZENOH);
     ``bus``: the Zenoh users to use (if None: made for this run and removed after it, or
-    none at all in peer mode)."""
+    none at all in peer mode); ``ros_domains``: the ROS 2 domains the router carries for a
+    ROS 2 robot link with no rmw_zenoh router of its own (common.contract.acl)."""
     local_zenoh = local_zenoh if local_zenoh is not None else LocalZenoh.from_env()
     postgres: EmbeddedPostgres | None = None
     lifeline: Lifeline | None = None
@@ -246,6 +248,7 @@ async def local_stack(
             (endpoint,),
             str(bus.users_file) if bus is not None else None,
             data_queue=local_zenoh.data_queue,
+            ros_domains=ros_domains,
         )
         try:
             conn = await asyncpg.connect(url)

@@ -288,6 +288,14 @@ def service_database(local: LocalStack, name: str) -> dict[str, str]:
     return {"PNAV_DATABASE_URL": local.url_for(name)}
 
 
+def _ros_domains(env: dict[str, str]) -> tuple[int, ...]:
+    """The ROS 2 domain the stack's own router carries: a ROS 2 robot link with no rmw_zenoh
+    router of its own (``--ros-router``) speaks ROS 2 through it."""
+    if env.get("PNAV_ROBOT_LINK") != "ros2" or env.get("PNAV_ROS2_CONNECT"):
+        return ()
+    return (int(env.get("PNAV_ROS_DOMAIN_ID") or 0),)
+
+
 @contextlib.asynccontextmanager
 async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
     world = resolve_world(options.world)
@@ -295,7 +303,10 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
     if "sim" in options.services and "sim" not in options.replace:
         check_world(world, options.model)
     log_dir = options.log_dir or Path(tempfile.mkdtemp(prefix="pnav-logs-"))
-    async with local_stack(options.data_dir, options.zenoh_port, bus=options.bus) as local:
+    ros_domains = _ros_domains(options.extra_env)
+    async with local_stack(
+        options.data_dir, options.zenoh_port, bus=options.bus, ros_domains=ros_domains
+    ) as local:
         specs = recorder_spec(local, options) + service_specs(local, options, world)
         supervisor = Supervisor(specs, log_dir, echo=options.echo)
         running = RunningStack(local, supervisor, options, world, log_dir)

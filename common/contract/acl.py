@@ -39,7 +39,25 @@ DICTIONARY_FILE = "/run/secrets/zenoh_users"
 # their lockstep reports. The CLI, the dashboard, the demo, the recorder, the benchmarks
 # (pnav bench latency / startup, pnav bench nav, pnav bench faults) and the end-to-end
 # tests. No service's name: people cannot pass for a service.
-USER_SERVICES = ("cli", "dashboard", "demo", "recorder", "bench", "navbench", "faults", "e2e")
+USER_SERVICES = (
+    *("cli", "dashboard", "demo", "recorder", "bench", "navbench", "faults", "e2e"),
+    "rviz",  # pnav.ros2: RViz's goals in, each robot's plan out (docs/ROS2.md)
+)
+# The identities that take part in a ROS 2 graph carried by this router (a robot link with
+# no rmw_zenoh router of its own, docs/ROS2.md): the sim as a ROS 2 robot, the bridge as its
+# driver, people's RViz process. ROS 2's keys live outside pnav/, under the domain id.
+ROS2_IDENTITIES = ("sim", "bridge", USER)
+_ROS2_MESSAGES = [
+    "put",
+    "delete",
+    "declare_subscriber",
+    "query",
+    "declare_queryable",
+    "reply",
+    "liveliness_token",
+    "declare_liveliness_subscriber",
+    "liveliness_query",
+]
 EVERYTHING = f"{keys.PREFIX}/**"
 _EGRESS = [
     "put",
@@ -62,6 +80,8 @@ def put_keys(identity: str) -> list[str]:
         own += [keys.SIM_CLOCK, keys.SIM_WORLD]
     elif identity == "bridge":
         own += [keys.robot_watch(keys.CMD_VEL), keys.robot_watch(keys.COLLISION_ACK)]
+        # a ROS 2 robot with no pybullet sim: the bridge gives the stack ROS time
+        own.append(keys.SIM_CLOCK)
     own += [keys.lockstep_key(name, "*") for name in _names(identity)]
     return own
 
@@ -85,8 +105,15 @@ def _rule(rule_id: str, messages: list[str], flow: str, key_exprs: list[str]) ->
     }
 
 
-def access_control() -> dict[str, Any]:
-    """The ``access_control`` section of the router's config."""
+def ros2_keys(domain: int) -> list[str]:
+    """What a ROS 2 node of ``domain`` speaks on (rmw_zenoh: topics, services and the
+    advanced pub/sub's caches under the domain id; the graph's liveliness tokens)."""
+    return [f"{domain}/**", f"@ros2_lv/{domain}/**"]
+
+
+def access_control(ros_domains: tuple[int, ...] = ()) -> dict[str, Any]:
+    """The ``access_control`` section of the router's config; with ``ros_domains``, the
+    ROS 2 identities may also speak ROS 2 in those domains (never a pnav/ key)."""
     rules = [
         _rule("receive everything", _EGRESS, "egress", [EVERYTHING]),
         _rule(
@@ -105,6 +132,11 @@ def access_control() -> dict[str, Any]:
         },
         {"rules": ["serve the world"], "subjects": ["sim"]},
     ]
+    if ros_domains:
+        ros2 = [k for d in ros_domains for k in ros2_keys(d)]
+        rules.append(_rule("speak ROS 2", _ROS2_MESSAGES, "ingress", ros2))
+        rules.append(_rule("hear ROS 2", _ROS2_MESSAGES, "egress", ros2))
+        policies.append({"rules": ["speak ROS 2", "hear ROS 2"], "subjects": list(ROS2_IDENTITIES)})
     for identity in BUS_IDENTITIES:
         rules.append(_rule(f"{identity} puts", ["put"], "ingress", put_keys(identity)))
         rules.append(
@@ -152,9 +184,11 @@ def router_config(
     listen: tuple[str, ...] = ("tcp/0.0.0.0:7447",),
     dictionary_file: str = DICTIONARY_FILE,
     data_queue: int = DATA_QUEUE_BATCHES,
+    ros_domains: tuple[int, ...] = (),
 ) -> dict[str, Any]:
     """The router's whole config: compose's by default; the local stack's router gives its
-    loopback endpoint, its run's user/password file and its queue size."""
+    loopback endpoint, its run's user/password file, its queue size and the ROS 2 domains it
+    carries (``pnav up --robot-link ros2`` with no ``--ros-router``)."""
     return {
         "mode": "router",
         "listen": {"endpoints": list(listen)},
@@ -163,7 +197,7 @@ def router_config(
             "auth": {"usrpwd": {"dictionary_file": dictionary_file}},
             "link": {"tx": {"queue": {"size": {"data": data_queue}}}},
         },
-        "access_control": access_control(),
+        "access_control": access_control(ros_domains),
     }
 
 
