@@ -298,3 +298,14 @@ def test_the_launchers_report_is_put_by_the_local_routers_own_session(tmp_path: 
         finally:
             subscriber.undeclare()
             listener.close()
+
+
+def test_a_ros2_domain_is_spoken_only_by_the_ros2_identities_and_never_on_pnav_keys() -> None:
+    control = acl.access_control(ros_domains=(7,))
+    rules = {rule["id"]: rule for rule in control["rules"]}
+    spoken = {k for rid in ("speak ROS 2", "hear ROS 2") for k in rules[rid]["key_exprs"]}
+    assert spoken == {"7/**", "@ros2_lv/7/**"}
+    subjects = [p["subjects"] for p in control["policies"] if "speak ROS 2" in p["rules"]]
+    assert subjects == [["sim", "bridge", "user"]]
+    # compose's router carries no ROS 2 domain
+    assert "speak ROS 2" not in {rule["id"] for rule in acl.access_control()["rules"]}
