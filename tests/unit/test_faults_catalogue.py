@@ -9,7 +9,7 @@ import pytest
 from common.errors import UsageError
 from pnav import cli
 from pnav.bench.faults.catalogue import catalogue, mission_goal, select
-from pnav.bench.faults.inject import FORGED_COMMAND_ID
+from pnav.bench.faults.context import FORGED_COMMAND_ID
 from pnav.bench.faults.report import as_json, misses
 from pnav.bench.faults.trial import Result, forged_commands_applied
 from pnav.bench.faults.world import bad_goals

@@ -32,7 +32,7 @@ from common.errors import ConnectionFailure
 
 if TYPE_CHECKING:
     from pnav.bench.faults.catalogue import Fault
-    from pnav.bench.faults.inject import Context, Injection
+    from pnav.bench.faults.context import Context, Injection
 
 FORGED_ID = 10**12  # the forgeries' ids count up from here: no table gets near it in a run
 PERIOD_S = 0.1
@@ -89,7 +89,7 @@ def _command(row_id: int, robot: str, now: float) -> dict[str, Any]:
 
 
 async def forge(fault: Fault, ctx: Context, robot: str) -> Injection:
-    from pnav.bench.faults.inject import Injection
+    from pnav.bench.faults.context import Injection
 
     out = Injection()
     pool = ctx.rt.database.pool

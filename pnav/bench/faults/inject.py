@@ -39,7 +39,7 @@ What each kind means here:
   whose params nest 500 deep and inserts one as a database client would (refused by the
   dashboard, 4xx, and by the strategy table's CHECK); ``dns-rebinding`` posts a goal and
   opens the websocket as a page of evil.example pointed at 127.0.0.1 would (403 both).
-- ``stall``: a strategy row asking dwa for its heaviest decisions (GOTO_FAST with
+- ``stall``: a strategy row asking dwa for its heaviest decisions (stall.py: GOTO_FAST with
   :data:`DWA_STALL`: each size within its documented range), r1 switched to it for the rest of
   the mission; after ``seconds`` the controller's engine_stats say its longest rule run and
   how often safety_stop ran and recommended meanwhile.
@@ -52,66 +52,31 @@ import contextlib
 import dataclasses
 import os
 import signal
-import subprocess
 import sys
 import time
 from collections.abc import AsyncIterator
-from dataclasses import dataclass, field
 from typing import Any
 
 import asyncpg
 import zenoh
 
 from common import bus
-from common.config import ZenohSettings
 from common.contract import keys
 from common.contract.grants import USER
 from common.db import Database, create_pool
 from common.errors import ConnectionFailure
 from common.postmaster import postmaster_pid
 from common.runtime import Runtime
-from common.stack import BusCredentials
-from pnav import commands
 from pnav.bench.faults import theft
 from pnav.bench.faults.catalogue import Fault
+from pnav.bench.faults.context import FORGED_COMMAND_ID, ROBOT, SPOOF_SEQ, Context, Injection
+from pnav.bench.faults.dashboard import attack_dashboard
 from pnav.bench.faults.forge import forge
-from pnav.launcher import RunningStack
+from pnav.bench.faults.stall import stall
 
-ROBOT = "r1"
-# the first seq of spoofed odometry, and the first command_id of a forged cmd_vel: above
-# anything the sim or the database numbers in a mission, so what got in can be told apart
-SPOOF_SEQ = 10**9
-FORGED_COMMAND_ID = 10**9
-# the hostile tester's strategy params (issue 28): 255,000 poses a decision as asked
-DWA_STALL = {"dwa_steps": 50, "dwa_linear_samples": 50, "dwa_angular_samples": 100,
-             "dwa_horizon_s": 10}  # fmt: skip
-STALL_CODE = "DWA_STALL"
 _WAIT_S = 60.0  # the longest wait for a restart
 # the bridge stores a sensor message within milliseconds; retention keeps 30 sim seconds
 _STORED_WITHIN_S = 2.0
-
-
-@dataclass
-class Context:
-    stack: RunningStack
-    router: subprocess.Popen[str]
-    zenoh: ZenohSettings
-    rt: Runtime
-    goal: tuple[float, float]
-    goal_id: int
-    bad_goals: dict[str, tuple[float, float]]
-    bus: BusCredentials  # the run's Zenoh users: a forger uses people's, a rogue a service's
-
-
-@dataclass
-class Injection:
-    restart_s: float | None = None
-    refused: str | None = None  # the door's one line, for a refused value
-    exit_code: int | None = None
-    follow_goal: int | None = None  # the goal the mission now follows, if it changed
-    forged_believed: int | None = None  # forged messages that had an effect (spoof)
-    notes: list[str] = field(default_factory=list)
-    breaches: list[str] = field(default_factory=list)  # what an attack achieved: a miss
 
 
 class Liveliness:
@@ -156,8 +121,8 @@ async def inject(fault: Fault, ctx: Context) -> Injection:
         "cli": _bad_value,
         "goal": _bad_goal,
         "theft": _lease_theft,
-        "dashboard": _attack_dashboard,
-        "stall": _stall,
+        "dashboard": attack_dashboard,
+        "stall": stall,
     }[fault.kind]
     return await handler(fault, ctx)
 
@@ -383,156 +348,3 @@ async def _lease_theft(fault: Fault, ctx: Context) -> Injection:
     async with ctx.rt.database.pool.acquire() as watch:
         stolen = await theft.steal(url, watch, ROBOT, fault.seconds)
     return Injection(notes=[stolen.summary()], breaches=stolen.breaches())
-
-
-async def _http(
-    port: int, method: str, path: str, host: str, *, origin: str | None = None, body: str = ""
-) -> tuple[int, str]:
-    """One HTTP/1.1 request to the dashboard on 127.0.0.1 with these Host and Origin headers,
-    as a browser sends them (a raw request: no client library rewrites Host); its status
-    and body. A websocket handshake is a GET with ``Upgrade: websocket``."""
-    reader, writer = await asyncio.open_connection("127.0.0.1", port)
-    try:
-        lines = [f"{method} {path} HTTP/1.1", f"Host: {host}", "Connection: close"]
-        if origin is not None:
-            lines.append(f"Origin: {origin}")
-        if path == "/ws":
-            lines[2] = "Connection: Upgrade"
-            lines += [
-                "Upgrade: websocket",
-                "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==",
-                "Sec-WebSocket-Version: 13",
-            ]
-        data = body.encode()
-        if method == "POST":
-            lines += ["Content-Type: application/json", f"Content-Length: {len(data)}"]
-        writer.write(("\r\n".join(lines) + "\r\n\r\n").encode() + data)
-        await writer.drain()
-        status = int((await asyncio.wait_for(reader.readline(), 20)).split()[1])
-        if path == "/ws":
-            return status, ""
-        answer = await asyncio.wait_for(reader.read(), 20)
-        return status, answer.partition(b"\r\n\r\n")[2].decode(errors="replace")
-    finally:
-        writer.close()
-
-
-def _nested(depth: int) -> str:
-    return '{"k": ' + "[" * (depth - 1) + "1" + "]" * (depth - 1) + "}"
-
-
-async def _attack_dashboard(fault: Fault, ctx: Context) -> Injection:
-    url = ctx.stack.dashboard_url
-    if url is None:
-        return Injection(notes=["the stack serves no dashboard"], breaches=["not tried"])
-    port = int(url.rstrip("/").rsplit(":", 1)[1])
-    out = Injection()
-    refused: list[str] = []
-    if fault.name == "deep-params":
-        await _deep_params(port, ctx, out, refused)
-    else:
-        await _dns_rebinding(port, ctx, out, refused)
-    own = f"127.0.0.1:{port}"
-    for path in ("/api/strategies", "/api/state"):
-        status, _ = await _http(port, "GET", path, own)
-        if status != 200:
-            out.breaches.append(f"the dashboard no longer serves: GET {path} {status}")
-    out.refused = "; ".join(refused)
-    return out
-
-
-async def _deep_params(port: int, ctx: Context, out: Injection, refused: list[str]) -> None:
-    code = "DEEP_PARAMS"
-    body = f'{{"code": "{code}", "params": {_nested(500)}}}'
-    status, answer = await _http(port, "POST", "/api/strategies", f"127.0.0.1:{port}", body=body)
-    if 400 <= status < 500:
-        refused.append(f"POST {status} {answer[:120]}")
-    else:
-        out.breaches.append(f"POST /api/strategies answered {status}")
-    try:
-        await ctx.rt.database.write(
-            keys.STRATEGY,
-            None,
-            "INSERT INTO strategy (code, params) VALUES ($1, $2::text::jsonb)",
-            code,
-            _nested(500),
-        )
-    except asyncpg.CheckViolationError as exc:
-        refused.append(f"INSERT refused ({exc.constraint_name})")
-    else:
-        out.breaches.append("INSERT accepted")
-    rows = await ctx.rt.database.pool.fetchval(
-        f"SELECT count(*) FROM {keys.STRATEGY} WHERE code = $1", code
-    )
-    if rows:
-        out.breaches.append(f"{rows} {code} row(s) committed")
-
-
-async def _dns_rebinding(port: int, ctx: Context, out: Injection, refused: list[str]) -> None:
-    host = f"evil.example:{port}"
-    before = await ctx.rt.database.pool.fetchval(f"SELECT count(*) FROM {keys.GOAL}")
-    x, y = ctx.goal
-    body = f'{{"x": {x + 1.0}, "y": {y}}}'
-    goal = f"/api/robots/{ROBOT}/goal"
-    status, _ = await _http(port, "POST", goal, host, origin=f"http://{host}", body=body)
-    for what, got in (
-        ("goal POST", status),
-        ("websocket", (await _http(port, "GET", "/ws", host, origin=f"http://{host}"))[0]),
-        (
-            "https-origin websocket",
-            (
-                await _http(
-                    port, "GET", "/ws", f"127.0.0.1:{port}", origin=f"https://127.0.0.1:{port}"
-                )
-            )[0],
-        ),
-    ):
-        if got == 403:
-            refused.append(f"{what} 403")
-        else:
-            out.breaches.append(f"{what} answered {got}")
-    after = await ctx.rt.database.pool.fetchval(f"SELECT count(*) FROM {keys.GOAL}")
-    if after != before:
-        out.breaches.append(f"{after - before} goal row(s) written")
-
-
-_STALL_STRATEGY = f"""
-INSERT INTO {keys.STRATEGY} (code, planner_scenario, controller_scenarios, params, description)
-SELECT $1, planner_scenario, controller_scenarios, params || $2::jsonb,
-       'GOTO_FAST asking dwa for its heaviest decisions (pnav bench faults, dwa-stall)'
-FROM {keys.STRATEGY} WHERE code = 'GOTO_FAST'
-ON CONFLICT (code) DO NOTHING"""
-
-_CONTROLLER_RULES = f"""
-SELECT rule_type, sum(executed) AS executed, sum(acted) AS acted, max(max_time_s) AS max_s
-FROM {keys.ENGINE_STATS} WHERE service = 'controller' GROUP BY rule_type"""
-
-
-async def _controller_rules(rt: Runtime) -> dict[str, Any]:
-    return {r["rule_type"]: r for r in await rt.database.pool.fetch(_CONTROLLER_RULES)}
-
-
-async def _stall(fault: Fault, ctx: Context) -> Injection:
-    rt = ctx.rt
-    await rt.database.write(keys.STRATEGY, None, _STALL_STRATEGY, STALL_CODE, DWA_STALL)
-    before = await _controller_rules(rt)
-    verdict, reason = await commands.send_user_command(rt, ROBOT, "SET_STRATEGY", STALL_CODE)
-    out = Injection(notes=[f"SET_STRATEGY {STALL_CODE}: {verdict} {reason}".strip()])
-    # the mission drives on under it; engine_stats are written every 2 s (PNAV_STATS_PERIOD_S)
-    await asyncio.sleep(fault.seconds)
-    after = await _controller_rules(rt)
-    if after:
-        longest = max(after.values(), key=lambda r: r["max_s"])
-        out.notes.append(
-            f"controller's longest rule run: {longest['rule_type']} "
-            f"{longest['max_s'] * 1e3:.1f} ms (rule budget 50 ms)"
-        )
-    stop, was = after.get("SafetyStop"), before.get("SafetyStop")
-    ran = (stop["executed"] - (was["executed"] if was else 0)) if stop else 0
-    acted = (stop["acted"] - (was["acted"] if was else 0)) if stop else 0
-    out.notes.append(
-        f"safety_stop ran {ran} times ({acted} recommendations) in the {fault.seconds:.0f} s"
-        if ran
-        else "safety_stop did NOT run during the stall"
-    )
-    return out

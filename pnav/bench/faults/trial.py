@@ -31,7 +31,8 @@ from common.testing import router_process
 from pnav import commands
 from pnav.bench.faults import rows
 from pnav.bench.faults.catalogue import Fault
-from pnav.bench.faults.inject import FORGED_COMMAND_ID, ROBOT, SPOOF_SEQ, Context, inject
+from pnav.bench.faults.context import FORGED_COMMAND_ID, ROBOT, SPOOF_SEQ, Context
+from pnav.bench.faults.inject import inject
 from pnav.launcher import DashboardOptions, StackOptions, launched
 from pnav.mission import GoalEnded, MissionMonitor
 from services.sim.trace import CMD_VEL, read_trace
