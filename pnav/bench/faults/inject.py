@@ -72,7 +72,7 @@ from common.postmaster import postmaster_pid
 from common.runtime import Runtime
 from common.stack import BusCredentials
 from pnav import commands
-from pnav.bench.faults import theft
+from pnav.bench.faults import tablelock, theft
 from pnav.bench.faults.catalogue import Fault
 from pnav.bench.faults.forge import forge
 from pnav.launcher import RunningStack
@@ -158,6 +158,7 @@ async def inject(fault: Fault, ctx: Context) -> Injection:
         "theft": _lease_theft,
         "dashboard": _attack_dashboard,
         "stall": _stall,
+        "tablelock": tablelock.inject,
     }[fault.kind]
     return await handler(fault, ctx)
 
