@@ -9,6 +9,9 @@ variable                   meaning                               default
 PNAV_DATABASE_URL          Postgres DSN (postgresql://...)       none: required by services
 PNAV_DB_POOL_MAX           most connections in a service's pool  4
 PNAV_DB_WAIT_S             how long to retry an unreachable DB   10
+PNAV_DB_LOCK_TIMEOUT_MS    a service's statement that waits this 200
+                           long for a lock fails (0: waits
+                           forever; CONTRACT.md, *Roles*)
 PNAV_ZENOH_MODE            client, peer or router                client
 PNAV_ZENOH_CONNECT         comma-separated endpoints to connect  tcp/127.0.0.1:7447
 PNAV_ZENOH_LISTEN          comma-separated endpoints to listen   (none)
@@ -251,6 +254,10 @@ class ServiceConfig:
     leases: LeaseSettings = field(default_factory=LeaseSettings)
     pool_max: int = 4
     db_wait_s: float = 10.0
+    # Postgres' lock_timeout for every statement of the service's pool: a people's lock (the
+    # people's role may UPDATE some tables, so LOCK them) fails a blocked statement fast,
+    # and its rule is run again at the next activation, instead of stalling the engine
+    db_lock_timeout_ms: int = 200
     stats_period_s: float = 2.0
     instance: str = field(default_factory=default_instance)
     log_level: str = "INFO"
@@ -278,6 +285,7 @@ class ServiceConfig:
             leases=LeaseSettings.from_env(env),
             pool_max=_int(env, "PNAV_DB_POOL_MAX", cls.pool_max, minimum=1),
             db_wait_s=_float(env, "PNAV_DB_WAIT_S", cls.db_wait_s),
+            db_lock_timeout_ms=_int(env, "PNAV_DB_LOCK_TIMEOUT_MS", cls.db_lock_timeout_ms),
             stats_period_s=_float(env, "PNAV_STATS_PERIOD_S", cls.stats_period_s, minimum=0.1),
             instance=_get(env, "PNAV_INSTANCE", default_instance()),
             log_level=_get(env, "PNAV_LOG_LEVEL", cls.log_level).upper(),

@@ -117,6 +117,21 @@ async def create_pool(
             raise ConnectionFailure(f"no such database at {_redact(url)}: {exc}") from exc
 
 
+def lock_settings(lock_timeout_ms: int) -> dict[str, str]:
+    """A service pool's ``server_settings`` for ``lock_timeout_ms`` (0: none, Postgres' own
+    default: wait forever).
+
+    Any role that may UPDATE a table may also LOCK it, or hold its rows with ``SELECT ... FOR
+    UPDATE``, for as long as it likes; the people's role may UPDATE goal, strategy and
+    retention_policy. With a lock timeout a service's statement blocked by such a lock fails
+    with ``LockNotAvailableError`` (SQLSTATE 55P03) after that long instead of stalling the
+    engine's activation; the rule's error is logged (common.engine.errorlog) and the rule
+    runs again at the next activation (CONTRACT.md, *Roles*). Only the lock wait is bounded:
+    a long query is not.
+    """
+    return {"lock_timeout": f"{lock_timeout_ms}ms"} if lock_timeout_ms > 0 else {}
+
+
 async def connect(url: str) -> asyncpg.Connection:
     """One connection with the contract's codecs (for tools and tests)."""
     try:

@@ -23,7 +23,7 @@ from common import bus, lockstep, log
 from common.clock import SimClock
 from common.config import ServiceConfig
 from common.contract import keys
-from common.db import Database, create_pool
+from common.db import Database, create_pool, lock_settings
 from common.errors import ConnectionFailure, UsageError
 from common.lifeline import die_with_parent
 from common.outage import fold_outage_logs
@@ -63,7 +63,10 @@ class Runtime:
             runtime.clock.attach(runtime.session, runtime.ledger)
             if with_db:
                 pool = await create_pool(
-                    config.database_url, max_size=config.pool_max, wait_s=config.db_wait_s
+                    config.database_url,
+                    max_size=config.pool_max,
+                    wait_s=config.db_wait_s,
+                    server_settings=lock_settings(config.db_lock_timeout_ms),
                 )
                 runtime.db = Database(
                     pool,

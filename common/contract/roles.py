@@ -26,6 +26,7 @@ import asyncpg
 from common.contract.grants import (
     LOGIN_ROLES,
     OWNER,
+    USER,
     Grant,
     contract_grants,
     lease_holders,
@@ -55,6 +56,14 @@ SELECT 'FUNCTION ' || p.oid::regprocedure::text FROM pg_proc p
    AND NOT EXISTS (SELECT 1 FROM pg_depend d WHERE d.classid = 'pg_proc'::regclass
                    AND d.objid = p.oid AND d.deptype = 'e')
 """
+
+# The people's sessions (the CLI, dashboards, psql as pnav_user) may hold a transaction open,
+# idle, this long; then the server ends the session. A people's role may UPDATE some tables,
+# so it may lock them: a transaction left open (a crashed tool, a person at a prompt) would
+# hold its locks for ever. The shipped tools never hold one for more than a few statements.
+# A role's default only: a session may SET it otherwise, so the services bound their own
+# lock waits as well (common.db.lock_settings; CONTRACT.md, *Roles*).
+PEOPLE_IDLE_IN_TRANSACTION = "5s"
 
 # Every catalog function that takes an advisory lock (session or transaction, shared or not,
 # waiting or trying), whatever overloads this Postgres has.
@@ -95,9 +104,10 @@ async def _retry_race(conn: asyncpg.Connection, sql: str) -> None:
 
 
 async def ensure_roles(conn: asyncpg.Connection, passwords: Mapping[str, str]) -> None:
-    """Create the owner and every login role if missing; (re)set their attributes, and the
-    password of each role (short name) ``passwords`` names. A role not named keeps its
-    password (none, on a server that trusts its local connections)."""
+    """Create the owner and every login role if missing; (re)set their attributes (and the
+    people's idle-in-transaction bound), and the password of each role (short name)
+    ``passwords`` names. A role not named keeps its password (none, on a server that trusts
+    its local connections)."""
     for short in (OWNER, *LOGIN_ROLES):
         name = role_name(short)
         login = "NOLOGIN" if short == OWNER else "LOGIN"
@@ -108,6 +118,12 @@ async def ensure_roles(conn: asyncpg.Connection, passwords: Mapping[str, str]) -
             except _RACES:
                 pass  # created meanwhile for another database of this server
         await _retry_race(conn, f"ALTER ROLE {name} {login} {_ATTRIBUTES}")
+        if short == USER:
+            await _retry_race(
+                conn,
+                f"ALTER ROLE {name} SET idle_in_transaction_session_timeout "
+                f"= '{PEOPLE_IDLE_IN_TRANSACTION}'",
+            )
         password = passwords.get(short)
         if password is not None:
             sql = await conn.fetchval(

@@ -16,6 +16,13 @@ does not by default), else one query for the odometry alone. Either falls back t
 as the contract says: no image, a ``seq`` gap (``common.freshness.Sequences``), or nothing
 heard for ``recheck_s`` (the scan cache's period, as without images).
 
+A people's lock (CONTRACT.md, *Roles*): the people's role may UPDATE, so lock, ``strategy``,
+which the meta-controller reads with the robots. That read waits behind a lock for
+:data:`STRATEGY_LOCK_WAIT_MS` at most (the service's other statements: its ``lock_timeout``,
+common.db.lock_settings); the store then serves the robots and strategies it read before,
+and reads them again in the background, never in an activation, until a read gets through:
+safety_stop, which reads scans and odometry only, waits behind a lock once, that long.
+
 Batching across robots (docs/ARCHITECTURE.md): the odometry query asks, in the same round
 trip, for every other robot served whose scan came as an image and has none yet (their rules
 run later in the same activation); and in the service, recommendations are held until the
@@ -25,9 +32,13 @@ common.writebehind).
 
 from __future__ import annotations
 
+import asyncio
 import logging
+import time
 from collections.abc import Awaitable, Callable, Iterable, Sequence
 from typing import Protocol
+
+import asyncpg
 
 from common import log
 from common.bus import Notification
@@ -53,6 +64,9 @@ Tables = tuple[list[Robot], dict[str, ActiveStrategy]]
 
 _META = "robots and strategies"  # the one key of the meta cache: read together, stale together
 _META_TABLES = frozenset((keys.ACTIVE_STRATEGY, keys.STRATEGY, keys.ROBOT))
+# how long a read of the strategies waits behind a lock before the ones held serve
+STRATEGY_LOCK_WAIT_MS = 10
+LOCKED_LOG_S = 10.0  # a lock on the meta tables is logged at most this often (wall time)
 
 
 class ControllerSource(Protocol):
@@ -92,7 +106,13 @@ class PgControllerSource:
         return await records.robots(self.db)
 
     async def active_strategies(self) -> dict[str, ActiveStrategy]:
-        return await records.active_strategies(self.db)
+        # strategy is the one table read here that people may lock (CONTRACT.md, *Roles*):
+        # a plain read waits only behind ACCESS EXCLUSIVE, which no service takes while the
+        # stack runs, so it may give up long before the pool's lock_timeout, and the
+        # activation it runs in (safety_stop's too) barely waits
+        async with self.db.pool.acquire() as conn, conn.transaction(readonly=True):
+            await conn.execute(f"SET LOCAL lock_timeout = '{STRATEGY_LOCK_WAIT_MS}ms'")
+            return await records.active_strategies(conn)
 
     async def newest_scan_and_odometry(self, robot_id: str) -> ScanAndOdometry:
         return await records.newest_scan_and_odometry(self.db, robot_id)
@@ -188,6 +208,12 @@ class ControllerStore:
         # per (robot, scenario): the newest scan it recommended on, so that a scenario
         # restarted (or named again) never recommends twice on one scan
         self._recommended: dict[Key, int] = {}
+        # a lock refused the last read of the robots and strategies: the ones held serve,
+        # and _refresh reads them again off the activations
+        self.meta_locked = False
+        self.meta_lock_refusals = 0  # reads a lock refused (tests, logs)
+        self._refresh: asyncio.Task[None] | None = None
+        self._lock_logged_at = -LOCKED_LOG_S
 
     @property
     def notifications_lost(self) -> int:
@@ -279,10 +305,55 @@ class ControllerStore:
         return self._sim_now()
 
     async def robots(self) -> list[Robot]:
-        return (await self.tables.get(_META, self._read_tables))[0]
+        return (await self._tables())[0]
 
     async def active_strategies(self) -> dict[str, ActiveStrategy]:
-        return (await self.tables.get(_META, self._read_tables))[1]
+        return (await self._tables())[1]
+
+    async def _tables(self) -> Tables:
+        """The robots and strategies; those held while a lock refuses reading them."""
+        held = self.tables.peek(_META)
+        if held is None or not self.meta_locked:
+            try:
+                return await self.tables.get(_META, self._read_tables)
+            except asyncpg.LockNotAvailableError as exc:
+                if held is None:
+                    raise  # nothing to serve yet: the rule fails, and runs again
+                self._refused(exc)
+                return held
+        refresh = self._refresh
+        if (refresh is None or refresh.done()) and self.tables.stale(_META):
+            self._refresh = asyncio.create_task(self._read_again(), name="controller-meta-read")
+        return held
+
+    async def _read_again(self) -> None:
+        """Read the robots and strategies once, off the activations (a lock refused them)."""
+        try:
+            await self.tables.get(_META, self._read_tables)
+        except asyncpg.LockNotAvailableError as exc:
+            self._refused(exc)  # still locked: tried again once the held ones are stale
+            return
+        except Exception:
+            # not a lock (the connection, say): the next activation reads, and the engine
+            # reports what fails there as for any rule
+            self.meta_locked = False
+            return
+        self.meta_locked = False
+        log.event(logger, logging.INFO, "robots and strategies read again after a lock")
+
+    def _refused(self, exc: Exception) -> None:
+        self.meta_locked = True
+        self.meta_lock_refusals += 1
+        now = time.monotonic()
+        if now - self._lock_logged_at >= LOCKED_LOG_S:
+            self._lock_logged_at = now
+            log.event(
+                logger,
+                logging.WARNING,
+                "robots and strategies locked: serving those read before",
+                refusals=self.meta_lock_refusals,
+                error=repr(exc),
+            )
 
     async def newest_scan(self, robot_id: str) -> LaserScan | None:
         async def read() -> ScanAndOdometry:

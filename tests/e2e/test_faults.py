@@ -106,6 +106,14 @@ async def test_a_lease_theft_by_people_is_refused_and_moves_no_robot(tmp_path: P
     assert misses(r) == []
 
 
+async def test_people_locking_strategy_and_goal_stall_no_robot(tmp_path: Path) -> None:
+    r = await trial("table-lock", tmp_path)
+    assert r.outcome == "reached"
+    assert r.collisions == 0 and r.contacts == 0
+    assert r.breaches == [], r.breaches  # safety_stop ran while the tables were held
+    assert misses(r) == []
+
+
 async def test_params_nested_500_deep_are_refused_and_the_dashboard_still_serves(
     tmp_path: Path,
 ) -> None:

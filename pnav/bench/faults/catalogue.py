@@ -25,7 +25,7 @@ MISSIONS: dict[str, tuple[float, float]] = {
 class Fault:
     name: str
     # kill | postgres | freeze | cut | spoof | cmd_vel | rogue | forge | cli | goal | theft |
-    # dashboard | stall
+    # dashboard | stall | tablelock
     kind: str
     what: str  # for the report
     target: str = ""  # the service concerned
@@ -118,6 +118,13 @@ def catalogue() -> tuple[Fault, ...]:
             "10 s horizon) for the rest of the mission",
             "controller",
             10,
+        ),
+        Fault(
+            "table-lock",
+            "tablelock",
+            "pnav_user holds strategy locked (ACCESS EXCLUSIVE) and every goal row FOR UPDATE "
+            "for 8 s mid-mission",
+            seconds=8,
         ),
     )
 

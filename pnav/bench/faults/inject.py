@@ -67,7 +67,7 @@ from common.db import Database, create_pool
 from common.errors import ConnectionFailure
 from common.postmaster import postmaster_pid
 from common.runtime import Runtime
-from pnav.bench.faults import theft
+from pnav.bench.faults import tablelock, theft
 from pnav.bench.faults.catalogue import Fault
 from pnav.bench.faults.context import FORGED_COMMAND_ID, ROBOT, SPOOF_SEQ, Context, Injection
 from pnav.bench.faults.dashboard import attack_dashboard
@@ -123,6 +123,7 @@ async def inject(fault: Fault, ctx: Context) -> Injection:
         "theft": _lease_theft,
         "dashboard": attack_dashboard,
         "stall": stall,
+        "tablelock": tablelock.inject,
     }[fault.kind]
     return await handler(fault, ctx)
 
