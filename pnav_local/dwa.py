@@ -30,8 +30,8 @@ import numpy as np
 import pnav_local.trajectories as tr
 from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
+from common.controller_core.scenario import Command, ControllerScenario
 from pnav_local.params import DwaParams
-from services.controller.scenario import Command, ControllerScenario
 
 PRIORITY = 30
 _RANGE_TOLERANCE_M = 1e-4  # float32 ranges: a hit at range_min reads a hair below it

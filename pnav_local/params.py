@@ -2,7 +2,7 @@
 "dwa").
 
 A missing key takes its default; a value that is not a number in range is logged once and
-takes its default (services.controller.params.number), so a typo never stops the robot's
+takes its default (common.controller_core.params.number), so a typo never stops the robot's
 local controller. The speeds, accelerations and footprint are the robot row's, never here.
 
 A strategy row is people's, and each size within its range still multiplies the others:
@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from common import log
+from common.controller_core.params import number
 from pnav_local.trajectories import Weights
-from services.controller.params import number
 
 logger = logging.getLogger("pnav.controller")
 

@@ -18,10 +18,10 @@ import numpy as np
 from common.contract import keys, offers
 from common.contract.planned_path import PlannedPath, planned_path_of
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot, Strategy
+from common.controller_core.scenario import Recommendation, installed_scenarios
 from common.engine import Engine
 from pnav.monolith.contract import MemoryContract, Row
 from services.controller.meta import Scenarios, seed_controller
-from services.controller.scenario import Recommendation, installed_scenarios
 from services.controller.store import ControllerStore, ScanAndOdometry
 
 _ROBOT = (

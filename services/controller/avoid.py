@@ -33,8 +33,8 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from common.contract.records import LaserScan, Odometry, Robot
-from services.controller.params import number
-from services.controller.scenario import Command, ControllerScenario
+from common.controller_core.params import number
+from common.controller_core.scenario import Command, ControllerScenario
 from services.controller.sectors import Hit, ScanView, Sector, clamp, deg, describe_sector
 
 LEFT, RIGHT = 1, -1

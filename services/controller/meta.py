@@ -33,9 +33,9 @@ from dataclasses import dataclass, field
 from common import log
 from common.contract import keys
 from common.contract.records import ActiveStrategy, Robot
+from common.controller_core.scenario import ControllerScenario, Host, Key, ScenarioSpec
 from common.engine import Engine, Rule
 from common.engine.supervisor import Supervisor, Ticket
-from services.controller.scenario import ControllerScenario, Host, Key, ScenarioSpec
 
 logger = logging.getLogger("pnav.controller")
 

@@ -34,8 +34,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from common.contract.records import LaserScan, Odometry, Robot
-from services.controller.params import number
-from services.controller.scenario import Command, ControllerScenario
+from common.controller_core.params import number
+from common.controller_core.scenario import Command, ControllerScenario
 from services.controller.sectors import ScanView, clamp, deg
 
 MOVING_MPS = 0.01  # below this the robot is not translating (odometry noise, creeping)

@@ -14,10 +14,10 @@ from collections.abc import Collection
 
 from common import log
 from common.bus import Notification
+from common.controller_core.scenario import installed_scenarios
 from common.runtime import Runtime
 from common.service import ScenarioService
 from services.controller.meta import seed_controller
-from services.controller.scenario import installed_scenarios
 from services.controller.store import ControllerStore, PgControllerSource
 
 logger = logging.getLogger("pnav.controller")

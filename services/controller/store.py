@@ -4,7 +4,7 @@
 - :class:`PgControllerSource`: them in Postgres (through ``common.contract.records``);
   pnav/monolith/controller.py has them in memory;
 - :class:`ControllerStore`: the one object the service holds. It implements the rules'
-  :class:`~services.controller.scenario.Host`, keeps the caches, and learns from the
+  :class:`~common.controller_core.scenario.Host`, keeps the caches, and learns from the
   change notifications (:meth:`ControllerStore.note`, on the event loop) when to read again
   (common.freshness): an activation woken by one robot's scan reads that robot's scan only,
   not every robot's, and the robots and strategies only after one of them changed.
@@ -46,11 +46,11 @@ from common.contract import keys, records
 from common.contract.planned_path import PlannedPath, newest_planned_path, planned_path_of
 from common.contract.recommendations import write_recommendation, write_recommendations
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
+from common.controller_core.scenario import Key, Recommendation
 from common.db import Database
 from common.freshness import FreshCache, Sequences
 from common.images import ImageGuard
 from common.writebehind import WriteBehind
-from services.controller.scenario import Key, Recommendation
 
 logger = logging.getLogger("pnav.controller")
 
@@ -146,7 +146,7 @@ def _path_id(path: PlannedPath | None) -> int | None:
 
 
 class ControllerStore:
-    """The rules' :class:`~services.controller.scenario.Host` over a source, with caches.
+    """The rules' :class:`~common.controller_core.scenario.Host` over a source, with caches.
 
     ``clock`` is what the caches count ``recheck_s`` in (wall time in a service, sim time in
     a lockstep or in-process run); ``sim_now`` is sim time for the rules (None before the

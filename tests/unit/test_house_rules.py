@@ -58,6 +58,44 @@ def test_the_check_catches_a_cross_import(tmp_path: Path) -> None:
     assert cross_imports(tmp_path) == ["services/controller/bad.py imports services.planner.rules"]
 
 
+# Packages that plug into a service (its entry points) or stand beside it: they are written
+# against common/ alone (common/controller_core for a controller scenario), as a team's own
+# package would be, and never reach into a service's internals.
+PLUGIN_DIRS = ("pnav_local", "examples")
+
+
+def plugin_service_imports(root: Path) -> list[str]:
+    """Every `services` import found in a plug-in package (pnav_local, all of examples/)."""
+    return [
+        f"{path.relative_to(root)} imports {module}"
+        for top in PLUGIN_DIRS
+        if (root / top).is_dir()
+        for path in sorted((root / top).rglob("*.py"))
+        for module in imported_modules(path)
+        if module.split(".")[0] == "services"
+    ]
+
+
+def test_no_plugin_package_imports_a_service() -> None:
+    assert plugin_service_imports(ROOT) == []
+
+
+def test_the_check_catches_a_plugin_importing_a_service(tmp_path: Path) -> None:
+    (tmp_path / "pnav_local").mkdir()
+    (tmp_path / "examples" / "team").mkdir(parents=True)
+    (tmp_path / "pnav_local" / "ok.py").write_text(
+        "from common.controller_core.scenario import ControllerScenario\n"
+    )
+    (tmp_path / "pnav_local" / "bad.py").write_text("from services.controller import params\n")
+    (tmp_path / "examples" / "team" / "bad.py").write_text(
+        "def f():\n    import services.controller.store\n"
+    )
+    assert plugin_service_imports(tmp_path) == [
+        "pnav_local/bad.py imports services.controller",
+        "examples/team/bad.py imports services.controller.store",
+    ]
+
+
 MAX_MODULE_LINES = 400
 SOURCE_DIRS = ("common", "services", "pnav", "examples")
 

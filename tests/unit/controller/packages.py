@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from services.controller.scenario import SCENARIO_GROUP
+from common.controller_core.scenario import SCENARIO_GROUP
 
 
 def write_scenario_package(
@@ -27,7 +27,7 @@ def write_scenario_package(
 
 # A complete controller scenario in one module: drive on slowly whatever the scan shows.
 CREEP = """
-from services.controller.scenario import Command, ControllerScenario
+from common.controller_core.scenario import Command, ControllerScenario
 
 
 class Creep(ControllerScenario):

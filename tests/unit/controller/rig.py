@@ -10,11 +10,11 @@ from typing import Any
 from common.bus import Notification
 from common.contract import keys
 from common.contract.records import Robot, Strategy
+from common.controller_core.scenario import Key, installed_scenarios
 from common.engine import Engine
 from pnav.monolith.contract import MemoryContract
 from pnav.monolith.controller import MemoryControllerSource
 from services.controller.meta import ControllerState, Scenarios, seed_controller
-from services.controller.scenario import Key, installed_scenarios
 from services.controller.store import ControllerStore
 from tests.unit.controller.scans import BURGER, Obstacle, scan
 

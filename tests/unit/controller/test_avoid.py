@@ -7,9 +7,9 @@ import dataclasses
 import pytest
 
 from common.contract.records import LaserScan
+from common.controller_core.scenario import Command
 from services.controller.avoid_left import AvoidLeft
 from services.controller.avoid_right import AvoidRight
-from services.controller.scenario import Command
 from tests.unit.controller.scans import BURGER, Obstacle, aisle, scan
 
 

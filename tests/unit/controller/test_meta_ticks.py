@@ -14,9 +14,9 @@ from typing import Any
 import pytest
 
 from common.contract.records import LaserScan, Odometry, Robot, Strategy
+from common.controller_core.scenario import Command, ControllerScenario
 from services.controller.avoid_left import AvoidLeft
 from services.controller.safety_stop import SafetyStop
-from services.controller.scenario import Command, ControllerScenario
 from tests.unit.controller.rig import Rig
 
 RIGHT = (-40.0, -20.0, 0.30)  # front-right, within the avoid distance: avoid_left fires

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
+from common.controller_core.scenario import ControllerScenario, installed_scenarios
 from services.controller.safety_stop import SafetyStop
-from services.controller.scenario import ControllerScenario, installed_scenarios
 from tests.unit.controller.packages import CREEP, write_scenario_package
 
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from common.contract.records import LaserScan, Odometry
+from common.controller_core.scenario import Command
 from services.controller.safety_stop import SafetyStop
-from services.controller.scenario import Command
 from tests.unit.controller.scans import BURGER, odom, scan
 
 AHEAD = (-10.0, 10.0, 0.14)  # inside footprint 0.105 + margin 0.06

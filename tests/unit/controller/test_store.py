@@ -8,9 +8,9 @@ from __future__ import annotations
 from common.bus import Notification
 from common.contract import keys
 from common.contract.records import Odometry, Strategy
+from common.controller_core.scenario import Recommendation
 from pnav.monolith.contract import MemoryContract
 from pnav.monolith.controller import MemoryControllerSource
-from services.controller.scenario import Recommendation
 from services.controller.store import RECHECK_S
 from tests.unit.controller.rig import Rig
 

@@ -8,10 +8,10 @@ from collections.abc import Sequence
 from dataclasses import replace
 
 from common.contract.records import Odometry, Strategy
+from common.controller_core.scenario import Recommendation
 from pnav.monolith.contract import MemoryContract
 from pnav.monolith.controller import MemoryControllerSource
 from services.controller.safety_stop import SafetyStop
-from services.controller.scenario import Recommendation
 from tests.unit.controller.rig import Rig
 from tests.unit.controller.scans import BURGER
 

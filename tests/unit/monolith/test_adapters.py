@@ -9,6 +9,7 @@ from typing import Any
 import pytest
 
 from common.contract import keys
+from common.controller_core.scenario import Recommendation
 from common.engine import Rule
 from pnav.monolith.bridge import Applied, Bridge
 from pnav.monolith.contract import AdapterError, MemoryContract
@@ -19,7 +20,6 @@ from pnav.monolith.planner import planner_engine
 from pnav.monolith.stack import MonolithStack
 from pnav.monolith.strategies import combo_strategy, shipped_strategies
 from pnav.navbench.episode import Combo
-from services.controller.scenario import Recommendation
 from services.decision.arbitration import RobotDecision
 from services.planner.routes import Target
 from services.planner.world import RobotInfo, RobotState

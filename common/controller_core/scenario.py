@@ -17,7 +17,9 @@ drive it tick by tick). The base does the rest the same way for every scenario:
 
 Scenarios are found, not listed: the controller loads every class named under the
 entry-point group :data:`SCENARIO_GROUP` when it starts (docs/CONTROLLER.md, "Adding a
-controller scenario").
+controller scenario"). This module lives in common/ so that a scenario package needs
+nothing of the controller service's: the service implements :class:`Host` and runs the
+scenarios.
 """
 
 from __future__ import annotations
@@ -31,10 +33,10 @@ from common import log
 from common.contract.planned_path import PlannedPath
 from common.contract.recommendations import RecommendationRow
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
+from common.controller_core.params import number
 from common.engine.supervisor import Supervised, Ticket
 from common.errors import InternalError
 from common.plugins import load_scenarios
-from services.controller.params import number
 
 logger = logging.getLogger("pnav.controller")
 
@@ -99,8 +101,8 @@ class ScenarioSpec:
 
 
 class Host(Protocol):
-    """What the rules see of their service: the controller's store (store.py), or any
-    object with these methods."""
+    """What the rules see of their service: the controller's store
+    (services/controller/store.py), or any object with these methods."""
 
     def sim_now(self) -> float | None:
         """Sim time now, or None before the first clock message."""
