@@ -245,9 +245,11 @@ def dispatch(args: argparse.Namespace) -> int:
     if args.command == "demo":
         from pnav import demo
 
-        record = launcher_record(args.record)
+        record = launcher_record(args.record, args.encoding)
         link = robot_link_env(args)
-        return demo.run(args.json, args.rate, record, dashboard_options(args), args.model, link)
+        return demo.run(
+            args.json, args.rate, record, dashboard_options(args), args.model, link, args.encoding
+        )
     if args.command == "record":
         from pnav.record import info
 
@@ -296,7 +298,8 @@ def _up(args: argparse.Namespace) -> int:
         echo=not args.quiet,
         replicas=parse_replicas(args.replicas),
         replace=parse_replace(args.replace),
-        record=launcher_record(args.record),
+        record=launcher_record(args.record, args.encoding),
+        record_encoding=args.encoding,
         dashboard=dashboard_options(args),
     )
     if args.lockstep:
@@ -307,10 +310,12 @@ def _up(args: argparse.Namespace) -> int:
     return uvloop.run(up(options))
 
 
-def launcher_record(path: Path | None) -> Path | None:
+def launcher_record(path: Path | None, encoding: str = "foxglove") -> Path | None:
     """``--record FILE`` checked before the stack starts (None: not recording)."""
     from pnav.launcher import record_target
 
+    if path is None and encoding != "foxglove":
+        raise UsageError(f"--encoding {encoding}: the encoding of a recording; add --record FILE")
     return None if path is None else record_target(path)
 
 

@@ -117,6 +117,13 @@ def record_option(parser: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="record the mission into FILE as MCAP, Foxglove's schemas (docs/RECORDING.md)",
     )
+    parser.add_argument(
+        "--encoding",
+        choices=("foxglove", "ros2"),
+        default="foxglove",
+        help="the recording's encoding: foxglove (default) or ros2 (ros2msg schemas, CDR: "
+        "`ros2 bag play` reads it)",
+    )
 
 
 def record_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:

@@ -164,6 +164,7 @@ async def demo(
     dashboard: DashboardOptions | None = None,
     model: str | None = None,
     robot_link: dict[str, str] | None = None,
+    record_encoding: str = "foxglove",
 ) -> dict[str, Any]:
     """``robot_link``: the robot link's variables (pnav.cli_args.robot_link_env); none: native."""
     wall_start = time.monotonic()
@@ -178,7 +179,7 @@ async def demo(
         dashboard=dashboard,
         model=model,
     )
-    options.record = record
+    options.record, options.record_encoding = record, record_encoding
     options.extra_env.update(robot_link or {})
     if robot_link:
         print(f"  robot link: {robot_link.get('PNAV_ROBOT_LINK')} (the robot's topics on ROS 2)")
@@ -229,8 +230,9 @@ def run(
     dashboard: DashboardOptions | None = None,
     model: str | None = None,
     robot_link: dict[str, str] | None = None,
+    record_encoding: str = "foxglove",
 ) -> int:
-    summary = uvloop.run(demo(rate or RATE, record, dashboard, model, robot_link))
+    summary = uvloop.run(demo(rate or RATE, record, dashboard, model, robot_link, record_encoding))
     if json_path:
         Path(json_path).write_text(json.dumps(summary, indent=2, default=str) + "\n")
     return 0 if summary["outcome"] == "success" else 1

@@ -90,6 +90,8 @@ class StackOptions:
     replace: dict[str, list[str]] = field(default_factory=dict)
     # record the mission into this MCAP file (pnav/record, docs/RECORDING.md)
     record: Path | None = None
+    # its encoding: "foxglove" (Foxglove's schemas) or "ros2" (ros2msg, CDR)
+    record_encoding: str = "foxglove"
     # the dashboard, supervised like the services; None: none (tests and benchmarks)
     dashboard: DashboardOptions | None = None
 
@@ -201,6 +203,7 @@ def recorder_spec(local: LocalStack, options: StackOptions) -> list[ProcessSpec]
     if options.record is None:
         return []
     argv = [sys.executable, "-m", "pnav.record", str(options.record)]
+    argv += ["--encoding", options.record_encoding]
     env = {**local.env(), "PNAV_DATABASE_URL": local.url_for("user"), **options.extra_env}
     return [ProcessSpec("recorder", argv, env)]
 

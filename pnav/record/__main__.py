@@ -1,4 +1,5 @@
-"""``python -m pnav.record FILE``: record the running stack into FILE until SIGINT/SIGTERM.
+"""``python -m pnav.record FILE [--encoding ros2]``: record the running stack into FILE until
+SIGINT/SIGTERM.
 
 Started by ``pnav up --record FILE`` and ``pnav demo --record FILE`` as a supervised process,
 with the stack's environment (PNAV_DATABASE_URL, PNAV_ZENOH_*). A restart after a crash does
@@ -18,7 +19,9 @@ from common import bus
 from common.config import ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime, run_service
+from pnav.record import ENCODINGS
 from pnav.record.recorder import Recorder
+from pnav.record.ros2 import Ros2Recorder
 from pnav.record.source import RecordSource
 
 log = logging.getLogger("pnav.record")
@@ -33,11 +36,14 @@ def free_path(path: Path) -> Path:
     return candidate
 
 
-async def record(path: Path, config: ServiceConfig, stop: asyncio.Event) -> None:
+async def record(
+    path: Path, config: ServiceConfig, stop: asyncio.Event, encoding: str = "foxglove"
+) -> None:
     # a recorder only watches: it never holds up a lockstep sim
     rt = await Runtime.open(dataclasses.replace(config, lockstep=()))
     target = free_path(path)
-    recorder = Recorder(target, RecordSource(rt.database.pool), rt.clock)
+    kind = Ros2Recorder if encoding == "ros2" else Recorder
+    recorder = kind(target, RecordSource(rt.database.pool), rt.clock)
 
     def on_notification(key: str, payload: bytes) -> None:
         try:
@@ -46,7 +52,7 @@ async def record(path: Path, config: ServiceConfig, stop: asyncio.Event) -> None
             log.debug("ignored a malformed notification on %s", key)
 
     subscriber = bus.subscribe(rt.zenoh, keys.NOTIFY_ALL, on_notification)
-    log.info("recording to %s", target)
+    log.info("recording to %s (%s encoding)", target, encoding)
     try:
         await recorder.run(stop)
     finally:
@@ -64,8 +70,11 @@ async def record(path: Path, config: ServiceConfig, stop: asyncio.Event) -> None
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m pnav.record", description=__doc__)
     parser.add_argument("file", type=Path, help="the MCAP file to write")
+    parser.add_argument("--encoding", choices=ENCODINGS, default="foxglove")
     args = parser.parse_args(argv)
-    return run_service("recorder", lambda config, stop: record(args.file, config, stop))
+    return run_service(
+        "recorder", lambda config, stop: record(args.file, config, stop, args.encoding)
+    )
 
 
 if __name__ == "__main__":

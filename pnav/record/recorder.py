@@ -51,8 +51,6 @@ class Recorder:
         self, path: Path, source: RecordSource, clock: SimClock, *, period_s: float = 0.5
     ) -> None:
         self.path, self.source, self.clock, self.period_s = path, source, clock, period_s
-        self.context = foxglove.Context()
-        self.writer = foxglove.open_mcap(path, context=self.context)
         self.counts = Counts()
         self._channels: dict[str, _Channel] = {}
         self._last: dict[str, int] = {}  # table -> newest id recorded
@@ -63,6 +61,11 @@ class Recorder:
         self._dirty: set[str] = set(WATCHED)
         self._wake = asyncio.Event()
         self._closed = False
+        self._open()
+
+    def _open(self) -> None:
+        self.context = foxglove.Context()
+        self.writer = foxglove.open_mcap(self.path, context=self.context)
 
     # -- input -----------------------------------------------------------------------------
     def note(self, n: bus.Notification) -> None:
@@ -156,10 +159,12 @@ class Recorder:
                 continue
             self._status[(table, row["id"])] = row["status"]
             if table == keys.GOAL and before is None:  # where it is, once, even if seen late
-                stamp = self._stamp(row["stamp"])
-                message = topics.goal_pose(row, stamp)
-                self.emit(f"/{row['robot_id']}/goal", fc.PoseInFrameChannel, message, stamp)
+                self._goal(row, self._stamp(row["stamp"]))
             self._changed(table, row)
+
+    def _goal(self, row: dict[str, Any], stamp: float) -> None:
+        message = topics.goal_pose(row, stamp)
+        self.emit(f"/{row['robot_id']}/goal", fc.PoseInFrameChannel, message, stamp)
 
     def _changed(self, table: str, row: dict[str, Any]) -> None:
         robot, status = str(row["robot_id"]), row["status"]

@@ -38,7 +38,9 @@ DOC = Path(__file__).resolve().parents[3] / "docs" / "RECORDING.md"
 ROBOT = "r1"
 
 
-async def start_recorder(path: Path, db_url: str, zenoh: ZenohSettings) -> Any:
+async def start_recorder(
+    path: Path, db_url: str, zenoh: ZenohSettings, encoding: str = "foxglove"
+) -> Any:
     env = {
         **os.environ,
         "PNAV_DATABASE_URL": db_url,
@@ -50,6 +52,8 @@ async def start_recorder(path: Path, db_url: str, zenoh: ZenohSettings) -> Any:
         "-m",
         "pnav.record",
         str(path),
+        "--encoding",
+        encoding,
         env=env,
         stdout=asyncio.subprocess.PIPE,
         stderr=asyncio.subprocess.STDOUT,
