@@ -174,6 +174,9 @@ async def steal(user_url: str, watch: asyncpg.Connection, robot: str, seconds: f
             )
             end = time.monotonic() + seconds
             while time.monotonic() < end:
+                # a statement each round: the server ends people's transactions left idle
+                # for 5 s (idle_in_transaction_session_timeout), and a thief keeps it busy
+                await reader.execute("SELECT 1")
                 tally = await attempt(thief, attempts)
                 result.rounds += 1
                 result.refused += tally.refused
