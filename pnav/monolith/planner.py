@@ -18,12 +18,13 @@ import numpy as np
 
 from common.contract import keys, offers, records
 from common.engine import Engine
+from common.planner_core.scenario import RobotInfo
 from pnav.monolith.contract import MemoryContract, Row
 from services.planner import meta
 from services.planner.paths import PathRow
 from services.planner.recommendation import Recommendation
 from services.planner.store import PlannerStore
-from services.planner.world import MapRow, RobotInfo, Station
+from services.planner.world import MapRow, Station
 
 
 def _strategy(row: Row) -> records.Strategy:

@@ -29,10 +29,11 @@ from common import log
 from common.contract import keys, offers, records
 from common.engine import Engine, Rule
 from common.engine.supervisor import Supervisor, Ticket
+from common.planner_core.scenario import SCENARIO_GROUP, MoveScenario
 from common.plugins import load_scenarios
 from services.planner.battery import BatteryCheck, ChargeComplete
 from services.planner.recovery_rule import Recovery
-from services.planner.scenario import MoveScenario
+from services.planner.scenario import MoveRule, move_rule
 from services.planner.target import RuleKey, Spec, TargetRule
 from services.planner.unrunnable import Unrunnable
 from services.planner.view import PlannerStoreView, PlannerView
@@ -40,7 +41,6 @@ from services.planner.world import RobotState
 
 logger = logging.getLogger("pnav.planner")
 
-SCENARIO_GROUP = "pnav.planner.scenarios"  # the entry points naming the move scenarios
 # The planner's own scenarios, listed first (the thesis' order); plug-ins follow by name.
 SHIPPED = ("turn_then_move", "move_while_turning")
 TARGETS = ("goal", "nearest_charger")
@@ -70,7 +70,10 @@ class PlannerRules:
 
     def __init__(self, view: PlannerView, scenarios: Mapping[str, type[MoveScenario]]) -> None:
         self.view = view
-        self.scenarios = dict(scenarios)
+        # each scenario as the rule that runs it (scenario.move_rule)
+        self.scenarios: dict[str, type[MoveRule]] = {
+            name: move_rule(cls) for name, cls in scenarios.items()
+        }
         # any change of spec starts a fresh rule: a new strategy never inherits a route
         # follower's or a battery rule's memory
         self.supervisor: Supervisor[RuleKey, Spec] = Supervisor(

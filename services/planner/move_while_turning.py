@@ -10,8 +10,7 @@ from __future__ import annotations
 
 import math
 
-from services.planner.scenario import Movement, MoveScenario, clamp, cruise_speed
-from services.planner.world import RobotInfo
+from common.planner_core.scenario import Movement, MoveScenario, RobotInfo, clamp, cruise_speed
 
 TURN_GAIN = 1.2  # rad/s per rad of heading error
 MAX_TURN_RPS = 1.5

@@ -1,10 +1,14 @@
-"""What both planner scenarios do; they differ only in how they turn a heading error into a
-velocity (``select``).
+"""The rule every move scenario runs in: the scenarios differ only in how they turn a heading
+error into a velocity (``select``, common/planner_core/scenario.py).
 
-One rule per robot, started by the meta-planner's supervisor and cloning itself while it is
-still the robot's planner scenario (its ticket lives). A new scenario is a subclass in any
-package, registered under the ``pnav.planner.scenarios`` entry points (docs/PLANNER.md).
-Per activation:
+A scenario is a ``common.planner_core.scenario.MoveScenario`` subclass in any package,
+registered under the ``pnav.planner.scenarios`` entry points (docs/PLANNER.md); it needs
+nothing of this service's. :func:`move_rule` makes it into a :class:`MoveRule`: one rule per
+robot, started by the meta-planner's supervisor and cloning itself while it is still the
+robot's planner scenario (its ticket lives). The rule stays here, not in common/, because
+everything it does is the planner's own: the target (routes.Target), the route and its
+progress (tracking.py), the planned_path rows (paths.py), the robot's state (world.py) and
+the store's view (view.py). Per activation:
 
 1. acquisition: the newest odometry (at most every EVAL_PERIOD_S of sim time, unless a
    goal notification came or a recommendation is due by the cadence), the target (the active
@@ -26,28 +30,26 @@ from __future__ import annotations
 
 import logging
 import math
-from abc import abstractmethod
 from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 from common import log
 from common.contract import records
 from common.engine.supervisor import Ticket
+from common.planner_core.scenario import Movement, MoveScenario
 from services.planner.paths import PathKey, PathRow, empty_key, empty_row, route_row
 from services.planner.routes import Target
 from services.planner.target import RuleKey, Spec, TargetRule
 from services.planner.tracking import Progress, Route, heading_error
 from services.planner.view import PlannerView
-from services.planner.world import RobotInfo, RobotState
+from services.planner.world import RobotState
 
 logger = logging.getLogger("pnav.planner")
 
 PRIORITY = 10
 VALIDITY_S = 0.5
 ODOM_MAX_AGE_S = 1.0
-SLOW_RADIUS_M = 0.6  # closer than this to the target: slow down in proportion
-MIN_SPEED_FRACTION = 0.25  # ...but never below this fraction of max_linear
 # Recommend again at least this often (sim s) while nothing changes: well inside VALIDITY_S,
 # and as often as the decision service re-issues its winner anyway.
 RECOMMEND_PERIOD_S = 0.1
@@ -63,13 +65,6 @@ EVAL_PERIOD_S = 0.06
 # A robot's odometry is looked at on its own notifications, or this long (the planner's
 # clock: wall time in the service) after the last read in case one was lost.
 ODOM_RECHECK_S = 0.25
-
-
-@dataclass(frozen=True)
-class Movement:
-    linear: float
-    angular: float
-    turning: bool  # turning in place (turn_then_move) rather than driving
 
 
 @dataclass(frozen=True)
@@ -96,16 +91,6 @@ def due(last: Said | None, stamp: float, target_key: tuple[Any, ...], move: Move
     )
 
 
-def clamp(value: float, limit: float) -> float:
-    return max(-limit, min(limit, value))
-
-
-def cruise_speed(max_linear: float, remaining_m: float) -> float:
-    """Full speed, slowing down over the last SLOW_RADIUS_M so the robot does not overshoot."""
-    fraction = min(1.0, max(MIN_SPEED_FRACTION, remaining_m / SLOW_RADIUS_M))
-    return max_linear * fraction
-
-
 async def target_of(view: PlannerView, robot: RobotState, x: float, y: float) -> Target | None:
     """The robot's target under its strategy's ``target`` param (None: nothing to go to)."""
     strategy = robot.strategy
@@ -119,8 +104,8 @@ async def target_of(view: PlannerView, robot: RobotState, x: float, y: float) ->
     return None
 
 
-class MoveScenario(TargetRule):
-    """A planner scenario: subclasses say how a heading error becomes a velocity."""
+class MoveRule(TargetRule, MoveScenario):
+    """A move scenario's rule: everything but ``select``, which the scenario supplies."""
 
     kind: ClassVar[str] = "move"
 
@@ -149,13 +134,6 @@ class MoveScenario(TargetRule):
         # The planned_path row (paths.py): what was published last, and what is due now.
         self.published: PathKey | None = None
         self.path_due: tuple[PathKey, PathRow] | None = None
-
-    @abstractmethod
-    def select(
-        self, error: float, remaining_m: float, info: RobotInfo, turn_rate: float = 0.0
-    ) -> Movement:
-        """The velocity for a heading error (rad, CCW positive), the distance left and the
-        measured turn rate (rad/s, from the odometry)."""
 
     async def data_acquisition(self) -> None:
         self.robot = self.claim()
@@ -344,3 +322,24 @@ class MoveScenario(TargetRule):
             f"{verb} waypoint {progress.waypoint}/{progress.waypoints}, heading error "
             f"{error:.2f} rad, {progress.remaining_m:.2f} m to {target.label}"
         )
+
+
+_rules: dict[type[MoveScenario], type[MoveRule]] = {}
+
+
+def move_rule(scenario: type[MoveScenario]) -> type[MoveRule]:
+    """The rule class that runs ``scenario``: a subclass of both, named as the scenario (its
+    name in logs and engine_stats), so that ``select`` sees the rule's state (``turning``)
+    and may override a step as a subclass of the rule could. One class per scenario, so a
+    strategy's spec is equal from one meta run to the next."""
+    if issubclass(scenario, MoveRule):
+        return scenario
+    rule = _rules.get(scenario)
+    if rule is None:
+        made = type(
+            scenario.__name__,
+            (scenario, MoveRule),
+            {"__module__": scenario.__module__, "__qualname__": scenario.__qualname__},
+        )
+        rule = _rules[scenario] = cast(type[MoveRule], made)
+    return rule

@@ -12,9 +12,10 @@ from common.contract import keys, offers, planned_path, records
 from common.contract.offers import Offers
 from common.contract.recommendations import write_recommendation, write_recommendations
 from common.db import Database
+from common.planner_core.scenario import RobotInfo
 from services.planner.paths import PathRow
 from services.planner.recommendation import Recommendation
-from services.planner.world import MapRow, RobotInfo, Station
+from services.planner.world import MapRow, Station
 
 ROBOTS_SQL = (
     "SELECT robot_id, world, max_linear_mps, max_angular_rps, footprint_radius_m FROM robot"

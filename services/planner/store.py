@@ -37,13 +37,14 @@ from common.contract import keys, records
 from common.contract.offers import Offers
 from common.freshness import FreshCache, Sequences
 from common.images import ImageGuard
+from common.planner_core.scenario import RobotInfo
 from common.writebehind import WriteBehind
 from services.planner.paths import PathRow
 from services.planner.recommendation import Recommendation
 from services.planner.routes import Router, Target
 from services.planner.source import PlannerSource
 from services.planner.tracking import Progress
-from services.planner.world import MapData, RobotInfo, RobotState, Station, World
+from services.planner.world import MapData, RobotState, Station, World
 
 logger = logging.getLogger("pnav.planner")
 

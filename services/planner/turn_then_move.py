@@ -23,8 +23,7 @@ from __future__ import annotations
 
 import math
 
-from services.planner.scenario import Movement, MoveScenario, clamp, cruise_speed
-from services.planner.world import RobotInfo
+from common.planner_core.scenario import Movement, MoveScenario, RobotInfo, clamp, cruise_speed
 
 THRESHOLD_RAD = 0.3  # turn in place above this heading error
 ALIGNED_RAD = 0.15  # ...until the error is below this

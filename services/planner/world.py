@@ -18,6 +18,7 @@ import numpy as np
 
 from common import log
 from common.contract import records
+from common.planner_core.scenario import RobotInfo
 from services.planner.grid import OCCUPIED_AT, PlanGrid, plan_grid
 from services.planner.obstacles import PoseTrail, Seen
 from services.planner.tracking import Route
@@ -30,15 +31,6 @@ INFLATION_MARGIN_M = 0.05  # clearance kept beyond the footprint radius when pla
 def inflation_m(footprint_m: float) -> float:
     """The planning grid's blocked radius around obstacles for a robot's footprint."""
     return round(footprint_m + INFLATION_MARGIN_M, 3)
-
-
-@dataclass(frozen=True)
-class RobotInfo:
-    robot_id: str
-    world: str | None
-    max_linear_mps: float
-    max_angular_rps: float
-    footprint_radius_m: float
 
 
 @dataclass(frozen=True)

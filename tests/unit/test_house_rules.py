@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ast
 import subprocess
+import tomllib
 import warnings
 from pathlib import Path
 
@@ -59,8 +60,9 @@ def test_the_check_catches_a_cross_import(tmp_path: Path) -> None:
 
 
 # Packages that plug into a service (its entry points) or stand beside it: they are written
-# against common/ alone (common/controller_core for a controller scenario), as a team's own
-# package would be, and never reach into a service's internals.
+# against common/ alone (common/controller_core for a controller scenario, common/planner_core
+# for a planner move scenario), as a team's own package would be, and never reach into a
+# service's internals.
 PLUGIN_DIRS = ("pnav_local", "examples")
 
 
@@ -142,3 +144,38 @@ def test_nothing_in_the_repository_cites_a_document_outside_it() -> None:
     if not (ROOT / ".git").exists():
         return  # not a checkout (an installed copy): nothing to ask git
     assert outside_citations(ROOT) == []
+
+
+def shipped_move_scenario_service_imports(root: Path) -> list[str]:
+    """Every `services` import in a module the planner's entry points name (pyproject.toml):
+    the shipped move scenarios are written against common/planner_core alone, as a
+    plug-in's must be (docs/PLANNER.md, "Adding a move scenario")."""
+    points = tomllib.loads((root / "pyproject.toml").read_text())["project"]["entry-points"]
+    modules = {target.split(":")[0] for target in points["pnav.planner.scenarios"].values()}
+    return [
+        f"{name} imports {module}"
+        for name in sorted(modules)
+        for module in imported_modules(root / (name.replace(".", "/") + ".py"))
+        if module.split(".")[0] == "services"
+    ]
+
+
+def test_the_shipped_move_scenarios_need_only_the_planners_interface() -> None:
+    assert shipped_move_scenario_service_imports(ROOT) == []
+
+
+def test_the_check_catches_a_shipped_move_scenario_importing_the_planner(tmp_path: Path) -> None:
+    (tmp_path / "services" / "planner").mkdir(parents=True)
+    (tmp_path / "pyproject.toml").write_text(
+        '[project.entry-points."pnav.planner.scenarios"]\n'
+        'a = "services.planner.a:A"\nb = "services.planner.b:B"\n'
+    )
+    (tmp_path / "services" / "planner" / "a.py").write_text(
+        "from common.planner_core.scenario import MoveScenario\n"
+    )
+    (tmp_path / "services" / "planner" / "b.py").write_text(
+        "from services.planner.world import RobotState\n"
+    )
+    assert shipped_move_scenario_service_imports(tmp_path) == [
+        "services.planner.b imports services.planner.world"
+    ]

@@ -11,6 +11,7 @@ import pytest
 from common.contract import keys
 from common.controller_core.scenario import Recommendation
 from common.engine import Rule
+from common.planner_core.scenario import RobotInfo
 from pnav.monolith.bridge import Applied, Bridge
 from pnav.monolith.contract import AdapterError, MemoryContract
 from pnav.monolith.controller import MemoryControllerSource
@@ -22,7 +23,7 @@ from pnav.monolith.strategies import combo_strategy, shipped_strategies
 from pnav.navbench.episode import Combo
 from services.decision.arbitration import RobotDecision
 from services.planner.routes import Target
-from services.planner.world import RobotInfo, RobotState
+from services.planner.world import RobotState
 from services.sim.robot import BURGER
 from services.sim.sim import SimConfig
 from services.sim.world import load_world

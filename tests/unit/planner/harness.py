@@ -12,11 +12,11 @@ from common.bus import Notification
 from common.config import EngineSettings
 from common.contract import keys
 from common.engine import Engine
+from common.planner_core.scenario import MoveScenario
 from pnav.monolith.contract import MemoryContract
 from pnav.monolith.planner import MemoryPlannerSource
 from pnav.monolith.strategies import shipped_strategies
 from services.planner import meta
-from services.planner.scenario import MoveScenario
 from services.planner.store import PlannerStore
 from services.planner.target import TargetRule
 

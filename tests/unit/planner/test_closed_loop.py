@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 from common.contract.records import LaserScan, Odometry
+from common.planner_core.scenario import Movement, RobotInfo
 from services.planner import move_while_turning, turn_then_move
 from services.planner.obstacles import see
 from services.planner.routes import Router, Target
-from services.planner.scenario import Movement
 from services.planner.tracking import heading_error
-from services.planner.world import MapData, RobotInfo, RobotState, World
+from services.planner.world import MapData, RobotState, World
 
 RES = 0.05
 FOOTPRINT = 0.105

@@ -8,10 +8,9 @@ from __future__ import annotations
 
 from typing import Any
 
+from common.planner_core.scenario import Movement, MoveScenario, RobotInfo
 from services.planner import meta
 from services.planner.routes import Target
-from services.planner.scenario import Movement, MoveScenario
-from services.planner.world import RobotInfo
 from tests.unit.planner.harness import ROBOT, Planner
 
 GOTO = {"move": ("TurnThenMove", "GOTO_AVOID"), "battery": ("BatteryCheck", "GOTO_AVOID")}

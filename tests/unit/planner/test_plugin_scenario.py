@@ -15,7 +15,7 @@ from tests.unit.planner.harness import Planner
 MODULE = "pnav_test_creep_scenario"
 
 SOURCE = '''
-from services.planner.scenario import Movement, MoveScenario
+from common.planner_core.scenario import Movement, MoveScenario
 
 
 class Creep(MoveScenario):
