@@ -49,9 +49,11 @@ _REFUSED = (asyncpg.IntegrityConstraintViolationError, asyncpg.DataError)
 
 
 @dataclass(frozen=True)
-class RecommendationRow:
+class Recommendation:
     """A command_recommendation row about to be written: its contract columns, in the
-    order of :data:`RECOMMENDATION_COLUMNS`."""
+    order of :data:`RECOMMENDATION_COLUMNS`. The one type every writer uses (the controller,
+    the planner, their scenarios and the monolith); a scenario makes it with
+    :meth:`velocity` or :meth:`system`."""
 
     robot_id: str
     kind: str  # 'robot' (a velocity) or 'system' (a system command)
@@ -78,7 +80,7 @@ class RecommendationRow:
         ttl_s: float,
         reason: str,
         inputs: dict[str, Any] | None = None,
-    ) -> RecommendationRow:
+    ) -> Recommendation:
         """A robot recommendation valid until ``stamp + ttl_s`` (sim time)."""
         return cls(
             robot_id, "robot", source, priority, float(linear), float(angular), None,
@@ -97,7 +99,7 @@ class RecommendationRow:
         ttl_s: float,
         reason: str,
         inputs: dict[str, Any] | None = None,
-    ) -> RecommendationRow:
+    ) -> Recommendation:
         """A system recommendation (e.g. CMD_BATTSAVE) valid until ``stamp + ttl_s``."""
         return cls(
             robot_id, "system", source, priority, None, None, command,
@@ -113,23 +115,30 @@ class RecommendationRow:
         )  # fmt: skip
 
     @property
-    def key(self) -> tuple[str, str]:
-        """(robot, source): what pairs a batch's rows with the ids RETURNING gives."""
-        return self.robot_id, self.source
+    def scan_id(self) -> int | None:
+        """The laser_scan row it was derived from (``inputs.laser_scan``), if it names one."""
+        value = self.inputs.get("laser_scan")
+        return value if isinstance(value, int) else None
 
     def image(self) -> dict[str, Any]:
         """The row's contract columns as written (the notification adds ``id``)."""
         return dict(zip(RECOMMENDATION_COLUMNS, self.values(), strict=True))
 
 
-# the columns a recommendation is written with, in RecommendationRow's order: its image
+# the columns a recommendation is written with, in Recommendation's order: its image
 RECOMMENDATION_COLUMNS = (
     *("robot_id", "kind", "source", "priority", "linear_mps", "angular_rps"),
     *("system_command", "stamp", "expires_stamp", "inputs", "reason"),
 )
 
 
-async def write_recommendation(db: Database, row: RecommendationRow) -> int:
+def recommendation_key(row: Recommendation) -> tuple[str, str]:
+    """(robot, source): what pairs a batch's rows with the ids RETURNING gives, and what a
+    store's write-behind outbox keeps one row of (common.writebehind)."""
+    return row.robot_id, row.source
+
+
+async def write_recommendation(db: Database, row: Recommendation) -> int:
     """Write one row and notify with its image; its id."""
     value = await db.write(
         keys.COMMAND_RECOMMENDATION, row.robot_id, _RECOMMEND, *row.values(), image=row.image()
@@ -137,9 +146,7 @@ async def write_recommendation(db: Database, row: RecommendationRow) -> int:
     return int(value)
 
 
-async def write_recommendations(
-    db: Database, rows: Sequence[RecommendationRow]
-) -> list[int | None]:
+async def write_recommendations(db: Database, rows: Sequence[Recommendation]) -> list[int | None]:
     """Write ``rows`` (distinct (robot, source) pairs) in one statement and one commit, then
     notify each with its image. Their ids, in order; None for a row the database refused
     (a refused batch is written again row by row; logged)."""
@@ -163,7 +170,7 @@ async def write_recommendations(
     return list(ids)
 
 
-async def _write_alone(db: Database, row: RecommendationRow) -> int | None:
+async def _write_alone(db: Database, row: Recommendation) -> int | None:
     try:
         return await write_recommendation(db, row)
     except _REFUSED as exc:
@@ -186,7 +193,7 @@ async def recommend_velocity(
 ) -> int:
     """Write a robot recommendation valid until ``stamp + ttl_s`` (sim time) and notify,
     with the row's image."""
-    row = RecommendationRow.velocity(
+    row = Recommendation.velocity(
         robot_id, source=source, priority=priority, linear=linear, angular=angular,
         stamp=stamp, ttl_s=ttl_s, reason=reason, inputs=inputs,
     )  # fmt: skip
@@ -206,7 +213,7 @@ async def recommend_system(
     inputs: dict[str, Any] | None = None,
 ) -> int:
     """Write a system recommendation (e.g. CMD_BATTSAVE) and notify, with the row's image."""
-    row = RecommendationRow.system(
+    row = Recommendation.system(
         robot_id, source=source, priority=priority, command=command,
         stamp=stamp, ttl_s=ttl_s, reason=reason, inputs=inputs,
     )  # fmt: skip

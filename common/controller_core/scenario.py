@@ -31,7 +31,7 @@ from typing import Any, ClassVar, Protocol
 
 from common import log
 from common.contract.planned_path import PlannedPath
-from common.contract.recommendations import RecommendationRow
+from common.contract.recommendations import Recommendation
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
 from common.controller_core.params import number
 from common.engine.supervisor import Supervised, Ticket
@@ -59,35 +59,6 @@ class Command:
     # more provenance for the row's ``inputs`` (e.g. the planned_path a local controller
     # scored against), beside the scan and odometry the base names
     inputs: Mapping[str, Any] | None = None
-
-
-@dataclass(frozen=True)
-class Recommendation:
-    """A row of command_recommendation (kind ``robot``) about to be written."""
-
-    robot_id: str
-    source: str
-    priority: int
-    linear: float
-    angular: float
-    stamp: float
-    ttl_s: float
-    reason: str
-    inputs: dict[str, Any]
-
-    def row(self) -> RecommendationRow:
-        """The command_recommendation row it is written as."""
-        return RecommendationRow.velocity(
-            self.robot_id, source=self.source, priority=self.priority, linear=self.linear,
-            angular=self.angular, stamp=self.stamp, ttl_s=self.ttl_s, reason=self.reason,
-            inputs=self.inputs,
-        )  # fmt: skip
-
-    @property
-    def scan_id(self) -> int | None:
-        """The laser_scan row it was derived from (``inputs.laser_scan``)."""
-        value = self.inputs.get("laser_scan")
-        return value if isinstance(value, int) else None
 
 
 @dataclass(frozen=True)
@@ -207,8 +178,8 @@ class ControllerScenario(Supervised[Key, ScenarioSpec]):
         if command.inputs:
             inputs.update(command.inputs)
         await self.host.recommend(
-            Recommendation(
-                robot_id=self.spec.robot.robot_id,
+            Recommendation.velocity(
+                self.spec.robot.robot_id,
                 source=self.scenario,
                 priority=self.priority,
                 linear=command.linear,

@@ -19,6 +19,7 @@ from typing import Any
 
 from common.contract import keys
 from common.contract.offers import Offers
+from common.contract.recommendations import Recommendation
 
 Row = dict[str, Any]
 # (table, robot, row id): what a write announces; the monolith's stand-in for Zenoh
@@ -122,6 +123,13 @@ class MemoryContract:
         if notify:
             self.changed(table, row.get("robot_id"), row_id, row)
         return row_id
+
+    def insert_recommendation(self, recommendation: Recommendation) -> int:
+        """Write a command_recommendation row (not yet treated) and announce it, as
+        ``write_recommendation`` does in the stack; its id."""
+        image = recommendation.image()
+        row = {**image, "inputs": dict(image["inputs"]), "treated_by": None}
+        return self.insert(keys.COMMAND_RECOMMENDATION, row)
 
     def changed(
         self, table: str, robot: str | None, row_id: int | None, row: Row | None = None

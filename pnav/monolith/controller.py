@@ -17,8 +17,9 @@ import numpy as np
 
 from common.contract import keys, offers
 from common.contract.planned_path import PlannedPath, planned_path_of
+from common.contract.recommendations import Recommendation
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot, Strategy
-from common.controller_core.scenario import Recommendation, installed_scenarios
+from common.controller_core.scenario import installed_scenarios
 from common.engine import Engine
 from pnav.monolith.contract import MemoryContract, Row
 from services.controller.meta import Scenarios, seed_controller
@@ -91,10 +92,7 @@ class MemoryControllerSource:
         return {robot_id: await self.newest_odometry(robot_id) for robot_id in robot_ids}
 
     async def recommend(self, recommendation: Recommendation) -> int:
-        image = recommendation.row().image()
-        row = {**image, "inputs": dict(image["inputs"]), "treated_by": None}
-        # inserted, then announced to the contract's listeners, as Database.write does
-        return self.contract.insert(keys.COMMAND_RECOMMENDATION, row)
+        return self.contract.insert_recommendation(recommendation)
 
     async def recommend_many(self, recommendations: Sequence[Recommendation]) -> list[int | None]:
         return [await self.recommend(r) for r in recommendations]

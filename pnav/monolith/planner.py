@@ -17,12 +17,12 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from common.contract import keys, offers, records
+from common.contract.recommendations import Recommendation
 from common.engine import Engine
 from common.planner_core.scenario import RobotInfo
 from pnav.monolith.contract import MemoryContract, Row
 from services.planner import meta
 from services.planner.paths import PathRow
-from services.planner.recommendation import Recommendation
 from services.planner.store import PlannerStore
 from services.planner.world import MapRow, Station
 
@@ -145,9 +145,7 @@ class MemoryPlannerSource:
         return max(expiries) if expiries else None
 
     async def recommend(self, rec: Recommendation) -> int:
-        image = rec.row().image()
-        row: Row = {**image, "inputs": dict(image["inputs"]), "treated_by": None}
-        return self.contract.insert(keys.COMMAND_RECOMMENDATION, row)
+        return self.contract.insert_recommendation(rec)
 
     async def recommend_many(self, recs: Sequence[Recommendation]) -> list[int | None]:
         return [await self.recommend(rec) for rec in recs]

@@ -44,9 +44,14 @@ from common import log
 from common.bus import Notification
 from common.contract import keys, records
 from common.contract.planned_path import PlannedPath, newest_planned_path, planned_path_of
-from common.contract.recommendations import write_recommendation, write_recommendations
+from common.contract.recommendations import (
+    Recommendation,
+    recommendation_key,
+    write_recommendation,
+    write_recommendations,
+)
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
-from common.controller_core.scenario import Key, Recommendation
+from common.controller_core.scenario import Key
 from common.db import Database
 from common.freshness import FreshCache, Sequences
 from common.images import ImageGuard
@@ -127,14 +132,10 @@ class PgControllerSource:
         return await newest_planned_path(self.db, robot_id)
 
     async def recommend(self, recommendation: Recommendation) -> int:
-        return await write_recommendation(self.db, recommendation.row())
+        return await write_recommendation(self.db, recommendation)
 
     async def recommend_many(self, recommendations: Sequence[Recommendation]) -> list[int | None]:
-        return await write_recommendations(self.db, [r.row() for r in recommendations])
-
-
-def _recommendation_key(r: Recommendation) -> tuple[str, str]:
-    return r.robot_id, r.source
+        return await write_recommendations(self.db, recommendations)
 
 
 def _scan_id(pair: ScanAndOdometry) -> int | None:
@@ -434,7 +435,7 @@ class ControllerStore:
         each is written when its rule asks."""
         if self.outbox is None:
             self.outbox = WriteBehind(
-                self.source.recommend_many, _recommendation_key, "command_recommendation"
+                self.source.recommend_many, recommendation_key, "command_recommendation"
             )
         return self.outbox.flush
 
@@ -450,8 +451,8 @@ class ControllerStore:
             robot=r.robot_id,
             source=r.source,
             id=row_id,
-            linear=round(r.linear, 3),
-            angular=round(r.angular, 3),
+            linear=round(r.linear_mps or 0.0, 3),
+            angular=round(r.angular_rps or 0.0, 3),
             reason=r.reason,
         )
 

@@ -10,11 +10,14 @@ from typing import Protocol
 
 from common.contract import keys, offers, planned_path, records
 from common.contract.offers import Offers
-from common.contract.recommendations import write_recommendation, write_recommendations
+from common.contract.recommendations import (
+    Recommendation,
+    write_recommendation,
+    write_recommendations,
+)
 from common.db import Database
 from common.planner_core.scenario import RobotInfo
 from services.planner.paths import PathRow
-from services.planner.recommendation import Recommendation
 from services.planner.world import MapRow, Station
 
 ROBOTS_SQL = (
@@ -136,10 +139,10 @@ class PgPlannerSource:
         return float(value) if value is not None else None
 
     async def recommend(self, rec: Recommendation) -> int:
-        return await write_recommendation(self.db, rec.row())
+        return await write_recommendation(self.db, rec)
 
     async def recommend_many(self, recs: Sequence[Recommendation]) -> list[int | None]:
-        return await write_recommendations(self.db, [rec.row() for rec in recs])
+        return await write_recommendations(self.db, recs)
 
     async def publish_path(self, path: PathRow) -> int:
         return await planned_path.write_planned_path(self.db, path)

@@ -35,12 +35,12 @@ import services.planner.obstacles as obstacles
 from common.bus import Notification
 from common.contract import keys, records
 from common.contract.offers import Offers
+from common.contract.recommendations import Recommendation, recommendation_key
 from common.freshness import FreshCache, Sequences
 from common.images import ImageGuard
 from common.planner_core.scenario import RobotInfo
 from common.writebehind import WriteBehind
 from services.planner.paths import PathRow
-from services.planner.recommendation import Recommendation
 from services.planner.routes import Router, Target
 from services.planner.source import PlannerSource
 from services.planner.tracking import Progress
@@ -56,10 +56,6 @@ FAST_REFRESH_S = 0.5
 _WORLD_TABLES = (keys.ROBOT, keys.MAP, keys.CHARGING_STATION)
 _STRATEGY_TABLES = (keys.ACTIVE_STRATEGY, keys.STRATEGY)
 _WORLD, _ACTIVE, _OFFERS = "world", "active", "offers"  # the keys of the whole-table caches
-
-
-def _recommendation_key(rec: Recommendation) -> tuple[str, str]:
-    return rec.robot_id, rec.source
 
 
 class PlannerStore:
@@ -245,22 +241,9 @@ class PlannerStore:
     async def live_system(self, robot_id: str, command: str) -> float | None:
         return await self.source.live_system(robot_id, command, self.now())
 
-    async def recommend_velocity(
-        self,
-        robot_id: str,
-        *,
-        source: str,
-        priority: int,
-        linear: float,
-        angular: float,
-        stamp: float,
-        ttl_s: float,
-        reason: str,
-        inputs: dict[str, Any],
-    ) -> None:
-        rec = Recommendation(
-            robot_id, source, priority, stamp, ttl_s, reason, inputs, linear, angular
-        )
+    async def recommend_velocity(self, robot_id: str, **row: Any) -> None:
+        # the keywords view.py declares for the rules, as Recommendation.velocity takes them
+        rec = Recommendation.velocity(robot_id, **row)
         if self.outbox is not None:
             self.outbox.add(rec)
             return
@@ -273,27 +256,13 @@ class PlannerStore:
         written at once: the battery rule reads them back (``live_system``) before writing."""
         if self.outbox is None:
             self.outbox = WriteBehind(
-                self.source.recommend_many, _recommendation_key, "command_recommendation"
+                self.source.recommend_many, recommendation_key, "command_recommendation"
             )
         return self.outbox.flush
 
-    async def recommend_system(
-        self,
-        robot_id: str,
-        *,
-        source: str,
-        priority: int,
-        command: str,
-        stamp: float,
-        ttl_s: float,
-        reason: str,
-        inputs: dict[str, Any],
-    ) -> int:
-        return await self.source.recommend(
-            Recommendation(
-                robot_id, source, priority, stamp, ttl_s, reason, inputs, command=command
-            )
-        )
+    async def recommend_system(self, robot_id: str, **row: Any) -> int:
+        rec = Recommendation.system(robot_id, **row)
+        return await self.source.recommend(rec)
 
     async def publish_path(self, path: PathRow) -> int:
         return await self.source.publish_path(path)

@@ -17,7 +17,7 @@ from common import bus
 from common.bus import Notification
 from common.contract import keys
 from common.contract.recommendations import (
-    RecommendationRow,
+    Recommendation,
     write_recommendation,
     write_recommendations,
 )
@@ -33,8 +33,8 @@ async def add_robot(client: Runtime, robot_id: str) -> None:
     await client.database.execute("INSERT INTO robot (robot_id) VALUES ($1)", robot_id)
 
 
-def velocity(robot_id: str, source: str, linear: float) -> RecommendationRow:
-    return RecommendationRow.velocity(
+def velocity(robot_id: str, source: str, linear: float) -> Recommendation:
+    return Recommendation.velocity(
         robot_id, source=source, priority=50, linear=linear, angular=-linear, stamp=10.0,
         ttl_s=0.5, reason=f"{source} says {linear}", inputs={"laser_scan": 7, "why": [1, 2]},
     )  # fmt: skip
@@ -62,7 +62,7 @@ async def test_a_batch_is_one_commit_with_each_row_as_a_lone_write_gives_it(
             velocity("r1", "safety_stop", 0.0),
             velocity("r2", "avoid_left", 0.1),  # the same robot and source as the lone row
             velocity("r1", "avoid_left", 0.2),  # one robot, two sources
-            RecommendationRow.system(
+            Recommendation.system(
                 "r2",
                 source="battery_check",
                 priority=60,

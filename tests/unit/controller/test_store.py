@@ -7,8 +7,8 @@ from __future__ import annotations
 
 from common.bus import Notification
 from common.contract import keys
+from common.contract.recommendations import Recommendation
 from common.contract.records import Odometry, Strategy
-from common.controller_core.scenario import Recommendation
 from pnav.monolith.contract import MemoryContract
 from pnav.monolith.controller import MemoryControllerSource
 from services.controller.store import RECHECK_S
@@ -31,7 +31,17 @@ class CountingSource(MemoryControllerSource):
 
 def recommendation(scan_id: int, source: str = "safety_stop") -> Recommendation:
     inputs = {"laser_scan": scan_id, "scan_stamp": 10.0}
-    return Recommendation("r1", source, 100, 0.0, 0.5, 10.0, 0.5, "test", inputs)
+    return Recommendation.velocity(
+        "r1",
+        source=source,
+        priority=100,
+        linear=0.0,
+        angular=0.5,
+        stamp=10.0,
+        ttl_s=0.5,
+        reason="test",
+        inputs=inputs,
+    )
 
 
 async def scan_id(rig: Rig) -> int | None:

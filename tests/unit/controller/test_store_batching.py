@@ -7,8 +7,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import replace
 
+from common.contract.recommendations import Recommendation
 from common.contract.records import Odometry, Strategy
-from common.controller_core.scenario import Recommendation
 from pnav.monolith.contract import MemoryContract
 from pnav.monolith.controller import MemoryControllerSource
 from services.controller.safety_stop import SafetyStop

@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 
 from common.contract import keys
-from common.controller_core.scenario import Recommendation
+from common.contract.recommendations import Recommendation
 from common.engine import Rule
 from common.planner_core.scenario import RobotInfo
 from pnav.monolith.bridge import Applied, Bridge
@@ -54,7 +54,9 @@ async def test_the_controller_source_reads_the_in_memory_rows() -> None:
 async def test_a_write_notifies_after_it_and_the_decision_marks_what_it_considered() -> None:
     contract, notes = contract_with_rows()
     rec = await MemoryControllerSource(contract).recommend(
-        Recommendation("r1", "x", 5, 0.1, 0.0, stamp=1.0, ttl_s=0.5, reason="", inputs={})
+        Recommendation.velocity(
+            "r1", source="x", priority=5, linear=0.1, angular=0.0, stamp=1.0, ttl_s=0.5, reason=""
+        )
     )
     assert notes[-1] == (keys.COMMAND_RECOMMENDATION, "r1", rec)
     decisions = MemoryDecisionSource(contract)
