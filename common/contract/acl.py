@@ -47,18 +47,8 @@ USER_SERVICES = (
 # no rmw_zenoh router of its own, docs/ROS2.md): the sim as a ROS 2 robot, the bridge as its
 # driver, people's RViz process. ROS 2's keys live outside pnav/, under the domain id.
 ROS2_IDENTITIES = ("sim", "bridge", USER)
-_ROS2_MESSAGES = [
-    "put",
-    "delete",
-    "declare_subscriber",
-    "query",
-    "declare_queryable",
-    "reply",
-    "liveliness_token",
-    "declare_liveliness_subscriber",
-    "liveliness_query",
-]
 EVERYTHING = f"{keys.PREFIX}/**"
+# every kind of message: what anyone may receive under pnav/, and all a ROS 2 node speaks
 _EGRESS = [
     "put",
     "delete",
@@ -70,6 +60,7 @@ _EGRESS = [
     "declare_liveliness_subscriber",
     "liveliness_query",
 ]
+_ROS2_MESSAGES = _EGRESS
 
 
 def put_keys(identity: str) -> list[str]:

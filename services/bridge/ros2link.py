@@ -31,12 +31,13 @@ from typing import Any, Final
 
 import zenoh
 
+import services.bridge.messages as messages
+import services.bridge.ros2msgs as ros2msgs
 from common import ros2types
 from common.contract import keys
 from common.contract import rmw_zenoh as rz
 from common.robotlink import TWIST_STAMPED, RobotLinkSettings, RobotTopics
 from common.ros2node import Publisher, Ros2Node, type_of_key
-from services.bridge import messages, ros2msgs
 from services.bridge.counters import Counters
 from services.bridge.messages import MalformedMessage, SensorRecord
 

@@ -28,12 +28,12 @@ from typing import Any, Final
 
 import numpy as np
 
+import services.bridge.messages as messages
 from common import ros2types
 from common.contract import keys
 from common.contract import rmw_zenoh as rz
 from common.db import Database
 from common.ros2node import Ros2Node, type_of_key
-from services.bridge import messages
 from services.bridge.messages import MalformedMessage
 from services.bridge.world import MAX_CELLS
 
