@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Final
 
+import numpy as np
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
@@ -35,6 +36,10 @@ CLOCK: Final = "rosgraph_msgs/msg/Clock"
 # sensor_msgs/BatteryState.power_supply_status
 POWER_SUPPLY_STATUS_CHARGING: Final = 1
 POWER_SUPPLY_STATUS_DISCHARGING: Final = 2
+# The contract keeps a battery's energy (Wh) and power (W); ROS 2 its charge (Ah) and current
+# (A): they are converted at a TurtleBot3's nominal 11.1 V (a 3-cell LiPo), which the message
+# carries, so a reader gets the same Wh and W back.
+NOMINAL_VOLTS: Final = 11.1
 
 
 @functools.cache
@@ -102,4 +107,39 @@ def quaternion(yaw: float) -> Any:
         y=0.0,
         z=math.sin(yaw / 2.0),
         w=math.cos(yaw / 2.0),
+    )
+
+
+def battery_state(
+    stamp: float,
+    frame_id: str,
+    *,
+    power_w: float,
+    energy_wh: float,
+    capacity_wh: float,
+    percentage: float,
+    charging: bool,
+) -> Any:
+    """A sensor_msgs/BatteryState from the contract's battery figures (percentage 0..100)."""
+    volts = NOMINAL_VOLTS
+    return message(
+        BATTERY_STATE,
+        header=header(stamp, frame_id),
+        voltage=volts,
+        temperature=math.nan,
+        current=-power_w / volts,  # ROS: negative while discharging
+        charge=energy_wh / volts,
+        capacity=capacity_wh / volts,
+        design_capacity=capacity_wh / volts,
+        percentage=percentage / 100.0,
+        power_supply_status=(
+            POWER_SUPPLY_STATUS_CHARGING if charging else POWER_SUPPLY_STATUS_DISCHARGING
+        ),
+        power_supply_health=0,
+        power_supply_technology=3,  # LiPo, as a TurtleBot3's
+        present=True,
+        cell_voltage=np.zeros(0, dtype=np.float32),
+        cell_temperature=np.zeros(0, dtype=np.float32),
+        location="",
+        serial_number="",
     )

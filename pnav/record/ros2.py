@@ -12,6 +12,7 @@ and are left out (the default encoding records them).
 from __future__ import annotations
 
 import functools
+import math
 import re
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -38,7 +39,6 @@ TOPICS: dict[str, str] = {
     "/{ns}/plan": ros2types.PATH,
     "/{ns}/cmd_vel": ros2types.TWIST,
 }
-VOLTS = 11.1  # a TurtleBot3's battery: the contract keeps energy, ROS 2 charge in Ah
 
 
 @functools.cache
@@ -159,36 +159,18 @@ def scan(row: topics.Row) -> Any:
 
 
 def battery(row: topics.Row) -> Any:
-    charging = bool(row["charging"])
-    status = (
-        ros2types.POWER_SUPPLY_STATUS_CHARGING
-        if charging
-        else ros2types.POWER_SUPPLY_STATUS_DISCHARGING
-    )
-    nan = float("nan")
-
     def number(column: str) -> float:
         value = row[column]
-        return nan if value is None else float(value)
+        return math.nan if value is None else float(value)
 
-    return ros2types.message(
-        ros2types.BATTERY_STATE,
-        header=ros2types.header(float(row["stamp"]), frame(str(row["robot_id"]), "base_link")),
-        voltage=VOLTS,
-        temperature=nan,
-        current=-number("power_w") / VOLTS,  # ROS: negative while discharging
-        charge=number("energy_wh") / VOLTS,
-        capacity=number("capacity_wh") / VOLTS,
-        design_capacity=number("capacity_wh") / VOLTS,
-        percentage=number("percentage") / 100.0,
-        power_supply_status=status,
-        power_supply_health=0,
-        power_supply_technology=3,  # LiPo, as a TurtleBot3's
-        present=True,
-        cell_voltage=np.zeros(0, dtype=np.float32),
-        cell_temperature=np.zeros(0, dtype=np.float32),
-        location="",
-        serial_number="",
+    return ros2types.battery_state(
+        float(row["stamp"]),
+        frame(str(row["robot_id"]), "base_link"),
+        power_w=number("power_w"),
+        energy_wh=number("energy_wh"),
+        capacity_wh=number("capacity_wh"),
+        percentage=number("percentage"),
+        charging=bool(row["charging"]),
     )
 
 

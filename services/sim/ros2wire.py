@@ -10,7 +10,8 @@ has no collision message), and the bridge keeps listening to them there. So does
 unless the robot-link file says ``clock: ros`` (with ``use_sim_time: true``): the sim then
 publishes ROS ``/clock`` as Gazebo does, and the bridge turns it into ``pnav/sim/clock``.
 
-The battery has no voltage in the sim; it is published at a nominal ``VOLTS`` with charge,
+The battery has no voltage in the sim; it is published at a nominal voltage
+(``ros2types.NOMINAL_VOLTS``) with charge,
 capacity and current in A h and A, so the bridge gets the sim's Wh and W back.
 """
 
@@ -31,7 +32,6 @@ from common.robotlink import CLOCK_ROS, NATIVE, TWIST_STAMPED, RobotLinkSettings
 from common.ros2node import Publisher, Ros2Node, type_of_key
 
 NODE_NAME: Final = "pnav_sim"
-VOLTS: Final = 12.0
 TOPICS: Final = (keys.SCAN, keys.ODOM, keys.BATTERY_MSG)
 
 # robot, linear, angular (already checked finite); or robot and what is wrong
@@ -87,30 +87,14 @@ def odom_msg(message: dict[str, Any], odom_frame: str, base_frame: str) -> Any:
 
 
 def battery_msg(message: dict[str, Any], frame_id: str) -> Any:
-    status = (
-        ros2types.POWER_SUPPLY_STATUS_CHARGING
-        if message["charging"]
-        else ros2types.POWER_SUPPLY_STATUS_DISCHARGING
-    )
-    nan = math.nan
-    return ros2types.message(
-        ros2types.BATTERY_STATE,
-        header=ros2types.header(message["stamp"], frame_id),
-        voltage=VOLTS,
-        temperature=nan,
-        current=-message["power_w"] / VOLTS,  # ROS: negative while discharging
-        charge=message["energy_wh"] / VOLTS,
-        capacity=message["capacity_wh"] / VOLTS,
-        design_capacity=message["capacity_wh"] / VOLTS,
-        percentage=message["percentage"] / 100.0,
-        power_supply_status=status,
-        power_supply_health=0,
-        power_supply_technology=3,  # LiPo, as a TurtleBot3's
-        present=True,
-        cell_voltage=np.zeros(0, dtype=np.float32),
-        cell_temperature=np.zeros(0, dtype=np.float32),
-        location="",
-        serial_number="",
+    return ros2types.battery_state(
+        message["stamp"],
+        frame_id,
+        power_w=message["power_w"],
+        energy_wh=message["energy_wh"],
+        capacity_wh=message["capacity_wh"],
+        percentage=message["percentage"],
+        charging=bool(message["charging"]),
     )
 
 
