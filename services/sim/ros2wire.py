@@ -11,8 +11,8 @@ unless the robot-link file says ``clock: ros`` (with ``use_sim_time: true``): th
 publishes ROS ``/clock`` as Gazebo does, and the bridge turns it into ``pnav/sim/clock``.
 
 The battery has no voltage in the sim; it is published at a nominal voltage
-(``ros2types.NOMINAL_VOLTS``) with charge,
-capacity and current in A h and A, so the bridge gets the sim's Wh and W back.
+(``ros2types.NOMINAL_VOLTS``) with charge, capacity and current in A h and A, so the bridge
+gets the sim's Wh and W back.
 """
 
 from __future__ import annotations
