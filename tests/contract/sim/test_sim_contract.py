@@ -273,6 +273,9 @@ def test_payloads_follow_the_contract_and_cmd_vel_moves_the_robot(
 def test_collision_event_on_the_wire(zenoh_settings: ZenohSettings, listener: Listener) -> None:
     key = keys.robot_key("r1", keys.COLLISION)
     with running_sim(zenoh_settings, rate=0.0, **HELD):
+        # a put before the sim's cmd_vel subscriber reached the router is dropped: the sim
+        # declares it before its first reading, so its first odometry says it is there
+        listener.wait(lambda: listener.of(keys.robot_key("r1", keys.ODOM)))
         listener.send("r1", cmd(0.22, 0.0))
         # the first copy: nobody acknowledges it here, so the sim sends it again later
         event = listener.wait(lambda: listener.of(key), timeout=20.0)[0]
@@ -293,6 +296,7 @@ def test_a_collision_event_is_resent_until_acknowledged_and_then_no_more(
 ) -> None:
     key = keys.robot_key("r1", keys.COLLISION)
     with running_sim(zenoh_settings, rate=0.0, cmd_timeout_s=0.0) as node:
+        listener.wait(lambda: listener.of(keys.robot_key("r1", keys.ODOM)))  # subscribed
         listener.send("r1", cmd(0.22, 0.0))
         listener.wait(lambda: listener.of(key), timeout=20.0)
         listener.send("r1", cmd(0.0, 0.0))  # against the wall, standing: one contact
