@@ -43,17 +43,18 @@ class Publisher:
     # a transient-local publisher's: keeps its last samples for late subscriptions
     _advanced: Any = None
 
-    def put(self, msg: Any, *, reliable: bool = False) -> None:
-        """Send ``msg`` (a rosbags message of this publisher's type) as CDR."""
-        self.put_cdr(ros2types.encode(self.type_name, msg), reliable=reliable)
+    def put(self, msg: Any, *, reliable: bool = False) -> int:
+        """Send ``msg`` (a rosbags message of this publisher's type) as CDR; returns the
+        sequence number its attachment carries."""
+        return self.put_cdr(ros2types.encode(self.type_name, msg), reliable=reliable)
 
-    def put_cdr(self, payload: bytes, *, reliable: bool = False) -> None:
+    def put_cdr(self, payload: bytes, *, reliable: bool = False) -> int:
         with self._lock:
             seq = next(self._seq)
         attachment = rz.Attachment(seq, time.time_ns(), self.gid).encode()
         if self._advanced is not None:
             self._advanced.put(payload, attachment=attachment)
-            return
+            return seq
         # session puts, not a declared publisher: a client's fresh publisher drops its first
         # puts until the router has answered its interest (common/bus.py, Notifier)
         self._session.put(
@@ -65,6 +66,7 @@ class Publisher:
             ),
             express=True,
         )
+        return seq
 
 
 class Ros2Node:

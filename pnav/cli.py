@@ -151,6 +151,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="N|SERVICE=N",
         help="replicas: N of every scenario service, or SERVICE=N (repeatable)",
     )
+    latency.add_argument(
+        "--robot-link",
+        default="native",
+        metavar="LINK[,LINK]",
+        help="the robots' wire, one run per link and robot count: native, ros2 or both "
+        "(native,ros2: the ROS 2 link beside the native one in one report; default native)",
+    )
     latency.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
     nav = benches.add_parser(
         "nav",
@@ -338,6 +345,7 @@ def _bench(args: argparse.Namespace) -> int:
             args.seconds,
             parse_replicas(args.replicas),
             args.json,
+            latency_report.parse_links(args.robot_link),
         )
     if args.bench == "nav":
         from pnav.navbench import runner

@@ -30,13 +30,16 @@ from typing import Any
 
 from common.config import ServiceConfig
 from common.runtime import Runtime
+from common.trace import CMD_VEL, TraceEvent, read_trace
 from pnav import commands
 from pnav.bench import provenance as prov
 from pnav.bench.hall import Hall, write_hall
 from pnav.bench.processes import Usage
 from pnav.launcher import StackOptions, launched
-from services.sim.trace import CMD_VEL, read_trace
 
+LINKS = ("native", "ros2")
+# the stack's own router carries the ROS 2 domain (docs/ROS2.md); nothing else is on it
+ROS_DOMAIN = "0"
 WARMUP_S = 3.0  # after every robot got its first command: let pools, caches and JITs settle
 SEQUENCES = ("odometry", "laser_scan", "battery", "command_recommendation", "command2robot")
 # a process's own count of the change notifications that never reached it: the services'
@@ -162,13 +165,47 @@ async def rule_times(rt: Runtime) -> list[dict[str, Any]]:
     ]
 
 
+def link_env(link: str, bridge_trace: Path) -> dict[str, str]:
+    """The stack's variables for ``link``: the ROS 2 link as `pnav up --robot-link ros2` sets
+    it (the sim plays a ROS 2 robot on the stack's router), with the bridge's trace."""
+    if link == "native":
+        return {}
+    return {
+        "PNAV_ROBOT_LINK": link,
+        "PNAV_ROS_DOMAIN_ID": ROS_DOMAIN,
+        "PNAV_BRIDGE_TRACE": str(bridge_trace),
+    }
+
+
+def join_trace(
+    sim: list[TraceEvent], bridge: list[TraceEvent] | None
+) -> tuple[dict[tuple[str, str, int], float], dict[int, float]]:
+    """When each sensor message was published, by (kind, robot, the row's ``seq``), and when
+    each command id reached the robot. On the ROS 2 link (``bridge`` given) a row's ``seq`` is
+    the attachment's number and the sim knows a cmd_vel only by its attachment's number: the
+    bridge's trace says which command id went out as which (common/trace.py)."""
+    published: dict[tuple[str, str, int], float] = {}
+    arrivals: dict[int, float] = {}
+    sent = None if bridge is None else {(e.robot, e.wire): e.ref for e in bridge}
+    for e in sim:
+        at = e.wall_ns / 1e9
+        if e.kind != CMD_VEL:
+            published[(e.kind, e.robot, e.ref if sent is None else e.wire)] = at
+            continue
+        command_id = e.ref if sent is None else sent.get((e.robot, e.wire))
+        if command_id is not None:
+            arrivals.setdefault(command_id, at)
+    return published, arrivals
+
+
 async def measure(
-    robots: int, hz: float, seconds: float, replicas: dict[str, int]
+    robots: int, hz: float, seconds: float, replicas: dict[str, int], link: str = "native"
 ) -> dict[str, Any]:
-    """One run: the stack with ``robots`` robots, measured for ``seconds`` sim seconds."""
-    work = Path(tempfile.mkdtemp(prefix=f"pnav-latency-{robots}-"))
+    """One run: the stack with ``robots`` robots on ``link``, measured for ``seconds`` sim
+    seconds."""
+    work = Path(tempfile.mkdtemp(prefix=f"pnav-latency-{robots}-{link}-"))
     hall = write_hall(work / "world", robots)
-    trace_path = work / "trace.csv"
+    trace_path, bridge_trace = work / "trace.csv", work / "bridge-trace.csv"
     options = StackOptions(
         world=str(hall.world),
         zenoh_port=None,
@@ -178,6 +215,7 @@ async def measure(
             "PNAV_SIM_SCAN_HZ": str(hz),
             "PNAV_SIM_ODOM_HZ": str(hz),
             "PNAV_SIM_TRACE": str(trace_path),
+            **link_env(link, bridge_trace),
         },
     )
     async with launched(options) as stack:
@@ -209,19 +247,14 @@ async def measure(
             with contextlib.suppress(Exception):
                 await rt.close()
     lost = notifications_lost(work / "logs")
-    events = read_trace(trace_path)
-    published: dict[tuple[str, str, int], float] = {}
-    arrivals: dict[int, float] = {}
-    for e in events:
-        at = e.wall_ns / 1e9
-        if e.kind == CMD_VEL:
-            arrivals.setdefault(e.ref, at)
-        else:
-            published[(e.kind, e.robot, e.ref)] = at
+    published, arrivals = join_trace(
+        read_trace(trace_path), None if link == "native" else read_trace(bridge_trace)
+    )
     all_samples, unmatched = prov.samples(arrivals, collected.commands, collected.rows, published)
     samples = [s for s in all_samples if t0 <= s.published <= t1]
     wall = t1 - t0
     return {
+        "link": link,
         "robots": robots,
         "hz": hz,
         "replicas": replicas,

@@ -8,12 +8,24 @@ from typing import Any
 import uvloop
 
 from pnav.bench import provenance as prov
-from pnav.bench.latency import measure
+from pnav.bench.latency import LINKS, measure
 from pnav.bench.report import emit, machine, percentiles
 
 # the issue's targets: robots -> p99 ms, on a 2-core machine
 TARGETS_MS = {1: 5.0, 10: 10.0, 50: 50.0}
 LIMITS_MS = (5.0, 50.0)
+
+
+def parse_links(text: str) -> tuple[str, ...]:
+    """``--robot-link``: ``native``, ``ros2`` or both, comma-separated, in the order given."""
+    links = tuple(dict.fromkeys(part.strip() for part in text.split(",") if part.strip()))
+    unknown = [link for link in links if link not in LINKS]
+    if not links or unknown:
+        raise SystemExit(
+            f"pnav bench latency: --robot-link {text!r}: each link must be one of "
+            f"{', '.join(LINKS)}"
+        )
+    return links
 
 
 def target_for(robots: int) -> float | None:
@@ -59,9 +71,15 @@ def summarise(run: dict[str, Any]) -> dict[str, Any]:
     }
 
 
+def _label(run: dict[str, Any]) -> str:
+    link = "" if run["link"] == "native" else f", {run['link']} link"
+    return f"  {run['robots']:>3} robots{link}: "
+
+
 def table(results: Sequence[dict[str, Any]]) -> list[str]:
     head = (
-        f"{'robots':>6} {'repl':>4} {'samples':>7} {'p50':>7} {'p95':>7} {'p99':>7} {'max':>7}"
+        f"{'link':>6} {'robots':>6} {'repl':>4} {'samples':>7}"
+        f" {'p50':>7} {'p95':>7} {'p99':>7} {'max':>7}"
         f" {'>5ms':>6} {'>50ms':>6} {'target':>7} {'rows/s':>7} {'sim x':>6} {'CPU %':>6}"
     )
     lines = ["sense-to-act latency, ms (sensor published by the sim -> command at the sim)", head]
@@ -73,11 +91,14 @@ def table(results: Sequence[dict[str, Any]]) -> list[str]:
         target = "-" if r["target_p99_ms"] is None else f"<{r['target_p99_ms']:g}"
         mark = {True: " ok", False: " MISS", None: ""}[r["target_met"]]
         if not lat:
-            lines.append(f"{r['robots']:>6} {repl:>4} {0:>7}   no samples (see unmatched)")
+            lines.append(
+                f"{r['link']:>6} {r['robots']:>6} {repl:>4} {0:>7}   no samples (see unmatched)"
+            )
             continue
         lines.append(
-            f"{r['robots']:>6} {repl:>4} {r['samples']:>7} {lat['p50']:>7.2f} {lat['p95']:>7.2f}"
-            f" {lat['p99']:>7.2f} {lat['max']:>7.1f} {lat['share_over_5ms']:>6.1%}"
+            f"{r['link']:>6} {r['robots']:>6} {repl:>4} {r['samples']:>7}"
+            f" {lat['p50']:>7.2f} {lat['p95']:>7.2f} {lat['p99']:>7.2f} {lat['max']:>7.1f}"
+            f" {lat['share_over_5ms']:>6.1%}"
             f" {lat['share_over_50ms']:>6.1%} {target:>7} {rows:>7.0f} {r['sim_rate']:>6.2f}"
             f" {cpu:>6.0f}{mark}"
         )
@@ -89,7 +110,7 @@ def table(results: Sequence[dict[str, Any]]) -> list[str]:
             for name, st in r["stages_ms"].items()
             if st
         ]
-        lines.append(f"  {r['robots']:>3} robots: " + ", ".join(parts))
+        lines.append(_label(r) + ", ".join(parts))
     lines.append("")
     lines.append("per process: CPU % of one core, peak PSS MB")
     for r in results:
@@ -97,12 +118,12 @@ def table(results: Sequence[dict[str, Any]]) -> list[str]:
         parts = [
             f"{name} {p['cpu_percent']:.0f}%/{p['peak_pss_mb']:.0f}" for name, p in procs.items()
         ]
-        lines.append(f"  {r['robots']:>3} robots: " + ", ".join(parts))
+        lines.append(_label(r) + ", ".join(parts))
     lines.append("")
     lines.append("change notifications lost, whole run (each process's own count: a seq skipped)")
     for r in results:
         parts = [f"{name} {n}" for name, n in r.get("notifications_lost", {}).items()]
-        lines.append(f"  {r['robots']:>3} robots: " + (", ".join(parts) or "no count found"))
+        lines.append(_label(r) + (", ".join(parts) or "no count found"))
     lines.append("")
     lines.append("rules: mean / max ms per run of the rule, its queries included (engine_stats)")
     for r in results:
@@ -110,7 +131,7 @@ def table(results: Sequence[dict[str, Any]]) -> list[str]:
             f"{x['service']}.{x['rule']} {x['mean_ms']:.2f}/{x['max_ms']:.1f} (x{x['executed']})"
             for x in r.get("rules", [])
         ]
-        lines.append(f"  {r['robots']:>3} robots: " + ", ".join(parts))
+        lines.append(_label(r) + ", ".join(parts))
     return lines
 
 
@@ -120,11 +141,16 @@ def run(
     seconds: float = 30.0,
     replicas: dict[str, int] | None = None,
     json_path: str | None = None,
+    links: Sequence[str] = ("native",),
 ) -> int:
     results = []
     for n in robots:
-        print(f"running {n} robot(s) at {hz:g} Hz for {seconds:g} sim s ...", flush=True)
-        results.append(summarise(uvloop.run(measure(n, hz, seconds, replicas or {}))))
+        for link in links:
+            print(
+                f"running {n} robot(s) at {hz:g} Hz for {seconds:g} sim s, {link} link ...",
+                flush=True,
+            )
+            results.append(summarise(uvloop.run(measure(n, hz, seconds, replicas or {}, link))))
     for line in table(results):
         print(line)
     emit({"benchmark": "latency", "machine": machine(), "runs": results}, json_path)

@@ -3,7 +3,7 @@
 A ``cmd_vel`` carries its ``command_id``; that ``command2robot`` row names the
 ``recommendation_id`` it obeyed; the recommendation's ``inputs`` name the sensor rows it was
 decided from (``laser_scan`` and/or ``odometry`` ids); a sensor row keeps the ``seq`` of the
-sim message it stores. The sim's trace (services/sim/trace.py) gives the two ends on the wall
+sim message it stores. The sim's trace (common/trace.py) gives the two ends on the wall
 clock: when that message left the sim, and when the command reached it. Postgres'
 ``clock_timestamp()`` columns (``received_at``, ``created_at``) mark the stages between.
 

@@ -23,6 +23,7 @@ import contextlib
 import functools
 import logging
 import time
+from pathlib import Path
 
 import zenoh
 
@@ -34,6 +35,7 @@ from common.errors import ConfigError
 from common.robotlink import NATIVE, RobotLinkSettings
 from common.runtime import Runtime, run_service
 from common.tasks import cancel_and_wait
+from common.trace import Tracer
 from services.bridge.acks import CollisionAcks
 from services.bridge.commands import CommandRelay
 from services.bridge.counters import Counters, RateLimitedLog
@@ -218,6 +220,7 @@ class Bridge:
             self.counters,
             self._accept,
             self._malformed,
+            Tracer(Path(self.settings.trace)) if self.settings.trace else None,
         )
         self.ros2.start()
         self.commands.send_out = self.ros2.send_cmd_vel

@@ -143,8 +143,8 @@ class CommandRelay:
         self._subscriber: zenoh.Subscriber[None] | None = None
         self._tasks: list[asyncio.Task[None]] = []
         # another robot link's sender (the ROS 2 link): (robot, stamp, linear, angular,
-        # reliable); None: the native cmd_vel below
-        self.send_out: Callable[[str, float, float, float, bool], None] | None = None
+        # reliable, command_id); None: the native cmd_vel below
+        self.send_out: Callable[[str, float, float, float, bool, int | None], None] | None = None
 
     async def start(self) -> None:
         # Subscribe before the first read, so a command written in between is not missed.
@@ -377,7 +377,7 @@ class CommandRelay:
         reliable: bool = False,
     ) -> None:
         if self.send_out is not None:
-            self.send_out(robot, self.clock.now(), linear, angular, reliable)
+            self.send_out(robot, self.clock.now(), linear, angular, reliable, command_id)
             return
         if self.ledger is not None:
             self.ledger.sent_on(keys.robot_key(robot, keys.CMD_VEL))

@@ -38,6 +38,7 @@ from common.contract import keys
 from common.contract import rmw_zenoh as rz
 from common.robotlink import TWIST_STAMPED, RobotLinkSettings, RobotTopics
 from common.ros2node import Publisher, Ros2Node, type_of_key
+from common.trace import CMD_VEL, Tracer
 from services.bridge.counters import Counters
 from services.bridge.messages import MalformedMessage, SensorRecord
 
@@ -74,8 +75,10 @@ class Ros2Link:
         counters: Counters,
         on_record: OnRecord,
         on_malformed: OnMalformed,
+        tracer: Tracer | None = None,
     ) -> None:
         self.settings = settings
+        self.tracer = tracer
         self.session = session
         self.counters = counters
         self.on_record = on_record
@@ -119,10 +122,18 @@ class Ros2Link:
 
     def close(self) -> None:
         self.node.close()
+        if self.tracer is not None:
+            self.tracer.close()
 
     # -- commands --------------------------------------------------------------------------
     def send_cmd_vel(
-        self, robot: str, stamp: float, linear: float, angular: float, reliable: bool
+        self,
+        robot: str,
+        stamp: float,
+        linear: float,
+        angular: float,
+        reliable: bool,
+        command_id: int | None = None,
     ) -> None:
         publisher = self._cmd_vel.get(robot)
         if publisher is None:
@@ -132,7 +143,12 @@ class Ros2Link:
             msg = ros2msgs.twist_stamped(stamp, frame, linear, angular)
         else:
             msg = ros2msgs.twist(linear, angular)
-        publisher.put(msg, reliable=reliable)
+        sent_ns = Tracer.now()
+        wire = publisher.put(msg, reliable=reliable)
+        if self.tracer is not None and command_id is not None:
+            # a Twist has no room for the id: the trace says which attachment number carried it
+            self.tracer.record(CMD_VEL, robot, command_id, wire, sent_ns)
+            self.tracer.maybe_flush()
 
     # -- sensors ---------------------------------------------------------------------------
     def _from_zenoh(

@@ -19,6 +19,8 @@ PNAV_BRIDGE_SAFETY_LATENCY_S    sim seconds a command acts before the next     0
 PNAV_BRIDGE_SAFETY_MARGIN_M     gap kept between footprint and obstacle, m     0.05
 PNAV_BRIDGE_SAFETY_SCAN_AGE_S   sim age beyond which a scan is not evidence    0.5
 PNAV_BRIDGE_SAFETY_BLIND_MPS    speed cap with no fresh scan (empty: none)     (none)
+PNAV_BRIDGE_TRACE               on the ROS 2 link, a latency trace of each     (none)
+                                command sent (common/trace.py)
 ==============================  =============================================  =======
 
 The safety layer (:mod:`services.bridge.safety`, docs/BRIDGE.md "Safety layer") checks every
@@ -103,6 +105,8 @@ class BridgeSettings:
     # rows waiting per table while Postgres is slow; beyond it the oldest are dropped
     max_pending_rows: int = 10_000
     safety: SafetyParams = field(default_factory=SafetyParams)
+    # `pnav bench latency --robot-link ros2`: which command id went out as which cmd_vel
+    trace: str | None = None
 
     def __post_init__(self) -> None:
         for name in ("watchdog_s", "command_period_s", "watchdog_tick_s", "prune_period_s"):
@@ -122,4 +126,5 @@ class BridgeSettings:
             prune_period_s=_positive(env, "PNAV_BRIDGE_PRUNE_PERIOD_S", cls.prune_period_s),
             stats_period_s=_positive(env, "PNAV_BRIDGE_STATS_PERIOD_S", cls.stats_period_s),
             safety=_safety(env),
+            trace=env.get("PNAV_BRIDGE_TRACE", "").strip() or None,
         )

@@ -125,7 +125,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         "--trace",
         default=_env("PNAV_SIM_TRACE"),
         help="write when each sensor message left and each command arrived, for "
-        "`pnav bench latency` (services/sim/trace.py) [PNAV_SIM_TRACE]",
+        "`pnav bench latency` (common/trace.py) [PNAV_SIM_TRACE]",
     )
     ap.add_argument(
         "--physics-hz", type=float, default=240.0, help="physics steps per sim second (default 240)"
@@ -206,9 +206,9 @@ def serve(
     max_lag: float | None = None,
     lockstep: tuple[str, ...] = (),
 ) -> int:
+    from common.trace import Tracer
     from services.sim.gate import Gate
     from services.sim.node import SimNode
-    from services.sim.trace import Tracer
 
     stop = threading.Event()
     signals = SignalStop(stop)  # SIGINT and SIGTERM set ``stop`` (signals.py says how)

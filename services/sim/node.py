@@ -20,6 +20,7 @@ from common.bus import pack, subscribe_threaded, unpack
 from common.contract import keys
 from common.log import event
 from common.robotlink import RobotLinkSettings
+from common.trace import CMD_VEL, NO_REF, Tracer
 from services.sim.clock import Pacer
 from services.sim.gate import Gate
 from services.sim.lockstep import Barrier
@@ -28,7 +29,6 @@ from services.sim.outbox import CollisionOutbox
 from services.sim.ros2wire import TOPICS as ROS2_TOPICS
 from services.sim.ros2wire import make_wire
 from services.sim.sim import SimConfig, Simulation
-from services.sim.trace import CMD_VEL, Tracer
 from services.sim.world import World
 
 log = logging.getLogger(__name__)
@@ -145,11 +145,14 @@ class SimNode:
         if self.barrier is not None:
             self.barrier.on_cmd_vel(key)
 
-    def _ros2_command(self, robot: str, linear: float, angular: float) -> None:
-        """A ROS 2 cmd_vel (ros2wire.py checked it): no command id, no decided stamp."""
+    def _ros2_command(self, robot: str, linear: float, angular: float, wire: int) -> None:
+        """A ROS 2 cmd_vel (ros2wire.py checked it): no command id, no decided stamp; the
+        trace names it by its attachment's number, which the bridge's trace joins to the id."""
         if not self.sim.set_command(robot, linear, angular):
             self._complain(robot, robot, "cmd_vel for an unknown robot ignored")
             return
+        if self.tracer is not None:
+            self.tracer.record(CMD_VEL, robot, NO_REF, wire)
         self.commands_received += 1
 
     def _complain(self, robot: str, problem: str, msg: str = "") -> None:
@@ -172,11 +175,15 @@ class SimNode:
         if topic == keys.COLLISION:
             message = {**message, "run": self.outbox.run}
             self.outbox.sent(robot, message)
+        if self.wire is not None and topic in ROS2_TOPICS:
+            # stamped before it goes, as on the native wire; named by the attachment's number
+            sent_ns = Tracer.now()
+            wire = self.wire.publish(robot, topic, message)
+            if self.tracer is not None:
+                self.tracer.record(topic, robot, message["seq"], wire, sent_ns)
+            return
         if self.tracer is not None:
             self.tracer.record(topic, robot, message["seq"])
-        if self.wire is not None and topic in ROS2_TOPICS:
-            self.wire.publish(robot, topic, message)
-            return
         self._publishers[(robot, topic)].put(pack(message))
 
     def resend_collisions(

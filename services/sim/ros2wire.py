@@ -34,8 +34,9 @@ from common.ros2node import Publisher, Ros2Node, type_of_key
 NODE_NAME: Final = "pnav_sim"
 TOPICS: Final = (keys.SCAN, keys.ODOM, keys.BATTERY_MSG)
 
-# robot, linear, angular (already checked finite); or robot and what is wrong
-OnCommand = Callable[[str, float, float], None]
+# robot, linear, angular (already checked finite), the attachment's sequence number (-1
+# without one); or robot and what is wrong
+OnCommand = Callable[[str, float, float, int], None]
 OnBadCommand = Callable[[str, str], None]
 
 
@@ -160,7 +161,9 @@ class Ros2Wire:
         handler = functools.partial(self._on_cmd_vel, robot)
         self.node.subscription(rz.fully_qualified(ns, topics.cmd_vel), kind, handler)
 
-    def publish(self, robot: str, topic: str, message: dict[str, Any]) -> None:
+    def publish(self, robot: str, topic: str, message: dict[str, Any]) -> int:
+        """Publish a reading; returns its attachment's sequence number (what the bridge
+        stores as the row's ``seq``)."""
         topics = self._topics[robot]
         ns = topics.resolved_namespace(robot)
         odom_frame, base = frame(ns, topics.odom_frame), frame(ns, topics.base_frame)
@@ -171,7 +174,7 @@ class Ros2Wire:
             self._tf.put(tf_msg(message["stamp"], odom_frame, base, message))
         else:
             msg = battery_msg(message, base)
-        self._publishers[(robot, topic)].put(msg)
+        return self._publishers[(robot, topic)].put(msg)
 
     def publish_clock(self, stamp: float) -> bool:
         """Publish sim time as ROS ``/clock`` if the link says so (``clock: ros``)."""
@@ -195,10 +198,20 @@ class Ros2Wire:
         if not (math.isfinite(linear) and math.isfinite(angular)):
             self.on_bad_command(robot, f"cmd_vel not finite: {linear}, {angular}")
             return
-        self.on_command(robot, linear, angular)
+        self.on_command(robot, linear, angular, _sequence(att))
 
     def close(self) -> None:
         self.node.close()
+
+
+def _sequence(att: bytes | None) -> int:
+    """The attachment's sequence number, -1 without a readable one (it only labels the trace)."""
+    if att is None:
+        return -1
+    try:
+        return rz.Attachment.decode(att).sequence_number
+    except ValueError:
+        return -1
 
 
 def make_wire(

@@ -13,7 +13,7 @@ from pnav.bench.faults.context import FORGED_COMMAND_ID
 from pnav.bench.faults.report import as_json, misses
 from pnav.bench.faults.trial import Result, forged_commands_applied
 from pnav.bench.faults.world import bad_goals
-from services.sim.trace import CMD_VEL, Tracer
+from common.trace import CMD_VEL, Tracer
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -6,11 +6,11 @@ from pathlib import Path
 
 import pytest
 
+from common.trace import CMD_VEL, NO_REF, TraceEvent, Tracer, read_trace
 from pnav.bench import provenance as prov
 from pnav.bench.hall import write_hall
-from pnav.bench.latency import notifications_lost
-from pnav.bench.latency_report import latency_figures, target_for
-from services.sim.trace import Tracer, read_trace
+from pnav.bench.latency import join_trace, notifications_lost
+from pnav.bench.latency_report import latency_figures, parse_links, target_for
 from services.sim.world import load_world
 
 T0 = 1_800_000_000.0  # wall seconds, as Postgres' clock_timestamp() gives them
@@ -125,6 +125,58 @@ def test_the_sim_trace_reads_back_what_was_recorded(tmp_path: Path) -> None:
     assert events[0].wall_ns <= events[1].wall_ns
     tracer.close()
     assert len(read_trace(tmp_path / "trace.csv")) == 3
+
+
+def test_a_trace_keeps_the_wire_number_and_a_stamp_taken_before_it(tmp_path: Path) -> None:
+    # the sim stamps a ROS 2 reading before it goes and names it by its attachment number
+    # once the publisher has given it one
+    path = tmp_path / "trace.csv"
+    tracer = Tracer(path)
+    before = Tracer.now()
+    tracer.record("scan", "r1", 90, wire=4, wall_ns=before)
+    tracer.record(CMD_VEL, "r1", NO_REF, wire=11)
+    tracer.close()
+    scan, cmd = read_trace(path)
+    assert (scan.kind, scan.ref, scan.wire, scan.wall_ns) == ("scan", 90, 4, before)
+    assert (cmd.kind, cmd.ref, cmd.wire) == (CMD_VEL, NO_REF, 11)
+    assert cmd.wall_ns >= before
+
+
+def test_the_native_link_joins_by_the_sims_seq_and_the_command_id() -> None:
+    sim = [
+        TraceEvent("odom", "r1", 70, 1_000_000_000),
+        TraceEvent(CMD_VEL, "r1", 100, 1_004_000_000),
+        TraceEvent(CMD_VEL, "r1", 100, 1_009_000_000),  # the same command again: first counts
+    ]
+    published, arrivals = join_trace(sim, None)
+    assert published == {("odom", "r1", 70): 1.0}
+    assert arrivals == {100: 1.004}
+
+
+def test_the_ros2_link_joins_through_the_attachment_numbers_the_bridge_traced() -> None:
+    # rows keep the attachment number as seq; the sim knows a cmd_vel by its number only
+    sim = [
+        TraceEvent("odom", "r1", 70, 1_000_000_000, wire=3),
+        TraceEvent("odom", "r2", 70, 1_001_000_000, wire=3),
+        TraceEvent(CMD_VEL, "r1", NO_REF, 1_004_000_000, wire=8),
+        TraceEvent(CMD_VEL, "r2", NO_REF, 1_006_000_000, wire=8),  # same number, other robot
+        TraceEvent(CMD_VEL, "r1", NO_REF, 1_007_000_000, wire=9),  # sent without an id
+    ]
+    bridge = [
+        TraceEvent(CMD_VEL, "r1", 100, 1_003_000_000, wire=8),
+        TraceEvent(CMD_VEL, "r2", 101, 1_005_000_000, wire=8),
+    ]
+    published, arrivals = join_trace(sim, bridge)
+    assert published == {("odom", "r1", 3): 1.0, ("odom", "r2", 3): 1.001}
+    assert arrivals == {100: 1.004, 101: 1.006}
+
+
+def test_robot_links_are_parsed_in_order_and_an_unknown_one_is_refused() -> None:
+    assert parse_links("native") == ("native",)
+    assert parse_links("ros2, native,ros2") == ("ros2", "native")
+    for bad in ("", "dds", "native,ros3"):
+        with pytest.raises(SystemExit, match="--robot-link"):
+            parse_links(bad)
 
 
 @pytest.mark.parametrize("robots", [1, 10, 50])

@@ -28,6 +28,7 @@ from common.outage import is_connection_error
 from common.runtime import Runtime
 from common.stack import BusCredentials
 from common.testing import router_process
+from common.trace import CMD_VEL, read_trace
 from pnav import commands
 from pnav.bench.faults import rows
 from pnav.bench.faults.catalogue import Fault
@@ -35,7 +36,6 @@ from pnav.bench.faults.context import FORGED_COMMAND_ID, ROBOT, SPOOF_SEQ, Conte
 from pnav.bench.faults.inject import inject
 from pnav.launcher import DashboardOptions, StackOptions, launched
 from pnav.mission import GoalEnded, MissionMonitor
-from services.sim.trace import CMD_VEL, read_trace
 
 T = TypeVar("T")
 
@@ -126,7 +126,7 @@ def sim_figures(sim_log: Path) -> dict[str, float]:
 
 
 def forged_commands_applied(trace: Path) -> int | None:
-    """The forged cmd_vel the sim applied, by its own trace (services/sim/trace.py); None
+    """The forged cmd_vel the sim applied, by its own trace (common/trace.py); None
     without a trace (the sim never ran)."""
     if not trace.is_file():
         return None

@@ -13,6 +13,7 @@ import pytest
 from common import bus, ros2types
 from common.contract import rmw_zenoh as rz
 from common.testing import eventually
+from common.trace import CMD_VEL, NO_REF, read_trace
 from pnav.launcher import StackOptions, launched
 
 pytestmark = [pytest.mark.timeout(120), pytest.mark.slow]
@@ -32,6 +33,7 @@ async def test_the_sim_drives_as_a_ros2_robot_and_both_nodes_are_in_the_graph(
     the stack's clock (use_sim_time), as it would for a simulated robot of another sim."""
     link = tmp_path / "link.yaml"
     link.write_text(f"clock: {clock}\nuse_sim_time: true\n")
+    sim_trace, bridge_trace = tmp_path / "sim.csv", tmp_path / "bridge.csv"
     options = StackOptions(
         world="open_room",
         rate="1",
@@ -41,6 +43,9 @@ async def test_the_sim_drives_as_a_ros2_robot_and_both_nodes_are_in_the_graph(
             "PNAV_ROBOT_LINK": "ros2",
             "PNAV_ROS_DOMAIN_ID": "7",
             "PNAV_ROS2_LINK_FILE": str(link),
+            # the three traces `pnav bench latency --robot-link ros2` joins (common/trace.py)
+            "PNAV_SIM_TRACE": str(sim_trace),
+            "PNAV_BRIDGE_TRACE": str(bridge_trace),
         },
     )
     async with launched(options) as stack:
@@ -56,6 +61,21 @@ async def test_the_sim_drives_as_a_ros2_robot_and_both_nodes_are_in_the_graph(
             assert after["x"] - before["x"] > 0.2  # it moved forward, over ROS 2
             assert await conn.fetchval("SELECT count(*) FROM laser_scan") > 0
             assert await conn.fetchval("SELECT count(*) FROM battery") > 0
+
+            # the traces join what no ROS 2 message carries: the bridge names the command id
+            # each cmd_vel's attachment number stood for, the sim applied those numbers, and
+            # a row's seq is the number the sim's publisher gave the reading
+            await asyncio.sleep(1.0)  # both flush every 0.5 s
+            sent = {(e.robot, e.wire): e.ref for e in read_trace(bridge_trace)}
+            ids = {r["id"] for r in await conn.fetch("SELECT id FROM command2robot")}
+            assert len(sent) > 30 and set(sent.values()) <= ids
+            applied = [e for e in read_trace(sim_trace) if e.kind == CMD_VEL]
+            assert applied and all(e.ref == NO_REF for e in applied)
+            assert len({(e.robot, e.wire) for e in applied} & set(sent)) > 30
+            odom = {e.wire: e.ref for e in read_trace(sim_trace) if e.kind == "odom"}
+            rows = [r["seq"] for r in await conn.fetch("SELECT seq FROM odometry")]
+            traced = [seq for seq in rows if seq <= max(odom)]
+            assert len(traced) > 10 and all(seq in odom for seq in traced)
 
             replies = await asyncio.to_thread(
                 lambda: list(session.liveliness().get(rz.graph_watch(7), timeout=5.0))
