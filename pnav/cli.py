@@ -69,6 +69,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_dashboard_options(up, 8080)
     robot_link_options(up)
+    up.add_argument(
+        "--no-sim",
+        action="store_true",
+        help="real robots on the ROS 2 link: run no pybullet sim; the world file only "
+        "announces the robots, map and stations (needs --robot-link ros2 and a "
+        "--ros-link-file with clock: ros; docs/ROS2.md)",
+    )
 
     record_option(up)
 
@@ -314,6 +321,9 @@ def _up(args: argparse.Namespace) -> int:
             raise UsageError("--lockstep runs only on the native robot link")
         options.extra_env.update(lockstep_env(options))
     options.extra_env.update(robot_link_env(args))
+    if args.no_sim:
+        # the sim's process only tells the bridge the world: the robots publish the rest
+        options.extra_env["PNAV_SIM_WORLD_ONLY"] = "1"
     return uvloop.run(up(options))
 
 

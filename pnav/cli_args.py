@@ -180,7 +180,10 @@ def ros_domain(text: str) -> int:
 
 def robot_link_env(args: argparse.Namespace) -> dict[str, str]:
     """The variables common.robotlink reads, for the sim and the bridge."""
+    real = getattr(args, "no_sim", False)  # `pnav up --no-sim`: real robots, no pybullet sim
     if args.robot_link == "native":
+        if real:
+            raise UsageError("--no-sim drives real robots: it needs --robot-link ros2")
         return {}
     env = {"PNAV_ROBOT_LINK": args.robot_link, "PNAV_ROS_DOMAIN_ID": str(args.ros_domain_id)}
     if args.ros_router:
@@ -190,10 +193,19 @@ def robot_link_env(args: argparse.Namespace) -> dict[str, str]:
             raise UsageError(f"--ros-link-file {args.ros_link_file}: no such file")
         # a bad file is refused now, not by each process
         link = load_link_file(args.ros_link_file)
-        if link.clock == CLOCK_ROS and not link.use_sim_time:
+        if real and link.clock != CLOCK_ROS:
+            raise UsageError(
+                f"--ros-link-file {args.ros_link_file}: with --no-sim no sim keeps the stack's "
+                "clock; say clock: ros (docs/ROS2.md, The clock)"
+            )
+        if link.clock == CLOCK_ROS and not link.use_sim_time and not real:
             raise UsageError(
                 f"--ros-link-file {args.ros_link_file}: the sim's stamps are sim time; with "
                 "clock: ros it needs use_sim_time: true (docs/ROS2.md, The clock)"
             )
         env["PNAV_ROS2_LINK_FILE"] = str(args.ros_link_file.resolve())
+    elif real:
+        raise UsageError(
+            "--no-sim needs a --ros-link-file with clock: ros (the robots' time, docs/ROS2.md)"
+        )
     return env

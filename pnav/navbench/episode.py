@@ -43,13 +43,13 @@ from common import bus
 from common.config import ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime
+from common.trace import CMD_VEL, read_trace
 from pnav import commands
 from pnav.bench import provenance as prov
 from pnav.bench.latency import Collected, collect
 from pnav.bench.processes import Usage
 from pnav.launcher import StackOptions, launched
 from pnav.navbench.metrics import GOAL_TOLERANCE_M
-from common.trace import CMD_VEL, read_trace
 
 SUCCESS_RADIUS_M = GOAL_TOLERANCE_M  # BARN: the goal counts as reached within 0.3 m
 MAX_LAG_S = 0.1  # the decision service re-issues every 0.1 s sim: never staler than that

@@ -23,6 +23,7 @@ from pathlib import Path
 
 from common.bus import open_session
 from common.config import ZenohSettings, default_instance, lockstep_from_env
+from common.contract import keys
 from common.errors import ConfigError, ConnectionFailure, UsageError
 from common.lifeline import die_with_parent
 from common.log import event, setup
@@ -126,6 +127,14 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         default=_env("PNAV_SIM_TRACE"),
         help="write when each sensor message left and each command arrived, for "
         "`pnav bench latency` (common/trace.py) [PNAV_SIM_TRACE]",
+    )
+    ap.add_argument(
+        "--world-only",
+        action="store_true",
+        default=_env("PNAV_SIM_WORLD_ONLY") in ("1", "true", "yes", "on"),
+        help="a real robot: only announce the world (its robots, map and stations) on "
+        "pnav/sim/world; no physics, sensors, clock or cmd_vel (services/sim/announcer.py) "
+        "[PNAV_SIM_WORLD_ONLY]",
     )
     ap.add_argument(
         "--physics-hz", type=float, default=240.0, help="physics steps per sim second (default 240)"
@@ -248,6 +257,25 @@ def serve(
     return 0
 
 
+def announce_world(world: World) -> int:
+    """``--world-only``: the world for a real robot's bridge, until SIGINT/SIGTERM."""
+    from services.sim.announcer import announce
+    from services.sim.node import SERVICE, WORLD_PERIOD_S
+
+    stop = threading.Event()
+    signals = SignalStop(stop)
+    try:
+        session = open_session(ZenohSettings.from_env())
+        try:
+            instance = _env("PNAV_INSTANCE") or default_instance()
+            announce(world, session, stop, keys.alive_key(SERVICE, instance), WORLD_PERIOD_S)
+        finally:
+            session.close()
+    finally:
+        signals.close()
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     die_with_parent()
     setup("sim")
@@ -257,6 +285,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.bench:
             print(report(run_bench(world, replace(config, gui=False), args.seconds)), flush=True)
             return 0
+        if args.world_only:
+            return announce_world(world)
         return serve(world, config, rate, args.trace, args.max_lag, args.lockstep)
     except UsageError as exc:
         event(log, logging.ERROR, "cannot start the sim", problem=str(exc))

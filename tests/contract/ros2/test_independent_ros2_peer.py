@@ -1,7 +1,7 @@
 """The stack drives a TurtleBot3 played by an independent ROS 2 client (zenoh-ros2-sdk, not
-the project's rmw_zenoh code) to a goal sent as RViz sends it: no pybullet sim; the bridge
-gives the stack its clock in ROS time (``clock: ros``), the world's rows come from a world
-message as a sim would send them."""
+the project's rmw_zenoh code) to a goal sent as RViz sends it, as `pnav up --no-sim` runs
+it: no pybullet sim; the bridge gives the stack its clock in ROS time (``clock: ros``), and
+the sim's process only announces the world (``--world-only``) for the robots' rows."""
 
 from __future__ import annotations
 
@@ -12,8 +12,6 @@ from pathlib import Path
 import asyncpg
 import pytest
 
-from common import bus
-from common.contract import keys
 from common.testing import eventually
 from pnav.launcher import StackOptions, launched, resolve_world
 from services.sim.world import load_world
@@ -33,19 +31,16 @@ async def test_the_stack_drives_an_independent_ros2_turtlebot3_to_an_rviz_goal(
     options = StackOptions(
         world="open_room",
         zenoh_port=None,
-        services=("bridge", "strategy", "planner", "controller", "decision"),
-        extra_env={"PNAV_ROBOT_LINK": "ros2", "PNAV_ROS2_LINK_FILE": str(link)},
+        extra_env={
+            "PNAV_ROBOT_LINK": "ros2",
+            "PNAV_ROS2_LINK_FILE": str(link),
+            "PNAV_SIM_WORLD_ONLY": "1",  # what `pnav up --no-sim` sets
+        },
     )
     world = load_world(resolve_world("open_room"))
     start = world.message()["robots"][0]
     async with launched(options) as stack:
         local = stack.local
-        # the world, as the sim would announce it (the sim's identity on the bus)
-        sim_session = await asyncio.to_thread(bus.open_session, local.zenoh_for("sim"))
-        payload = bus.pack(world.message())
-        queryable = sim_session.declare_queryable(
-            keys.SIM_WORLD, lambda query: query.reply(keys.SIM_WORLD, payload)
-        )
         # the robot joins the stack's router as the sim does
         sim_auth = local.zenoh_for("sim")
         if sim_auth.user:
@@ -81,8 +76,6 @@ async def test_the_stack_drives_an_independent_ros2_turtlebot3_to_an_rviz_goal(
         finally:
             robot.close()
             await conn.close()
-            queryable.undeclare()
-            sim_session.close()
 
 
 async def _reached(conn: asyncpg.Connection) -> bool:

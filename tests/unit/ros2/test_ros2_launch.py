@@ -41,3 +41,22 @@ def test_pnav_up_refuses_a_ros_clock_on_wall_time_since_it_runs_the_sim(tmp_path
         robot_link_env(args)
     link.write_text("clock: ros\nuse_sim_time: true\n")
     assert robot_link_env(args)["PNAV_ROS2_LINK_FILE"] == str(link.resolve())
+
+
+def test_no_sim_takes_real_robots_on_ros2_with_their_clock_and_refuses_the_rest(
+    tmp_path: Path,
+) -> None:
+    link = tmp_path / "tb3.yaml"
+    link.write_text("clock: ros\nuse_sim_time: false\n")  # a real robot: wall time is right
+
+    def env(*extra: str) -> dict[str, str]:
+        return robot_link_env(build_parser().parse_args(["up", "--no-sim", *extra]))
+
+    assert env("--robot-link", "ros2", "--ros-link-file", str(link))["PNAV_ROBOT_LINK"] == "ros2"
+    with pytest.raises(UsageError, match="needs --robot-link ros2"):
+        env()
+    with pytest.raises(UsageError, match="needs a --ros-link-file with clock: ros"):
+        env("--robot-link", "ros2")
+    link.write_text("clock: sim\n")
+    with pytest.raises(UsageError, match="say clock: ros"):
+        env("--robot-link", "ros2", "--ros-link-file", str(link))
