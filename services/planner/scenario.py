@@ -102,6 +102,7 @@ class MoveRule(TargetRule, MoveScenario):
         self.done: dict[int, set[int]] = {}  # per goal: the waypoints this rule reached
         self.aligning: set[tuple[Any, ...]] = set()  # targets turned or settled at
         self.marks: list[tuple[Target, str, str | None]] = []  # waypoint progress to write
+        self.ahead: waypoints.Ahead | None = None  # how far the route is judged on the map
         self.sim_now = 0.0
         # What this activation found (data acquisition) for the conditions to test and the
         # actions to write.
@@ -184,6 +185,15 @@ class MoveRule(TargetRule, MoveScenario):
         self.last_said = (odom.id, target.key)
         self.arrived, self.move, self.failed = None, None, None
         target = self.target = self._next_leg(odom, target, robot)
+        bad = self._judge_ahead(robot)
+        if bad is not None:  # a waypoint ahead the map rules out: the route fails now
+            assert self.goal is not None  # only a goal's route is judged
+            target = self.target = waypoints.waypoint_target(self.goal, bad[0])
+            self.failed = waypoints.failure(target, bad[1])
+            self.marks.append((target, "failed", self.failed))
+            self.worth_saying = target.key not in self.dropped
+            self._path_done(target)
+            return
         distance = math.hypot(target.x - odom.x, target.y - odom.y)
         drives = robot.strategy is None or robot.strategy.params.get("planner_drives") is not False
         aligning = target.key in self.aligning
@@ -226,6 +236,16 @@ class MoveRule(TargetRule, MoveScenario):
         # gets the route, the arrival, the final turn and the failure from the planner, no
         # velocity on the way.
         self.worth_saying = drives and due(self.said, odom.stamp, target.key, move)
+
+    def _judge_ahead(self, robot: RobotState) -> tuple[records.Waypoint, str] | None:
+        """The next few waypoints of the goal's route judged on the map (waypoints.py)."""
+        goal, data = self.goal, self.view.map_for(robot.info)
+        if goal is None or not goal.waypoints or data is None:
+            return None
+        key = (goal.id, data.version, robot.info.footprint_radius_m)
+        if self.ahead is None or self.ahead.key != key:
+            self.ahead = waypoints.Ahead(key)
+        return waypoints.check_ahead(data, robot.info.footprint_radius_m, goal, self.ahead)
 
     def _next_leg(self, odom: records.Odometry, target: Target, robot: RobotState) -> Target:
         """The target after the route's waypoints the robot is at now: each passed through

@@ -5,17 +5,29 @@ order, then to its own pose. The target is the first waypoint still ``pending`` 
 and not yet reached in this planner's memory (``done``: its own marks, before the rows say
 so), else the goal itself. A waypoint passed through (no ``stop``, no ``yaw``) is reached
 once the robot's centre is within its tolerance, and the carrot goes straight on to the next;
-the speed slows only toward the next pose the robot halts at (``Target.beyond_m``). Pure.
+the speed slows only toward the next pose the robot halts at (``Target.beyond_m``).
+
+Every waypoint is also judged ahead of the robot (:func:`check_ahead`): one the map proves
+unreachable (reachability.spot_problem: off the map, in or too close to an obstacle) fails
+the route as soon as it is looked at, not when the robot gets there. A spot check costs about
+a millisecond, so CHECK_AHEAD of them per look: a route of 20 waypoints is judged within
+four looks (a quarter of a second), one of 1 000 within 200, while the robot drives. Pure.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Collection
+from dataclasses import dataclass
+from typing import Any
 
+import services.planner.reachability as reachability
 from common.contract import records
 from common.contract.limits import DEFAULT_YAW_TOLERANCE_RAD
 from services.planner.routes import Target
+from services.planner.world import MapData, inflation_m
+
+CHECK_AHEAD = 5  # waypoints judged against the map per look
 
 
 def halts(waypoint: records.Waypoint) -> bool:
@@ -45,20 +57,42 @@ def route_target(goal: records.Goal, done: Collection[int] = ()) -> Target:
             if w is None or halts(w):
                 break
             here = there
+    return waypoint_target(goal, first, beyond)
+
+
+def waypoint_target(goal: records.Goal, w: records.Waypoint, beyond: float = 0.0) -> Target:
+    """The target of waypoint ``w`` of ``goal``."""
+    yaw_tol = w.yaw_tolerance_rad or DEFAULT_YAW_TOLERANCE_RAD
+    key = f"{goal.id}#{w.seq}"
     return Target(
-        "goal",
-        f"{goal.id}#{first.seq}",
-        first.x,
-        first.y,
-        first.tolerance_m,
-        0.0,
-        goal.id,
-        first.yaw,
-        first.yaw_tolerance_rad or DEFAULT_YAW_TOLERANCE_RAD,
-        first.seq,
-        halts(first),
-        beyond,
+        "goal", key, w.x, w.y, w.tolerance_m, 0.0, goal.id, w.yaw, yaw_tol, w.seq, halts(w), beyond
     )
+
+
+@dataclass
+class Ahead:
+    """How far a route has been judged against one map: ``key`` (the goal, the map's
+    version, the footprint) and the index of the next waypoint to judge."""
+
+    key: tuple[Any, ...]
+    checked: int = 0
+
+
+def check_ahead(
+    data: MapData, footprint_m: float, goal: records.Goal, ahead: Ahead, limit: int = CHECK_AHEAD
+) -> tuple[records.Waypoint, str] | None:
+    """The next ``limit`` pending waypoints not judged yet, judged on the map: the first one
+    it proves unreachable, with why (None: none of them)."""
+    inflation = inflation_m(footprint_m)
+    end = min(len(goal.waypoints), ahead.checked + limit)
+    for w in goal.waypoints[ahead.checked : end]:
+        ahead.checked += 1
+        if w.status != "pending":
+            continue
+        why = reachability.spot_problem(data, inflation, w.x, w.y, w.tolerance_m)
+        if why is not None:
+            return w, why
+    return None
 
 
 def failure(target: Target, why: str) -> str:

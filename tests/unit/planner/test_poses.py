@@ -193,7 +193,7 @@ async def test_several_waypoints_within_reach_at_once_are_all_passed_in_one_look
     assert f"waypoint 3 of goal {goal}" in last(p)[2]
 
 
-async def test_a_waypoint_the_map_rules_out_fails_the_route_naming_it() -> None:
+async def room() -> Planner:
     p = Planner()
     occupied = np.zeros((60, 80), dtype=bool)  # 4 x 3 m from (-1, -1), walls all round
     occupied[0, :] = occupied[-1, :] = occupied[:, 0] = occupied[:, -1] = True
@@ -201,13 +201,29 @@ async def test_a_waypoint_the_map_rules_out_fails_the_route_naming_it() -> None:
     p.map(occupied, 0.05, (-1.0, -1.0))
     p.strategy("GOTO_AVOID")
     await p.tick(0.1)
+    return p
+
+
+async def test_a_waypoint_the_map_rules_out_fails_the_route_at_the_first_look_naming_it() -> None:
+    p = await room()
     goal = p.goal(2.0, 0.0, waypoints=({"x": 0.5, "y": 0.0}, {"x": 1.25, "y": 0.75}))
-    await p.tick(0.1)
-    assert p.goal_row(goal)["status"] == "active"  # waypoint 1 is fine
-    p.pose = (0.4, 0.0)  # waypoint 1 passed; waypoint 2 is inside the rack
-    await p.tick(0.1)
+    await p.tick(0.1)  # waypoint 2 is inside the rack: judged ahead, before the robot is there
     why = "waypoint 2 (1.25, 0.75): goal (1.25, 0.75) is inside an obstacle on the map"
     row = p.goal_row(goal)
     assert row["status"] == "failed" and row["reason"] == why
-    assert p.waypoint_rows(goal) == [(1, "reached", p.t), (2, "failed", p.t)]
+    assert p.waypoint_rows(goal) == [(1, "pending", None), (2, "failed", p.t)]
     assert last(p)[:2] == (0.0, 0.0)
+    assert last(p)[2] == f"waypoint 2 of goal {goal} failed: {why}: stop"
+    await p.tick(0.1)
+    assert len(p.recommendations()) == 1  # the stop, said once
+
+
+async def test_a_long_route_is_judged_a_few_waypoints_per_look_while_the_robot_drives() -> None:
+    p = await room()
+    route = (*({"x": 0.1 * i, "y": -0.5} for i in range(1, 13)), {"x": 1.25, "y": 0.75})
+    goal = p.goal(2.0, 0.0, waypoints=route)
+    for look in (1, 2):  # 5 waypoints judged per look: waypoint 13 not yet
+        await p.tick(0.1)
+        assert p.goal_row(goal)["status"] == "active", look
+    await p.tick(0.1)  # the third look judges 11 to 13
+    assert p.goal_row(goal)["reason"].startswith("waypoint 13 (1.25, 0.75): ")
