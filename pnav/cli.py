@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
@@ -17,6 +18,8 @@ from pnav.cli_args import (
     Parser,
     coordinate,
     count,
+    heading_deg,
+    heading_tolerance_deg,
     model_option,
     not_negative,
     parse_counts,
@@ -28,12 +31,14 @@ from pnav.cli_args import (
     robot_link_options,
     stack_options,
     strategy_code,
+    through,
     tolerance,
 )
 from pnav.dashboard_cli import add_dashboard_options, dashboard_options
 from pnav.navbench.worlds_cli import add_worlds_parser
 
 if TYPE_CHECKING:
+    from common.contract.people import Pose
     from common.runtime import Runtime
 
 
@@ -79,12 +84,41 @@ def build_parser() -> argparse.ArgumentParser:
 
     record_option(up)
 
-    goal = commands.add_parser("goal", help="send a robot to X Y (replaces its goal)")
-    goal.add_argument("x", type=coordinate, help=f"metres, within +-{GOAL_M:.0f}")
-    goal.add_argument("y", type=coordinate, help=f"metres, within +-{GOAL_M:.0f}")
+    goal = commands.add_parser(
+        "goal",
+        help="send a robot to X Y, facing --yaw, or through a route (replaces its goal)",
+    )
+    goal.add_argument("x", nargs="?", type=coordinate, help=f"metres, within +-{GOAL_M:.0f}")
+    goal.add_argument("y", nargs="?", type=coordinate, help=f"metres, within +-{GOAL_M:.0f}")
     goal.add_argument("--robot", help="robot id (needed when there are several)")
     goal.add_argument(
         "--tolerance", type=tolerance, help=f"metres, in (0, {MAX_TOL_M:.0f}] (default 0.15)"
+    )
+    goal.add_argument(
+        "--yaw",
+        type=heading_deg,
+        metavar="DEG",
+        help="the heading to stop at, DEGREES in [-180, 180] in the map frame (0: +x, 90: +y; "
+        "the goal row holds it in radians); the robot turns in place to it once there",
+    )
+    goal.add_argument(
+        "--yaw-tolerance",
+        type=heading_tolerance_deg,
+        metavar="DEG",
+        help="the heading holds within this many DEGREES, in (0, 180] (default 5.73: 0.1 rad)",
+    )
+    goal.add_argument(
+        "--through",
+        type=through,
+        metavar='"x,y[,yaw]; ..."',
+        help="a route instead of X Y: the poses to drive through in order (metres, yaw in "
+        "DEGREES), the last one the goal's; at most 1000 waypoints before it",
+    )
+    goal.add_argument(
+        "--stop-at-waypoints",
+        action="store_true",
+        help="halt at every waypoint of --through (default: pass through; a waypoint with a "
+        "yaw is always halted at and turned to)",
     )
 
     strategy = commands.add_parser("strategy", help="switch strategy (GOTO_AVOID, ...)")
@@ -368,6 +402,48 @@ def _bench(args: argparse.Namespace) -> int:
     raise AssertionError(f"unhandled bench {args.bench}")  # argparse enforces the choices
 
 
+def _goal_poses(args: argparse.Namespace) -> tuple[Pose, list[Pose]]:
+    """The goal's pose and the route's waypoints the arguments give (headings in radians)."""
+    from common.contract.people import Pose
+
+    def rad(deg: float | None) -> float | None:
+        return None if deg is None else math.radians(deg)
+
+    yaw_tol = rad(args.yaw_tolerance)
+    if args.through is None:
+        if args.x is None or args.y is None:
+            raise UsageError("pnav goal: give X Y, or a route with --through")
+        return Pose(args.x, args.y, rad(args.yaw), yaw_tol, args.tolerance), []
+    if args.x is not None or args.yaw is not None:
+        raise UsageError("pnav goal: --through gives the goal's pose (its last); drop X Y / --yaw")
+    *route, (x, y, yaw) = args.through
+    stop = args.stop_at_waypoints
+    waypoints = [Pose(wx, wy, rad(wyaw), yaw_tol if wyaw is not None else None, None, stop)
+                 for wx, wy, wyaw in route]  # fmt: skip
+    return Pose(x, y, rad(yaw), yaw_tol if yaw is not None else None, args.tolerance), waypoints
+
+
+async def _set_goal(rt: Runtime, args: argparse.Namespace) -> int:
+    from pnav import commands
+
+    goal, waypoints = _goal_poses(args)
+    (robot,) = await commands.pick_robots(rt, args.robot, one=True)
+    goal_id = await commands.set_goal(
+        rt,
+        robot,
+        goal.x,
+        goal.y,
+        goal.tolerance_m,
+        yaw=goal.yaw,
+        yaw_tolerance_rad=goal.yaw_tolerance_rad,
+        waypoints=waypoints,
+    )
+    facing = "" if goal.yaw is None else f" facing {math.degrees(goal.yaw):g} deg"
+    route = f" through {len(waypoints)} waypoint(s)" if waypoints else ""
+    print(f"{robot}: goal {goal_id} set to ({goal.x}, {goal.y}){facing}{route}")
+    return 0
+
+
 async def _drive(args: argparse.Namespace) -> int:
     from pnav import commands
 
@@ -376,10 +452,7 @@ async def _drive(args: argparse.Namespace) -> int:
         # a row the database refuses (a CHECK, say) is the user's input: one line, exit 2
         with commands.refusal_as_contract_error():
             if args.command == "goal":
-                (robot,) = await commands.pick_robots(rt, args.robot, one=True)
-                goal_id = await commands.set_goal(rt, robot, args.x, args.y, args.tolerance)
-                print(f"{robot}: goal {goal_id} set to ({args.x}, {args.y})")
-                return 0
+                return await _set_goal(rt, args)
             if args.command == "cancel":
                 for robot in await commands.pick_robots(rt, args.robot, one=False):
                     cancelled = await commands.cancel_goal(rt, robot)

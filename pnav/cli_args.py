@@ -51,11 +51,57 @@ coordinate = number(f"a finite number of metres within +-{GOAL_M:.0f}", lambda v
 tolerance = number(
     f"a finite number of metres in (0, {MAX_TOL_M:.0f}]", lambda v: 0 < v <= MAX_TOL_M
 )
+# headings on the command line are degrees (the goal rows hold radians)
+heading_deg = number("a finite angle in degrees within [-180, 180]", lambda v: abs(v) <= 180)
+heading_tolerance_deg = number("a finite angle in degrees in (0, 180]", lambda v: 0 < v <= 180)
 positive = number("a finite number above 0", lambda v: v > 0)
 not_negative = number("a finite number, 0 or more", lambda v: v >= 0)
 percent = number("a percentage from 0 to 100", lambda v: 0 <= v <= 100)
 count = number("a whole number, 1 or more", lambda v: v >= 1, int)
 port = number("a port number from 1 to 65535", lambda v: 1 <= v <= 65535, int)
+
+
+def through(text: str) -> list[tuple[float, float, float | None]]:
+    """An argparse ``type``: a route ``"x,y[,yaw]; x,y[,yaw]; ..."`` (metres, degrees), the
+    last pose the goal's; at most limits.MAX_WAYPOINTS waypoints before it. Each refusal
+    names the pose (``pose 3``) and the field."""
+    parts = [p.strip() for p in text.split(";")]
+    if parts and not parts[-1]:
+        parts.pop()  # a trailing ';'
+    most = limits.MAX_WAYPOINTS + 1
+    if len(parts) > most:
+        raise argparse.ArgumentTypeError(
+            f"at most {most} poses ({limits.MAX_WAYPOINTS} waypoints and the goal), "
+            f"got {len(parts)}"
+        )
+    if not parts:
+        raise argparse.ArgumentTypeError('needs at least one pose, "x,y[,yaw]"')
+    poses: list[tuple[float, float, float | None]] = []
+    for i, part in enumerate(parts, start=1):
+        fields = [f.strip() for f in part.split(",")]
+        if len(fields) not in (2, 3):
+            raise argparse.ArgumentTypeError(
+                f"pose {i} must be x,y or x,y,yaw (metres, degrees), got {_shown(part)}"
+            )
+        try:
+            x, y = (coordinate(f) for f in fields[:2])
+            yaw = heading_deg(fields[2]) if len(fields) == 3 else None
+        except argparse.ArgumentTypeError as exc:
+            name = ("x", "y", "yaw")[_first_bad(fields)]
+            raise argparse.ArgumentTypeError(f"pose {i} {name} {exc}") from None
+        poses.append((x, y, yaw))
+    return poses
+
+
+def _first_bad(fields: list[str]) -> int:
+    """The index of the first field of a pose the checks refuse."""
+    for i, text in enumerate(fields):
+        check = coordinate if i < 2 else heading_deg
+        try:
+            check(text)
+        except argparse.ArgumentTypeError:
+            return i
+    return 0
 
 
 def strategy_code(text: str) -> str:

@@ -20,7 +20,7 @@ from typing import Any
 import asyncpg
 
 from common.config import ServiceConfig
-from common.contract import limits, people
+from common.contract import people
 from common.errors import ContractError, UsageError
 from common.runtime import Runtime
 from pnav import stackfile
@@ -78,13 +78,32 @@ async def check_strategy(rt: Runtime, code: str) -> None:
 
 
 async def set_goal(
-    rt: Runtime, robot: str, x: float, y: float, tolerance: float | None = None
+    rt: Runtime,
+    robot: str,
+    x: float,
+    y: float,
+    tolerance: float | None = None,
+    *,
+    yaw: float | None = None,
+    yaw_tolerance_rad: float | None = None,
+    waypoints: Sequence[people.Pose] = (),
 ) -> int:
-    """Supersede the robot's active goal and set a new one, in one transaction.
+    """Supersede the robot's active goal and set a new one (a pose: ``yaw`` in radians, and a
+    route's waypoints before it), in one transaction.
 
-    A value the goal table would refuse raises ContractError before anything is written."""
-    limits.check_goal(x, y, tolerance)
-    return await people.set_goal(rt.database, robot, x, y, tolerance)
+    A value the goal or goal_waypoint table would refuse raises ContractError, naming it,
+    before anything is written."""
+    people.check_route(people.Pose(x, y, yaw, yaw_tolerance_rad, tolerance), waypoints)
+    return await people.set_goal(
+        rt.database,
+        robot,
+        x,
+        y,
+        tolerance,
+        yaw=yaw,
+        yaw_tolerance_rad=yaw_tolerance_rad,
+        waypoints=waypoints,
+    )
 
 
 async def cancel_goal(rt: Runtime, robot: str) -> int | None:

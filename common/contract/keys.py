@@ -37,6 +37,7 @@ COLLISION_EVENT: Final = "collision_event"
 MAP: Final = "map"
 CHARGING_STATION: Final = "charging_station"
 GOAL: Final = "goal"
+GOAL_WAYPOINT: Final = "goal_waypoint"
 USER_COMMAND: Final = "user_command"
 STRATEGY: Final = "strategy"
 ACTIVE_STRATEGY: Final = "active_strategy"
@@ -59,6 +60,7 @@ TABLES: Final = (
     MAP,
     CHARGING_STATION,
     GOAL,
+    GOAL_WAYPOINT,
     USER_COMMAND,
     STRATEGY,
     ACTIVE_STRATEGY,

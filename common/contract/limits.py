@@ -19,6 +19,14 @@ from common.errors import ContractError
 # so a goal further away could never be reached); tolerance in (0, 100] m.
 GOAL_MAX_ABS_M: Final = 1.0e5
 GOAL_MAX_TOLERANCE_M: Final = 100.0
+# goal and goal_waypoint headings (migration 13): yaw in [-pi, pi] rad (map frame), its
+# tolerance in (0, pi] rad; a yaw given without a tolerance holds within DEFAULT_YAW_TOLERANCE_RAD.
+MAX_ABS_YAW_RAD: Final = math.pi
+DEFAULT_YAW_TOLERANCE_RAD: Final = 0.1
+# goal_waypoint: at most this many per goal (seq runs 1..MAX_WAYPOINTS, unique per goal).
+MAX_WAYPOINTS: Final = 1000
+# goal_waypoint.tolerance_m when none is given: a waypoint is passed, not stopped at.
+DEFAULT_WAYPOINT_TOLERANCE_M: Final = 0.3
 
 # command_recommendation and command2robot velocities.
 MAX_ABS_LINEAR_MPS: Final = 10.0
@@ -61,6 +69,28 @@ def check_goal(x: float, y: float, tolerance_m: float | None) -> None:
             f"goal tolerance must be a finite number of metres in (0, "
             f"{GOAL_MAX_TOLERANCE_M:.0f}], got {tolerance_m!r}"
         )
+
+
+def check_heading(what: str, yaw: float | None, yaw_tolerance_rad: float | None) -> None:
+    """ContractError naming the first heading value (of ``what``: "goal", "waypoint 3") the
+    goal and goal_waypoint tables would refuse, if any."""
+    if yaw is not None and not (math.isfinite(yaw) and abs(yaw) <= MAX_ABS_YAW_RAD):
+        raise ContractError(f"{what} yaw must be a finite angle in [-pi, pi] rad, got {yaw!r}")
+    if yaw_tolerance_rad is None:
+        return
+    if yaw is None:
+        raise ContractError(f"{what} yaw_tolerance_rad needs a yaw")
+    if not (math.isfinite(yaw_tolerance_rad) and 0 < yaw_tolerance_rad <= MAX_ABS_YAW_RAD):
+        raise ContractError(
+            f"{what} yaw_tolerance_rad must be a finite angle in (0, pi] rad, "
+            f"got {yaw_tolerance_rad!r}"
+        )
+
+
+def check_waypoint_count(count: int) -> None:
+    """ContractError when a route has more waypoints than goal_waypoint holds per goal."""
+    if count > MAX_WAYPOINTS:
+        raise ContractError(f"waypoints: at most {MAX_WAYPOINTS} per goal, got {count}")
 
 
 def json_depth(value: Any, stop_at: int | None = None) -> int:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, TypeAlias
 
 import asyncpg
@@ -117,12 +117,34 @@ class ActiveStrategy:
 
 
 @dataclass(frozen=True)
+class Waypoint:
+    """A goal_waypoint row (migration 13): one pose of a route, and the planner's progress."""
+
+    seq: int
+    x: float
+    y: float
+    tolerance_m: float
+    yaw: float | None = None
+    yaw_tolerance_rad: float | None = None
+    stop: bool = False
+    status: str = "pending"
+
+
+@dataclass(frozen=True)
 class Goal:
     id: int
     robot_id: str
     x: float
     y: float
     tolerance_m: float
+    # the heading to stop at (rad, map frame) and within what (NULL with a yaw: 0.1 rad)
+    yaw: float | None = None
+    yaw_tolerance_rad: float | None = None
+    # the route's waypoints before the goal's own pose, in seq order
+    waypoints: tuple[Waypoint, ...] = ()
+    # how many goal_waypoint rows the goal had when read (the waypoints are read again when
+    # this changes: a row added after the goal's notification)
+    waypoint_count: int = 0
 
 
 @dataclass(frozen=True)
@@ -311,13 +333,33 @@ async def active_strategies(db: Executor) -> dict[str, ActiveStrategy]:
     }
 
 
-async def active_goal(db: Executor, robot_id: str) -> Goal | None:
-    row = await db.fetchrow(
-        "SELECT id, robot_id, x, y, tolerance_m FROM goal "
-        "WHERE robot_id = $1 AND status = 'active'",
-        robot_id,
-    )
-    return Goal(**dict(row)) if row else None
+ACTIVE_GOAL_SQL = (
+    "SELECT g.id, g.robot_id, g.x, g.y, g.tolerance_m, g.yaw, g.yaw_tolerance_rad, "
+    "(SELECT count(*) FROM goal_waypoint w WHERE w.goal_id = g.id) AS waypoint_count "
+    "FROM goal g WHERE g.robot_id = $1 AND g.status = 'active'"
+)
+WAYPOINTS_SQL = (
+    "SELECT seq, x, y, tolerance_m, yaw, yaw_tolerance_rad, stop, status "
+    "FROM goal_waypoint WHERE goal_id = $1 ORDER BY seq"
+)
+
+
+async def active_goal(db: Executor, robot_id: str, known: Goal | None = None) -> Goal | None:
+    """The robot's active goal with its waypoints. ``known``: the same goal as read before;
+    its waypoints are kept when the goal still has as many rows (the planner's period read
+    costs one indexed count, not a route of 1 000 rows)."""
+    row = await db.fetchrow(ACTIVE_GOAL_SQL, robot_id)
+    if row is None:
+        return None
+    fields = dict(row)
+    count = int(fields.pop("waypoint_count"))
+    goal = Goal(**fields, waypoint_count=count)
+    if count == 0:
+        return goal
+    if known is not None and known.id == goal.id and known.waypoint_count == count:
+        return replace(goal, waypoints=known.waypoints)
+    rows = await db.fetch(WAYPOINTS_SQL, goal.id)
+    return replace(goal, waypoints=tuple(Waypoint(**dict(r)) for r in rows))
 
 
 async def charging_stations(db: Executor) -> list[ChargingStation]:

@@ -717,3 +717,60 @@ CREATE POLICY scenario_offer_insert ON scenario_offer FOR INSERT WITH CHECK (wri
 CREATE POLICY scenario_offer_update ON scenario_offer FOR UPDATE
     USING (writes_as(service)) WITH CHECK (writes_as(service));
 CREATE POLICY scenario_offer_delete ON scenario_offer FOR DELETE USING (writes_as(service));
+
+-- migration 13: goal poses with a heading, and routes through waypoints
+--
+-- A goal was a point: a robot could not be told to stop facing a shelf, a dock or a door,
+-- nor to drive through a list of places. A goal may now carry a heading: `yaw` (radians, in
+-- the map frame, in [-pi, pi]) and `yaw_tolerance_rad` (in (0, pi]; NULL with a yaw: 0.1 rad,
+-- the readers' default; a tolerance without a yaw is refused, it would mean nothing). The
+-- planner turns the robot in place to it once there, and sets the goal `reached` only when
+-- both the position and the heading hold. Rows already present have no yaw: every constraint
+-- holds for them, so the constraints are validated.
+ALTER TABLE goal
+    ADD COLUMN yaw double precision,
+    ADD COLUMN yaw_tolerance_rad double precision,
+    ADD CONSTRAINT goal_yaw_bounded
+        CHECK (is_finite(yaw) AND yaw BETWEEN -pi() AND pi()),
+    ADD CONSTRAINT goal_yaw_tolerance_bounded
+        CHECK (is_finite(yaw_tolerance_rad) AND yaw_tolerance_rad > 0
+               AND yaw_tolerance_rad <= pi()),
+    ADD CONSTRAINT goal_yaw_tolerance_needs_yaw
+        CHECK (yaw_tolerance_rad IS NULL OR yaw IS NOT NULL);
+
+-- A route: the poses a goal is driven through, in `seq` order, before the goal's own pose
+-- (the last one). People insert them with their goal, in its transaction; the planner writes
+-- each one's progress (`status`, `reason`, `reached_stamp`). A goal holds at most 1 000 of
+-- them: `seq` runs from 1 to 1 000 and is unique per goal, so the cap is the table's own
+-- (a list of 10 000 poses fails at the 1 001st, naming goal_waypoint_seq_bounded).
+CREATE TABLE goal_waypoint (
+    goal_id           bigint NOT NULL REFERENCES goal ON DELETE CASCADE,
+    seq               integer NOT NULL,
+    x                 double precision NOT NULL,
+    y                 double precision NOT NULL,
+    tolerance_m       double precision NOT NULL DEFAULT 0.3,
+    yaw               double precision,
+    yaw_tolerance_rad double precision,
+    stop              boolean NOT NULL DEFAULT false,
+    status            text NOT NULL DEFAULT 'pending',
+    reason            text,
+    reached_stamp     double precision,
+    created_at        timestamptz NOT NULL DEFAULT now(),
+    PRIMARY KEY (goal_id, seq),
+    CONSTRAINT goal_waypoint_seq_bounded CHECK (seq BETWEEN 1 AND 1000),
+    CONSTRAINT goal_waypoint_xy_bounded
+        CHECK (is_finite(x) AND is_finite(y) AND abs(x) <= 1e5 AND abs(y) <= 1e5),
+    CONSTRAINT goal_waypoint_tolerance_bounded
+        CHECK (is_finite(tolerance_m) AND tolerance_m > 0 AND tolerance_m <= 100),
+    CONSTRAINT goal_waypoint_yaw_bounded
+        CHECK (is_finite(yaw) AND yaw BETWEEN -pi() AND pi()),
+    CONSTRAINT goal_waypoint_yaw_tolerance_bounded
+        CHECK (is_finite(yaw_tolerance_rad) AND yaw_tolerance_rad > 0
+               AND yaw_tolerance_rad <= pi()),
+    CONSTRAINT goal_waypoint_yaw_tolerance_needs_yaw
+        CHECK (yaw_tolerance_rad IS NULL OR yaw IS NOT NULL),
+    CONSTRAINT goal_waypoint_status_known
+        CHECK (status IN ('pending', 'reached', 'failed')),
+    CONSTRAINT goal_waypoint_progress_finite
+        CHECK (is_finite(reached_stamp) AND char_length(reason) <= 1000)
+);

@@ -93,6 +93,7 @@ class MemoryContract:
                 keys.STRATEGY,
                 keys.ACTIVE_STRATEGY,
                 keys.GOAL,
+                keys.GOAL_WAYPOINT,
                 keys.ODOMETRY,
                 keys.LASER_SCAN,
                 keys.BATTERY,

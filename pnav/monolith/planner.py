@@ -36,6 +36,10 @@ def _strategy(row: Row) -> records.Strategy:
     )
 
 
+# the goal_waypoint columns records.Waypoint holds
+_WAYPOINT = ("seq", "x", "y", "tolerance_m", "yaw", "yaw_tolerance_rad", "stop", "status")
+
+
 class MemoryPlannerSource:
     """``PlannerSource`` over the in-memory contract."""
 
@@ -86,11 +90,25 @@ class MemoryPlannerSource:
                 )
         return out
 
-    async def active_goal(self, robot_id: str) -> records.Goal | None:
+    async def active_goal(
+        self, robot_id: str, known: records.Goal | None = None
+    ) -> records.Goal | None:
         for r in self.contract[keys.GOAL].rows(robot_id):
             if r["status"] == "active":
-                return records.Goal(r["id"], r["robot_id"], r["x"], r["y"], r["tolerance_m"])
+                route = sorted(self._waypoints(robot_id, r["id"]), key=lambda w: w["seq"])
+                return records.Goal(
+                    r["id"], r["robot_id"], r["x"], r["y"], r["tolerance_m"],
+                    r.get("yaw"), r.get("yaw_tolerance_rad"),
+                    tuple(records.Waypoint(**{k: w[k] for k in _WAYPOINT}) for w in route),
+                    len(route),
+                )  # fmt: skip
         return None
+
+    def _waypoints(self, robot_id: str, goal_id: int) -> list[Row]:
+        # goal_waypoint rows are kept under their goal's robot (a column the table lacks)
+        return [
+            w for w in self.contract[keys.GOAL_WAYPOINT].rows(robot_id) if w["goal_id"] == goal_id
+        ]
 
     async def newest_odometry(self, robot_id: str) -> records.Odometry | None:
         r = self._newest(keys.ODOMETRY, robot_id)
@@ -134,6 +152,18 @@ class MemoryPlannerSource:
         if goal is not None and updated:
             goal.update(status="failed", reason=reason, finished_stamp=stamp)
         self.contract.changed(keys.GOAL, robot_id, goal_id if updated else None)
+        return updated
+
+    async def mark_waypoint(
+        self, goal_id: int, seq: int, robot_id: str, status: str, reason: str | None, stamp: float
+    ) -> bool:
+        goal = self.contract[keys.GOAL].by_id.get(goal_id)
+        rows = [w for w in self._waypoints(robot_id, goal_id) if w["seq"] == seq]
+        updated = bool(rows) and rows[0]["status"] == "pending"
+        updated = updated and goal is not None and goal["status"] == "active"
+        if updated:
+            rows[0].update(status=status, reason=reason, reached_stamp=stamp)
+        self.contract.changed(keys.GOAL_WAYPOINT, robot_id, goal_id if updated else None)
         return updated
 
     async def live_system(self, robot_id: str, command: str, now: float) -> float | None:

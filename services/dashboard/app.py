@@ -105,8 +105,9 @@ class Endpoints:
     async def set_goal(self, request: Request) -> Response:
         robot = self.robot_of(request)
         goal = GoalRequest.parse(await self.body(request))
-        goal_id = await self.orders.set_goal(robot, goal.x, goal.y, goal.tolerance_m)
-        body = {"robot": robot, "goal_id": goal_id, "x": goal.x, "y": goal.y}
+        goal_id = await self.orders.set_goal(robot, goal)
+        body = {"robot": robot, "goal_id": goal_id, "x": goal.x, "y": goal.y, "yaw": goal.yaw}
+        body["waypoints"] = len(goal.waypoints)
         return JSONResponse(body, status_code=201)
 
     async def cancel_goal(self, request: Request) -> Response:

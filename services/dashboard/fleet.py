@@ -55,6 +55,9 @@ class RobotState:
     # the newest scan's points, by (scan id, pose id): a robot is sent at 10 Hz, its scan
     # changes at 5
     points: tuple[tuple[Any, Any], list[float]] | None = None
+    # the newest goal's route (goal_waypoint rows as the page draws them), and its goal id
+    route: list[dict[str, Any]] = field(default_factory=list)
+    route_goal: int | None = None
 
     def scan_points(self, scan: Row, pose: Row) -> list[float]:
         key = (scan.get("id"), pose.get("id"))
@@ -119,6 +122,22 @@ class Fleet:
             state.undecided = row
         self._changed.add(robot)
 
+    def goal_ids(self, robots: set[str] | None) -> dict[str, int]:
+        """robot -> the id of its newest goal row held (of these robots; None: every one)."""
+        out = {}
+        for name, state in self.robots.items():
+            goal = state.rows.get(keys.GOAL)
+            if goal is not None and (robots is None or name in robots):
+                out[name] = int(goal["id"])
+        return out
+
+    def set_route(self, robot: str, goal_id: int, rows: Sequence[Row]) -> None:
+        state = self._state(robot)
+        route = [scene.waypoint(row) for row in rows]
+        if (state.route_goal, state.route) != (goal_id, route):
+            state.route, state.route_goal = route, goal_id
+            self._changed.add(robot)
+
     async def resolve(self, fetch: FetchRecommendations) -> None:
         """Build the decisions not shown yet, with the recommendations each one weighed."""
         waiting = {r: s for r, s in self.robots.items() if s.undecided is not None}
@@ -172,6 +191,7 @@ def robot_json(name: str, state: RobotState) -> dict[str, Any]:
         "battery": None if batt is None else scene.battery(batt),
         "strategy": None if strategy is None else scene.strategy_state(strategy),
         "goal": None if goal is None else scene.goal(goal),
+        "route": state.route if goal is not None and state.route_goal == goal["id"] else [],
         "path": None if path is None else scene.path(path),
         "decision": state.decision,
     }

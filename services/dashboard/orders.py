@@ -19,7 +19,7 @@ import asyncpg
 
 from common.contract import keys
 from common.errors import ConnectionFailure
-from services.dashboard.requests import NewStrategy, Refused
+from services.dashboard.requests import GoalRequest, NewStrategy, Refused
 from services.dashboard.store import DashboardStore
 
 logger = logging.getLogger("pnav.dashboard.orders")
@@ -59,10 +59,10 @@ class Orders:
         if code not in codes:
             raise Refused(422, f"unknown strategy {code!r}; known strategies: {', '.join(codes)}")
 
-    async def set_goal(self, robot: str, x: float, y: float, tolerance: float | None) -> int:
+    async def set_goal(self, robot: str, goal: GoalRequest) -> int:
         await self.require_robot(robot)
         async with refusal_as_4xx():
-            return await self.source.set_goal(robot, x, y, tolerance)
+            return await self.source.set_goal(robot, goal)
 
     async def cancel_goal(self, robot: str) -> int | None:
         await self.require_robot(robot)

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from common.contract import limits
+from common.contract.people import Pose, check_route
 from common.errors import ContractError, UsageError
 
 _CODE = re.compile(r"^[A-Z0-9_]+$")
@@ -117,24 +118,65 @@ def _unknown_fields(body: dict[str, Any], allowed: set[str]) -> None:
         raise Refused(422, f"unknown field(s) {', '.join(extra)}; accepted: {sorted(allowed)}")
 
 
+_POSE_FIELDS = {"x", "y", "tolerance_m", "yaw", "yaw_tolerance_rad"}
+
+
+def _pose(body: dict[str, Any], where: str, stop: bool = False) -> Pose:
+    """A pose of the body (``where``: "" for the goal's, "waypoints[2]." for a waypoint's);
+    a field that is no number is refused naming it (the bounds: :func:`check_route`)."""
+
+    def number(name: str, required: bool = False) -> float | None:
+        try:
+            return _number(body, name, required=required)
+        except Refused as exc:
+            raise Refused(exc.status, f"{where}{exc.reason}") from None
+
+    x, y = number("x", True), number("y", True)
+    assert x is not None and y is not None
+    heading = number("yaw"), number("yaw_tolerance_rad")
+    return Pose(x, y, *heading, number("tolerance_m"), stop)
+
+
 @dataclass(frozen=True)
 class GoalRequest:
+    """A goal pose (``yaw``, ``yaw_tolerance_rad``: radians) and a route's waypoints before
+    it (objects of x, y, optional tolerance_m, yaw, yaw_tolerance_rad, stop)."""
+
     x: float
     y: float
     tolerance_m: float | None = None
+    yaw: float | None = None
+    yaw_tolerance_rad: float | None = None
+    waypoints: tuple[Pose, ...] = ()
 
     @classmethod
     def parse(cls, body: dict[str, Any]) -> GoalRequest:
-        _unknown_fields(body, {"x", "y", "tolerance_m"})
-        x = _number(body, "x", required=True)
-        y = _number(body, "y", required=True)
-        tolerance = _number(body, "tolerance_m", required=False)
-        assert x is not None and y is not None
+        _unknown_fields(body, {*_POSE_FIELDS, "waypoints"})
+        goal = _pose(body, "")
+        listed = body.get("waypoints") or []
+        if not isinstance(listed, list):
+            raise Refused(422, f"'waypoints' must be a list of poses, got {listed!r}"[:200])
         try:
-            limits.check_goal(x, y, tolerance)
+            limits.check_waypoint_count(len(listed))
         except ContractError as exc:
             raise Refused(422, str(exc)) from None
-        return cls(x, y, tolerance)
+        waypoints = []
+        for i, item in enumerate(listed, start=1):
+            if not isinstance(item, dict):
+                raise Refused(422, f"waypoint {i} must be an object with x and y"[:200])
+            extra = sorted(set(item) - {*_POSE_FIELDS, "stop"})
+            if extra:
+                raise Refused(422, f"waypoint {i}: unknown field(s) {', '.join(extra)}")
+            stop = item.get("stop", False)
+            if not isinstance(stop, bool):
+                raise Refused(422, f"waypoint {i} 'stop' must be true or false, got {stop!r}")
+            waypoints.append(_pose(item, f"waypoint {i} ", stop))
+        try:
+            check_route(goal, waypoints)
+        except ContractError as exc:
+            raise Refused(422, str(exc)) from None
+        return cls(goal.x, goal.y, goal.tolerance_m, goal.yaw, goal.yaw_tolerance_rad,
+                   tuple(waypoints))  # fmt: skip
 
 
 def strategy_code(value: Any) -> str:

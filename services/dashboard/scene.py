@@ -115,8 +115,25 @@ def goal(row: Row) -> dict[str, Any]:
         "x": _num(row["x"]),
         "y": _num(row["y"]),
         "tolerance_m": _num(row["tolerance_m"]),
+        "yaw": _num(row.get("yaw")),
+        "yaw_tolerance_rad": _num(row.get("yaw_tolerance_rad")),
         "status": row["status"],
         "reason": row["reason"],
+    }
+
+
+def waypoint(row: Row) -> dict[str, Any]:
+    """A goal_waypoint row: a pose of a route and its progress."""
+    return {
+        "seq": row["seq"],
+        "x": _num(row["x"]),
+        "y": _num(row["y"]),
+        "tolerance_m": _num(row["tolerance_m"]),
+        "yaw": _num(row["yaw"]),
+        "stop": bool(row["stop"]),
+        "status": row["status"],
+        "reason": row["reason"],
+        "reached_stamp": _num(row["reached_stamp"]),
     }
 
 

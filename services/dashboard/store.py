@@ -25,7 +25,7 @@ from common.bus import Notification
 from common.contract import keys, limits, people
 from common.db import Database
 from services.dashboard.fleet import Fleet
-from services.dashboard.requests import NewStrategy, Refused
+from services.dashboard.requests import GoalRequest, NewStrategy, Refused
 from services.dashboard.timeline import Timeline, command_event, goal_event, strategy_event
 
 Row = Mapping[str, Any]
@@ -74,6 +74,11 @@ SELECT id, robot_id, kind, source, priority, linear_mps, angular_rps, system_com
        AS inputs
 FROM command_recommendation WHERE id = ANY($1::bigint[])
 """
+_ROUTES = """
+SELECT goal_id, seq, x, y, tolerance_m, yaw, yaw_tolerance_rad, stop, status,
+       left(reason, 200) AS reason, reached_stamp
+FROM goal_waypoint WHERE goal_id = ANY($1::bigint[]) ORDER BY goal_id, seq
+"""
 TIMELINE_TABLES: Final = (keys.GOAL, keys.USER_COMMAND, keys.SYSTEM_COMMAND)
 _SEED_ROWS = 100
 
@@ -87,7 +92,8 @@ class DashboardSource(Protocol):
     async def row(self, table: str, row_id: int) -> Row | None: ...
     async def recent(self, table: str, robot: str | None, limit: int) -> list[Row]: ...
     async def recommendations(self, ids: Sequence[int]) -> list[Row]: ...
-    async def set_goal(self, robot: str, x: float, y: float, tolerance: float | None) -> int: ...
+    async def set_goal(self, robot: str, goal: GoalRequest) -> int: ...
+    async def routes(self, goal_ids: Sequence[int]) -> dict[int, list[Row]]: ...
     async def cancel_goal(self, robot: str) -> int | None: ...
     async def user_command(self, robot: str, command: str, argument: str | None) -> int: ...
     async def add_strategy(self, request: NewStrategy) -> None: ...
@@ -144,8 +150,24 @@ class PgDashboardSource:
     async def recommendations(self, ids: Sequence[int]) -> list[Row]:
         return list(await self.db.pool.fetch(_RECOMMENDATIONS, list(ids)))
 
-    async def set_goal(self, robot: str, x: float, y: float, tolerance: float | None) -> int:
-        return await people.set_goal(self.db, robot, x, y, tolerance)
+    async def set_goal(self, robot: str, goal: GoalRequest) -> int:
+        return await people.set_goal(
+            self.db,
+            robot,
+            goal.x,
+            goal.y,
+            goal.tolerance_m,
+            yaw=goal.yaw,
+            yaw_tolerance_rad=goal.yaw_tolerance_rad,
+            waypoints=goal.waypoints,
+        )
+
+    async def routes(self, goal_ids: Sequence[int]) -> dict[int, list[Row]]:
+        """The waypoints of these goals (goal_waypoint), in seq order, per goal."""
+        out: dict[int, list[Row]] = {}
+        for row in await self.db.pool.fetch(_ROUTES, list(goal_ids)):
+            out.setdefault(int(row["goal_id"]), []).append(row)
+        return out
 
     async def cancel_goal(self, robot: str) -> int | None:
         return await people.cancel_goal(self.db, robot)
@@ -213,6 +235,7 @@ class DashboardStore:
         if note.table in (keys.ROBOT, keys.MAP, keys.CHARGING_STATION, keys.STRATEGY):
             self._dirty.setdefault((note.table, None), set()).add(None)
         elif note.robot is not None and note.table in (
+            keys.GOAL_WAYPOINT,
             *TIMELINE_TABLES,
             keys.ACTIVE_STRATEGY,
             *NEWEST_TABLES,
@@ -229,6 +252,7 @@ class DashboardStore:
                 self.fleet.set_row(table, row)
         for row in await source.active_strategies():
             self.fleet.set_row(keys.ACTIVE_STRATEGY, row)
+        await self._read_routes(None)
         if not self.loaded.is_set():
             await self._seed_timeline()
         else:
@@ -265,8 +289,9 @@ class DashboardStore:
         if any(robot is None for _table, robot in dirty):
             await self.read_globals()
         newest: dict[str, set[str]] = {}  # one query per table serves every robot
+        routes = {r for (t, r) in dirty if t in (keys.GOAL, keys.GOAL_WAYPOINT) and r}
         for (table, robot), ids in dirty.items():
-            if robot is None:
+            if robot is None or table == keys.GOAL_WAYPOINT:
                 continue
             if table in NEWEST_TABLES and table != keys.GOAL:
                 newest.setdefault(table, set()).add(robot)
@@ -276,7 +301,17 @@ class DashboardStore:
             for row in await self.source.newest(table):
                 if row["robot_id"] in robots:
                     self.fleet.set_row(table, row)
+        if routes:
+            await self._read_routes(routes)
         await self.fleet.resolve(self.source.recommendations)
+
+    async def _read_routes(self, robots: set[str] | None) -> None:
+        """The waypoints of these robots' goals (None: every robot's), in one query."""
+        goals = self.fleet.goal_ids(robots)
+        if goals:
+            found = await self.source.routes(list(goals.values()))
+            for robot, goal_id in goals.items():
+                self.fleet.set_route(robot, goal_id, found.get(goal_id, []))
 
     async def _read(self, table: str, robot: str, ids: set[int | None]) -> None:
         source = self.source

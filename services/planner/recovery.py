@@ -71,6 +71,10 @@ class Observation:
     footprint_m: float
     rear_clear: bool = True
     left_freer: bool = True
+    # the pose of the goal's route driven to now (a waypoint's seq, None: the goal's own) and
+    # how close counts as there: a robot there turns to a heading or stands, never stuck
+    leg: int | None = None
+    there_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -94,6 +98,7 @@ class Machine:
     def __init__(self) -> None:
         self.state = WATCH
         self.goal: tuple[Any, ...] | None = None
+        self.leg: int | None = None
         self.attempts = 0
         self.anchor = (0.0, 0.0, 0.0)  # x, y, stamp: where the robot has stayed near since
         self.best = (math.inf, 0.0)  # the nearest it came to the goal, and when
@@ -147,7 +152,15 @@ class Machine:
     def step(self, o: Observation, p: RecoveryParams) -> Action:
         if self.goal != o.goal:
             self.goal, self.attempts = o.goal, 0
+            self.leg = o.leg
             self._watch_from(o)
+        if self.leg != o.leg:  # on to the route's next pose: progress counts toward it
+            self.leg = o.leg
+            if self.state == WATCH:
+                self._watch_from(o)
+        if self.state == WATCH and math.hypot(o.goal_x - o.x, o.goal_y - o.y) <= o.there_m:
+            self._watch_from(o)  # there: turning to the heading or standing, not stuck
+            return NOTHING
         if self.state == WATCH:
             return self._watch(o, p)
         if self.state == BACK_UP:

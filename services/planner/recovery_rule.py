@@ -23,6 +23,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+import services.planner.arrival as arrival
+import services.planner.waypoints as waypoints
 from common import log
 from common.contract import records
 from common.engine.supervisor import Ticket
@@ -117,11 +119,14 @@ class Recovery(TargetRule):
         rear_clear: bool = True,
         left_freer: bool = True,
     ) -> Observation:
+        leg = waypoints.route_target(goal)  # the route's next pose, as its rows say
         return Observation(
-            *(odom.stamp, odom.x, odom.y, odom.yaw, ("goal", goal.id), goal.x, goal.y),
+            *(odom.stamp, odom.x, odom.y, odom.yaw, ("goal", goal.id), leg.x, leg.y),
             footprint_m,
             rear_clear,
             left_freer,
+            leg.seq,
+            leg.reach_m + arrival.ALIGN_SLACK_M,
         )
 
     def activation_guards(self) -> Iterator[bool]:

@@ -21,6 +21,7 @@ import numpy as np
 import services.planner.reachability as reachability
 from common import log
 from common.contract import records
+from common.contract.limits import DEFAULT_YAW_TOLERANCE_RAD
 from services.planner.obstacles import Points, Seen, buckets, known, recent
 from services.planner.path import path_length, plan_path, with_obstacles
 from services.planner.tracking import Progress, Route, follow
@@ -48,6 +49,15 @@ class Target:
     reach_m: float  # closer than this: reached
     hold_m: float  # once reached, stay stopped while closer than this
     goal_id: int | None = None
+    # the heading to turn to once there (rad, map frame; None: any) and within what
+    yaw: float | None = None
+    yaw_tol: float = DEFAULT_YAW_TOLERANCE_RAD
+    # a route's waypoint: its seq (None: the goal's own pose, or a charger)
+    seq: int | None = None
+    halts: bool = True  # the robot stops here (False: a waypoint passed through)
+    # straight-line metres beyond this target to the next pose the robot stops at: the
+    # speed slows only toward that one
+    beyond_m: float = 0.0
 
     @property
     def key(self) -> tuple[Any, ...]:
@@ -55,14 +65,31 @@ class Target:
 
     @property
     def label(self) -> str:
+        if self.seq is not None:
+            return f"waypoint {self.seq} of goal {self.goal_id}"
         return f"{self.kind} {self.ref}"
 
+    @property
+    def poses(self) -> bool:
+        """Whether arriving asks more than the position: a heading, or a halt on a route
+        (the robot stands still before the pose counts as reached)."""
+        return self.yaw is not None or (self.seq is not None and self.halts)
+
     def inputs(self) -> dict[str, Any]:
-        return {"goal": self.goal_id} if self.kind == "goal" else {"charger": self.ref}
+        if self.kind != "goal":
+            return {"charger": self.ref}
+        return (
+            {"goal": self.goal_id}
+            if self.seq is None
+            else {"goal": self.goal_id, "waypoint": self.seq}
+        )
 
     @classmethod
     def of_goal(cls, goal: records.Goal) -> Target:
-        return cls("goal", str(goal.id), goal.x, goal.y, goal.tolerance_m, 0.0, goal.id)
+        yaw_tol = goal.yaw_tolerance_rad or DEFAULT_YAW_TOLERANCE_RAD
+        return cls(
+            "goal", str(goal.id), goal.x, goal.y, goal.tolerance_m, 0.0, goal.id, goal.yaw, yaw_tol
+        )
 
     @classmethod
     def of_station(cls, station: Station) -> Target:

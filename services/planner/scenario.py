@@ -31,13 +31,15 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Iterator
-from dataclasses import dataclass
 from typing import Any, ClassVar, cast
 
+import services.planner.arrival as arrival
+import services.planner.waypoints as waypoints
 from common import log
 from common.contract import records
 from common.engine.supervisor import Ticket
 from common.planner_core.scenario import Movement, MoveScenario
+from services.planner.cadence import RECOMMEND_PERIOD_S, Said, due
 from services.planner.paths import PathKey, PathRow, empty_key, empty_row, route_row
 from services.planner.routes import Target
 from services.planner.target import RuleKey, Spec, TargetRule
@@ -50,12 +52,6 @@ logger = logging.getLogger("pnav.planner")
 PRIORITY = 10
 VALIDITY_S = 0.5
 ODOM_MAX_AGE_S = 1.0
-# Recommend again at least this often (sim s) while nothing changes: well inside VALIDITY_S,
-# and as often as the decision service re-issues its winner anyway.
-RECOMMEND_PERIOD_S = 0.1
-# A velocity differing from the last recommendation by more than this is sent at once.
-CHANGE_LINEAR_MPS = 0.02
-CHANGE_ANGULAR_RPS = 0.1
 # How often (sim s) the newest laser scan is read, for unmapped obstacles (2 of its 5 Hz).
 SCAN_PERIOD_S = 0.4
 # The odometry wakes the planner 30 times a sim second; it is read (and the velocity worked
@@ -67,41 +63,21 @@ EVAL_PERIOD_S = 0.06
 ODOM_RECHECK_S = 0.25
 
 
-@dataclass(frozen=True)
-class Said:
-    """The last velocity recommended: what a new one is compared with."""
-
-    stamp: float
-    target_key: tuple[Any, ...]
-    move: Movement
-
-
-def due(last: Said | None, stamp: float, target_key: tuple[Any, ...], move: Movement) -> bool:
-    """Whether ``move`` (for the odometry at ``stamp``) is worth a recommendation: a first one,
-    a new target, a switch between turning and driving, a material change of velocity, or
-    RECOMMEND_PERIOD_S since the last one (or sim time went back: the sim restarted)."""
-    if last is None or last.target_key != target_key or last.move.turning != move.turning:
-        return True
-    if not last.stamp <= stamp < last.stamp + RECOMMEND_PERIOD_S - 1e-9:
-        return True
-    return (
-        abs(move.linear - last.move.linear) > CHANGE_LINEAR_MPS
-        or abs(move.angular - last.move.angular) > CHANGE_ANGULAR_RPS
-        or (move.angular == 0.0) != (last.move.angular == 0.0)
-    )
-
-
-async def target_of(view: PlannerView, robot: RobotState, x: float, y: float) -> Target | None:
-    """The robot's target under its strategy's ``target`` param (None: nothing to go to)."""
+async def target_of(
+    view: PlannerView, robot: RobotState, x: float, y: float, done: dict[int, set[int]]
+) -> tuple[Target | None, records.Goal | None]:
+    """The robot's target under its strategy's ``target`` param (None: nothing to go to):
+    the active goal's route's next pose (waypoints.py; ``done``: the waypoints this rule
+    reached, per goal), or the nearest charger; and the goal."""
     strategy = robot.strategy
     kind = strategy.params.get("target") if strategy else None
     if kind == "goal":
         goal = await view.active_goal(robot)
-        return Target.of_goal(goal) if goal else None
+        return (waypoints.route_target(goal, done.get(goal.id, ())), goal) if goal else (None, None)
     if kind == "nearest_charger":
         station = view.choose_station(robot, x, y)
-        return Target.of_station(station) if station else None
-    return None
+        return (Target.of_station(station) if station else None), None
+    return None, None
 
 
 class MoveRule(TargetRule, MoveScenario):
@@ -122,6 +98,11 @@ class MoveRule(TargetRule, MoveScenario):
         self.robot: RobotState | None = None
         self.odom: records.Odometry | None = None
         self.target: Target | None = None
+        self.goal: records.Goal | None = None
+        self.done: dict[int, set[int]] = {}  # per goal: the waypoints this rule reached
+        self.aligning: set[tuple[Any, ...]] = set()  # targets turned or settled at
+        self.marks: list[tuple[Target, str, str | None]] = []  # waypoint progress to write
+        self.ahead: waypoints.Ahead | None = None  # how far the route is judged on the map
         self.sim_now = 0.0
         # What this activation found (data acquisition) for the conditions to test and the
         # actions to write.
@@ -137,8 +118,9 @@ class MoveRule(TargetRule, MoveScenario):
 
     async def data_acquisition(self) -> None:
         self.robot = self.claim()
-        self.odom = self.target = None
+        self.odom = self.target = self.goal = None
         self.news = False
+        self.marks = []
         self.path_due = None
         if self.robot is None:
             return
@@ -169,7 +151,7 @@ class MoveRule(TargetRule, MoveScenario):
         if self.odom is None:
             return
         robot.note_pose(self.odom)
-        self.target = await target_of(view, robot, self.odom.x, self.odom.y)
+        self.target, self.goal = await target_of(view, robot, self.odom.x, self.odom.y, self.done)
         if self.target is not None and abs(self.sim_now - robot.scan_read_at) >= SCAN_PERIOD_S:
             # The lidar, for the unmapped obstacles the route should go around (view.see).
             robot.scan_read_at = self.sim_now
@@ -202,8 +184,34 @@ class MoveRule(TargetRule, MoveScenario):
             return
         self.last_said = (odom.id, target.key)
         self.arrived, self.move, self.failed = None, None, None
+        target = self.target = self._next_leg(odom, target, robot)
+        bad = self._judge_ahead(robot)
+        if bad is not None:  # a waypoint ahead the map rules out: the route fails now
+            assert self.goal is not None  # only a goal's route is judged
+            target = self.target = waypoints.waypoint_target(self.goal, bad[0])
+            self.failed = waypoints.failure(target, bad[1])
+            self.marks.append((target, "failed", self.failed))
+            self.worth_saying = target.key not in self.dropped
+            self._path_done(target)
+            return
         distance = math.hypot(target.x - odom.x, target.y - odom.y)
-        if distance <= target.reach_m or (target.key in self.held and distance <= target.hold_m):
+        drives = robot.strategy is None or robot.strategy.params.get("planner_drives") is not False
+        aligning = target.key in self.aligning
+        there = arrival.at_position(target, distance, aligning)
+        if target.poses and there:
+            # there: turn to the heading and stand (whatever drives: a local controller has
+            # stopped on the empty path), then the pose is reached
+            move = arrival.final_move(
+                target, odom.yaw, odom.angular_rps, odom.linear_mps, robot.info.max_angular_rps
+            )
+            if move is not None:
+                self.aligning.add(target.key)
+                self.move, self.why = move, arrival.why(target, move, odom.yaw)
+                self.worth_saying = due(self.said, odom.stamp, target.key, move)
+                self._path_done(target)
+                return
+        self.aligning.discard(target.key)
+        if there or (target.key in self.held and distance <= target.hold_m):
             self.arrived = distance
             self.worth_saying = target.key not in self.held  # stopped there already: no
             self._path_done(target)
@@ -211,20 +219,53 @@ class MoveRule(TargetRule, MoveScenario):
         self.held.discard(target.key)
         progress = self.view.route_for(robot, odom.x, odom.y, target, odom.stamp)
         if progress.unreachable is not None and target.goal_id is not None:
-            self.failed = progress.unreachable
+            self.failed = waypoints.failure(target, progress.unreachable)
+            if target.seq is not None:
+                self.marks.append((target, "failed", self.failed))
             self.worth_saying = target.key not in self.dropped  # stopped for it already: no
             self._path_done(target)
             return
         if robot.route is not None and robot.route is not self.published:
             self.path_due = (robot.route, route_row(self.robot_id, odom.stamp, target, robot.route))
         error = heading_error(odom.x, odom.y, odom.yaw, progress.lookahead)
-        move = self.select(error, progress.remaining_m, robot.info, odom.angular_rps)
+        remaining = progress.remaining_m + target.beyond_m  # slow only toward a halt
+        move = self.select(error, remaining, robot.info, odom.angular_rps)
         self.move = move
         self.why = self._reason(move, error, progress, target)
         # A strategy whose local controller drives (``planner_drives`` false, e.g. GOTO_FAST)
-        # gets the route, the arrival and the failure from the planner, no velocity.
-        drives = robot.strategy is None or robot.strategy.params.get("planner_drives") is not False
+        # gets the route, the arrival, the final turn and the failure from the planner, no
+        # velocity on the way.
         self.worth_saying = drives and due(self.said, odom.stamp, target.key, move)
+
+    def _judge_ahead(self, robot: RobotState) -> tuple[records.Waypoint, str] | None:
+        """The next few waypoints of the goal's route judged on the map (waypoints.py)."""
+        goal, data = self.goal, self.view.map_for(robot.info)
+        if goal is None or not goal.waypoints or data is None:
+            return None
+        key = (goal.id, data.version, robot.info.footprint_radius_m)
+        if self.ahead is None or self.ahead.key != key:
+            self.ahead = waypoints.Ahead(key)
+        return waypoints.check_ahead(data, robot.info.footprint_radius_m, goal, self.ahead)
+
+    def _next_leg(self, odom: records.Odometry, target: Target, robot: RobotState) -> Target:
+        """The target after the route's waypoints the robot is at now: each passed through
+        within its tolerance, or halted at with its pose held and the robot standing, is
+        reached (marked for the actions to write) and the next pose becomes the target."""
+        goal = self.goal
+        while target.seq is not None and goal is not None:
+            distance = math.hypot(target.x - odom.x, target.y - odom.y)
+            aligning = target.key in self.aligning
+            if not arrival.at_position(target, distance, aligning):
+                break
+            if target.halts and arrival.final_move(
+                target, odom.yaw, odom.angular_rps, odom.linear_mps, robot.info.max_angular_rps
+            ):
+                break  # turning or settling there still
+            self.aligning.discard(target.key)
+            self.done.setdefault(goal.id, set()).add(target.seq)
+            self.marks.append((target, "reached", None))
+            target = waypoints.route_target(goal, self.done[goal.id])
+        return target
 
     def _path_done(self, target: Target) -> None:
         """The target is reached or failed: the path in force becomes an empty one."""
@@ -240,9 +281,23 @@ class MoveRule(TargetRule, MoveScenario):
             self.path_due = (key, empty_row(self.robot_id, self.sim_now, None))
 
     def conditions(self) -> Iterator[bool]:
-        yield self.path_due is not None or (self.news and self.worth_saying)
+        yield bool(self.marks) or self.path_due is not None or (self.news and self.worth_saying)
 
     async def actions(self) -> None:
+        for leg, status, why in self.marks:
+            # a route's progress, on its rows (only while the goal is active)
+            assert leg.goal_id is not None and leg.seq is not None
+            await self.view.mark_waypoint(
+                leg.goal_id, leg.seq, self.robot_id, status, why, self.sim_now
+            )
+            log.event(
+                logger,
+                logging.INFO,
+                f"waypoint {status}",
+                robot=self.robot_id,
+                goal=leg.goal_id,
+                waypoint=leg.seq,
+            )
         if self.path_due is not None:
             # the path first: a local controller then stops on its empty path at once
             key, row = self.path_due
@@ -275,6 +330,12 @@ class MoveRule(TargetRule, MoveScenario):
                 logger, logging.INFO, "goal reached", robot=self.robot_id, goal=target.goal_id
             )
             reason = f"{target.label} reached ({distance:.2f} m away): stop"
+            if target.yaw is not None:
+                error = arrival.heading_error(target, odom.yaw)
+                reason = (
+                    f"{target.label} reached ({distance:.2f} m away, heading error "
+                    f"{error:.2f} rad): stop"
+                )
         else:
             reason = f"at {target.label} ({distance:.2f} m from its centre): stop and charge"
         self.said = Said(odom.stamp, target.key, Movement(0.0, 0.0, False))

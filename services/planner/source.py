@@ -37,6 +37,11 @@ MARK_FAILED_SQL = (
     "UPDATE goal SET status = 'failed', reason = $3, finished_stamp = $2 "
     "WHERE id = $1 AND status = 'active' RETURNING id"
 )
+MARK_WAYPOINT_SQL = (
+    "UPDATE goal_waypoint w SET status = $3, reason = $4, reached_stamp = $5 FROM goal g "
+    "WHERE w.goal_id = $1 AND w.seq = $2 AND w.status = 'pending' "
+    "AND g.id = w.goal_id AND g.status = 'active' RETURNING w.goal_id"
+)
 LIVE_SYSTEM_SQL = (
     "SELECT max(expires_stamp) FROM command_recommendation WHERE robot_id = $1 "
     "AND kind = 'system' AND system_command = $2 AND expires_stamp > $3"
@@ -58,7 +63,11 @@ class PlannerSource(Protocol):
 
     async def active_strategies(self) -> dict[str, records.ActiveStrategy]: ...
 
-    async def active_goal(self, robot_id: str) -> records.Goal | None: ...
+    async def active_goal(
+        self, robot_id: str, known: records.Goal | None = None
+    ) -> records.Goal | None:
+        """The robot's active goal with its route (``known``: as read last; its waypoints
+        are kept while their count is unchanged)."""
 
     async def newest_odometry(self, robot_id: str) -> records.Odometry | None: ...
 
@@ -71,6 +80,11 @@ class PlannerSource(Protocol):
 
     async def mark_failed(self, goal_id: int, robot_id: str, reason: str, stamp: float) -> bool:
         """Set the goal 'failed' with ``reason`` if it is still active, and notify."""
+
+    async def mark_waypoint(
+        self, goal_id: int, seq: int, robot_id: str, status: str, reason: str | None, stamp: float
+    ) -> bool:
+        """Set a pending waypoint of an active goal ``status``, and notify; whether it was."""
 
     async def live_system(self, robot_id: str, command: str, now: float) -> float | None:
         """The newest expiry after ``now`` of the robot's ``command`` recommendations."""
@@ -114,8 +128,10 @@ class PgPlannerSource:
     async def active_strategies(self) -> dict[str, records.ActiveStrategy]:
         return await records.active_strategies(self.db)
 
-    async def active_goal(self, robot_id: str) -> records.Goal | None:
-        return await records.active_goal(self.db, robot_id)
+    async def active_goal(
+        self, robot_id: str, known: records.Goal | None = None
+    ) -> records.Goal | None:
+        return await records.active_goal(self.db, robot_id, known)
 
     async def newest_odometry(self, robot_id: str) -> records.Odometry | None:
         return await records.newest_odometry(self.db, robot_id)
@@ -133,6 +149,14 @@ class PgPlannerSource:
     async def mark_failed(self, goal_id: int, robot_id: str, reason: str, stamp: float) -> bool:
         sql, args = MARK_FAILED_SQL, (goal_id, stamp, reason)
         return await self.db.write(keys.GOAL, robot_id, sql, *args) is not None
+
+    async def mark_waypoint(
+        self, goal_id: int, seq: int, robot_id: str, status: str, reason: str | None, stamp: float
+    ) -> bool:
+        args = (goal_id, seq, status, reason, stamp)
+        return (
+            await self.db.write(keys.GOAL_WAYPOINT, robot_id, MARK_WAYPOINT_SQL, *args) is not None
+        )
 
     async def live_system(self, robot_id: str, command: str, now: float) -> float | None:
         value = await self.db.fetchval(LIVE_SYSTEM_SQL, robot_id, command, now)

@@ -85,6 +85,7 @@ class PlannerStore:
         )
         # what the live controllers offer (scenario_offer), read as often as the world
         self._offers = FreshCache[str, Offers](clock, math.nextafter(REFRESH_S, math.inf))
+        self._routes_changed: set[str] = set()  # robots whose waypoints to read in full
         self._odometry_notes: dict[str, int] = {}
         # per robot: the newest odometry image and the store clock when it came (None: the
         # newest notification could not stand in for the table)
@@ -129,11 +130,16 @@ class PlannerStore:
             self._active.announce(_ACTIVE)
         elif note.table == keys.SCENARIO_OFFER:
             self._offers.announce(_OFFERS)
-        elif note.table == keys.GOAL:
+        elif note.table in (keys.GOAL, keys.GOAL_WAYPOINT):
+            # a route's rows come with their goal (or after it, notified on their own): read
+            # both again; a waypoint notification reads every waypoint, not only the count
             if note.robot is None:
                 self._goals.announce_all()
+                self._routes_changed.update(self.world.robots)
             else:
                 self._goals.announce(note.robot)
+                if note.table == keys.GOAL_WAYPOINT:
+                    self._routes_changed.add(note.robot)
         elif note.table == keys.ODOMETRY and note.robot is not None:
             self._odometry_notes[note.robot] = self._odometry_notes.get(note.robot, 0) + 1
             self._image(self._odometry, records.odometry_of, note.robot, note)
@@ -212,7 +218,10 @@ class PlannerStore:
 
     async def active_goal(self, robot: RobotState) -> records.Goal | None:
         robot_id = robot.info.robot_id
-        return await self._goals.get(robot_id, lambda: self.source.active_goal(robot_id))
+        known = None if robot_id in self._routes_changed else self._goals.peek(robot_id)
+        if self._goals.stale(robot_id):
+            self._routes_changed.discard(robot_id)
+        return await self._goals.get(robot_id, lambda: self.source.active_goal(robot_id, known))
 
     async def newest_odometry(self, robot_id: str) -> records.Odometry | None:
         image = self._odometry.get(robot_id)
@@ -237,6 +246,11 @@ class PlannerStore:
 
     async def mark_failed(self, goal_id: int, robot_id: str, reason: str, stamp: float) -> bool:
         return await self.source.mark_failed(goal_id, robot_id, reason, stamp)
+
+    async def mark_waypoint(
+        self, goal_id: int, seq: int, robot_id: str, status: str, reason: str | None, stamp: float
+    ) -> bool:
+        return await self.source.mark_waypoint(goal_id, seq, robot_id, status, reason, stamp)
 
     async def live_system(self, robot_id: str, command: str) -> float | None:
         return await self.source.live_system(robot_id, command, self.now())

@@ -56,6 +56,12 @@ class Contract(Clocks, Protocol):
     async def mark_failed(self, goal_id: int, robot_id: str, reason: str, stamp: float) -> bool:
         """Set the goal 'failed' with ``reason`` and notify; False if it was no longer active."""
 
+    async def mark_waypoint(
+        self, goal_id: int, seq: int, robot_id: str, status: str, reason: str | None, stamp: float
+    ) -> bool:
+        """Set a route's waypoint ``status`` (reached, failed) if it is pending and its goal
+        active, and notify; whether it was."""
+
     async def live_system(self, robot_id: str, command: str) -> float | None:
         """Expiry of this robot's newest unexpired ``command`` recommendation, if any."""
 

@@ -104,6 +104,35 @@ def hex_rgb(color: str) -> list[int]:
 def click_world(driver: Any, x: float, y: float) -> None:
     """Click the canvas at world point (x, y), through the page's own transform."""
     from selenium.webdriver.common.action_chains import ActionChains
+
+    canvas, dx, dy = _at_world(driver, x, y)
+    ActionChains(driver).move_to_element_with_offset(canvas, dx, dy).click().perform()
+
+
+def drag_world(driver: Any, x: float, y: float, right_px: int, up_px: int, shift: bool) -> None:
+    """Press the canvas at world point (x, y), drag by (right, up) pixels, release; with Shift
+    held if ``shift``."""
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.keys import Keys
+
+    # the form steps may have scrolled the page: actions outside the viewport are lost
+    driver.execute_script("document.getElementById('map').scrollIntoView({block: 'center'})")
+    canvas, dx, dy = _at_world(driver, x, y)
+    chain = ActionChains(driver)
+    if shift:
+        chain = chain.key_down(Keys.SHIFT)
+    chain = chain.move_to_element_with_offset(canvas, dx, dy).click_and_hold()
+    chain = chain.move_by_offset(right_px // 2, -up_px // 2).move_by_offset(
+        right_px - right_px // 2, -(up_px - up_px // 2)
+    )
+    chain = chain.release()
+    if shift:
+        chain = chain.key_up(Keys.SHIFT)
+    chain.perform()
+
+
+def _at_world(driver: Any, x: float, y: float) -> tuple[Any, int, int]:
+    """The canvas and the offset of world point (x, y) from its centre (W3C actions)."""
     from selenium.webdriver.common.by import By
 
     canvas = driver.find_element(By.ID, "map")
@@ -118,8 +147,7 @@ def click_world(driver: Any, x: float, y: float) -> None:
         x,
         y,
     )
-    # offsets are from the element's centre (W3C actions)
-    ActionChains(driver).move_to_element_with_offset(canvas, int(dx), int(dy)).click().perform()
+    return canvas, int(dx), int(dy)
 
 
 async def test_the_page_draws_the_robot_sends_a_goal_switches_strategy_and_explains(
@@ -260,6 +288,38 @@ async def test_the_page_draws_the_robot_sends_a_goal_switches_strategy_and_expla
             deep = browser.find_element(By.CSS_SELECTOR, option)
             assert deep.text == "DEEP (unreadable)" and not deep.is_enabled()
             assert drawn(browser) is not None
+
+            # 7. a drag sets the heading: Shift+drag a waypoint facing up (+y), then a drag
+            # to the right a goal facing +x, sent with the waypoint before it
+            if browser.find_element(By.ID, "provenance").is_displayed():
+                browser.find_element(By.ID, "provenance-close").click()
+            drag_world(browser, 2.0, 2.5, 0, 40, shift=True)
+            message = browser.find_element(By.ID, "message")
+            try:
+                await until(
+                    lambda: "waypoint 1 placed" in message.text,
+                    "the page to say the waypoint was placed",
+                    within=30,
+                )
+            except AssertionError as exc:
+                raise AssertionError(f"{exc}; it says {message.text!r}") from None
+            drag_world(browser, *GOAL, 40, 0, shift=False)
+            await until(
+                lambda: "through 1 waypoint" in browser.find_element(By.ID, "message").text,
+                "the page to say the goal pose was set",
+                within=30,
+            )
+            posed = await pool.fetchrow(  # the newest goal (whatever the planner made of it)
+                "SELECT id, x, y, yaw, yaw_tolerance_rad, status, reason FROM goal "
+                "WHERE robot_id = 'r1' ORDER BY id DESC LIMIT 1"
+            )
+            assert abs(posed["yaw"]) < 0.05 and posed["yaw_tolerance_rad"] == 0.1, dict(posed)
+            assert math.hypot(posed["x"] - GOAL[0], posed["y"] - GOAL[1]) < 0.05, dict(posed)
+            waypoint = await pool.fetchrow(
+                "SELECT seq, x, y, yaw FROM goal_waypoint WHERE goal_id = $1", posed["id"]
+            )
+            assert waypoint["seq"] == 1 and abs(waypoint["yaw"] - math.pi / 2) < 0.05
+            assert math.hypot(waypoint["x"] - 2.0, waypoint["y"] - 2.5) < 0.05, dict(waypoint)
 
             shot = tmp_path / "dashboard.png"
             assert browser.save_screenshot(str(shot))

@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import math
 from pathlib import Path
+from typing import Any
 
 import asyncpg
 import pytest
@@ -51,6 +52,16 @@ def assert_one_line_refusal(code: int, err: str, *needles: str) -> None:
         (["goal", "1", "1", "--tolerance", "0"], ["argument --tolerance", "'0'"]),
         (["goal", "1", "1", "--tolerance", "nan"], ["argument --tolerance", "'nan'"]),
         (["goal", "1", "1", "--tolerance", "101"], ["argument --tolerance", "'101'"]),
+        (["goal", "1", "1", "--yaw", "nan"], ["argument --yaw", "degrees", "'nan'"]),
+        (["goal", "1", "1", "--yaw", "180.5"], ["argument --yaw", "[-180, 180]", "'180.5'"]),
+        (["goal", "1", "1", "--yaw", "90", "--yaw-tolerance", "0"], ["--yaw-tolerance", "'0'"]),
+        (["goal", "--through", "1,2;3,nan"], ["argument --through", "pose 2 y", "'nan'"]),
+        (["goal", "--through", "1,2,nan"], ["argument --through", "pose 1 yaw", "'nan'"]),
+        (["goal", "--through", "1,2,3,4"], ["argument --through", "pose 1 must be x,y"]),
+        (
+            ["goal", "--through", ";".join(f"{i},0" for i in range(10_000))],
+            ["argument --through", "at most 1001 poses", "got 10000"],
+        ),
         (["strategy", "GOTO AVOID"], ["argument code", "letters, digits and _"]),
         (["strategy", "GOTO;DROP"], ["argument code"]),
         (["strategy", "A" * 65], ["argument code", "at most 64 characters, got 65"]),
@@ -146,6 +157,41 @@ def test_a_good_goal_is_written_and_a_database_refusal_is_one_line_too(
     code, _, err = run_cli(["goal", "1", "1", "--tolerance", "nan"], capsys)
     assert_one_line_refusal(code, err, "database refused", "goal_tolerance_bounded")
     assert asyncio.run(goals(stack_env)) == [(1.5, -2.0, 0.3)]
+
+
+def test_a_goal_pose_and_a_route_are_written_with_headings_in_radians(
+    stack_env: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, out, err = run_cli(["goal", "1", "2", "--yaw", "90"], capsys)
+    assert code == 0 and "r1: goal 1 set to (1.0, 2.0) facing 90 deg" in out, err
+    code, out, err = run_cli(
+        ["goal", "--through", "1,0; 2,0,-90; 3,1,180", "--yaw-tolerance", "10"], capsys
+    )
+    assert code == 0 and "r1: goal 2 set to (3.0, 1.0) facing 180 deg through 2" in out, err
+
+    async def rows() -> tuple[list[tuple[Any, ...]], list[tuple[Any, ...]]]:
+        conn = await asyncpg.connect(stack_env)
+        try:
+            g = await conn.fetch("SELECT id, status, yaw, yaw_tolerance_rad FROM goal ORDER BY id")
+            w = await conn.fetch(
+                "SELECT seq, x, y, yaw, yaw_tolerance_rad, stop, status FROM goal_waypoint "
+                "WHERE goal_id = 2 ORDER BY seq"
+            )
+        finally:
+            await conn.close()
+        return [tuple(r) for r in g], [tuple(r) for r in w]
+
+    goal_rows, waypoint_rows = asyncio.run(rows())
+    ten = math.radians(10)
+    assert goal_rows == [(1, "superseded", math.pi / 2, 0.1), (2, "active", math.pi, ten)]
+    assert waypoint_rows == [
+        (1, 1.0, 0.0, None, None, False, "pending"),
+        (2, 2.0, 0.0, -math.pi / 2, ten, False, "pending"),
+    ]
+    code, _, err = run_cli(["goal", "1", "2", "--through", "1,0"], capsys)
+    assert_one_line_refusal(code, err, "--through gives the goal's pose")
+    code, _, err = run_cli(["goal"], capsys)
+    assert_one_line_refusal(code, err, "give X Y, or a route with --through")
 
 
 async def test_set_goal_refuses_before_writing(db_url: str) -> None:

@@ -15,6 +15,10 @@ const state = {
   drawn: {}, // robot -> {x, y, px, py}: where the robot was last drawn (world and canvas)
   gridImage: null,
   frames: 0,
+  route: [], // waypoints placed with Shift (x, y, yaw?), sent with the next goal
+  press: null, // where a press on the map began (canvas px), while the button is down
+  dragTo: null, // where the pointer is while dragging a heading
+  dragged: false, // the last press was a drag: the click that follows it is not a goal
 };
 window.pnavDashboard = state; // for people poking at the console, and for the browser test
 
@@ -99,6 +103,65 @@ function circle(x, y, r, fill, stroke) {
   if (stroke) { ctx.strokeStyle = stroke; ctx.lineWidth = 2; ctx.stroke(); }
 }
 
+// a heading: an arrow 28 px long from (x, y) along yaw (rad, map frame)
+function arrow(x, y, yaw, color) {
+  const [px, py] = toCanvas(x, y);
+  const ex = px + 28 * Math.cos(yaw), ey = py - 28 * Math.sin(yaw);
+  ctx.strokeStyle = color;
+  ctx.lineWidth = 3;
+  ctx.beginPath(); ctx.moveTo(px, py); ctx.lineTo(ex, ey);
+  for (const side of [-1, 1]) {
+    const a = -yaw + Math.PI + side * 0.5;
+    ctx.moveTo(ex, ey); ctx.lineTo(ex + 9 * Math.cos(a), ey + 9 * Math.sin(a));
+  }
+  ctx.stroke();
+  ctx.lineWidth = 2;
+}
+
+// a route: its waypoints in order, numbered, filled once reached (red when failed)
+function drawRoute(route, goal, color) {
+  if (!route.length) return;
+  ctx.strokeStyle = color;
+  ctx.setLineDash([2, 4]);
+  ctx.beginPath();
+  route.forEach((w, i) => {
+    const [px, py] = toCanvas(w.x, w.y);
+    if (i === 0) ctx.moveTo(px, py); else ctx.lineTo(px, py);
+  });
+  const [gx, gy] = toCanvas(goal.x, goal.y);
+  ctx.lineTo(gx, gy);
+  ctx.stroke();
+  ctx.setLineDash([]);
+  for (const w of route) {
+    const fill = w.status === "reached" ? color : w.status === "failed" ? "#e03131" : "#fff";
+    circle(w.x, w.y, 0.06, fill, w.stop || w.yaw !== null ? "#111" : color);
+    if (w.yaw !== null && w.yaw !== undefined) arrow(w.x, w.y, w.yaw, color);
+    const [px, py] = toCanvas(w.x, w.y);
+    ctx.fillStyle = "#111";
+    ctx.font = "11px system-ui";
+    ctx.fillText(String(w.seq), px + 6, py - 6);
+  }
+}
+
+function drawPlacing() {
+  // the waypoints placed so far, and the heading being dragged
+  state.route.forEach((w, i) => {
+    circle(w.x, w.y, 0.06, "#fff", "#555");
+    if (w.yaw !== undefined) arrow(w.x, w.y, w.yaw, "#555");
+    const [px, py] = toCanvas(w.x, w.y);
+    ctx.fillStyle = "#555";
+    ctx.fillText(String(i + 1), px + 6, py - 6);
+  });
+  if (state.press && state.dragTo) {
+    ctx.strokeStyle = "#555";
+    ctx.setLineDash([4, 3]);
+    ctx.beginPath();
+    ctx.moveTo(state.press[0], state.press[1]); ctx.lineTo(state.dragTo[0], state.dragTo[1]);
+    ctx.stroke();
+    ctx.setLineDash([]);
+  }
+}
+
 function drawRobot(id, r) {
   const color = colorOf(id);
   if (r.path && r.path.xs.length > 1) {
@@ -114,6 +177,7 @@ function drawRobot(id, r) {
     ctx.setLineDash([]);
   }
   if (r.goal && r.goal.status === "active") {
+    drawRoute(r.route || [], r.goal, color);
     circle(r.goal.x, r.goal.y, r.goal.tolerance_m, null, color);
     const [gx, gy] = toCanvas(r.goal.x, r.goal.y);
     ctx.strokeStyle = color;
@@ -121,6 +185,7 @@ function drawRobot(id, r) {
     ctx.moveTo(gx - 7, gy - 7); ctx.lineTo(gx + 7, gy + 7);
     ctx.moveTo(gx + 7, gy - 7); ctx.lineTo(gx - 7, gy + 7);
     ctx.stroke();
+    if (r.goal.yaw !== null && r.goal.yaw !== undefined) arrow(r.goal.x, r.goal.y, r.goal.yaw, color);
   }
   if (r.scan) {
     ctx.fillStyle = "rgba(230, 30, 30, 0.75)";
@@ -162,6 +227,7 @@ function draw() {
     ctx.fillText("⚡", px - 5, py + 5);
   }
   for (const id of Object.keys(state.robots).sort()) drawRobot(id, state.robots[id]);
+  drawPlacing();
   state.frames += 1;
 }
 
@@ -195,7 +261,8 @@ function renderSelected() {
   const rows = [
     ["pose", r.pose ? `(${fmt(r.pose.x)}, ${fmt(r.pose.y)}) yaw ${fmt(r.pose.yaw)} · sim ${fmt(r.pose.stamp, 1)} s` : "-"],
     ["speed", r.pose ? `${fmt(r.pose.linear)} m/s, ${fmt(r.pose.angular)} rad/s` : "-"],
-    ["goal", r.goal ? `${r.goal.id} (${fmt(r.goal.x)}, ${fmt(r.goal.y)}) ${r.goal.status}${r.goal.reason ? ": " + r.goal.reason : ""}` : "-"],
+    ["goal", r.goal ? `${r.goal.id} (${fmt(r.goal.x)}, ${fmt(r.goal.y)})${r.goal.yaw === null || r.goal.yaw === undefined ? "" : " facing " + fmt(r.goal.yaw * 180 / Math.PI, 0) + "°"} ${r.goal.status}${r.goal.reason ? ": " + r.goal.reason : ""}` : "-"],
+    ["route", r.route && r.route.length ? r.route.map((w) => `${w.seq} ${w.status}`).join(", ") : "-"],
     ["strategy", r.strategy ? `${r.strategy.code} (${r.strategy.source})${r.strategy.resume_code ? " resumes " + r.strategy.resume_code : ""}` : "-"],
     ["battery", r.battery ? `${fmt(r.battery.percentage, 2)}% ${r.battery.charging ? "charging" : ""}` : "-"],
     ["path", r.path ? `${r.path.target}, ${r.path.xs.length} points, ${fmt(r.path.length_m)} m` : "-"],
@@ -323,18 +390,76 @@ async function call(method, url, body) {
   return data;
 }
 
-canvas.addEventListener("click", async (ev) => {
+function canvasPoint(ev) {
+  const rect = canvas.getBoundingClientRect();
+  return [(ev.clientX - rect.left) * (canvas.width / rect.width),
+          (ev.clientY - rect.top) * (canvas.height / rect.height)];
+}
+
+const DRAG_PX = 8; // a press that moves further than this sets a heading
+
+// Click: a goal there. Press and drag: a goal there facing the way dragged. With Shift: a
+// waypoint of a route instead, sent (in order) with the next goal; Escape forgets them.
+async function place(press, release, shift) {
   const robot = state.selected;
   if (!robot) return say("no robot to send", false);
-  const rect = canvas.getBoundingClientRect();
-  const px = (ev.clientX - rect.left) * (canvas.width / rect.width);
-  const py = (ev.clientY - rect.top) * (canvas.height / rect.height);
-  const [x, y] = toWorld(px, py);
+  const [x, y] = toWorld(press[0], press[1]);
+  const pose = { x: Math.round(x * 100) / 100, y: Math.round(y * 100) / 100 };
+  const dx = release[0] - press[0], dy = release[1] - press[1];
+  if (Math.hypot(dx, dy) > DRAG_PX) pose.yaw = Math.round(Math.atan2(-dy, dx) * 1000) / 1000;
+  if (shift) {
+    state.route.push(pose);
+    draw();
+    return say(`waypoint ${state.route.length} placed: click (or drag) without Shift for the goal; Escape forgets them`, true);
+  }
+  const body = state.route.length ? { ...pose, waypoints: state.route } : pose;
   try {
-    const g = await call("POST", `/api/robots/${robot}/goal`,
-      { x: Math.round(x * 100) / 100, y: Math.round(y * 100) / 100 });
-    say(`${robot}: goal ${g.goal_id} set to (${fmt(g.x)}, ${fmt(g.y)})`, true);
+    const g = await call("POST", `/api/robots/${robot}/goal`, body);
+    const facing = g.yaw === null || g.yaw === undefined ? "" : ` facing ${fmt(g.yaw * 180 / Math.PI, 0)}°`;
+    const through = g.waypoints ? ` through ${g.waypoints} waypoint(s)` : "";
+    say(`${robot}: goal ${g.goal_id} set to (${fmt(g.x)}, ${fmt(g.y)})${facing}${through}`, true);
+    state.route = [];
   } catch (err) { say(`goal refused: ${err.message}`, false); }
+  draw();
+}
+
+canvas.addEventListener("mousedown", (ev) => {
+  state.press = canvasPoint(ev);
+  state.dragTo = null;
+  state.dragged = false;
+});
+
+canvas.addEventListener("mousemove", (ev) => {
+  if (!state.press) return;
+  const p = canvasPoint(ev);
+  if (Math.hypot(p[0] - state.press[0], p[1] - state.press[1]) > DRAG_PX) {
+    state.dragTo = p;
+    draw();
+  }
+});
+
+canvas.addEventListener("mouseup", async (ev) => {
+  const press = state.press;
+  state.press = state.dragTo = null;
+  if (!press) return;
+  const release = canvasPoint(ev);
+  if (Math.hypot(release[0] - press[0], release[1] - press[1]) <= DRAG_PX) return; // a click
+  state.dragged = true; // the click event that follows is this drag's, not a goal
+  await place(press, release, ev.shiftKey);
+});
+
+canvas.addEventListener("click", async (ev) => {
+  if (state.dragged) { state.dragged = false; return; }
+  const p = canvasPoint(ev);
+  await place(p, p, ev.shiftKey);
+});
+
+document.addEventListener("keydown", (ev) => {
+  if (ev.key === "Escape" && state.route.length) {
+    state.route = [];
+    draw();
+    say("waypoints forgotten", true);
+  }
 });
 
 $("strategy-select").addEventListener("change", (ev) => { ev.target.dataset.touched = "1"; });

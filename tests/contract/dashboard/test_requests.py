@@ -14,7 +14,7 @@ from common.contract import keys
 from common.runtime import Runtime
 from common.testing import eventually
 from services.dashboard.orders import Orders
-from services.dashboard.requests import Refused
+from services.dashboard.requests import GoalRequest, Refused
 from tests.contract.dashboard.conftest import ROBOT, Fleet, Running
 
 pytestmark = pytest.mark.timeout(90)
@@ -47,6 +47,43 @@ async def test_a_goal_is_a_goal_row_and_the_next_one_supersedes_it(
         (3.5, -1.25, 0.3, "active"),
     ]
     assert rows[1]["id"] == second.json()["goal_id"]
+
+
+async def test_a_goal_pose_with_a_route_is_written_and_its_progress_shown(
+    running: Running, fleet: Fleet, foreign: Runtime, http: httpx.AsyncClient
+) -> None:
+    await known_robot(running, fleet)
+    body = {
+        "x": 3.0,
+        "y": 1.0,
+        "yaw": 1.5,
+        "waypoints": [{"x": 1.0, "y": 0.0}, {"x": 2.0, "y": 0.0, "yaw": -1.0, "stop": True}],
+    }
+    response = await http.post(ROBOT_GOAL, json=body)
+    assert response.status_code == 201, response.text
+    assert response.json()["yaw"] == 1.5 and response.json()["waypoints"] == 2
+    goal = response.json()["goal_id"]
+    pool = foreign.database.pool
+    row = await pool.fetchrow("SELECT yaw, yaw_tolerance_rad FROM goal WHERE id = $1", goal)
+    assert (row["yaw"], row["yaw_tolerance_rad"]) == (1.5, 0.1)
+    # the planner's progress (played here), notified as the planner does
+    await foreign.database.write(
+        keys.GOAL_WAYPOINT,
+        ROBOT,
+        "UPDATE goal_waypoint SET status = 'reached', reached_stamp = 7.5 "
+        "WHERE goal_id = $1 AND seq = 1 RETURNING seq",
+        goal,
+    )
+
+    def shown() -> list[tuple[int, str]] | None:
+        robot = running.dashboard.store.snapshot()["robots"].get(ROBOT) or {}
+        route = [(w["seq"], w["status"]) for w in robot.get("route", [])]
+        return route if route == [(1, "reached"), (2, "pending")] else None
+
+    await eventually(shown, what="the route's progress on the page")
+    robot = running.dashboard.store.snapshot()["robots"][ROBOT]
+    assert robot["goal"]["yaw"] == 1.5 and robot["route"][1]["stop"] is True
+    assert robot["route"][1]["yaw"] == -1.0 and robot["route"][0]["reached_stamp"] == 7.5
 
 
 async def play_strategy_service(foreign: Runtime, verdict: str) -> None:
@@ -123,6 +160,54 @@ BAD_REQUESTS: list[tuple[str, str, str | dict[str, Any] | None, int, str]] = [
     ("POST", ROBOT_GOAL, {"x": "1", "y": 1}, 422, "'x' must be a number"),
     ("POST", ROBOT_GOAL, {"x": True, "y": 1}, 422, "'x' must be a number"),
     ("POST", ROBOT_GOAL, {"x": 1, "y": 1, "z": 0}, 422, "unknown field(s) z"),
+    ("POST", ROBOT_GOAL, '{"x": 1, "y": 1, "yaw": NaN}', 400, "not valid JSON"),
+    ("POST", ROBOT_GOAL, {"x": 1, "y": 1, "yaw": 3.5}, 422, "goal yaw must be a finite angle"),
+    ("POST", ROBOT_GOAL, {"x": 1, "y": 1, "yaw": "north"}, 422, "'yaw' must be a number"),
+    (
+        "POST",
+        ROBOT_GOAL,
+        {"x": 1, "y": 1, "yaw_tolerance_rad": 0.1},
+        422,
+        "goal yaw_tolerance_rad needs a yaw",
+    ),
+    (
+        "POST",
+        ROBOT_GOAL,
+        {"x": 1, "y": 1, "yaw": 1, "yaw_tolerance_rad": 4},
+        422,
+        "goal yaw_tolerance_rad must be",
+    ),
+    ("POST", ROBOT_GOAL, {"x": 1, "y": 1, "waypoints": 3}, 422, "'waypoints' must be a list"),
+    (
+        "POST",
+        ROBOT_GOAL,
+        {"x": 1, "y": 1, "waypoints": [{"x": 0, "y": 0}, {"x": 1, "y": 0, "yaw": -4}]},
+        422,
+        "waypoint 2 yaw must be a finite angle",
+    ),
+    ("POST", ROBOT_GOAL, {"x": 1, "y": 1, "waypoints": [{"x": 0}]}, 422, "waypoint 1 'y' is"),
+    (
+        "POST",
+        ROBOT_GOAL,
+        {"x": 1, "y": 1, "waypoints": [{"x": 0, "y": 0, "stop": "yes"}]},
+        422,
+        "waypoint 1 'stop' must be true or false",
+    ),
+    (
+        "POST",
+        ROBOT_GOAL,
+        {"x": 1, "y": 1, "waypoints": [[0, 0]] * 1001},
+        422,
+        "waypoints: at most 1000 per goal, got 1001",
+    ),
+    # 10 000 poses do not fit the body's 64 KiB: refused before any parse
+    (
+        "POST",
+        ROBOT_GOAL,
+        {"x": 1, "y": 1, "waypoints": [{"x": 1.5, "y": 2.5}] * 10_000},
+        413,
+        "the body is over",
+    ),
     ("POST", "/api/robots/nobody/goal", {"x": 1, "y": 1}, 404, "no robot 'nobody'"),
     ("DELETE", "/api/robots/nobody/goal", None, 404, "no robot 'nobody'"),
     ("POST", "/api/robots/r1/strategy", {"code": "NO_SUCH"}, 422, "unknown strategy 'NO_SUCH'"),
@@ -215,7 +300,7 @@ async def test_a_row_the_database_refuses_is_a_422_naming_the_constraint(
     constraint still refuses the row, and the refusal is a 422, not a 500."""
     await known_robot(running, fleet)
     with pytest.raises(Refused) as refused:
-        await Orders(running.dashboard.store).set_goal(ROBOT, math.nan, 1.0, None)
+        await Orders(running.dashboard.store).set_goal(ROBOT, GoalRequest(math.nan, 1.0))
     assert refused.value.status == 422
     assert "goal_xy_bounded" in refused.value.reason
     assert await foreign.database.pool.fetchval("SELECT count(*) FROM goal") == 0

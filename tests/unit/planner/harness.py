@@ -33,6 +33,8 @@ class Planner:
     ) -> None:
         self.t = 100.0
         self.pose = (0.0, 0.0)  # where sense() says the robot is
+        self.yaw = 0.0  # ...its heading
+        self.rates = (0.0, 0.0)  # ...and its measured linear and angular velocity
         self.contract = MemoryContract()
         self.store = PlannerStore(MemoryPlannerSource(self.contract), self.now, self.now)
         self.contract.listeners.append(
@@ -78,9 +80,37 @@ class Planner:
         row = {"robot_id": ROBOT, "strategy_code": code, "resume_code": None, "source": "user"}
         self.contract.insert(keys.ACTIVE_STRATEGY, row)
 
-    def goal(self, x: float, y: float) -> int:
+    def goal(
+        self,
+        x: float,
+        y: float,
+        yaw: float | None = None,
+        yaw_tolerance_rad: float | None = None,
+        waypoints: tuple[dict[str, Any], ...] = (),
+    ) -> int:
+        """A goal (with a heading, and a route's waypoints: dicts of goal_waypoint columns,
+        x and y at least), written as people.set_goal writes it: waypoints first, one
+        notification each."""
         row = {"robot_id": ROBOT, "x": x, "y": y, "tolerance_m": 0.15, "status": "active"}
-        return self.contract.insert(keys.GOAL, row | {"stamp": self.t, "finished_stamp": None})
+        row |= {"yaw": yaw, "yaw_tolerance_rad": yaw_tolerance_rad}
+        row |= {"stamp": self.t, "finished_stamp": None}
+        goal_id = self.contract.insert(keys.GOAL, row, notify=False)
+        for seq, w in enumerate(waypoints, start=1):
+            wp = {"tolerance_m": 0.3, "yaw": None, "yaw_tolerance_rad": None, "stop": False}
+            wp |= {"status": "pending", "reason": None, "reached_stamp": None}
+            wp |= {"robot_id": ROBOT, "goal_id": goal_id, "seq": seq, **w}
+            self.contract.insert(keys.GOAL_WAYPOINT, wp, notify=False)
+        if waypoints:
+            self.contract.changed(keys.GOAL_WAYPOINT, ROBOT, goal_id)
+        self.contract.changed(keys.GOAL, ROBOT, goal_id, row)
+        return goal_id
+
+    def waypoint_rows(self, goal_id: int) -> list[tuple[int, str, float | None]]:
+        """(seq, status, reached_stamp) of the goal's waypoints."""
+        rows = self.contract[keys.GOAL_WAYPOINT].rows(ROBOT)
+        return [
+            (w["seq"], w["status"], w["reached_stamp"]) for w in rows if w["goal_id"] == goal_id
+        ]
 
     async def tick(self, dt: float = 0.05) -> None:
         """Sim time moves on, a sensor row of each kind comes, the engine runs once."""
@@ -91,8 +121,11 @@ class Planner:
         """Sim time moves on; the robot's odometry and battery rows come."""
         self.t += dt
         x, y = self.pose
-        odometry = {"robot_id": ROBOT, "stamp": self.t, "x": x, "y": y, "yaw": 0.0}
-        self.contract.insert(keys.ODOMETRY, odometry | {"linear_mps": 0.0, "angular_rps": 0.0})
+        odometry = {"robot_id": ROBOT, "stamp": self.t, "x": x, "y": y, "yaw": self.yaw}
+        linear, angular = self.rates
+        self.contract.insert(
+            keys.ODOMETRY, odometry | {"linear_mps": linear, "angular_rps": angular}
+        )
         battery = {"robot_id": ROBOT, "stamp": self.t, "energy_wh": 15.0, "capacity_wh": 19.98}
         self.contract.insert(keys.BATTERY, battery | {"percentage": 75.0, "charging": False})
 

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from common.planner_core.scenario import Movement
 from services.planner import move_while_turning, turn_then_move
-from services.planner.scenario import RECOMMEND_PERIOD_S, Said, due
+from services.planner.cadence import RECOMMEND_PERIOD_S, Said, due
 from services.planner.tracking import Route, follow, heading_error, wrap_angle
 
 MAX_V, MAX_W = 0.22, 2.84

@@ -156,3 +156,28 @@ def test_a_lidar_with_no_beams_behind_never_calls_the_rear_clear() -> None:
 
     assert surroundings(sweep(0.0, 360), 0.22, 0.3)[0]  # all round and nothing near: clear
     assert not surroundings(sweep(-135.0, 270), 0.22, 0.3)[0]  # the Jackal's: blind behind
+
+
+def test_a_robot_turning_at_its_pose_is_never_stuck_and_a_new_leg_is_watched_afresh() -> None:
+    m = Machine()
+
+    def at(t: float, x: float, leg: int | None, gx: float = 5.0) -> Observation:
+        # the route's next pose at (gx, 0), reached within 0.2 m
+        return Observation(t, x, 0.0, 0.0, GOAL, gx, 0.0, 0.2, leg=leg, there_m=0.2)
+
+    assert m.step(at(0.0, 4.9, None), P).kind == "none"  # at the goal's position, turning
+    assert m.step(at(5.0, 4.9, None), P).kind == "none"  # 5 s there (stuck_s 2): not stuck
+    assert m.state == WATCH and m.attempts == 0
+    # a route: waypoint 1 at (1, 0); 9 s of progress toward it, the best 0.1 m away
+    m = Machine()
+    assert m.step(at(0.0, 0.0, 1, gx=1.0), P).kind == "none"
+    assert m.step(at(1.5, 0.5, 1, gx=1.0), P).kind == "none"
+    assert m.step(at(3.0, 0.9, 1, gx=1.0), P).kind == "none"  # within 0.2 m: there
+    # on to waypoint 2 at (-4, 0), 4.9 m away: progress now counts toward it, from here
+    assert m.step(at(3.5, 0.9, 2, gx=-4.0), P).kind == "none"
+    assert m.best == (4.9, 3.5)  # not waypoint 1's 0.1 m, which would never be beaten
+    assert m.step(at(5.0, 0.9, 2, gx=-4.0), P).kind == "none"
+    assert m.step(at(5.5, 0.4, 2, gx=-4.0), P).kind == "none"  # moving: anchored again
+    assert m.state == WATCH and m.attempts == 0
+    a = m.step(at(7.6, 0.4, 2, gx=-4.0), P)  # 2.1 s within 0.2 m of (0.4, 0), not there: stuck
+    assert (m.state, a.kind) == (BACK_UP, "drive")
