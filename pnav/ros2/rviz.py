@@ -154,7 +154,7 @@ class RvizLink:
 
     async def _on_goal_pose(self, robot: str | None, key: str, payload: bytes) -> None:
         try:
-            target, x, y = self._goal(robot, key, payload)
+            target, x, y, yaw = self._goal(robot, key, payload)
             limits.check_goal(x, y, None)
         except _Refused as exc:
             self._refuse(exc.reason, exc.detail, key)
@@ -162,11 +162,16 @@ class RvizLink:
         except ContractError as exc:
             self._refuse(OUT_OF_RANGE, str(exc), key)
             return
-        goal_id = await people.set_goal(self.runtime.database, target, x, y, None)
+        goal_id = await people.set_goal(self.runtime.database, target, x, y, None, yaw=yaw)
         self.goals_set += 1
-        logger.info("goal %d for %s at (%.3f, %.3f) from %s", goal_id, target, x, y, key)
+        heading = "any heading" if yaw is None else f"yaw {yaw:.3f} rad"
+        logger.info(
+            "goal %d for %s at (%.3f, %.3f), %s, from %s", goal_id, target, x, y, heading, key
+        )
 
-    def _goal(self, robot: str | None, key: str, payload: bytes) -> tuple[str, float, float]:
+    def _goal(
+        self, robot: str | None, key: str, payload: bytes
+    ) -> tuple[str, float, float, float | None]:
         if type_of_key(key) != (self._pose.dds, self._pose.hash):
             raise _Refused(WRONG_TYPE, f"{key.rsplit('/', 2)[1]} is not a PoseStamped")
         if len(payload) > MAX_PAYLOAD:
@@ -179,7 +184,7 @@ class RvizLink:
         if frame not in ("", MAP_FRAME):
             raise _Refused(FRAME, f"frame {frame!r}: a goal is in the map frame")
         target = robot if robot is not None else self._robot_of_global()
-        return target, float(msg.pose.position.x), float(msg.pose.position.y)
+        return target, float(msg.pose.position.x), float(msg.pose.position.y), heading(msg.pose)
 
     def _robot_of_global(self) -> str:
         """The robot ``/goal_pose`` is for: the un-namespaced one, or the only one."""
@@ -231,6 +236,19 @@ class _Refused(Exception):
         super().__init__(detail)
         self.reason = reason
         self.detail = detail
+
+
+def heading(pose: Any) -> float | None:
+    """The goal's heading from RViz's arrow (the pose's orientation about z), or None for an
+    all-zero quaternion, which a client that sets only a position leaves; a quaternion that is
+    not finite is refused."""
+    q = pose.orientation
+    parts = (float(q.x), float(q.y), float(q.z), float(q.w))
+    if not all(math.isfinite(v) for v in parts):
+        raise _Refused(OUT_OF_RANGE, f"orientation not finite: {parts}")
+    if not any(parts):
+        return None
+    return ros2types.yaw_of(q)
 
 
 def path_msg(stamp: float, xs: list[float], ys: list[float]) -> Any:

@@ -25,12 +25,15 @@ from tests.contract.bridge.conftest import SETTLE_S
 pytestmark = pytest.mark.slow
 
 GOALS = "SELECT robot_id, x, y, tolerance_m, status FROM goal ORDER BY id"
+HEADINGS = "SELECT yaw, yaw_tolerance_rad FROM goal ORDER BY id"
 
 
-def goal_pose(x: float, y: float, frame: str = "map") -> Any:
+def goal_pose(x: float, y: float, frame: str = "map", orientation: Any = None) -> Any:
     point = ros2types.message("geometry_msgs/msg/Point", x=x, y=y, z=0.0)
     pose = ros2types.message(
-        "geometry_msgs/msg/Pose", position=point, orientation=ros2types.quaternion(1.0)
+        "geometry_msgs/msg/Pose",
+        position=point,
+        orientation=ros2types.quaternion(1.0) if orientation is None else orientation,
     )
     return ros2types.message(ros2types.POSE_STAMPED, header=ros2types.header(3.0, frame), pose=pose)
 
@@ -73,12 +76,16 @@ async def two_robots(db_url: str, zenoh_settings: ZenohSettings) -> AsyncIterato
         yield rviz
 
 
-async def _goals(db_url: str) -> list[asyncpg.Record]:
+async def _fetch(db_url: str, sql: str) -> list[asyncpg.Record]:
     conn = await asyncpg.connect(db_url)
     try:
-        return list(await conn.fetch(GOALS))
+        return list(await conn.fetch(sql))
     finally:
         await conn.close()
+
+
+async def _goals(db_url: str) -> list[asyncpg.Record]:
+    return await _fetch(db_url, GOALS)
 
 
 async def test_rviz_goal_pose_becomes_the_robots_goal_row(
@@ -89,20 +96,29 @@ async def test_rviz_goal_pose_becomes_the_robots_goal_row(
     await asyncio.sleep(SETTLE_S)
     publisher.put(goal_pose(1.5, -0.75), reliable=True)
     await eventually(lambda: one_robot.goals_set == 1, what="a goal")
-    publisher.put(goal_pose(2.0, 1.0), reliable=True)  # the next one supersedes it
+    # a client that sets only a position leaves the quaternion all zero: any heading
+    unset = ros2types.message("geometry_msgs/msg/Quaternion", x=0.0, y=0.0, z=0.0, w=0.0)
+    publisher.put(goal_pose(2.0, 1.0, orientation=unset), reliable=True)  # supersedes it
     await eventually(lambda: one_robot.goals_set == 2, what="a second goal")
     rows = await _goals(db_url)
     assert [tuple(r) for r in rows] == [
         ("r1", 1.5, -0.75, 0.15, "superseded"),
         ("r1", 2.0, 1.0, 0.15, "active"),
     ]
-    # not in the map frame, beyond the contract's bounds, not a PoseStamped: refused
+    # RViz's arrow is the goal's heading, with the contract's default tolerance
+    (arrow, yaw_tol), (none, none_tol) = [tuple(r) for r in await _fetch(db_url, HEADINGS)]
+    assert arrow == pytest.approx(1.0) and yaw_tol == pytest.approx(0.1)
+    assert none is None and none_tol is None
+    # not in the map frame, beyond the contract's bounds, a heading that is no number, not a
+    # PoseStamped: refused
     publisher.put(goal_pose(1.0, 1.0, frame="odom"), reliable=True)
     publisher.put(goal_pose(math.inf, 1.0), reliable=True)
+    nan = ros2types.message("geometry_msgs/msg/Quaternion", x=0.0, y=0.0, z=math.nan, w=1.0)
+    publisher.put(goal_pose(1.0, 1.0, orientation=nan), reliable=True)
     publisher.put_cdr(b"\x00\x01\x00\x00\x07", reliable=True)
     await eventually(
-        lambda: one_robot.refused == {"frame": 1, "out_of_range": 1, "bad_cdr": 1},
-        what="three refused",
+        lambda: one_robot.refused == {"frame": 1, "out_of_range": 2, "bad_cdr": 1},
+        what="four refused",
     )
     assert len(await _goals(db_url)) == 2
     rviz.close()
