@@ -9,7 +9,9 @@ from typing import Any
 
 import pytest
 
+from common import bus
 from common.errors import WorldError
+from services.bridge.world import parse_world
 from services.sim.sim import SimConfig, Simulation
 from services.sim.world import load_world
 from tests.unit.sim.conftest import MakeWorld
@@ -193,3 +195,13 @@ def test_the_world_message_lists_the_movers(make_world: MakeWorld) -> None:
         "mode": "back_and_forth",
         "offset_m": 0.0,
     }
+
+
+def test_the_bridge_reads_a_world_message_with_movers_and_its_static_map(
+    make_world: MakeWorld,
+) -> None:
+    """An old reader (the bridge stores the map and ignores the movers) takes the message of
+    a world with movers: the map it stores is the walls alone."""
+    still = parse_world(bus.pack(load_world(make_world(5.0, 4.0)).message()))
+    moving = parse_world(bus.pack(load_world(make_world(5.0, 4.0, movers=[walker()])).message()))
+    assert moving.map == still.map and moving.robots == still.robots
