@@ -205,3 +205,38 @@ def test_the_bridge_reads_a_world_message_with_movers_and_its_static_map(
     still = parse_world(bus.pack(load_world(make_world(5.0, 4.0)).message()))
     moving = parse_world(bus.pack(load_world(make_world(5.0, 4.0, movers=[walker()])).message()))
     assert moving.map == still.map and moving.robots == still.robots
+
+
+@pytest.mark.parametrize("which", ["fast walker", "turning box"])
+def test_skipping_contact_tests_while_clear_misses_no_mover(
+    make_world: MakeWorld, which: str
+) -> None:
+    """The sim skips a robot's contact tests while nothing can have reached it (its
+    clearance over the fastest closing speed, a robot's and a mover's, less a box's corner
+    jump where its path turns). A run that tests every step gets the same events and poses:
+    a walker ten times as fast as the Burger, met by a driving robot; a box whose corner
+    swings onto a standing robot where its path turns."""
+    if which == "fast walker":
+        robot = {"id": "r1", "x": 0.5, "y": 2.0, "yaw": 0.0}
+        mover = walker(speed=2.5, path=[[2.0, 0.5], [2.0, 3.5]])
+        command = (0.2, 0.0)
+    else:
+        robot = {"id": "r1", "x": 4.6, "y": 3.2, "yaw": 0.0}  # just past the cart's turn
+        mover = {"name": "cart", "type": "box", "size": [0.9, 0.3], "speed": 1.5,
+                 "mode": "loop", "path": [[3.2, 2.6], [4.6, 2.6], [4.6, 3.0]]}  # fmt: skip
+        command = (0.0, 1.0)
+    path = make_world(5.0, 4.0, movers=[mover], robots=[robot])
+    runs = []
+    for every_step in (False, True):
+        rec = Recorder()
+        sim = Simulation(load_world(path), SimConfig(cmd_timeout_s=0.0), rec)
+        if every_step:
+            sim._closing = math.inf  # no step is ever thought clear
+        try:
+            sim.set_command("r1", *command)
+            sim.run_for(12.0)
+        finally:
+            sim.close()
+        runs.append(rec.msgs)
+    assert runs[0] == runs[1]
+    assert {e["other"] for e in runs[0][("r1", "collision")]} == {mover["name"]}
