@@ -240,3 +240,37 @@ def test_skipping_contact_tests_while_clear_misses_no_mover(
         runs.append(rec.msgs)
     assert runs[0] == runs[1]
     assert {e["other"] for e in runs[0][("r1", "collision")]} == {mover["name"]}
+
+
+@pytest.mark.parametrize("shape", ["box", "cylinder"])
+def test_a_mover_reads_as_the_same_obstacle_standing_there(
+    make_world: MakeWorld, shape: str
+) -> None:
+    """A Jackal's first scan (720 beams over 270 degrees) with a mover where it is at sim
+    time 0 reads what it reads with a standing obstacle of that shape there: the movers'
+    cast agrees with the sim's closed-form cast of the static world, beam by beam."""
+    robots = [{"id": "r1", "x": 1.0, "y": 2.3, "yaw": 0.2, "model": "jackal"}]
+    heading = 0.4
+    ahead = [3.0 + math.cos(heading), 2.0 + math.sin(heading)]
+    if shape == "box":
+        standing = {"name": "thing", "type": "box", "x": 3.0, "y": 2.0, "yaw": heading,
+                    "size": [0.6, 0.4, 1.0]}  # fmt: skip
+        moving = {"name": "thing", "type": "box", "size": [0.6, 0.4, 1.0],
+                  "path": [[3.0, 2.0], ahead], "speed": 0.5}  # fmt: skip
+    else:
+        standing = {"name": "thing", "type": "cylinder", "x": 3.0, "y": 2.0, "radius": 0.3,
+                    "height": 1.0}  # fmt: skip
+        moving = walker(name="thing", radius=0.3, path=[[3.0, 2.0], ahead])
+    scans = []
+    for doc in ({"obstacles": [standing]}, {"movers": [moving]}):
+        rec = Recorder()
+        sim = Simulation(load_world(make_world(5.0, 4.0, robots=robots, **doc)), SimConfig(), rec)
+        try:
+            sim.step()  # senses at sim time 0
+        finally:
+            sim.close()
+        scans.append(rec.msgs[("r1", "scan")][0]["ranges"])
+    assert len(scans[0]) == 720
+    hits = [i for i, r in enumerate(scans[0]) if r < math.inf]  # the thing (no walls here)
+    assert len(hits) > 20
+    assert scans[1] == pytest.approx(scans[0], abs=1e-9)
