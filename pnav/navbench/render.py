@@ -5,7 +5,9 @@ cannot reach (within the footprint plus margin of an obstacle) light grey; free 
 reference path green; the driven trajectory blue; the start a green disc of the robot's size;
 the goal an orange dot inside an orange ring of the goal tolerance; each collision a red
 cross in a red ring; the world's unmapped obstacles (in the world file, not on the map: only the
-lidar sees them) purple, their true shape. North (+y) is up. A legend strip under the picture
+lidar sees them) purple, their true shape; each moving obstacle's track (services/sim/mover.py)
+a light band as wide as its body along its path, the path itself dark pink, and its body where
+it is at sim time 0 dark pink too. North (+y) is up. A legend strip under the picture
 names every colour (pnav/navbench/legend.py).
 """
 
@@ -23,6 +25,7 @@ from pnav.navbench.legend import with_legend
 from pnav.navbench.png import encode_png
 from pnav.navbench.search import BoolGrid, Point, inflate
 from pnav.navbench.worldfile import BenchmarkWorld, occupied_cells
+from services.sim.mover import MoverSpec
 from services.sim.world import ObstacleSpec
 
 Colour = tuple[int, int, int]
@@ -37,6 +40,8 @@ COLLISION: Colour = (225, 20, 20)
 START: Colour = (20, 160, 60)
 GOAL: Colour = (240, 130, 0)
 UNMAPPED: Colour = (150, 60, 200)
+MOVER: Colour = (200, 30, 120)
+MOVER_BAND: Colour = (245, 200, 225)
 
 
 class Canvas:
@@ -129,6 +134,16 @@ class Canvas:
         centre_rows, centre_cols = self.to_px([(ob.x, ob.y)])
         self.stamp(centre_rows, centre_cols, 0.5, colour)
 
+    def mover(self, mover: MoverSpec) -> None:
+        """A mover's track: the band its body sweeps, its path, and its body at sim time 0."""
+        track = [*mover.path, mover.path[0]] if mover.mode == "loop" else list(mover.path)
+        across = mover.size[1] if mover.shape == "box" else mover.size[0]
+        self.polyline(track, MOVER_BAND, across / self.resolution * self.scale)
+        self.polyline(track, MOVER, 2.0)
+        x, y, heading = mover.pose_at(0.0)
+        sx, sy, sz = mover.size
+        self.obstacle(ObstacleSpec(mover.name, mover.shape, x, y, heading, (sx, sy, sz)), MOVER)
+
     def ring(self, centre: Point, radius_m: float, colour: Colour, width_px: float = 2.0) -> None:
         n = max(16, math.ceil(2 * math.pi * radius_m / self.resolution * self.scale * 2))
         t = np.linspace(0.0, 2.0 * math.pi, n + 1)
@@ -157,14 +172,18 @@ def draw_world(
     footprint_radius_m: float = 0.105,
     inflation_m: float | None = None,
     obstacles: Sequence[ObstacleSpec] = (),
+    movers: Sequence[MoverSpec] = (),
     scale: int = 4,
     legend: bool = False,
 ) -> Image:
     """The picture (height, width, 3) of a world and, optionally, of one run in it;
-    ``obstacles``: the world's unmapped ones; ``legend``: add the colour key under it."""
+    ``obstacles``: the world's unmapped ones; ``movers``: its moving obstacles, drawn as
+    their tracks; ``legend``: add the colour key under it."""
     canvas = Canvas(occupied, resolution, origin, scale=scale, inflation_m=inflation_m)
     for ob in obstacles:
         canvas.obstacle(ob, UNMAPPED)
+    for mover in movers:
+        canvas.mover(mover)
     canvas.polyline(reference_path, REFERENCE, 2.0)
     canvas.polyline(trajectory, TRAJECTORY, 2.0)
     if start is not None:
@@ -177,14 +196,19 @@ def draw_world(
         canvas.cross(point, 0.08, COLLISION, 2.0)
     if not legend:
         return canvas.image
-    return with_legend(canvas.image, _key(inflation_m, bool(obstacles), bool(collisions)))
+    key = _key(inflation_m, bool(obstacles), bool(collisions), bool(movers))
+    return with_legend(canvas.image, key)
 
 
-def _key(inflation: float | None, unmapped: bool, collisions: bool) -> list[tuple[Colour, str]]:
+def _key(
+    inflation: float | None, unmapped: bool, collisions: bool, movers: bool = False
+) -> list[tuple[Colour, str]]:
     """The legend's entries: every colour the picture may show (the optional ones when used)."""
     key = [(OCCUPIED, "map obstacle")]
     if unmapped:
         key.append((UNMAPPED, "unmapped obstacle"))
+    if movers:
+        key += [(MOVER, "mover"), (MOVER_BAND, "mover track")]
     if inflation:
         key.append((UNREACHABLE, "too close"))
     key += [(REFERENCE, "reference"), (TRAJECTORY, "driven"), (GOAL, "goal")]
@@ -236,6 +260,7 @@ def draw_run(
         footprint_radius_m=world.footprint_radius_m,
         inflation_m=world.inflation_m,
         obstacles=world.obstacles,
+        movers=world.movers,
         scale=scale,
         legend=True,
     )

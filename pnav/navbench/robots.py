@@ -59,11 +59,11 @@ def for_model(world: BenchmarkWorld, robot: RobotFit, folder: Path) -> Benchmark
     limit for that speed (the default protocol keeps the world's), and, when the world was
     made for another model (or names none), a copy of its world file under ``folder`` whose
     robot is this model (the map and the obstacles unchanged)."""
-    from pnav.navbench import barn
+    from pnav.navbench import barn, dynabarn
     from pnav.navbench.metrics import optimal_time
 
     limit = world.time_limit_s
-    if world.protocol == barn.PROTOCOL:
+    if world.protocol in (barn.PROTOCOL, dynabarn.PROTOCOL):
         limit = barn.time_limit(robot.max_linear_mps)
     world_file = world.world_file
     if robot.name != world.model:

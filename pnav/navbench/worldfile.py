@@ -28,6 +28,7 @@ from pnav.navbench.generator import LEVELS, ORIGIN, GeneratedWorld
 from pnav.navbench.metrics import GOAL_TOLERANCE_M, TOP_SPEED_MPS, default_time_limit, optimal_time
 from pnav.navbench.search import BoolGrid, Point
 from services.sim.mapserver import OCCUPIED, OccupancyGrid, encode_pgm, load_map, map_yaml
+from services.sim.mover import MoverSpec
 from services.sim.world import ObstacleSpec, load_world, read_world_yaml
 
 FORMAT = 1
@@ -118,7 +119,10 @@ class BenchmarkWorld:
     generator: dict[str, Any]
     # in the world file but not on the map: only the lidar sees them (the sim's `obstacles`)
     obstacles: tuple[ObstacleSpec, ...] = ()
-    protocol: str = "default"  # or "barn": obstacles only in the sim world (barnfile.py)
+    # moving obstacles (the sim's `movers`): only the lidar sees them either
+    movers: tuple[MoverSpec, ...] = ()
+    # "barn": obstacles only in the sim world (barnfile.py); "dynabarn": movers (dynabarn.py)
+    protocol: str = "default"
     model: str = ""  # the robot model the world was made for ("": the Burger, before models)
 
     @property
@@ -179,6 +183,7 @@ def read_benchmark(path: str | Path) -> BenchmarkWorld:
     sx, sy, syaw = _numbers(path, bench, "start", 3)
     gx, gy = _numbers(path, bench, "goal", 2)
     generator = bench.get("generator")
+    sim_world = load_world(path) if doc.get("obstacles") or doc.get("movers") else None
     return BenchmarkWorld(
         name=str(doc.get("name") or path.stem),
         world_file=path,
@@ -198,7 +203,8 @@ def read_benchmark(path: str | Path) -> BenchmarkWorld:
         difficulty=parsed,
         generator=generator if isinstance(generator, dict) else {},
         # parsed (and checked) as the sim parses them; only then is the map loaded twice
-        obstacles=load_world(path).obstacles if doc.get("obstacles") else (),
+        obstacles=sim_world.obstacles if sim_world else (),
+        movers=sim_world.movers if sim_world else (),
         protocol=str(bench.get("protocol", "default")),
         model=str(bench.get("model", "")),
     )

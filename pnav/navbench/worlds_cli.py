@@ -1,13 +1,15 @@
 """``pnav worlds generate``: write a suite of BARN-style benchmark worlds.
 
     pnav worlds generate --out DIR [--count N] [--seed S] [--levels easy,medium,hard] [--png]
-                         [--protocol default|barn] [--model NAME]
+                         [--protocol default|barn|dynabarn] [--model NAME]
 
 writes N worlds per level (world i of a level drawn with seed S * 1000 + i) as DIR/NAME.yaml
 plus DIR/maps/NAME.{yaml,pgm}, with --png a preview DIR/preview/NAME.png of each, and
 DIR/SUITE.md (the command, the levels, a table of the worlds); prints the same table.
-``--protocol barn`` writes BARN-protocol worlds for ``--model`` (``pnav.navbench.barn``). This
-module imports nothing heavy at load time: ``pnav``'s parser is built on every command.
+``--protocol barn`` writes BARN-protocol worlds for ``--model`` (``pnav.navbench.barn``);
+``--protocol dynabarn`` the same corridor crossed by moving obstacles
+(``pnav.navbench.dynabarn``). This module imports nothing heavy at load time: ``pnav``'s
+parser is built on every command.
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ class SuiteWorld(Protocol):
 
 
 DEFAULT_LEVELS = "easy,medium,hard"
-PROTOCOLS = ("default", "barn")
+PROTOCOLS = ("default", "barn", "dynabarn")
 BARN_DEFAULT_MODEL = "jackal"  # the BARN Challenge's robot
 COLUMNS = ("world", "level", "seed", "tries", "fill", "L_ref m", "OT s", "limit s")
 METRIC_COLUMNS = ("closest m", "visib m", "dispers", "char m", "tortuos")
@@ -64,10 +66,12 @@ def add_worlds_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentPa
         default="default",
         help="default: the obstacles are in the map, for the Burger; barn: BARN's protocol "
         "(obstacles only in the sim world, goal 10 m ahead, success within 1 m, BARN's time "
-        "limit), for --model (jackal)",
+        "limit), for --model (jackal); dynabarn: BARN's corridor with no standing obstacle, "
+        "crossed by moving obstacles at 0.1-1.0 m/s (seen only by the lidar)",
     )
     gen.add_argument(
-        "--model", help="robot model the worlds are made for (--protocol barn; default jackal)"
+        "--model",
+        help="robot model the worlds are made for (--protocol barn or dynabarn; default jackal)",
     )
 
 
@@ -77,8 +81,9 @@ def command_line(args: argparse.Namespace) -> str:
         f"pnav worlds generate --out {args.out} --count {args.count} --seed {args.seed} "
         f"--levels {args.levels}"
     )
-    if getattr(args, "protocol", "default") == "barn":
-        line += f" --protocol barn --model {args.model or BARN_DEFAULT_MODEL}"
+    protocol = getattr(args, "protocol", "default")
+    if protocol != "default":
+        line += f" --protocol {protocol} --model {args.model or BARN_DEFAULT_MODEL}"
     return line + (" --png" if args.png else "")
 
 
@@ -223,9 +228,12 @@ def generate(args: argparse.Namespace) -> int:
 
     if getattr(args, "protocol", "default") == "barn":
         return generate_barn(args)
+    if getattr(args, "protocol", "default") == "dynabarn":
+        return generate_dynabarn(args)
     if getattr(args, "model", None):
         raise UsageError(
-            "--model needs --protocol barn (the default protocol's worlds are for the Burger)"
+            "--model needs --protocol barn or dynabarn (the default protocol's worlds are for "
+            "the Burger)"
         )
     levels = checked_levels(args, list(LEVELS))
     command = command_line(args)
@@ -267,6 +275,30 @@ def generate_barn(args: argparse.Namespace) -> int:
     print(text_table((*barnfile.COLUMNS, *METRIC_COLUMNS), barnfile.table_rows(worlds)))
     print()
     print(text_table(MEAN_COLUMNS, level_means(worlds)))
+    return finish(out, [w.name for w in worlds])
+
+
+def generate_dynabarn(args: argparse.Namespace) -> int:
+    """``--protocol dynabarn``: BARN's corridor crossed by movers (dynabarnfile.py)."""
+    from pnav.navbench import dynabarnfile
+    from pnav.navbench.dynabarn import LEVELS, generate_dynabarn_suite
+    from pnav.navbench.robots import resolve_model
+
+    levels = checked_levels(args, list(LEVELS))
+    robot = resolve_model(args.model or BARN_DEFAULT_MODEL)
+    command = command_line(args)
+    worlds = generate_dynabarn_suite(levels, args.count, args.seed, robot)
+    out: Path = args.out
+    header = (
+        f"Dynamic BARN-protocol benchmark world, written by `{command}`.\n"
+        "Generated: do not edit (the movers are drawn from the seed). Fields: docs/NAVBENCH.md."
+    )
+    for world in worlds:
+        dynabarnfile.write_dynabarn_world(world, out, header=header)
+        if args.png:
+            dynabarnfile.write_preview(out / "preview" / f"{world.name}.png", world)
+    (out / "SUITE.md").write_text(dynabarnfile.dynabarn_suite_markdown(worlds, command))
+    print(text_table(dynabarnfile.COLUMNS, dynabarnfile.table_rows(worlds)))
     return finish(out, [w.name for w in worlds])
 
 

@@ -25,6 +25,7 @@ from services.sim.battery import Battery, BatteryModel
 from services.sim.clock import Every
 from services.sim.fleetcast import Cast, FleetCast
 from services.sim.lidar import Lidar
+from services.sim.movers import Movers
 from services.sim.outline import Outline
 from services.sim.physics import CONTACT_TOLERANCE_M, Scene
 from services.sim.robot import RobotState, accelerate, clamp_command, integrate
@@ -90,6 +91,8 @@ class Simulation:
         self.scene = Scene(world, gui=config.gui)
         # every robot's lidar, in closed form (Bullet only moves bodies and finds contacts)
         self.cast = FleetCast(Outline.of(world), world.models, self.lidars)
+        # the moving obstacles, where they are at sim time 0 (services/sim/movers.py)
+        self.movers = Movers(world.movers, self.scene)
         self._touching: list[frozenset[str]] = [frozenset() for _ in self.robots]
         self._seq: dict[tuple[int, str], int] = {}
         # Each robot's sensors run on its own phase, i/N of a period after robot 0's, as the
@@ -120,9 +123,10 @@ class Simulation:
         self.max_after_command_m = 0.0
         self.counts: dict[str, int] = {SCAN: 0, ODOM: 0, BATTERY: 0, COLLISION: 0}
         # contact tests skipped per robot while its clearance lasts; the closing speed bound
-        # is two robots driving at each other flat out
+        # is two robots driving at each other flat out, or a robot and the fastest mover
         self._unchecked = [0 for _ in self.robots]
-        self._closing = 2.0 * max(r.model.max_linear_mps for r in self.robots) * self.dt
+        top = max(r.model.max_linear_mps for r in self.robots)
+        self._closing = (top + max(top, self.movers.top_speed_mps)) * self.dt
         for i, r in enumerate(self.robots):
             self._touching[i] = self.scene.probe(i, r.x, r.y)[0]
 
@@ -154,6 +158,8 @@ class Simulation:
         if self._timeout_steps:
             self._time_out_commands()
         self.steps += 1
+        if self.movers:
+            self.movers.place(self.time)  # before the robots: their contact tests meet them
         for i, robot in enumerate(self.robots):
             self._advance(i, robot)
 
@@ -224,8 +230,10 @@ class Simulation:
                 robot.linear, robot.angular = v * moved.fraction, w
                 touching, clearance = moved.touching, moved.clearance
             # this robot and any other close in by at most _closing per step, and the walls
-            # not at all: until the clearance is used up, the test cannot find anything
-            self._unchecked[i] = max(0, int((clearance - CONTACT_TOLERANCE_M) / self._closing) - 1)
+            # not at all (a box mover's corner may jump by turn_jump_m where its path turns):
+            # until the clearance is used up, the test cannot find anything
+            room = clearance - CONTACT_TOLERANCE_M - self.movers.turn_jump_m
+            self._unchecked[i] = max(0, int(room / self._closing) - 1)
         bat.step(self.dt, robot.linear, robot.angular, self._charge_power(robot))
         for other in sorted(touching - self._touching[i]):
             msg = messages.collision(
@@ -249,6 +257,8 @@ class Simulation:
         if scanning:
             poses = [(r.x, r.y, r.yaw) for r in self.robots]
             casts = dict(zip(scanning, self.cast(poses, scanning), strict=True))
+            if self.movers:
+                casts = {i: self.movers.cast(c, poses[i], self.lidars[i]) for i, c in casts.items()}
         for i, robot in enumerate(self.robots):
             due = self._schedule[i]
             if due[ODOM].due(step):

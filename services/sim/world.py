@@ -13,6 +13,8 @@ A world file is YAML (format in docs/SIM.md)::
     obstacles:                       # not drawn in the map: the robot meets them unannounced
       - {type: box, x: 3.0, y: 2.0, yaw: 0.3, size: [0.4, 0.4, 0.4]}
       - {type: cylinder, x: 4.0, y: 2.5, radius: 0.15, height: 0.5}
+    movers:                          # moving obstacles (services/sim/mover.py), not in the map
+      - {name: walker, radius: 0.25, path: [[1, 2], [6, 2]], speed: 0.8, mode: back_and_forth}
 
 A robot that names no model is the default one (``pnav up --model``, else the Burger). A bare
 map_server YAML is accepted too: the world is then the map with one robot of the default
@@ -36,6 +38,7 @@ from common.robotmodel import DEFAULT_MODEL, ROBOT_FIELDS, RobotModel, load_mode
 from services.sim.entry import EntryReader
 from services.sim.mapserver import FREE, OccupancyGrid, load_map
 from services.sim.mapserver import REQUIRED_KEYS as MAP_KEYS
+from services.sim.mover import MoverSpec, parse_movers
 from services.sim.robot import BURGER
 
 DEFAULT_STATION_RADIUS_M = 0.3
@@ -44,7 +47,16 @@ DEFAULT_WALL_HEIGHT_M = 0.3
 
 # The keys of each mapping of a world file: any other is refused, naming the closest one.
 # ``benchmark`` is the navigation benchmark's block (docs/NAVBENCH.md), read by pnav.navbench.
-WORLD_KEYS = ("name", "map", "robots", "charging_stations", "obstacles", "wall_height", "benchmark")
+WORLD_KEYS = (
+    "name",
+    "map",
+    "robots",
+    "charging_stations",
+    "obstacles",
+    "movers",
+    "wall_height",
+    "benchmark",
+)
 ROBOT_KEYS = ("id", "x", "y", "yaw", "battery", "model")
 STATION_KEYS = ("id", "x", "y", "radius", "power")
 _OBSTACLE = ("name", "type", "x", "y", "yaw")
@@ -100,6 +112,7 @@ class World:
     robots: tuple[RobotSpec, ...]
     stations: tuple[StationSpec, ...] = ()
     obstacles: tuple[ObstacleSpec, ...] = ()
+    movers: tuple[MoverSpec, ...] = ()  # where each is at sim time 0 counts for the starts
     wall_height_m: float = DEFAULT_WALL_HEIGHT_M
     # the model of robots that name none: extra robots (with_robot_count) are of this one
     default_model: RobotModel = BURGER
@@ -119,6 +132,9 @@ class World:
         for obstacle in self.obstacles:
             if obstacle.overlaps_disc(x, y, radius):
                 return f"obstacle {obstacle.name}"
+        for mover in self.movers:
+            if mover.overlaps_disc(0.0, x, y, radius):
+                return f"mover {mover.name} (where it is at sim time 0)"
         return None
 
     def with_robot_count(self, count: int, *, spacing_m: float = 0.6) -> World:
@@ -189,6 +205,8 @@ class World:
                 }
                 for s in self.stations
             ],
+            # only in a world with movers: a static world's message is as it always was
+            **({"movers": [m.message() for m in self.movers]} if self.movers else {}),
         }
 
 
@@ -345,10 +363,12 @@ def load_world(path: str | Path, model: str | None = None) -> World:
     robots = [_robot(path, i, d, default) for i, d in enumerate(robot_docs)]
     stations = [_station(path, i, d) for i, d in enumerate(_list(path, doc, "charging_stations"))]
     obstacles = [_obstacle(path, i, d) for i, d in enumerate(_list(path, doc, "obstacles"))]
+    movers = parse_movers(path, _list(path, doc, "movers"))
     for label, ids in (
         ("robot", [r.robot_id for r in robots]),
         ("charging station", [s.station_id for s in stations]),
-        ("obstacle", [o.name for o in obstacles]),
+        # a collision names what the robot touched: an obstacle and a mover share the names
+        ("obstacle or mover", [o.name for o in obstacles] + [m.name for m in movers]),
     ):
         dupes = sorted({i for i in ids if ids.count(i) > 1})
         if dupes:
@@ -361,6 +381,7 @@ def load_world(path: str | Path, model: str | None = None) -> World:
         robots=tuple(robots),
         stations=tuple(stations),
         obstacles=tuple(obstacles),
+        movers=movers,
         wall_height_m=wall_height,
         default_model=default,
     )
