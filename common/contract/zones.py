@@ -259,5 +259,10 @@ async def add_zone(db: Database, zone: Zone) -> None:
 
 
 async def remove_zone(db: Database, name: str) -> bool:
-    """Delete the zone named ``name`` and notify; whether there was one."""
-    return await db.write(keys.ZONE, None, DELETE_SQL, name) is not None
+    """Delete the zone named ``name`` and notify; whether there was one (none: nothing
+    changed, nothing notified)."""
+    async with db.transaction() as tx:
+        removed = await tx.conn.fetchval(DELETE_SQL, name)
+        if removed is not None:
+            tx.changed(keys.ZONE, None)
+    return removed is not None
