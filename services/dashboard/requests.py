@@ -235,9 +235,9 @@ def zone_request(body: dict[str, Any]) -> Zone:
         body.get("robot_id"),
         body.get("description") or "",
     )
-    for field_name, value in (("name", name), ("kind", kind)):
-        if not isinstance(value, str):
-            raise Refused(422, f"'{field_name}' must be text, got {value!r}")
+    if not isinstance(name, str) or not isinstance(kind, str):
+        wrong = "name" if not isinstance(name, str) else "kind"
+        raise Refused(422, f"'{wrong}' must be text, got {body.get(wrong)!r}")
     if robot is not None and not isinstance(robot, str):
         raise Refused(422, f"'robot_id' must be a robot id or null, got {robot!r}")
     if not isinstance(description, str):
