@@ -887,3 +887,19 @@ CREATE TABLE zone (
     CONSTRAINT zone_polygon CHECK (zone_polygon_ok(xs, ys)),
     CONSTRAINT zone_max_speed_mps_kind CHECK ((kind = 'speed_limit') = (max_speed_mps IS NOT NULL))
 );
+
+-- At most 256 zones: every reader tests every zone (the bridge one robot's pose per command,
+-- the planner each zone's cells per change), so no number of rows people write may make
+-- that work unbounded. A trigger, as a CHECK sees one row: refused as a check_violation of
+-- `zone_count`. Two people inserting at the same moment may pass it together by one or two.
+CREATE FUNCTION zone_count_bounded() RETURNS trigger LANGUAGE plpgsql AS $$
+BEGIN
+    IF (SELECT count(*) FROM zone) >= 256 THEN
+        RAISE EXCEPTION 'zone table holds at most 256 zones: remove one first'
+            USING ERRCODE = 'check_violation', CONSTRAINT = 'zone_count', TABLE = 'zone';
+    END IF;
+    RETURN NEW;
+END;
+$$;
+CREATE TRIGGER zone_count_bounded BEFORE INSERT ON zone
+    FOR EACH ROW EXECUTE FUNCTION zone_count_bounded();

@@ -15,6 +15,7 @@ import math
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any, Final
 
 from common.contract import keys
@@ -31,6 +32,7 @@ MAX_ABS_M: Final = 1.0e5  # as goals: nothing beyond it is ever reached
 MIN_AREA_M2: Final = 0.01
 MAX_SPEED_MPS: Final = 10.0  # as command velocities
 MAX_DESCRIPTION_CHARS: Final = 1000
+MAX_ZONES: Final = 256  # rows in the table (a trigger: constraint zone_count)
 NAME: Final = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 _ROBOT_ID = re.compile(r"^[A-Za-z0-9_-]+$")
 
@@ -58,12 +60,20 @@ class Zone:
     def keepout(self) -> bool:
         return self.kind == KEEPOUT
 
+    @cached_property
+    def box(self) -> tuple[float, float, float, float]:
+        """(x0, y0, x1, y1): the polygon's bounding box, worked out once."""
+        return min(self.xs), min(self.ys), max(self.xs), max(self.ys)
+
     def applies_to(self, robot_id: str) -> bool:
         return self.robot_id is None or self.robot_id == robot_id
 
     def contains(self, x: float, y: float) -> bool:
         """Whether (x, y) lies inside the polygon (even-odd rule; the boundary counts as
         inside when a ray along it meets it, as a point on a left or bottom edge does)."""
+        x0, y0, x1, y1 = self.box
+        if not (x0 <= x <= x1 and y0 <= y <= y1):
+            return False  # the cheap test first: most zones are far from most points
         inside = False
         xs, ys = self.xs, self.ys
         j = len(xs) - 1

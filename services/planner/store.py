@@ -212,7 +212,7 @@ class PlannerStore:
             # the routes made on the old ones go stale by themselves (routes.py)
             keepouts = sum(1 for z in zones if z.keepout)
             log.event(logger, logging.INFO, "zones read", keepout=keepouts, total=len(zones))
-        self.world.zones = zones
+        self.world.set_zones(zones)
 
     def robots(self) -> Iterable[RobotState]:
         return self.world.robots.values()

@@ -21,7 +21,7 @@ from common.contract import records
 from common.contract.zones import Zone
 from common.planner_core.scenario import RobotInfo
 from services.planner.grid import OCCUPIED_AT, PlanGrid, plan_grid
-from services.planner.keepout import with_keepouts, zones_key
+from services.planner.keepout import Keepouts, with_keepouts, zones_key
 from services.planner.obstacles import PoseTrail, Seen
 from services.planner.tracking import Route
 
@@ -144,6 +144,7 @@ class World:
         self.maps: dict[str, MapData] = {}
         self.stations: list[Station] = []
         self.zones: tuple[Zone, ...] = ()  # every zone row, by name
+        self._keepouts: dict[str, Keepouts] = {}  # per robot, for the zones above
         self._warned: set[str] = set()
 
     def set_robots(self, infos: Iterable[RobotInfo]) -> set[str]:
@@ -182,9 +183,19 @@ class World:
             return next(iter(self.maps.values()))
         return None
 
-    def keepouts(self, info: RobotInfo) -> tuple[Zone, ...]:
-        """The keepout zones that apply to the robot, by name."""
-        return tuple(z for z in self.zones if z.keepout and z.applies_to(info.robot_id))
+    def set_zones(self, zones: tuple[Zone, ...]) -> None:
+        if zones != self.zones:
+            self.zones = zones
+            self._keepouts.clear()
+
+    def keepouts(self, info: RobotInfo) -> Keepouts:
+        """The keepout zones that apply to the robot, by name (worked out once per zone set:
+        the rules ask on every activation)."""
+        held = self._keepouts.get(info.robot_id)
+        if held is None:
+            robot = info.robot_id
+            held = self._keepouts[robot] = Keepouts(z for z in self.zones if z.applies_to(robot))
+        return held
 
     def forget(self, robot_id: str) -> None:
         """Start the robot afresh (its strategy stays: it is the contract's, read as usual)."""

@@ -151,3 +151,14 @@ async def test_people_write_zones_and_services_only_read_them(empty_db_url: str)
                 await conn.execute("DELETE FROM zone")
         finally:
             await conn.close()
+
+
+async def test_the_table_holds_at_most_256_zones(client: asyncpg.Connection) -> None:
+    for i in range(zones.MAX_ZONES):
+        await client.execute(INSERT, f"z{i}", "keepout", *SQUARE, None)
+    with pytest.raises(asyncpg.CheckViolationError) as caught:
+        await client.execute(INSERT, "one-more", "keepout", *SQUARE, None)
+    assert caught.value.constraint_name == "zone_count"
+    assert "at most 256 zones" in str(caught.value)
+    await client.execute("DELETE FROM zone WHERE name = 'z0'")
+    await client.execute(INSERT, "one-more", "keepout", *SQUARE, None)  # room again

@@ -156,3 +156,31 @@ def test_a_zone_covers_the_cells_whose_centres_are_inside_it_and_those_its_edges
     far = Zone("f", KEEPOUT, (5.0, 6.0, 6.0), (5.0, 5.0, 6.0))
     occupied = np.eye(6, dtype=bool)
     assert np.array_equal(with_keepouts(occupied, [far], 0.1, (0.0, 0.0, 0.0)), occupied)
+
+
+def test_the_cells_match_the_zones_own_inside_test_on_random_star_polygons() -> None:
+    rng = np.random.default_rng(7)
+    res, origin = 0.1, (-0.3, 0.2, 0.0)
+    for _ in range(30):
+        n = int(rng.integers(3, 40))
+        angles = np.sort(rng.uniform(0, 2 * np.pi, n))
+        radii = rng.uniform(0.3, 2.0, n)
+        cx, cy = rng.uniform(0.5, 3.5, 2)
+        xs = tuple(float(v) for v in cx + radii * np.cos(angles))
+        ys = tuple(float(v) for v in cy + radii * np.sin(angles))
+        zone = Zone("star", KEEPOUT, xs, ys)
+        cells = zone_cells(zone, (40, 40), res, origin)
+        for row in range(40):
+            for col in range(40):
+                x, y = origin[0] + (col + 0.5) * res, origin[1] + (row + 0.5) * res
+                if zone.contains(x, y):
+                    assert cells[row, col], (zone, row, col)
+
+
+def test_a_zone_far_larger_than_the_map_covers_all_of_it() -> None:
+    huge = Zone("all", KEEPOUT, (-1.0e5, 1.0e5, 1.0e5, -1.0e5), (-1.0e5, -1.0e5, 1.0e5, 1.0e5))
+    assert zone_cells(huge, (60, 80), 0.05, (-1.0, -1.0, 0.0)).all()
+    # one whose edge crosses the map from far away marks the cells it crosses, no others
+    sliver = Zone("s", KEEPOUT, (-1.0e5, 1.0e5, 1.0e5), (0.01, 0.01, 0.04))
+    cells = zone_cells(sliver, (60, 80), 0.05, (-1.0, -1.0, 0.0))
+    assert cells[20].all() and cells.sum() == 80
