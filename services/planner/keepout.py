@@ -92,20 +92,36 @@ def _centres_inside(
     return np.asarray(counts % 2 == 1, dtype=np.bool_)
 
 
-def _clip(ax: float, ay: float, bx: float, by: float, w: int, h: int) -> tuple[float, float] | None:
-    """The part (t0, t1) of the segment a + t (b - a), t in [0, 1], over the grid (one cell
-    of slack round it; Liang-Barsky); None when it misses the grid."""
-    t0, t1 = 0.0, 1.0
-    for delta, start, low, high in ((bx - ax, ax, -1.0, w + 1.0), (by - ay, ay, -1.0, h + 1.0)):
-        if delta == 0.0:
-            if not low <= start <= high:
-                return None
-            continue
-        ta, tb = (low - start) / delta, (high - start) / delta
-        t0, t1 = max(t0, min(ta, tb)), min(t1, max(ta, tb))
-        if t0 > t1:
-            return None
-    return t0, t1
+def _edge_cells(
+    cols: np.ndarray[Any, np.dtype[np.float64]],
+    rows: np.ndarray[Any, np.dtype[np.float64]],
+    w: int,
+    h: int,
+) -> tuple[np.ndarray[Any, np.dtype[np.int64]], np.ndarray[Any, np.dtype[np.int64]]]:
+    """The (cols, rows) of the grid cells the polygon's edges pass through: every edge
+    sampled at a quarter of a cell, on the part of it over the grid only (clipped to the
+    grid and a cell round it, Liang-Barsky), all edges at once."""
+    ax, ay = np.roll(cols, 1), np.roll(rows, 1)
+    dx, dy = cols - ax, rows - ay
+    t0, t1 = np.zeros(len(cols)), np.ones(len(cols))
+    keep = np.ones(len(cols), dtype=np.bool_)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for delta, start, high in ((dx, ax, w + 1.0), (dy, ay, h + 1.0)):
+            flat = delta == 0.0
+            keep &= ~flat | ((start >= -1.0) & (start <= high))
+            ta, tb = (-1.0 - start) / delta, (high - start) / delta
+            t0 = np.where(flat, t0, np.maximum(t0, np.minimum(ta, tb)))
+            t1 = np.where(flat, t1, np.minimum(t1, np.maximum(ta, tb)))
+    keep &= t0 <= t1
+    steps = np.where(keep, np.maximum(1, np.ceil(4 * np.hypot(dx, dy) * (t1 - t0))), 0)
+    counts = np.where(keep, steps + 1, 0).astype(np.int64)
+    edge = np.repeat(np.arange(len(cols)), counts)
+    first = np.repeat(np.cumsum(counts) - counts, counts)
+    t = t0[edge] + (t1 - t0)[edge] * (np.arange(len(edge)) - first) / steps[edge]
+    ec = np.floor(ax[edge] + dx[edge] * t).astype(np.int64)
+    er = np.floor(ay[edge] + dy[edge] * t).astype(np.int64)
+    on = (ec >= 0) & (er >= 0) & (ec < w) & (er < h)
+    return ec[on], er[on]
 
 
 def zone_cells(
@@ -120,20 +136,8 @@ def zone_cells(
     if c0 >= c1 or r0 >= r1:
         return out  # off the map
     out[r0:r1, c0:c1] = _centres_inside(cols, rows, c0, c1, r0, r1)
-    n = len(cols)
-    # the edges' own cells, sampled at a quarter of a cell, on the part over the map only
-    for i in range(n):
-        ax, ay, bx, by = cols[i - 1], rows[i - 1], cols[i], rows[i]
-        span = _clip(ax, ay, bx, by, w, h)
-        if span is None:
-            continue
-        t0, t1 = span
-        steps = max(1, math.ceil(4 * math.hypot(bx - ax, by - ay) * (t1 - t0)))
-        t = np.linspace(t0, t1, steps + 1)
-        ec = np.floor(ax + (bx - ax) * t).astype(np.int64)
-        er = np.floor(ay + (by - ay) * t).astype(np.int64)
-        on = (ec >= 0) & (er >= 0) & (ec < w) & (er < h)
-        out[er[on], ec[on]] = True
+    ec, er = _edge_cells(cols, rows, w, h)
+    out[er, ec] = True
     return out
 
 

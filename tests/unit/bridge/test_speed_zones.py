@@ -102,3 +102,27 @@ def test_an_older_pose_does_not_replace_a_newer_one() -> None:
     zones.pose("r1", 10.0, 0.5, 0.0)
     zones.pose("r1", 9.0, -3.0, 0.0)
     assert zones.cap("r1") == Cap(0.3, "aisle")
+
+
+def test_the_cap_agrees_with_each_zones_own_inside_test_on_random_star_zones() -> None:
+    import numpy as np
+
+    rng = np.random.default_rng(3)
+    stars = []
+    for i in range(40):
+        n = int(rng.integers(3, 30))
+        angles = np.sort(rng.uniform(0, 2 * np.pi, n))
+        radii = rng.uniform(0.5, 3.0, n)
+        cx, cy = rng.uniform(0, 10, 2)
+        xs = tuple(float(v) for v in cx + radii * np.cos(angles))
+        ys = tuple(float(v) for v in cy + radii * np.sin(angles))
+        stars.append(Zone(f"z{i}", SPEED_LIMIT, xs, ys, float(rng.uniform(0.1, 2.0))))
+    zones = SpeedZones()
+    zones.set(stars)
+    for k in range(300):
+        x, y = rng.uniform(-2, 12, 2)
+        zones.pose("r1", float(k), float(x), float(y))
+        inside = [z for z in stars if z.contains(float(x), float(y))]
+        best = min(inside, key=lambda z: z.max_speed_mps or 0.0) if inside else None
+        expected = None if best is None else Cap(best.max_speed_mps or 0.0, best.name)
+        assert zones.cap("r1") == expected, (x, y)
