@@ -36,6 +36,7 @@ from pnav.cli_args import (
 )
 from pnav.dashboard_cli import add_dashboard_options, dashboard_options
 from pnav.navbench.worlds_cli import add_worlds_parser
+from pnav.zone_cli import add_zone_parser
 
 if TYPE_CHECKING:
     from common.contract.people import Pose
@@ -256,6 +257,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_faults_parser(benches, positive)
     # _SubParsersAction is invariant in its parser class; ours only makes Parser ones
     add_worlds_parser(cast("argparse._SubParsersAction[argparse.ArgumentParser]", commands))
+    add_zone_parser(cast("argparse._SubParsersAction[argparse.ArgumentParser]", commands))
     return parser
 
 
@@ -290,6 +292,7 @@ def dispatch(args: argparse.Namespace) -> int:
         return uvloop.run(commands.status(args.once or not sys.stdout.isatty()))
     if args.command in ("goal", "strategy", "cancel"):
         return uvloop.run(_drive(args))
+
     if args.command == "demo":
         from pnav import demo
 
@@ -304,11 +307,20 @@ def dispatch(args: argparse.Namespace) -> int:
         return info.run(args.file, args.json)
     if args.command == "bench":
         return _bench(args)
-    if args.command == "worlds":
-        from pnav.navbench.worlds_cli import run_worlds
-
-        return run_worlds(args)
+    if args.command in ("worlds", "zone"):
+        return _verbs(args)
     raise AssertionError(f"unhandled command {args.command}")  # argparse enforces the choices
+
+
+def _verbs(args: argparse.Namespace) -> int:
+    """The commands whose verbs live in their own module (``pnav worlds``, ``pnav zone``)."""
+    if args.command == "zone":
+        from pnav.zone_cli import run_zone
+
+        return uvloop.run(run_zone(args))
+    from pnav.navbench.worlds_cli import run_worlds
+
+    return run_worlds(args)
 
 
 def _secrets_parser(commands: argparse._SubParsersAction[Parser]) -> None:

@@ -49,6 +49,7 @@ RETENTION_POLICY: Final = "retention_policy"
 ROBOT_LEASE: Final = "robot_lease"
 PLANNED_PATH: Final = "planned_path"
 SCENARIO_OFFER: Final = "scenario_offer"
+ZONE: Final = "zone"
 
 TABLES: Final = (
     SCHEMA_VERSION,
@@ -72,6 +73,7 @@ TABLES: Final = (
     ROBOT_LEASE,
     PLANNED_PATH,
     SCENARIO_OFFER,
+    ZONE,
 )
 
 # Tables written at sensor rate; the retention policy keeps them bounded.

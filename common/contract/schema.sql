@@ -774,3 +774,183 @@ CREATE TABLE goal_waypoint (
     CONSTRAINT goal_waypoint_progress_finite
         CHECK (is_finite(reached_stamp) AND char_length(reason) <= 1000)
 );
+
+-- migration 14: keepout and speed zones people draw on the map
+--
+-- Every warehouse has places a robot must not enter and places it must slow down in. A zone
+-- is a polygon in the map frame (its vertices' x and y in two arrays, in order, closed
+-- implicitly: the last vertex joins the first), of kind `keepout` (the planner never routes
+-- through it) or `speed_limit` (the bridge's safety layer caps the linear speed sent to a
+-- robot whose centre is inside it at `max_speed_mps`). `robot_id` NULL: every robot; else
+-- that robot only. People write the rows (the CLI, dashboards); a change applies at once:
+-- the writer notifies `pnav/db/zone/_`, and readers read the table again at least every few
+-- tenths of a second anyway (CONTRACT.md, zone).
+--
+-- A polygon is refused unless it has 3 to 100 vertices, the same number of x and y, every
+-- coordinate finite and within +-100 000 m, no vertex repeated by the next (nor the first
+-- repeated at the end: it is closed implicitly), not every vertex on one line, no edge
+-- crossing, touching or folding back onto another (a simple polygon), and an area of at
+-- least 0.01 m^2. zone_polygon_problem
+-- says what is wrong in words naming the field; zone_polygon_ok raises it as a
+-- check_violation of constraint `zone_polygon`, so every client sees the reason.
+-- common.contract.zones mirrors every bound for tools that refuse first.
+
+-- what is wrong with the polygon (xs, ys), or NULL when it is a simple polygon within bounds
+CREATE FUNCTION zone_polygon_problem(xs double precision[], ys double precision[])
+RETURNS text LANGUAGE plpgsql IMMUTABLE PARALLEL SAFE AS $$
+DECLARE
+    n integer;
+    i integer;
+    j integer;
+    area double precision := 0;
+    collinear boolean;
+    x1 double precision; y1 double precision; x2 double precision; y2 double precision;
+    x3 double precision; y3 double precision; x4 double precision; y4 double precision;
+    d1 double precision; d2 double precision; d3 double precision; d4 double precision;
+BEGIN
+    IF xs IS NULL OR ys IS NULL THEN
+        RETURN 'polygon xs and ys are required';
+    END IF;
+    IF array_ndims(xs) IS DISTINCT FROM 1 OR array_ndims(ys) IS DISTINCT FROM 1
+       OR array_lower(xs, 1) <> 1 OR array_lower(ys, 1) <> 1 THEN
+        RETURN 'polygon xs and ys must be one-dimensional arrays of at least 3 vertices';
+    END IF;
+    n := cardinality(xs);
+    IF n <> cardinality(ys) THEN
+        RETURN format('polygon xs has %s values but ys has %s: one x and one y per vertex',
+                      n, cardinality(ys));
+    END IF;
+    IF n < 3 THEN
+        RETURN format('polygon has %s vertices: at least 3 are needed (fewer make an open '
+                      'line, not an area)', n);
+    END IF;
+    IF n > 100 THEN
+        RETURN format('polygon has %s vertices: at most 100', n);
+    END IF;
+    FOR i IN 1..n LOOP
+        IF xs[i] IS NULL OR ys[i] IS NULL OR xs[i] = 'NaN' OR ys[i] = 'NaN'
+           OR abs(xs[i]) > 1e5 OR abs(ys[i]) > 1e5 THEN
+            RETURN format('polygon vertex %s (xs[%s], ys[%s]) must be finite and within '
+                          '+-100000 m, got (%s, %s)', i, i, i, xs[i], ys[i]);
+        END IF;
+    END LOOP;
+    FOR i IN 1..n LOOP
+        j := i % n + 1;
+        IF xs[i] = xs[j] AND ys[i] = ys[j] THEN
+            IF j = 1 THEN
+                RETURN format('polygon repeats vertex 1 at the end (vertex %s): a zone is '
+                              'closed implicitly, give each vertex once', n);
+            END IF;
+            RETURN format('polygon vertices %s and %s are the same point: a degenerate edge',
+                          i, j);
+        END IF;
+        area := area + xs[i] * ys[j] - xs[j] * ys[i];
+    END LOOP;
+    -- every vertex on the line through the first two: no area at all
+    collinear := true;
+    FOR i IN 3..n LOOP
+        IF (xs[2] - xs[1]) * (ys[i] - ys[1]) - (ys[2] - ys[1]) * (xs[i] - xs[1]) <> 0 THEN
+            collinear := false;
+        END IF;
+    END LOOP;
+    IF collinear THEN
+        RETURN 'polygon is degenerate: its vertices are on one line';
+    END IF;
+    -- a simple polygon: no two edges meet except adjacent ones at their shared vertex
+    FOR i IN 1..n LOOP
+        x1 := xs[i]; y1 := ys[i]; x2 := xs[i % n + 1]; y2 := ys[i % n + 1];
+        FOR j IN i + 1..n LOOP
+            x3 := xs[j]; y3 := ys[j]; x4 := xs[j % n + 1]; y4 := ys[j % n + 1];
+            IF j = i + 1 OR (i = 1 AND j = n) THEN
+                -- adjacent: they share one vertex; they overlap only when collinear and the
+                -- second turns straight back along the first
+                IF j = i + 1 THEN
+                    d1 := (x2 - x1) * (y4 - y3) - (y2 - y1) * (x4 - x3);
+                    d2 := (x2 - x1) * (x4 - x3) + (y2 - y1) * (y4 - y3);
+                ELSE
+                    d1 := (x1 - x3) * (y2 - y1) - (y1 - y3) * (x2 - x1);
+                    d2 := (x1 - x3) * (x2 - x1) + (y1 - y3) * (y2 - y1);
+                END IF;
+                IF d1 = 0 AND d2 < 0 THEN
+                    RETURN format('polygon edges %s and %s fold back onto each other: a '
+                                  'zone must not intersect itself', i, j);
+                END IF;
+                CONTINUE;
+            END IF;
+            d1 := (x4 - x3) * (y1 - y3) - (y4 - y3) * (x1 - x3);
+            d2 := (x4 - x3) * (y2 - y3) - (y4 - y3) * (x2 - x3);
+            d3 := (x2 - x1) * (y3 - y1) - (y2 - y1) * (x3 - x1);
+            d4 := (x2 - x1) * (y4 - y1) - (y2 - y1) * (x4 - x1);
+            IF ((d1 > 0 AND d2 < 0) OR (d1 < 0 AND d2 > 0))
+               AND ((d3 > 0 AND d4 < 0) OR (d3 < 0 AND d4 > 0)) THEN
+                RETURN format('polygon edges %s and %s cross: a zone must not intersect '
+                              'itself (give the vertices in order around it)', i, j);
+            END IF;
+            IF (d1 = 0 AND least(x3, x4) <= x1 AND x1 <= greatest(x3, x4)
+                       AND least(y3, y4) <= y1 AND y1 <= greatest(y3, y4))
+               OR (d2 = 0 AND least(x3, x4) <= x2 AND x2 <= greatest(x3, x4)
+                          AND least(y3, y4) <= y2 AND y2 <= greatest(y3, y4))
+               OR (d3 = 0 AND least(x1, x2) <= x3 AND x3 <= greatest(x1, x2)
+                          AND least(y1, y2) <= y3 AND y3 <= greatest(y1, y2))
+               OR (d4 = 0 AND least(x1, x2) <= x4 AND x4 <= greatest(x1, x2)
+                          AND least(y1, y2) <= y4 AND y4 <= greatest(y1, y2)) THEN
+                RETURN format('polygon edges %s and %s touch: a zone must not intersect '
+                              'itself', i, j);
+            END IF;
+        END LOOP;
+    END LOOP;
+    IF abs(area) / 2 < 0.01 THEN
+        RETURN format('polygon is degenerate: its area is %s m^2, at least 0.01 is needed',
+                      round((abs(area) / 2)::numeric, 6));
+    END IF;
+    RETURN NULL;
+END;
+$$;
+
+-- true for a valid polygon; otherwise raises the problem as constraint zone_polygon's
+CREATE FUNCTION zone_polygon_ok(xs double precision[], ys double precision[])
+RETURNS boolean LANGUAGE plpgsql IMMUTABLE PARALLEL SAFE AS $$
+DECLARE
+    problem text := zone_polygon_problem(xs, ys);
+BEGIN
+    IF problem IS NOT NULL THEN
+        RAISE EXCEPTION 'zone %', problem
+            USING ERRCODE = 'check_violation', CONSTRAINT = 'zone_polygon', TABLE = 'zone',
+                  COLUMN = 'xs, ys';
+    END IF;
+    RETURN true;
+END;
+$$;
+
+CREATE TABLE zone (
+    name          text PRIMARY KEY CONSTRAINT zone_name_check
+                  CHECK (name ~ '^[A-Za-z0-9_.-]{1,64}$'),
+    kind          text NOT NULL CONSTRAINT zone_kind_check
+                  CHECK (kind IN ('keepout', 'speed_limit')),
+    xs            double precision[] NOT NULL,
+    ys            double precision[] NOT NULL,
+    max_speed_mps double precision CONSTRAINT zone_max_speed_mps_check
+                  CHECK (max_speed_mps > 0 AND max_speed_mps <= 10),
+    robot_id      text CONSTRAINT zone_robot_id_check CHECK (robot_id ~ '^[A-Za-z0-9_-]+$'),
+    description   text NOT NULL DEFAULT '' CONSTRAINT zone_description_check
+                  CHECK (char_length(description) <= 1000),
+    created_at    timestamptz NOT NULL DEFAULT now(),
+    CONSTRAINT zone_polygon CHECK (zone_polygon_ok(xs, ys)),
+    CONSTRAINT zone_max_speed_mps_kind CHECK ((kind = 'speed_limit') = (max_speed_mps IS NOT NULL))
+);
+
+-- At most 256 zones: every reader tests every zone (the bridge one robot's pose per command,
+-- the planner each zone's cells per change), so no number of rows people write may make
+-- that work unbounded. A trigger, as a CHECK sees one row: refused as a check_violation of
+-- `zone_count`. Two people inserting at the same moment may pass it together by one or two.
+CREATE FUNCTION zone_count_bounded() RETURNS trigger LANGUAGE plpgsql AS $$
+BEGIN
+    IF (SELECT count(*) FROM zone) >= 256 THEN
+        RAISE EXCEPTION 'zone table holds at most 256 zones: remove one first'
+            USING ERRCODE = 'check_violation', CONSTRAINT = 'zone_count', TABLE = 'zone';
+    END IF;
+    RETURN NEW;
+END;
+$$;
+CREATE TRIGGER zone_count_bounded BEFORE INSERT ON zone
+    FOR EACH ROW EXECUTE FUNCTION zone_count_bounded();

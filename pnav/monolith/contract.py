@@ -79,6 +79,16 @@ class Table:
         rows = self._by_robot.get(robot)
         return rows[-1] if rows else None
 
+    def remove(self, doomed: Callable[[Row], bool]) -> int:
+        """Delete every row ``doomed`` says (people's tables: a zone removed); how many."""
+        removed = 0
+        for robot, rows in self._by_robot.items():
+            kept = [r for r in rows if not doomed(r)]
+            removed += len(rows) - len(kept)
+            self._by_robot[robot] = deque(kept, maxlen=self.keep)
+        self.by_id = {i: r for i, r in self.by_id.items() if not doomed(r)}
+        return removed
+
 
 class MemoryContract:
     """Every contract table the navigation services use, plus the change listeners."""
@@ -104,6 +114,7 @@ class MemoryContract:
                 keys.USER_COMMAND,
                 keys.PLANNED_PATH,
                 keys.SCENARIO_OFFER,
+                keys.ZONE,
             )
         }
         self.listeners: list[Listener] = []

@@ -18,6 +18,7 @@ import numpy as np
 
 from common.contract import keys, offers, records
 from common.contract.recommendations import Recommendation
+from common.contract.zones import Zone
 from common.engine import Engine
 from common.planner_core.scenario import RobotInfo
 from pnav.monolith.contract import MemoryContract, Row
@@ -75,6 +76,10 @@ class MemoryPlannerSource:
             self.contract[keys.CHARGING_STATION].all_rows(), key=lambda r: r["station_id"]
         )
         return [Station(r["station_id"], r["map_id"], r["x"], r["y"], r["radius_m"]) for r in rows]
+
+    async def zones(self) -> list[Zone]:
+        rows = sorted(self.contract[keys.ZONE].all_rows(), key=lambda r: r["name"])
+        return [Zone.of_row(r) for r in rows]
 
     async def active_strategies(self) -> dict[str, records.ActiveStrategy]:
         # the join of records.active_strategies; a robot's newest row wins (the table keeps

@@ -43,6 +43,7 @@ from services.bridge.messages import (
     UNKNOWN_ROBOT,
     LaserScan,
     MalformedMessage,
+    Odometry,
     SensorRecord,
     parse_sensor,
 )
@@ -208,6 +209,8 @@ class Bridge:
         """A valid reading from either link: into the safety layer and the writer."""
         if isinstance(record, LaserScan):
             self.commands.safety.scan(record)  # before any command decided from it comes
+        elif isinstance(record, Odometry):  # where the robot is, for the speed zones
+            self.commands.safety.zones.pose(record.robot_id, record.stamp, record.x, record.y)
         self.writer.add(record)
 
     def _start_ros2(self) -> None:

@@ -141,6 +141,7 @@ class CommandRelay:
         self.images = CommandImages(logger, counters.images_refused)
         self._alerts = RateLimitedLog(logger)
         self._subscriber: zenoh.Subscriber[None] | None = None
+        self._subscriber_zones: zenoh.Subscriber[None] | None = None
         self._tasks: list[asyncio.Task[None]] = []
         # another robot link's sender (the ROS 2 link): (robot, stamp, linear, angular,
         # reliable, command_id); None: the native cmd_vel below
@@ -154,8 +155,12 @@ class CommandRelay:
             self._on_notification,
             ledger=self.ledger,
         )
+        self._subscriber_zones = bus.subscribe(
+            self.session, keys.notify_watch(keys.ZONE), self._on_zones, ledger=self.ledger
+        )
         async with self.pool.acquire() as conn:
             await self.limits.read(conn)
+            await self.safety.zones.read(conn)
             rows = await conn.fetch(_NEWEST)
         self.counters.command_reads += 1
         self.notes.start()
@@ -169,9 +174,10 @@ class CommandRelay:
 
     async def close(self, robots: Iterable[str] = ()) -> None:
         """Stop listening, then send every robot (``robots`` and those commanded) a zero."""
-        if self._subscriber is not None:
-            self._subscriber.undeclare()
-            self._subscriber = None
+        for subscriber in (self._subscriber, self._subscriber_zones):
+            if subscriber is not None:
+                subscriber.undeclare()
+        self._subscriber = self._subscriber_zones = None
         await cancel_and_wait(self._tasks)
         self._tasks = []
         targets = sorted(set(robots) | set(self.last_sent))
@@ -187,6 +193,12 @@ class CommandRelay:
     def robots_changed(self) -> None:
         """A robot notification: read the robots' limits again before trusting them."""
         self.limits.changed()
+        self._wake.set()
+
+    def _on_zones(self, key: str, payload: bytes) -> None:
+        """A zone notification: the speed zones are read before the next command's verdict
+        can count on them (the poller reads them; a command meanwhile meets the old ones)."""
+        self.safety.zones.changed()
         self._wake.set()
 
     def _on_notification(self, key: str, payload: bytes) -> None:
@@ -259,6 +271,8 @@ class CommandRelay:
         async with self.pool.acquire() as conn:
             if self.limits.stale():
                 await self.limits.read(conn)
+            if self.safety.zones.due():
+                await self.safety.zones.read(conn)
             if wanted == []:
                 return []  # woken for the limits alone
             self.counters.command_reads += 1
@@ -332,6 +346,8 @@ class CommandRelay:
             self.counters.safety_limited += 1
         elif verdict.outcome == UNCHECKED:
             self.counters.safety_unchecked += 1
+        if verdict.zone is not None:
+            self.counters.safety_zone_capped += 1
         level = logging.INFO if verdict.outcome == UNCHECKED else logging.WARNING
         # keyed by outcome alone: a small set, whatever the robot ids
         self._alerts.log(

@@ -43,6 +43,7 @@ class Counters:
     safety_stopped: int = 0
     safety_limited: int = 0
     safety_unchecked: int = 0
+    safety_zone_capped: int = 0  # of those, commands a speed zone capped (zones.py)
     worlds_applied: int = 0
     worlds_unchanged: int = 0
     worlds_malformed: int = 0
@@ -75,6 +76,7 @@ class Counters:
             "safety_stopped": self.safety_stopped,
             "safety_limited": self.safety_limited,
             "safety_unchecked": self.safety_unchecked,
+            "safety_zone_capped": self.safety_zone_capped,
             "worlds_applied": self.worlds_applied,
             "worlds_unchanged": self.worlds_unchanged,
             "worlds_malformed": self.worlds_malformed,

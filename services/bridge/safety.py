@@ -6,6 +6,11 @@ and base (its "stop"/"slowdown" polygons, sized from the speed as its "approach"
 Pure geometry and bookkeeping here, no I/O; :mod:`.commands` and the reference's bridge
 (``pnav/monolith/bridge.py``) both call :meth:`SafetyLayer.judge`.
 
+Speed zones come first: a robot whose centre is inside a speed_limit zone (:mod:`.zones`)
+has its linear speed capped at the zone's ``max_speed_mps`` (LIMITED, the reason naming the
+zone), and the capped speed is then judged against the scan as any other. The cap holds
+whether or not the scan check is enabled: it is people's rule, not a tunable.
+
 The geometry, for a commanded linear speed ``v`` (the angular speed is always kept: turning in
 place sweeps nothing new for a round robot, and is how it gets out):
 
@@ -37,6 +42,7 @@ import numpy as np
 import numpy.typing as npt
 
 from services.bridge.messages import LaserScan
+from services.bridge.zones import Cap, SpeedZones
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -128,6 +134,7 @@ class Verdict:
     linear: float
     outcome: str  # CLEAR, LIMITED, STOPPED or UNCHECKED
     reason: str = ""
+    zone: str | None = None  # the speed zone that capped the speed, if one did
 
     @property
     def noted(self) -> bool:
@@ -154,6 +161,8 @@ class SafetyLayer:
         self.params = params
         self.scans: dict[str, Scan] = {}
         self.sent: dict[str, float] = {}  # the last linear speed sent, per robot
+        # the speed zones and each robot's pose (zones.py): caps applied before the scan's
+        self.zones = SpeedZones()
 
     def scan(self, record: LaserScan) -> None:
         """A valid scan came in: the newest (by stamp) is kept."""
@@ -171,9 +180,28 @@ class SafetyLayer:
         instead if set) at sim time ``now`` (None: no clock yet, the newest scan counts as
         fresh). Records the speed the verdict sends as the robot's last."""
         decel = self.params.decel_mps2 if self.params.decel_mps2 is not None else decel_mps2
-        verdict = self._judge(robot, linear, radius, now, decel)
+        cap = self.zones.cap(robot)
+        if cap is None or abs(linear) <= cap.mps:
+            verdict = self._judge(robot, linear, radius, now, decel)
+        else:
+            verdict = self._capped(robot, linear, cap, radius, now, decel)
         self.sent[robot] = verdict.linear
         return verdict
+
+    def _capped(
+        self, robot: str, linear: float, cap: Cap, radius: float, now: float | None, decel: float
+    ) -> Verdict:
+        """The verdict on ``linear`` above a speed zone's cap: the cap, then the scan's
+        judgement of the capped speed (which may lower it further, or stop)."""
+        capped = math.copysign(cap.mps, linear)
+        why = f"speed zone '{cap.zone}' caps {cap.mps:g} m/s ({abs(linear):.3f} m/s decided)"
+        verdict = self._judge(robot, capped, radius, now, decel)
+        if verdict.outcome in (CLEAR, UNCHECKED):
+            reason = f"limited to {cap.mps:g} m/s: {why}"
+            if verdict.outcome == UNCHECKED:
+                reason += f"; {verdict.reason}"
+            return Verdict(capped, LIMITED, reason, cap.zone)
+        return Verdict(verdict.linear, verdict.outcome, f"{verdict.reason}; {why}", cap.zone)
 
     def sent_stop(self, robot: str) -> None:
         """A stop went out without a verdict (watchdog, shutdown)."""

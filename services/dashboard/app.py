@@ -26,7 +26,7 @@ from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 import services.dashboard.provenance as provenance
-from common.contract import keys, limits
+from common.contract import keys, limits, zones
 from common.errors import ConnectionFailure
 from services.dashboard.gate import LOOPBACK_NAMES, AllowedHosts, Gate
 from services.dashboard.hub import Hub
@@ -39,6 +39,7 @@ from services.dashboard.requests import (
     StrategyChoice,
     check_scenarios,
     json_object,
+    zone_request,
 )
 from services.dashboard.store import DashboardStore
 
@@ -128,6 +129,21 @@ class Endpoints:
         await self.orders.add_strategy(new)
         return JSONResponse({"code": new.code}, status_code=201)
 
+    async def zones(self, request: Request) -> Response:
+        return JSONResponse({"zones": self.store.world.get("zones", [])})
+
+    async def add_zone(self, request: Request) -> Response:
+        zone = zone_request(await self.body(request))
+        await self.orders.add_zone(zone)
+        return JSONResponse(zone.image(), status_code=201)
+
+    async def remove_zone(self, request: Request) -> Response:
+        name = str(request.path_params["name"])
+        if not zones.NAME.match(name):
+            raise Refused(404, f"name: no zone {name[:80]!r}: names are [A-Za-z0-9_.-], 1 to 64")
+        await self.orders.remove_zone(name)
+        return JSONResponse({"name": name, "removed": True})
+
     async def decision(self, request: Request) -> Response:
         table = {"decisions": keys.COMMAND2ROBOT, "system-commands": keys.SYSTEM_COMMAND}
         kind = request.url.path.strip("/").split("/")[1]
@@ -203,6 +219,9 @@ def create_app(
         Route("/api/robots/{robot}/goal", api.set_goal, methods=["POST"]),
         Route("/api/robots/{robot}/goal", api.cancel_goal, methods=["DELETE"]),
         Route("/api/robots/{robot}/strategy", api.set_strategy, methods=["POST"]),
+        Route("/api/zones", api.zones),
+        Route("/api/zones", api.add_zone, methods=["POST"]),
+        Route("/api/zones/{name}", api.remove_zone, methods=["DELETE"]),
         Route("/api/decisions/{id:int}", api.decision),
         Route("/api/system-commands/{id:int}", api.decision),
         WebSocketRoute("/ws", api.websocket),

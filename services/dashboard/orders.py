@@ -18,6 +18,7 @@ from typing import Any
 import asyncpg
 
 from common.contract import keys
+from common.contract.zones import Zone
 from common.errors import ConnectionFailure
 from services.dashboard.requests import GoalRequest, NewStrategy, Refused
 from services.dashboard.store import DashboardStore
@@ -88,6 +89,23 @@ class Orders:
         status = "pending" if row is None else row["status"]
         reason = "" if row is None else row["reason"] or ""
         return {"command_id": command_id, "status": status, "reason": reason}
+
+    async def add_zone(self, zone: Zone) -> None:
+        async with refusal_as_4xx():
+            await self.source.add_zone(zone)
+        await self._read_again(f"zone {zone.name} added")
+
+    async def remove_zone(self, name: str) -> None:
+        if not await self.source.remove_zone(name):
+            raise Refused(404, f"name: no zone named {name!r}")
+        await self._read_again(f"zone {name} removed")
+
+    async def _read_again(self, what: str) -> None:
+        try:
+            await self.store.read_globals()  # the page draws it at once...
+        except Exception as exc:
+            # ...or at the next push: the row is committed, the request succeeded
+            logger.warning("%s, the world not read again yet: %s", what, exc)
 
     async def add_strategy(self, request: NewStrategy) -> None:
         async with refusal_as_4xx():

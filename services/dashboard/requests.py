@@ -15,8 +15,9 @@ import re
 from dataclasses import dataclass, field
 from typing import Any
 
-from common.contract import limits
+from common.contract import limits, zones
 from common.contract.people import Pose, check_route
+from common.contract.zones import Zone
 from common.errors import ContractError, UsageError
 
 _CODE = re.compile(r"^[A-Z0-9_]+$")
@@ -264,3 +265,39 @@ def check_scenarios(request: NewStrategy, planners: set[str], controllers: set[s
             f"unknown controller scenario(s) {', '.join(unknown)}; "
             f"known: {', '.join(sorted(controllers)) or 'none'}",
         )
+
+
+def zone_request(body: dict[str, Any]) -> Zone:
+    """A zone row as a person draws one (CONTRACT.md, zone): 422 naming the field the zone
+    table would refuse, in its words (common.contract.zones)."""
+    _unknown_fields(body, {"name", "kind", "xs", "ys", "max_speed_mps", "robot_id", "description"})
+    name, kind, robot, description = (
+        body.get("name"),
+        body.get("kind"),
+        body.get("robot_id"),
+        body.get("description") or "",
+    )
+    if not isinstance(name, str) or not isinstance(kind, str):
+        wrong = "name" if not isinstance(name, str) else "kind"
+        raise Refused(422, f"'{wrong}' must be text, got {body.get(wrong)!r}")
+    if robot is not None and not isinstance(robot, str):
+        raise Refused(422, f"'robot_id' must be a robot id or null, got {robot!r}")
+    if not isinstance(description, str):
+        raise Refused(422, "'description' must be text")
+    coordinates = []
+    for axis in ("xs", "ys"):
+        values = body.get(axis)
+        if not isinstance(values, list) or len(values) > zones.MAX_VERTICES:
+            raise Refused(
+                422, f"'{axis}' must be a list of at most {zones.MAX_VERTICES} numbers (m)"
+            )
+        if any(isinstance(v, bool) or not isinstance(v, int | float) for v in values):
+            raise Refused(422, f"'{axis}' must hold numbers only (m)")
+        coordinates.append(tuple(float(v) for v in values))
+    speed = _number(body, "max_speed_mps", required=False)
+    zone = Zone(name, kind, coordinates[0], coordinates[1], speed, robot, description)
+    try:
+        zones.check_zone(zone)
+    except ContractError as exc:
+        raise Refused(422, str(exc)) from None
+    return zone

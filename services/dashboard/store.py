@@ -22,7 +22,8 @@ import asyncpg
 
 import services.dashboard.scene as scene
 from common.bus import Notification
-from common.contract import keys, limits, people
+from common.contract import keys, limits, people, zones
+from common.contract.zones import Zone
 from common.db import Database
 from services.dashboard.fleet import Fleet
 from services.dashboard.requests import GoalRequest, NewStrategy, Refused
@@ -97,6 +98,9 @@ class DashboardSource(Protocol):
     async def cancel_goal(self, robot: str) -> int | None: ...
     async def user_command(self, robot: str, command: str, argument: str | None) -> int: ...
     async def add_strategy(self, request: NewStrategy) -> None: ...
+    async def zones(self) -> list[Zone]: ...
+    async def add_zone(self, zone: Zone) -> None: ...
+    async def remove_zone(self, name: str) -> bool: ...
 
 
 class PgDashboardSource:
@@ -175,6 +179,18 @@ class PgDashboardSource:
     async def user_command(self, robot: str, command: str, argument: str | None) -> int:
         return await people.user_command(self.db, robot, command, argument)
 
+    async def zones(self) -> list[Zone]:
+        return await zones.read_zones(self.db)
+
+    async def add_zone(self, zone: Zone) -> None:
+        try:
+            await zones.add_zone(self.db, zone)
+        except asyncpg.UniqueViolationError:
+            raise Refused(409, f"name: a zone named {zone.name!r} exists already") from None
+
+    async def remove_zone(self, name: str) -> bool:
+        return await zones.remove_zone(self.db, name)
+
     async def add_strategy(self, request: NewStrategy) -> None:
         try:
             await self.db.write(
@@ -219,7 +235,7 @@ class DashboardStore:
         self.source = source
         self.fleet = Fleet()
         self.timeline = Timeline()
-        self.world: dict[str, Any] = {"map": None, "chargers": []}
+        self.world: dict[str, Any] = {"map": None, "chargers": [], "zones": []}
         self.strategies: list[dict[str, Any]] = []
         self.world_changed = self.strategies_changed = False
         # (table, robot) -> ids a notification named (None: the id was not given)
@@ -232,7 +248,7 @@ class DashboardStore:
         """A change notification, on the loop: use its image, or remember to read."""
         if note.robot is not None and self.fleet.apply(note):
             return
-        if note.table in (keys.ROBOT, keys.MAP, keys.CHARGING_STATION, keys.STRATEGY):
+        if note.table in (keys.ROBOT, keys.MAP, keys.CHARGING_STATION, keys.STRATEGY, keys.ZONE):
             self._dirty.setdefault((note.table, None), set()).add(None)
         elif note.robot is not None and note.table in (
             keys.GOAL_WAYPOINT,
@@ -266,7 +282,11 @@ class DashboardStore:
         source = self.source
         self.fleet.set_robots(await source.robots())
         grid, chargers = await source.world()
-        world = {"map": scene.world_map(grid), "chargers": [scene.charger(c) for c in chargers]}
+        world = {
+            "map": scene.world_map(grid),
+            "chargers": [scene.charger(c) for c in chargers],
+            "zones": [z.image() for z in await source.zones()],
+        }
         if world != self.world:
             self.world, self.world_changed = world, True
         strategies = [_strategy(r) for r in await source.strategies()]

@@ -115,6 +115,7 @@ class MetaPlanner(Rule):
         keys.MAP,
         keys.ROBOT,
         keys.CHARGING_STATION,
+        keys.ZONE,
     )
 
     def __init__(

@@ -1,9 +1,10 @@
 """Reachability: whether the map *proves* that a goal can never be reached.
 
-Three proofs, each on the map alone (never the lidar's unmapped obstacles, which move and
-may leave a way round):
+Three proofs, each on the map alone with the keepout zones that apply to the robot (never
+the lidar's unmapped obstacles, which move and may leave a way round):
 
 - the goal is outside the map, and no free cell of it lies within the goal's tolerance;
+- the goal is inside a keepout zone (the reason names it);
 - the goal is inside an obstacle, or so close to one that no cell the robot's centre may
   occupy (clearance above the inflation radius, as the planning grid's free cells) lies
   within the goal's tolerance of it;
@@ -25,6 +26,8 @@ from typing import Any
 
 import numpy as np
 
+import services.planner.keepout as keepout
+from common.contract.zones import Zone
 from services.planner.grid import XY, PlanGrid, clearance_cells
 from services.planner.path import SNAP_RADIUS_M, nearest_free
 from services.planner.world import MapData
@@ -66,13 +69,51 @@ def _within(
     return np.asarray(dr[:, None] ** 2 + dc[None, :] ** 2 <= reach * reach, dtype=np.bool_)
 
 
-def spot_problem(data: MapData, inflation_m: float, x: float, y: float, tol_m: float) -> str | None:
+def spot_problem(
+    data: MapData,
+    inflation_m: float,
+    x: float,
+    y: float,
+    tol_m: float,
+    keepouts: tuple[Zone, ...] = (),
+) -> str | None:
     """Why the goal (x, y) is not a place the robot's centre can come within ``tol_m`` of:
-    outside the map, or inside (or too close to) an obstacle on it. None: it is."""
-    fine = PlanGrid(data.occupied, data.resolution, *data.origin)
+    outside the map, inside one of ``keepouts`` (keepout zones: named), or inside (or too
+    close to) an obstacle on the map or a keepout zone. None: it is."""
+    zone = keepout.containing(keepouts, x, y)
+    if zone is not None:
+        return f"goal {_xy(x, y)} is inside keepout zone '{zone.name}'"
+    occupied = data.occupied_with(keepouts)
+    why = _spot_problem(data, occupied, inflation_m, x, y, tol_m)
+    if why is None or occupied is data.occupied:
+        return why
+    if _spot_problem(data, data.occupied, inflation_m, x, y, tol_m) is not None:
+        return why  # the map alone proves it
+    reach = tol_m + inflation_m + data.resolution
+    near = [
+        z
+        for z in keepouts
+        if min(z.xs) - reach <= x <= max(z.xs) + reach
+        and min(z.ys) - reach <= y <= max(z.ys) + reach
+    ]
+    return (
+        f"goal {_xy(x, y)} is too close to keepout zone {keepout.names(near or keepouts)}: "
+        f"the robot's centre cannot come within {tol_m:.2f} m of it"
+    )
+
+
+def _spot_problem(
+    data: MapData,
+    occupied: np.ndarray[Any, np.dtype[np.bool_]],
+    inflation_m: float,
+    x: float,
+    y: float,
+    tol_m: float,
+) -> str | None:
+    fine = PlanGrid(occupied, data.resolution, *data.origin)
     margin = math.floor(inflation_m / data.resolution) + 1
     rows, cols = _window(fine, x, y, tol_m + margin * data.resolution)
-    window = data.occupied[rows, cols]
+    window = occupied[rows, cols]
     if window.size:
         # The clearance in the window is exact for every cell within tol_m: their obstacles
         # within the inflation radius all lie inside it. Free as plan_grid frees a cell.
@@ -84,7 +125,7 @@ def spot_problem(data: MapData, inflation_m: float, x: float, y: float, tol_m: f
     col, row = fine.cell_of(x, y)
     if not fine.inside((col, row)):
         return f"goal {_xy(x, y)} is outside the map (the map spans {span(data)})"
-    if bool(data.occupied[row, col]):
+    if bool(occupied[row, col]):
         return f"goal {_xy(x, y)} is inside an obstacle on the map"
     return (
         f"goal {_xy(x, y)} is too close to an obstacle on the map: the robot's centre "

@@ -1,10 +1,11 @@
 """Routes: where a robot is going (``Target``) and the cached A* route that takes it there.
 
-:class:`Router` keeps one route per robot and plans again only when it must: the target or
-the map changed, the robot strayed, a straight fallback is due a retry, or a newly seen
-unmapped obstacle (obstacles.py) is close to the route ahead. Its own gates (replanning,
-retries) count on the store's clock: wall time in a service, sim time in lockstep and in
-the monolith; the obstacle checks count sim time.
+:class:`Router` keeps one route per robot and plans again only when it must: the target,
+the map or the keepout zones that apply to the robot changed (a zone's cells are obstacles
+on the planning grid: keepout.py), the robot strayed, a straight fallback is due a retry,
+or a newly seen unmapped obstacle (obstacles.py) is close to the route ahead. Its own gates
+(replanning, retries) count on the store's clock: wall time in a service, sim time in
+lockstep and in the monolith; the obstacle checks count sim time.
 """
 
 from __future__ import annotations
@@ -22,6 +23,8 @@ import services.planner.reachability as reachability
 from common import log
 from common.contract import records
 from common.contract.limits import DEFAULT_YAW_TOLERANCE_RAD
+from services.planner.keepout import names as keepout_names
+from services.planner.keepout import zones_key
 from services.planner.obstacles import Points, Seen, buckets, known, recent
 from services.planner.path import path_length, plan_path, with_obstacles
 from services.planner.tracking import Progress, Route, follow
@@ -130,7 +133,12 @@ class Router:
         target or the map changed, the robot strayed, a straight fallback is due a retry, or
         a newly seen unmapped obstacle is close to the route ahead. ``now``: sim time."""
         data = self.world.map_for(state.info)
+        keepouts = self.world.keepouts(state.info)
+        # a route is made on the map and the keepout zones: a zone added, moved or removed
+        # makes it stale, as a new map does, so the robot plans again at once
         version = data.version if data else None
+        if data is not None and keepouts:
+            version = f"{data.version}#{zones_key(keepouts)}"
         route = state.route
         clock = self.clock()
         if route is not None and route.target_key == target.key and route.map_version == version:
@@ -182,10 +190,13 @@ class Router:
         data = self.world.map_for(state.info)
         if target.kind != "goal" or data is None:
             return None
-        key = (target.key, data.version, state.info.footprint_radius_m)
+        keepouts = self.world.keepouts(state.info)
+        key = (target.key, data.version, state.info.footprint_radius_m, zones_key(keepouts))
         if state.spot is None or state.spot[0] != key:
             inflation = inflation_m(state.info.footprint_radius_m)
-            why = reachability.spot_problem(data, inflation, target.x, target.y, target.reach_m)
+            why = reachability.spot_problem(
+                data, inflation, target.x, target.y, target.reach_m, keepouts
+            )
             state.spot = (key, why)
         return state.spot[1]
 
@@ -195,9 +206,17 @@ class Router:
         data = self.world.map_for(state.info)
         if target.kind != "goal" or data is None:
             return None
-        grid = data.grid(state.info.footprint_radius_m)
+        keepouts = self.world.keepouts(state.info)
+        grid = data.grid(state.info.footprint_radius_m, keepouts)
         if not reachability.cut_off(grid, (x, y), (target.x, target.y), target.reach_m):
             return None
+        if keepouts:
+            alone = data.grid(state.info.footprint_radius_m)
+            if not reachability.cut_off(alone, (x, y), (target.x, target.y), target.reach_m):
+                return (
+                    f"no path on the map from ({x:.2f}, {y:.2f}) to the goal outside keepout "
+                    f"zone {keepout_names(keepouts)}"
+                )
         return f"no path on the map from ({x:.2f}, {y:.2f}) to the goal"
 
     def plan(
@@ -214,7 +233,7 @@ class Router:
         if data is None:
             return None
         started = time.perf_counter()
-        grid = data.grid(state.info.footprint_radius_m)
+        grid = data.grid(state.info.footprint_radius_m, self.world.keepouts(state.info))
         if obstacles is not None and len(obstacles):
             grid = with_obstacles(grid, obstacles)
         points = plan_path(grid, start, goal)

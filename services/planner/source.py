@@ -8,13 +8,14 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Protocol
 
-from common.contract import keys, offers, planned_path, records
+from common.contract import keys, offers, planned_path, records, zones
 from common.contract.offers import Offers
 from common.contract.recommendations import (
     Recommendation,
     write_recommendation,
     write_recommendations,
 )
+from common.contract.zones import Zone
 from common.db import Database
 from common.planner_core.scenario import RobotInfo
 from services.planner.paths import PathRow
@@ -62,6 +63,9 @@ class PlannerSource(Protocol):
         """By station id."""
 
     async def active_strategies(self) -> dict[str, records.ActiveStrategy]: ...
+
+    async def zones(self) -> list[Zone]:
+        """Every keepout and speed zone, by name."""
 
     async def active_goal(
         self, robot_id: str, known: records.Goal | None = None
@@ -127,6 +131,9 @@ class PgPlannerSource:
 
     async def active_strategies(self) -> dict[str, records.ActiveStrategy]:
         return await records.active_strategies(self.db)
+
+    async def zones(self) -> list[Zone]:
+        return await zones.read_zones(self.db)
 
     async def active_goal(
         self, robot_id: str, known: records.Goal | None = None

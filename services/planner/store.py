@@ -10,7 +10,7 @@
 
 The caches are read again when a notification says their table changed, and at least every
 REFRESH_S (the world: robots, maps, stations; the live scenario offers) or FAST_REFRESH_S
-(strategies, goals) of the store's clock in case one was lost. Goal rows change in place (a
+(strategies, goals, zones) of the store's clock in case one was lost. Goal rows change in place (a
 status), so a goal notification always means "read it again", whatever id it names; the
 planner hears every odometry row (30 Hz per robot) and reads neither the world nor the
 strategies for those.
@@ -32,6 +32,7 @@ from typing import Any
 
 import services.planner.chargers as chargers
 import services.planner.obstacles as obstacles
+from common import log
 from common.bus import Notification
 from common.contract import keys, records
 from common.contract.offers import Offers
@@ -55,7 +56,8 @@ FAST_REFRESH_S = 0.5
 
 _WORLD_TABLES = (keys.ROBOT, keys.MAP, keys.CHARGING_STATION)
 _STRATEGY_TABLES = (keys.ACTIVE_STRATEGY, keys.STRATEGY)
-_WORLD, _ACTIVE, _OFFERS = "world", "active", "offers"  # the keys of the whole-table caches
+# the keys of the whole-table caches
+_WORLD, _ACTIVE, _OFFERS, _ZONES = "world", "active", "offers", "zones"
 
 
 class PlannerStore:
@@ -83,6 +85,9 @@ class PlannerStore:
         self._goals = FreshCache[str, records.Goal | None](
             clock, math.nextafter(FAST_REFRESH_S, math.inf)
         )
+        # the keepout and speed zones: read on their notification, and as often as the
+        # strategies without one (people's rows, written by clients that may not notify)
+        self._zones = FreshCache[str, None](clock, math.nextafter(FAST_REFRESH_S, math.inf))
         # what the live controllers offer (scenario_offer), read as often as the world
         self._offers = FreshCache[str, Offers](clock, math.nextafter(REFRESH_S, math.inf))
         self._routes_changed: set[str] = set()  # robots whose waypoints to read in full
@@ -130,6 +135,8 @@ class PlannerStore:
             self._active.announce(_ACTIVE)
         elif note.table == keys.SCENARIO_OFFER:
             self._offers.announce(_OFFERS)
+        elif note.table == keys.ZONE:
+            self._zones.announce(_ZONES)
         elif note.table in (keys.GOAL, keys.GOAL_WAYPOINT):
             # a route's rows come with their goal (or after it, notified on their own): read
             # both again; a waypoint notification reads every waypoint, not only the count
@@ -188,6 +195,8 @@ class PlannerStore:
 
         if self._offers.stale(_OFFERS):
             await self._offers.get(_OFFERS, self.source.live_offers)
+        if self._zones.stale(_ZONES):
+            await self._zones.get(_ZONES, self._read_zones)
 
     def offers(self) -> Offers:
         """The live planners' and controllers' offers, as last read (none before)."""
@@ -202,6 +211,14 @@ class PlannerStore:
             if row is not None:
                 world.maps[map_id] = MapData.of_row(row)
         world.stations = await self.source.stations()
+
+    async def _read_zones(self) -> None:
+        zones = tuple(await self.source.zones())
+        if zones != self.world.zones:
+            # the routes made on the old ones go stale by themselves (routes.py)
+            keepouts = sum(1 for z in zones if z.keepout)
+            log.event(logger, logging.INFO, "zones read", keepout=keepouts, total=len(zones))
+        self.world.set_zones(zones)
 
     def robots(self) -> Iterable[RobotState]:
         return self.world.robots.values()

@@ -18,14 +18,19 @@ import numpy as np
 
 from common import log
 from common.contract import records
+from common.contract.zones import Zone
 from common.planner_core.scenario import RobotInfo
 from services.planner.grid import OCCUPIED_AT, PlanGrid, plan_grid
+from services.planner.keepout import Keepouts, with_keepouts, zones_key
 from services.planner.obstacles import PoseTrail, Seen
 from services.planner.tracking import Route
 
 logger = logging.getLogger("pnav.planner")
 
 INFLATION_MARGIN_M = 0.05  # clearance kept beyond the footprint radius when planning
+# planning grids kept per map (footprints x keepout sets); older ones are dropped when the
+# zones change, so a map's grids never pile up however often people edit zones
+GRIDS_KEPT = 8
 
 
 def inflation_m(footprint_m: float) -> float:
@@ -77,19 +82,37 @@ class MapData:
         self.occupied = occupied
         self.resolution = resolution
         self.origin = origin
-        self._grids: dict[float, PlanGrid] = {}
+        self._grids: dict[tuple[float, str], PlanGrid] = {}
+        self._occupied: dict[str, np.ndarray[Any, np.dtype[np.bool_]]] = {}
 
     @classmethod
     def of_row(cls, row: MapRow) -> MapData:
         log.event(logger, logging.INFO, "map loaded", map=row.map_id, cells=int(row.cells.size))
         return cls(row.map_id, row.version, row.cells >= OCCUPIED_AT, row.resolution, row.origin)
 
-    def grid(self, footprint_m: float) -> PlanGrid:
+    def occupied_with(self, keepouts: tuple[Zone, ...] = ()) -> np.ndarray[Any, np.dtype[np.bool_]]:
+        """The map's obstacles with the cells of ``keepouts`` (keepout zones) added."""
+        if not keepouts:
+            return self.occupied
+        key = zones_key(keepouts)
+        occupied = self._occupied.get(key)
+        if occupied is None:
+            if len(self._occupied) >= GRIDS_KEPT:
+                self._occupied.clear()
+            occupied = with_keepouts(self.occupied, keepouts, self.resolution, self.origin)
+            self._occupied[key] = occupied
+        return occupied
+
+    def grid(self, footprint_m: float, keepouts: tuple[Zone, ...] = ()) -> PlanGrid:
+        """The planning grid for a footprint, with ``keepouts`` (keepout zones) as obstacles."""
         radius = inflation_m(footprint_m)
-        grid = self._grids.get(radius)
+        key = (radius, zones_key(keepouts) if keepouts else "")
+        grid = self._grids.get(key)
         if grid is None:
-            grid = self._grids[radius] = plan_grid(
-                self.occupied, self.resolution, self.origin, radius
+            if len(self._grids) >= GRIDS_KEPT:
+                self._grids.clear()
+            grid = self._grids[key] = plan_grid(
+                self.occupied_with(keepouts), self.resolution, self.origin, radius
             )
         return grid
 
@@ -120,6 +143,8 @@ class World:
         self.robots: dict[str, RobotState] = {}
         self.maps: dict[str, MapData] = {}
         self.stations: list[Station] = []
+        self.zones: tuple[Zone, ...] = ()  # every zone row, by name
+        self._keepouts: dict[str, Keepouts] = {}  # per robot, for the zones above
         self._warned: set[str] = set()
 
     def set_robots(self, infos: Iterable[RobotInfo]) -> set[str]:
@@ -157,6 +182,20 @@ class World:
         if len(self.maps) == 1:
             return next(iter(self.maps.values()))
         return None
+
+    def set_zones(self, zones: tuple[Zone, ...]) -> None:
+        if zones != self.zones:
+            self.zones = zones
+            self._keepouts.clear()
+
+    def keepouts(self, info: RobotInfo) -> Keepouts:
+        """The keepout zones that apply to the robot, by name (worked out once per zone set:
+        the rules ask on every activation)."""
+        held = self._keepouts.get(info.robot_id)
+        if held is None:
+            robot = info.robot_id
+            held = self._keepouts[robot] = Keepouts(z for z in self.zones if z.applies_to(robot))
+        return held
 
     def forget(self, robot_id: str) -> None:
         """Start the robot afresh (its strategy stays: it is the contract's, read as usual)."""

@@ -1,12 +1,14 @@
 // proactive-nav dashboard: draws what the websocket pushes (docs/DASHBOARD.md), and writes
-// people's rows (goal, user_command, strategy) through the HTTP endpoints. Plain JS, no build.
+// people's rows (goal, user_command, strategy, zone) through the HTTP endpoints. Plain JS,
+// no build.
 "use strict";
 
 const PALETTE = ["#d6336c", "#1c7ed6", "#2f9e44", "#f08c00", "#7048e8", "#0c8599", "#e8590c"];
 const MARGIN = 16;
 
 const state = {
-  world: { map: null, chargers: [] },
+  world: { map: null, chargers: [], zones: [] },
+  drawing: null, // the vertices of a zone being drawn ([[x, y], ...]), or null
   robots: {},
   strategies: [],
   timeline: [],
@@ -226,9 +228,81 @@ function draw() {
     ctx.font = "bold 14px system-ui";
     ctx.fillText("⚡", px - 5, py + 5);
   }
+  for (const z of state.world.zones || []) drawZone(z);
+  drawDraft();
   for (const id of Object.keys(state.robots).sort()) drawRobot(id, state.robots[id]);
   drawPlacing();
   state.frames += 1;
+}
+
+// -- zones: keepout red, speed limit amber; the one being drawn dashed ----------------------
+function polygonPath(points) {
+  ctx.beginPath();
+  points.forEach(([x, y], i) => {
+    const [px, py] = toCanvas(x, y);
+    if (i === 0) ctx.moveTo(px, py); else ctx.lineTo(px, py);
+  });
+}
+
+function drawZone(z) {
+  const keepout = z.kind === "keepout";
+  polygonPath(z.xs.map((x, i) => [x, z.ys[i]]));
+  ctx.closePath();
+  ctx.fillStyle = keepout ? "rgba(224, 49, 49, 0.22)" : "rgba(245, 159, 0, 0.2)";
+  ctx.strokeStyle = keepout ? "#c92a2a" : "#e67700";
+  ctx.lineWidth = 1.5;
+  ctx.fill();
+  ctx.stroke();
+  const [px, py] = toCanvas(Math.min(...z.xs), Math.max(...z.ys));
+  ctx.fillStyle = ctx.strokeStyle;
+  ctx.font = "11px system-ui";
+  const label = keepout ? z.name : `${z.name} ≤ ${z.max_speed_mps} m/s`;
+  ctx.fillText(z.robot_id ? `${label} (${z.robot_id})` : label, px + 3, py + 12);
+}
+
+function drawDraft() {
+  const points = state.drawing;
+  if (!points || !points.length) return;
+  polygonPath(points);
+  ctx.setLineDash([5, 4]);
+  ctx.strokeStyle = "#1d2430";
+  ctx.lineWidth = 1.5;
+  ctx.stroke();
+  ctx.setLineDash([]);
+  for (const [x, y] of points) circle(x, y, 0.04, "#1d2430", "#1d2430");
+}
+
+function renderZones() {
+  const list = $("zones");
+  list.replaceChildren();
+  for (const z of state.world.zones || []) {
+    const cap = z.kind === "keepout" ? "keepout" : `≤ ${z.max_speed_mps} m/s`;
+    const who = z.robot_id || "all robots";
+    const li = el("li");
+    li.append(el("span", {}, `${z.name}: ${cap}, ${who}, ${z.xs.length} vertices`));
+    const remove = el("button", { title: `remove zone ${z.name}` }, "Remove");
+    remove.onclick = async () => {
+      try {
+        await call("DELETE", `/api/zones/${encodeURIComponent(z.name)}`);
+        say(`zone ${z.name} removed`, true);
+      } catch (err) { say(`zone not removed: ${err.message}`, false); }
+    };
+    li.append(remove);
+    list.append(li);
+  }
+  if (!list.children.length) list.append(el("li", {}, "no zones"));
+}
+
+function drawingMode(points) {
+  state.drawing = points;
+  const on = points !== null;
+  $("zone-add").disabled = !on;
+  $("zone-discard").disabled = !on;
+  $("zone-draw").disabled = on;
+  $("zone-hint").textContent = on
+    ? `click the map to add vertices (${points.length} so far), then Add zone` : "";
+  $("hint").hidden = on;
+  draw();
 }
 
 // -- panels --------------------------------------------------------------------------------
@@ -325,6 +399,7 @@ function renderAll() {
   }
   renderRobots();
   renderSelected();
+  renderZones();
 }
 
 // -- the websocket -------------------------------------------------------------------------
@@ -444,6 +519,7 @@ canvas.addEventListener("mouseup", async (ev) => {
   if (!press) return;
   const release = canvasPoint(ev);
   if (Math.hypot(release[0] - press[0], release[1] - press[1]) <= DRAG_PX) return; // a click
+  if (state.drawing) return; // drawing a zone: vertices are clicks
   state.dragged = true; // the click event that follows is this drag's, not a goal
   await place(press, release, ev.shiftKey);
 });
@@ -451,6 +527,10 @@ canvas.addEventListener("mouseup", async (ev) => {
 canvas.addEventListener("click", async (ev) => {
   if (state.dragged) { state.dragged = false; return; }
   const p = canvasPoint(ev);
+  if (state.drawing) { // a zone's next vertex, not a goal
+    const [x, y] = toWorld(p[0], p[1]);
+    return drawingMode([...state.drawing, [Math.round(x * 100) / 100, Math.round(y * 100) / 100]]);
+  }
   await place(p, p, ev.shiftKey);
 });
 
@@ -460,6 +540,28 @@ document.addEventListener("keydown", (ev) => {
     draw();
     say("waypoints forgotten", true);
   }
+});
+
+$("zone-draw").addEventListener("click", () => drawingMode([]));
+$("zone-discard").addEventListener("click", () => drawingMode(null));
+$("zone-form").addEventListener("submit", async (ev) => {
+  ev.preventDefault();
+  const form = ev.target;
+  const points = state.drawing || [];
+  const body = {
+    name: form.elements.namedItem("name").value.trim(),
+    kind: form.elements.namedItem("kind").value,
+    xs: points.map((p) => p[0]),
+    ys: points.map((p) => p[1]),
+  };
+  if (body.kind === "speed_limit") {
+    body.max_speed_mps = Number(form.elements.namedItem("max_speed_mps").value);
+  }
+  try {
+    await call("POST", "/api/zones", body);
+    say(`zone ${body.name} added (${body.kind})`, true);
+    drawingMode(null);
+  } catch (err) { say(`zone refused: ${err.message}`, false); }
 });
 
 $("strategy-select").addEventListener("change", (ev) => { ev.target.dataset.touched = "1"; });
