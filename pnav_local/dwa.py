@@ -56,7 +56,9 @@ class Choice:
 @functools.lru_cache(maxsize=8)
 def _beams(angle_min: float, increment: float, count: int) -> tuple[tr.FloatArray, tr.FloatArray]:
     """Each beam's unit vector (cos, sin): the same for every scan of one lidar."""
-    angles = LaserScan(0, "", 0.0, angle_min, increment, 0.0, 0.0, np.zeros(count, np.float32)).angles()
+    angles = LaserScan(
+        0, "", 0.0, angle_min, increment, 0.0, 0.0, np.zeros(count, np.float32)
+    ).angles()
     return np.cos(angles), np.sin(angles)
 
 
@@ -139,12 +141,21 @@ def choose(
     points = points[np.hypot(points[:, 0], points[:, 1]) <= near]
     poses = tr.rollout(win, start, p.horizon_s, p.steps)
     # gaps beyond the footprint, exact up to what the margin reads (the clearance score's
-    # reach is measured below, for the arcs that can still win only)
+    # reach is measured below, for the arcs that can still win only): the roll-outs, the
+    # start and the slow arcs followed on further, in one query
     needed = p.margin_m + 0.01
     hits = clearance.Index(points, foot.reach_m + needed)
-    gaps = clearance.gaps(*poses, hits, foot, needed)
-    at = np.array([start[0]]), np.array([start[1]]), np.array([start[2]])
-    start_gap = float(clearance.gaps(*at, hits, foot, needed)[0])
+    slow, on = tr.further(win, start, p.min_travel_s * top, p.horizon_s, p.steps)
+    if p.min_travel_s <= 0:
+        slow = slow[:0]
+    xs, ys, yaws = (
+        np.concatenate([poses[k].ravel(), [start[k]], on[k][: len(slow)].ravel()]) for k in range(3)
+    )
+    every = clearance.gaps(xs, ys, yaws, hits, foot, needed)
+    n = poses[0].size
+    gaps = every[:n].reshape(poses[0].shape)
+    start_gap = float(every[n])
+    beyond = every[n + 1 :].reshape(len(slow), p.steps)
     ok = tr.admissible(
         win,
         gaps,
@@ -159,12 +170,11 @@ def choose(
         # slower toward a corner it could not pass, never stuck long enough for recovery;
         # counted at the robot's top speed, so a slow robot (the Burger) is hardly touched
         limit = min(p.margin_m, start_gap - 0.005)
-        travel = p.min_travel_s * top
-        ok &= tr.clear_for(win, start, hits, travel, p.horizon_s, p.steps, limit, foot)
+        ok[slow] &= beyond.min(axis=1, initial=np.inf) >= limit  # tr.clear_for's test
     if not ok.any():
         return Choice(win, ok, None, None, local, v_cap)
     weights = p.weights
-    blocked = tr.path_blocked(local, points, radius + p.margin_m)
+    blocked = tr.path_blocked(local, hits, radius + p.margin_m)
     if blocked:
         # the path runs into what the lidar shows (the planner has not re-planned yet):
         # keeping to it is worth little, getting round toward the carrot is what counts

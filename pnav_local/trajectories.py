@@ -36,6 +36,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 import pnav_local.clearance as clearance
 from pnav_local.bounds import MAX_OBSTACLES, MAX_PATH_POINTS, PAIRS_PER_PRODUCT, nearest, thin
@@ -230,11 +231,11 @@ def densify(points: FloatArray, step_m: float = 0.05) -> FloatArray:
     return dense
 
 
-def path_blocked(local: Local, obstacles: FloatArray, clearance_m: float) -> bool:
+def path_blocked(local: Local, obstacles: FloatArray | clearance.Index, clearance_m: float) -> bool:
     """Whether the path ahead, up to the carrot, runs within ``clearance_m`` of a hit: the
     planner has not yet planned round something the lidar shows."""
     dense = densify(local.points)
-    if len(obstacles) == 0 or len(dense) == 0:
+    if len(dense) == 0:
         return False
     near = clearance.gaps(dense[:, 0], dense[:, 1], None, obstacles, Footprint(0.0), clearance_m)
     return bool(near.min() < clearance_m)
@@ -349,10 +350,21 @@ def clear_for(
     ``limit_m`` from every obstacle. Arcs that cover ``travel_m`` within the horizon and
     turns in place pass (``admissible`` judged them); slower ones are rolled out further."""
     out: BoolArray = np.ones(len(win.v), dtype=np.bool_)
+    slow, (xs, ys, yaws) = further(win, start, travel_m, horizon_s, steps)
+    if len(slow):
+        gaps = clearance.gaps(xs, ys, yaws, obstacles, footprint, limit_m)
+        out[slow] = gaps.min(axis=1) >= limit_m
+    return out
+
+
+def further(
+    win: Window, start: tuple[float, float, float], travel_m: float, horizon_s: float, steps: int
+) -> tuple[npt.NDArray[np.int64], tuple[FloatArray, FloatArray, FloatArray]]:
+    """The trajectories too slow to cover ``travel_m`` within the horizon (indices), and
+    their poses followed on that far (or half a turn, or the horizon if longer): what
+    ``clear_for`` tests."""
     v = np.abs(win.v)
-    slow = (v * horizon_s < travel_m) & (v > 1e-6)
-    if not slow.any():
-        return out
+    slow = np.flatnonzero((v * horizon_s < travel_m) & (v > 1e-6))
     vs, ws = win.v[slow], win.w[slow]
     turn_s = np.where(np.abs(ws) > 1e-6, math.pi / np.maximum(np.abs(ws), 1e-6), np.inf)
     end_s = np.maximum(np.minimum(travel_m / v[slow], turn_s), horizon_s)
@@ -364,10 +376,7 @@ def clear_for(
     y = np.where(straight, 0.0, vs[:, None] / safe_w * (1.0 - np.cos(w * t)))
     sx, sy, syaw = start
     c, s = math.cos(syaw), math.sin(syaw)
-    xs, ys, yaws = sx + c * x - s * y, sy + s * x + c * y, syaw + w * t
-    gaps = clearance.gaps(xs, ys, yaws, obstacles, footprint, limit_m)
-    out[np.flatnonzero(slow)] = gaps.min(axis=1) >= limit_m
-    return out
+    return slow, (sx + c * x - s * y, sy + s * x + c * y, syaw + w * t)
 
 
 def straight_gap(obstacles: FloatArray, radius_m: float) -> float:
