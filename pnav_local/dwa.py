@@ -246,6 +246,11 @@ class Dwa(ControllerScenario):
         """Without a path there is nothing to follow: silent (``judge`` has the path)."""
         return None
 
+    def footprint_polygon(self) -> Sequence[Sequence[float]] | None:
+        """The outline the roll-outs are checked with (robot frame, metres, CCW); None: the
+        disc of the robot row's ``footprint_radius_m``. The robot row has no polygon yet."""
+        return None
+
     def judge(self, scan: LaserScan, odom: Odometry | None) -> Command | None:
         path = self.path
         if path is None or odom is None:
@@ -258,5 +263,5 @@ class Dwa(ControllerScenario):
                 0.0, 0.0, f"dwa: no path ({path.target}): stop", {"planned_path": path.id}
             )
         params = DwaParams.read(self.spec.params)
-        choice = choose(scan, odom, self.spec.robot, path, params)
+        choice = choose(scan, odom, self.spec.robot, path, params, self.footprint_polygon())
         return None if choice is None else command_for(choice, path, params.scaled)
