@@ -20,13 +20,15 @@ bounds.MAX_PATH_POINTS path points, computed bounds.PAIRS_PER_PRODUCT pairs at a
 
 from __future__ import annotations
 
+import functools
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
+import pnav_local.clearance as clearance
 import pnav_local.trajectories as tr
 from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
@@ -51,17 +53,26 @@ class Choice:
     blocked: bool = False  # the path ahead runs into a lidar hit
 
 
+@functools.lru_cache(maxsize=8)
+def _beams(angle_min: float, increment: float, count: int) -> tuple[tr.FloatArray, tr.FloatArray]:
+    """Each beam's unit vector (cos, sin): the same for every scan of one lidar."""
+    angles = LaserScan(
+        0, "", 0.0, angle_min, increment, 0.0, 0.0, np.zeros(count, np.float32)
+    ).angles()
+    return np.cos(angles), np.sin(angles)
+
+
 def obstacles(scan: LaserScan, reach_m: float) -> tr.FloatArray:
     """The scan's hits within ``reach_m``, robot frame (x ahead, y left), merged."""
     ranges = scan.ranges.astype(np.float64)
-    angles = scan.angles()
+    cos, sin = _beams(scan.angle_min, scan.angle_increment, len(ranges))
     valid = (
         np.isfinite(ranges)
         & (ranges >= scan.range_min - _RANGE_TOLERANCE_M)
         & (ranges <= min(scan.range_max, reach_m))
     )
-    r, a = ranges[valid], angles[valid]
-    return tr.merge_obstacles(np.column_stack([r * np.cos(a), r * np.sin(a)]))
+    r = ranges[valid]
+    return tr.merge_obstacles(np.column_stack([r * cos[valid], r * sin[valid]]))
 
 
 def path_in_robot_frame(path: PlannedPath, odom: Odometry) -> tr.FloatArray:
@@ -82,16 +93,24 @@ def stopping_speed(gap_m: float, lookahead_s: float, accel: float) -> float:
 
 
 def choose(
-    scan: LaserScan, odom: Odometry, robot: Robot, path: PlannedPath, p: DwaParams
+    scan: LaserScan,
+    odom: Odometry,
+    robot: Robot,
+    path: PlannedPath,
+    p: DwaParams,
+    polygon: Sequence[Sequence[float]] | None = None,
 ) -> Choice | None:
-    """Score the dynamic window for this scan (None: the path has no point)."""
+    """Score the dynamic window for this scan (None: the path has no point). ``polygon``:
+    the robot's footprint outline (robot frame, metres, counter-clockwise) its roll-outs
+    are checked with; None: the disc of the robot's ``footprint_radius_m``."""
     top = robot.max_linear_mps
     lookahead = p.lookahead_m or max(0.8, top * (p.horizon_s + p.delay_s) + 0.3)
     local = tr.localise(path_in_robot_frame(path, odom), lookahead)
     if local is None:
         return None
     radius = robot.footprint_radius_m
-    reach = p.obstacle_range_m or (top * (p.horizon_s + p.delay_s) + radius + 0.5)
+    foot = clearance.Footprint.of(radius, polygon)
+    reach = p.obstacle_range_m or (top * (p.horizon_s + p.delay_s) + foot.reach_m + 0.5)
     points = obstacles(scan, reach)
     accel = robot.max_linear_accel_mps2
     # stop at the path's end, and stay below safety_stop's reach straight ahead: its
@@ -118,16 +137,29 @@ def choose(
     )
     start = tr.start_pose(odom.linear_mps, odom.angular_rps, p.delay_s)
     # only what this window's arcs can come near matters to them
-    near = math.hypot(start[0], start[1]) + float(win.v.max()) * p.horizon_s + radius + 0.5
+    near = math.hypot(start[0], start[1]) + float(win.v.max()) * p.horizon_s + foot.reach_m + 0.5
     points = points[np.hypot(points[:, 0], points[:, 1]) <= near]
     poses = tr.rollout(win, start, p.horizon_s, p.steps)
-    gaps = tr.distances(*poses[:2], points)
-    start_gap = float(tr.distances(np.array([start[0]]), np.array([start[1]]), points)[0])
+    # gaps beyond the footprint, exact up to what the margin reads (the clearance score's
+    # reach is measured below, for the arcs that can still win only): the roll-outs, the
+    # start and the slow arcs followed on further, in one query
+    needed = p.margin_m + 0.01
+    hits = clearance.Index(points, foot.reach_m + needed)
+    slow, on = tr.further(win, start, p.min_travel_s * top, p.horizon_s, p.steps)
+    if p.min_travel_s <= 0:
+        slow = slow[:0]
+    xs, ys, yaws = (
+        np.concatenate([poses[k].ravel(), [start[k]], on[k][: len(slow)].ravel()]) for k in range(3)
+    )
+    every = clearance.gaps(xs, ys, yaws, hits, foot, needed)
+    n = poses[0].size
+    gaps = every[:n].reshape(poses[0].shape)
+    start_gap = float(every[n])
+    beyond = every[n + 1 :].reshape(len(slow), p.steps)
     ok = tr.admissible(
         win,
         gaps,
         start_gap,
-        radius_m=radius,
         margin_m=p.margin_m,
         accel_v=accel,
         delay_s=p.delay_s,
@@ -137,29 +169,36 @@ def choose(
         # a slow arc clear for the horizon only (a few centimetres) let the Jackal creep ever
         # slower toward a corner it could not pass, never stuck long enough for recovery;
         # counted at the robot's top speed, so a slow robot (the Burger) is hardly touched
-        limit = min(radius + p.margin_m, start_gap - 0.005)
-        travel = p.min_travel_s * top
-        ok &= tr.clear_for(win, start, points, travel, p.horizon_s, p.steps, limit)
+        limit = min(p.margin_m, start_gap - 0.005)
+        ok[slow] &= beyond.min(axis=1, initial=np.inf) >= limit  # tr.clear_for's test
     if not ok.any():
         return Choice(win, ok, None, None, local, v_cap)
     weights = p.weights
-    blocked = tr.path_blocked(local, points, radius + p.margin_m)
+    blocked = tr.path_blocked(local, hits, radius + p.margin_m)
     if blocked:
         # the path runs into what the lidar shows (the planner has not re-planned yet):
         # keeping to it is worth little, getting round toward the carrot is what counts
         weights = replace(weights, path=weights.path * p.blocked_path_factor)
-    scores = tr.score(
-        win,
-        poses,
-        gaps,
-        local,
-        start=start,
-        radius_m=radius,
-        max_v=top,
-        horizon_s=p.horizon_s,
-        clearance_cap_m=p.clearance_cap_m,
-        weights=weights,
-    )
+
+    def scored(gaps: tr.FloatArray, terms: tr.Scores | None = None) -> tr.Scores:
+        cap = p.clearance_cap_m
+        return tr.score(
+            win, poses, gaps, local, start=start, max_v=top, horizon_s=p.horizon_s,
+            clearance_cap_m=cap, weights=weights, terms=terms,
+        )  # fmt: skip
+
+    # early rejection: the clearance term lies between 0 and its weight x the speed share,
+    # so an arc whose total with full clearance is below another's with none cannot win;
+    # only the others are measured out to the clearance cap (the winner is the same)
+    bound = scored(np.full_like(gaps, np.inf))
+    floor = bound.total - weights.clearance * bound.clearance
+    contenders = np.flatnonzero(ok & (bound.total >= floor[ok].max() - 1e-9))
+    if p.clearance_cap_m > needed:
+        at_cap = (poses[0][contenders], poses[1][contenders], poses[2][contenders])
+        # an index of strips as wide as this longer reach asks
+        wide = clearance.Index(points, foot.reach_m + p.clearance_cap_m)
+        gaps[contenders] = clearance.gaps(*at_cap, wide, foot, p.clearance_cap_m)
+    scores = scored(gaps, bound)
     best = int(np.argmax(np.where(ok, scores.total, -np.inf)))
     return Choice(win, ok, scores, best, local, v_cap, blocked)
 
@@ -207,6 +246,11 @@ class Dwa(ControllerScenario):
         """Without a path there is nothing to follow: silent (``judge`` has the path)."""
         return None
 
+    def footprint_polygon(self) -> Sequence[Sequence[float]] | None:
+        """The outline the roll-outs are checked with (robot frame, metres, CCW); None: the
+        disc of the robot row's ``footprint_radius_m``. The robot row has no polygon yet."""
+        return None
+
     def judge(self, scan: LaserScan, odom: Odometry | None) -> Command | None:
         path = self.path
         if path is None or odom is None:
@@ -219,5 +263,5 @@ class Dwa(ControllerScenario):
                 0.0, 0.0, f"dwa: no path ({path.target}): stop", {"planned_path": path.id}
             )
         params = DwaParams.read(self.spec.params)
-        choice = choose(scan, odom, self.spec.robot, path, params)
+        choice = choose(scan, odom, self.spec.robot, path, params, self.footprint_polygon())
         return None if choice is None else command_for(choice, path, params.scaled)

@@ -32,15 +32,17 @@ clearance + speed_w * speed``; the best admissible one wins.
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
+import pnav_local.clearance as clearance
 from pnav_local.bounds import MAX_OBSTACLES, MAX_PATH_POINTS, PAIRS_PER_PRODUCT, nearest, thin
 from pnav_local.bounds import BoolArray as BoolArray  # the arrays' types, for the scenario
 from pnav_local.bounds import FloatArray as FloatArray
+from pnav_local.clearance import Footprint
 
 # Obstacles are merged onto a grid this fine before the distance test: a 720-beam scan of a
 # cluttered world has many hits a few millimetres apart, which tell nothing more.
@@ -141,25 +143,9 @@ def merge_obstacles(points: FloatArray, cell_m: float = MERGE_M) -> FloatArray:
 
 
 def distances(xs: FloatArray, ys: FloatArray, obstacles: FloatArray) -> FloatArray:
-    """Per pose, the distance to the nearest obstacle point (inf with none)."""
-    if len(obstacles) == 0:
-        return np.full(xs.shape, np.inf)
-    # |p - o|^2 = |p|^2 - 2 p.o + |o|^2: one matrix product (BLAS) instead of a pose x
-    # obstacle array per coordinate; float32 is centimetre-exact at these ranges
-    poses = np.column_stack([xs.ravel(), ys.ravel()]).astype(np.float32)
-    obs = obstacles.astype(np.float32)
-    across = -2.0 * obs.T
-    squares = (obs * obs).sum(axis=1)[None, :]
-    # at most PAIRS_PER_PRODUCT pose x obstacle pairs in memory at once, however many
-    # poses and hits a decision has
-    rows = max(1, PAIRS_PER_PRODUCT // len(obs))
-    nearest = np.empty(len(poses), dtype=np.float32)
-    for i in range(0, len(poses), rows):
-        part = poses[i : i + rows]
-        nearest[i : i + rows] = ((part @ across) + squares).min(axis=1)
-    nearest += (poses * poses).sum(axis=1)
-    out: FloatArray = np.sqrt(np.maximum(nearest, 0.0)).astype(np.float64).reshape(xs.shape)
-    return out
+    """Per pose, the distance to the nearest obstacle point (inf with none): every point
+    looked at (the roll-outs use clearance.gaps, which looks near each pose only)."""
+    return clearance.gaps(xs, ys, None, obstacles, Footprint(0.0), math.inf)
 
 
 def admissible(
@@ -167,17 +153,16 @@ def admissible(
     gaps: FloatArray,
     start_gap: float,
     *,
-    radius_m: float,
     margin_m: float,
     accel_v: float,
     delay_s: float,
     horizon_s: float,
 ) -> BoolArray:
-    """Per trajectory: it keeps ``radius + margin`` from every obstacle over the horizon, or
-    it is at the window's slowest speed and can brake before the first pose that does not.
-    ``gaps``: trajectories x steps distances to obstacles."""
+    """Per trajectory: its footprint keeps ``margin`` from every obstacle over the horizon,
+    or it is at the window's slowest speed and can brake before the first pose that does
+    not. ``gaps``: trajectories x steps gaps beyond the footprint (clearance.gaps)."""
     # already inside the margin: any arc that does not bring it closer
-    limit = min(radius_m + margin_m, start_gap - 0.005)
+    limit = min(margin_m, start_gap - 0.005)
     hit = gaps < limit
     steps = gaps.shape[1]
     first = np.where(hit.any(axis=1), hit.argmax(axis=1), steps)
@@ -234,24 +219,26 @@ def densify(points: FloatArray, step_m: float = 0.05) -> FloatArray:
     if len(points) < 2:
         return points
     points = thin(points, MAX_PATH_POINTS)
-    length = float(np.hypot(*np.diff(points, axis=0).T).sum())
-    step_m = max(step_m, length / MAX_PATH_POINTS)
-    parts = [points[:1]]
-    for a, b in itertools.pairwise(points):
-        n = max(1, math.ceil(float(np.hypot(*(b - a))) / step_m))
-        t = np.linspace(0.0, 1.0, n + 1)[1:, None]
-        parts.append(a + t * (b - a))
-    dense: FloatArray = np.vstack(parts)
+    legs = np.diff(points, axis=0)
+    lengths = np.hypot(legs[:, 0], legs[:, 1])
+    step_m = max(step_m, float(lengths.sum()) / MAX_PATH_POINTS)
+    # every leg cut into n equal parts, their ends k / n along it (k = 1..n), all at once
+    n = np.maximum(1, np.ceil(lengths / step_m)).astype(np.int64)
+    leg = np.repeat(np.arange(len(n)), n)
+    k = np.arange(1, int(n.sum()) + 1) - np.repeat(np.cumsum(n) - n, n)
+    t = (k / n[leg])[:, None]
+    dense: FloatArray = np.vstack([points[:1], points[:-1][leg] + t * legs[leg]])
     return dense
 
 
-def path_blocked(local: Local, obstacles: FloatArray, clearance_m: float) -> bool:
+def path_blocked(local: Local, obstacles: FloatArray | clearance.Index, clearance_m: float) -> bool:
     """Whether the path ahead, up to the carrot, runs within ``clearance_m`` of a hit: the
     planner has not yet planned round something the lidar shows."""
     dense = densify(local.points)
-    if len(obstacles) == 0 or len(dense) == 0:
+    if len(dense) == 0:
         return False
-    return bool(distances(dense[:, 0], dense[:, 1], obstacles).min() < clearance_m)
+    near = clearance.gaps(dense[:, 0], dense[:, 1], None, obstacles, Footprint(0.0), clearance_m)
+    return bool(near.min() < clearance_m)
 
 
 def to_path(xs: FloatArray, ys: FloatArray, points: FloatArray) -> FloatArray:
@@ -270,7 +257,7 @@ def to_path(xs: FloatArray, ys: FloatArray, points: FloatArray) -> FloatArray:
         t = np.clip((rx * ab[None, :, 0] + ry * ab[None, :, 1]) / length2[None, :], 0.0, 1.0)
         dx = rx - t * ab[None, :, 0]
         dy = ry - t * ab[None, :, 1]
-        out[i : i + rows] = np.hypot(dx, dy).min(axis=1)
+        out[i : i + rows] = np.sqrt((dx * dx + dy * dy).min(axis=1))  # np.hypot: slower
     return out
 
 
@@ -293,13 +280,41 @@ def score(
     local: Local,
     *,
     start: tuple[float, float, float],
-    radius_m: float,
     max_v: float,
     horizon_s: float,
     clearance_cap_m: float,
     weights: Weights,
+    terms: Scores | None = None,
 ) -> Scores:
-    """Every term of every trajectory (see the module's docstring)."""
+    """Every term of every trajectory (see the module's docstring). ``terms``: the same
+    trajectories scored before with other gaps, whose other terms are taken as they are."""
+    speed = win.v / max(max_v, 1e-6)
+    # room counts where the robot goes: weighted by the speed share, so that standing
+    # still (all the room it has now, no progress) never wins on clearance alone
+    gap = np.clip(gaps.min(axis=1), 0.0, clearance_cap_m) / clearance_cap_m * speed
+    if terms is None:
+        terms = _terms(win, poses, local, start=start, max_v=max_v, horizon_s=horizon_s)
+    progress, path, heading = terms.progress, terms.path, terms.heading
+    total = (
+        weights.progress * progress
+        - weights.path * path
+        - weights.heading * heading
+        + weights.clearance * gap
+        + weights.speed * speed
+    )
+    return Scores(progress, path, heading, gap, speed, total)
+
+
+def _terms(
+    win: Window,
+    poses: tuple[FloatArray, FloatArray, FloatArray],
+    local: Local,
+    *,
+    start: tuple[float, float, float],
+    max_v: float,
+    horizon_s: float,
+) -> Scores:
+    """The terms that do not depend on the gaps (clearance, speed and total left empty)."""
     xs, ys, yaws = poses
     ex, ey = xs[:, -1], ys[:, -1]
     cx, cy = local.carrot
@@ -313,40 +328,43 @@ def score(
     bearing = np.arctan2(cy - ys, cx - xs) - yaws
     along = np.abs(np.arctan2(np.sin(bearing), np.cos(bearing))) / math.pi
     # close to the carrot the bearing means little (the carrot is the path's end)
-    along = np.where(np.hypot(cx - xs, cy - ys) < 0.1 * reach, 0.0, along)
+    ox, oy = cx - xs, cy - ys
+    along = np.where(ox * ox + oy * oy < (0.1 * reach) ** 2, 0.0, along)
     heading = along.mean(axis=1)
-    speed = win.v / max(max_v, 1e-6)
-    # room counts where the robot goes: weighted by the speed share, so that standing
-    # still (all the room it has now, no progress) never wins on clearance alone
-    gap = np.clip(gaps.min(axis=1) - radius_m, 0.0, clearance_cap_m) / clearance_cap_m * speed
-    total = (
-        weights.progress * progress
-        - weights.path * path
-        - weights.heading * heading
-        + weights.clearance * gap
-        + weights.speed * speed
-    )
-    return Scores(progress, path, heading, gap, speed, total)
+    none = np.zeros(0)
+    return Scores(progress, path, heading, none, none, none)
 
 
 def clear_for(
     win: Window,
     start: tuple[float, float, float],
-    obstacles: FloatArray,
+    obstacles: FloatArray | clearance.Index,
     travel_m: float,
     horizon_s: float,
     steps: int,
     limit_m: float,
+    footprint: Footprint,
 ) -> BoolArray:
     """Per trajectory: whether its arc, followed on until it has covered ``travel_m`` (or
-    turned half a circle, or for the horizon if that is longer), keeps ``limit_m`` from every
-    obstacle. Arcs that cover ``travel_m`` within the horizon and turns in place pass
-    (``admissible`` judged them); slower ones are rolled out further."""
+    turned half a circle, or for the horizon if that is longer), keeps its footprint
+    ``limit_m`` from every obstacle. Arcs that cover ``travel_m`` within the horizon and
+    turns in place pass (``admissible`` judged them); slower ones are rolled out further."""
     out: BoolArray = np.ones(len(win.v), dtype=np.bool_)
+    slow, (xs, ys, yaws) = further(win, start, travel_m, horizon_s, steps)
+    if len(slow):
+        gaps = clearance.gaps(xs, ys, yaws, obstacles, footprint, limit_m)
+        out[slow] = gaps.min(axis=1) >= limit_m
+    return out
+
+
+def further(
+    win: Window, start: tuple[float, float, float], travel_m: float, horizon_s: float, steps: int
+) -> tuple[npt.NDArray[np.int64], tuple[FloatArray, FloatArray, FloatArray]]:
+    """The trajectories too slow to cover ``travel_m`` within the horizon (indices), and
+    their poses followed on that far (or half a turn, or the horizon if longer): what
+    ``clear_for`` tests."""
     v = np.abs(win.v)
-    slow = (v * horizon_s < travel_m) & (v > 1e-6)
-    if not slow.any() or len(obstacles) == 0:
-        return out
+    slow = np.flatnonzero((v * horizon_s < travel_m) & (v > 1e-6))
     vs, ws = win.v[slow], win.w[slow]
     turn_s = np.where(np.abs(ws) > 1e-6, math.pi / np.maximum(np.abs(ws), 1e-6), np.inf)
     end_s = np.maximum(np.minimum(travel_m / v[slow], turn_s), horizon_s)
@@ -358,9 +376,7 @@ def clear_for(
     y = np.where(straight, 0.0, vs[:, None] / safe_w * (1.0 - np.cos(w * t)))
     sx, sy, syaw = start
     c, s = math.cos(syaw), math.sin(syaw)
-    gaps = distances(sx + c * x - s * y, sy + s * x + c * y, obstacles)
-    out[np.flatnonzero(slow)] = gaps.min(axis=1) >= limit_m
-    return out
+    return slow, (sx + c * x - s * y, sy + s * x + c * y, syaw + w * t)
 
 
 def straight_gap(obstacles: FloatArray, radius_m: float) -> float:

@@ -12,6 +12,7 @@ import pytest
 import pnav_local.trajectories as tr
 from common.contract.planned_path import PlannedPath
 from common.contract.records import Odometry, Robot
+from pnav_local.clearance import Footprint
 from pnav_local.dwa import choose, command_for, stopping_speed
 from pnav_local.params import DwaParams
 from tests.unit.controller.scans import BURGER, scan
@@ -68,7 +69,7 @@ def test_a_small_trajectory_set_scores_term_by_term() -> None:
     poses = tr.rollout(win, (0.0, 0.0, 0.0), 1.0, 1)
     gaps = tr.distances(poses[0], poses[1], np.zeros((0, 2)))
     local = tr.Local(np.array([[0.0, 0.0], [1.0, 0.0]]), (1.0, 0.0), 3.0)
-    s = tr.score(win, poses, gaps, local, start=(0.0, 0.0, 0.0), radius_m=0.105, max_v=0.2,
+    s = tr.score(win, poses, gaps - 0.105, local, start=(0.0, 0.0, 0.0), max_v=0.2,
                  horizon_s=1.0, clearance_cap_m=0.5, weights=tr.Weights())  # fmt: skip
     # stand still: no progress, on the path, facing the carrot, no speed, and so no
     # clearance either (it counts times the speed share: standing never wins on room alone)
@@ -93,8 +94,9 @@ def test_admissible_keeps_the_margin_except_for_a_brake_that_stops_in_time() -> 
     # obstacle 1 m ahead; footprint 0.2 + margin 0.05: a pose within 0.25 m of it is a hit
     win = tr.Window(np.array([0.0, 0.5, 1.0, 1.0]), np.array([0.0, 0.0, 0.0, 3.0]))
     poses = tr.rollout(win, (0.0, 0.0, 0.0), 1.0, 10)
-    gaps = tr.distances(poses[0], poses[1], np.array([[1.0, 0.0]]))
-    ok = tr.admissible(win, gaps, 1.0, radius_m=0.2, margin_m=0.05, accel_v=2.0,
+    # gaps beyond the footprint: centre distances less the radius
+    gaps = tr.distances(poses[0], poses[1], np.array([[1.0, 0.0]])) - 0.2
+    ok = tr.admissible(win, gaps, 1.0 - 0.2, margin_m=0.05, accel_v=2.0,
                        delay_s=0.1, horizon_s=1.0)  # fmt: skip
     # standing: fine; 0.5 m/s: ends 0.5 m short, fine; 1 m/s straight: its 1 m ends in
     # it; 1 m/s turning hard (radius 0.33 m) stays clear
@@ -102,8 +104,8 @@ def test_admissible_keeps_the_margin_except_for_a_brake_that_stops_in_time() -> 
     # a robot already inside the margin (0.2 m from a wall) may still turn in place
     win = tr.Window(np.array([0.0, 0.3]), np.array([1.0, 0.0]))
     poses = tr.rollout(win, (0.0, 0.0, 0.0), 1.0, 10)
-    gaps = tr.distances(poses[0], poses[1], np.array([[0.2, 0.0]]))
-    ok = tr.admissible(win, gaps, 0.2, radius_m=0.105, margin_m=0.05, accel_v=2.5,
+    gaps = tr.distances(poses[0], poses[1], np.array([[0.2, 0.0]])) - 0.105
+    ok = tr.admissible(win, gaps, 0.2 - 0.105, margin_m=0.05, accel_v=2.5,
                        delay_s=0.1, horizon_s=1.0)  # fmt: skip
     assert ok.tolist() == [True, False]
 
@@ -210,15 +212,16 @@ def test_a_slow_arc_must_stay_clear_for_the_minimum_travel_not_only_the_horizon(
     win = tr.Window(np.array([0.05, 0.05, 0.0]), np.array([0.0, 2.0, 1.0]))
     crate = np.array([[0.3, 0.0]])
     poses = tr.rollout(win, (0.0, 0.0, 0.0), 1.2, 10)
-    gaps = tr.distances(poses[0], poses[1], crate)
-    ok = tr.admissible(win, gaps, 0.3, radius_m=0.105, margin_m=0.05, accel_v=2.5,
+    gaps = tr.distances(poses[0], poses[1], crate) - 0.105
+    ok = tr.admissible(win, gaps, 0.3 - 0.105, margin_m=0.05, accel_v=2.5,
                        delay_s=0.1, horizon_s=1.2)  # fmt: skip
     assert ok.tolist() == [True, True, True]
-    clear = tr.clear_for(win, (0.0, 0.0, 0.0), crate, 0.4, 1.2, 10, 0.155)
+    disc = Footprint(0.105)
+    clear = tr.clear_for(win, (0.0, 0.0, 0.0), crate, 0.4, 1.2, 10, 0.05, disc)
     assert clear.tolist() == [False, True, True]
     # a fast arc covers 0.4 m within the horizon: admissible() judged it, nothing more
     fast = tr.Window(np.array([0.5]), np.array([0.0]))
-    assert tr.clear_for(fast, (0.0, 0.0, 0.0), crate, 0.4, 1.2, 10, 0.155).tolist() == [True]
+    assert tr.clear_for(fast, (0.0, 0.0, 0.0), crate, 0.4, 1.2, 10, 0.05, disc).tolist() == [True]
 
 
 def test_the_turn_rate_that_faces_the_carrot_is_sampled() -> None:
@@ -243,7 +246,7 @@ def test_the_heading_counts_along_the_whole_arc() -> None:
     yaws = np.array([[0.0, 0.0], [math.pi / 2, 0.0]])
     win = tr.Window(np.array([1.0, 1.0]), np.array([0.0, 0.0]))
     s = tr.score(win, (xs, ys, yaws), np.full((2, 2), 9.0), local, start=(0.0, 0.0, 0.0),
-                 radius_m=0.1, max_v=1.0, horizon_s=1.0, clearance_cap_m=0.5,
+                 max_v=1.0, horizon_s=1.0, clearance_cap_m=0.5,
                  weights=tr.Weights())  # fmt: skip
     assert s.heading[0] == pytest.approx(0.0)
     assert s.heading[1] == pytest.approx(0.25)  # 90 degrees (0.5 of pi) for half the arc
