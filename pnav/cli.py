@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
@@ -22,6 +23,7 @@ from pnav.cli_args import (
     parse_counts,
     port,
     positive,
+    processes_option,
     record_option,
     record_parser,
     robot_link_env,
@@ -43,6 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     up = commands.add_parser("up", help="run the whole stack until Ctrl-C")
     stack_options(up)
+    processes_option(up)
     up.add_argument("--data-dir", type=Path, help="keep Postgres data here (default: fresh)")
     up.add_argument("--zenoh-port", type=port, default=7447, help="router port (7447)")
     up.add_argument("--log-dir", type=Path, help="service logs (default: a temp dir)")
@@ -121,6 +124,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_dashboard_options(demo, None)
     model_option(demo)
     robot_link_options(demo)
+    processes_option(demo)
 
     bench = commands.add_parser("bench", help="benchmarks: print figures and JSON")
     benches = bench.add_subparsers(dest="bench", metavar="BENCH", required=True)
@@ -133,6 +137,7 @@ def build_parser() -> argparse.ArgumentParser:
     startup = benches.add_parser("startup", help="start-up time to first command, and memory")
     startup.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
     startup.add_argument("--runs", type=count, default=3, help="how many start-ups to time")
+    processes_option(startup)
     latency = benches.add_parser(
         "latency", help="sense-to-act latency by stage, CPU and memory per process"
     )
@@ -152,6 +157,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="replicas: N of every scenario service, or SERVICE=N (repeatable)",
     )
     latency.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
+    processes_option(latency)
     nav = benches.add_parser(
         "nav",
         help="navigation: success, SPL and BARN score of every strategy/planner combo per world",
@@ -205,7 +211,9 @@ def build_parser() -> argparse.ArgumentParser:
     nav.add_argument(
         "--compare", type=Path, metavar="FILE", help="compare each run with an earlier --json"
     )
+    processes_option(nav)
     add_faults_parser(benches, positive)
+    processes_option(benches.choices["faults"])
     # _SubParsersAction is invariant in its parser class; ours only makes Parser ones
     add_worlds_parser(cast("argparse._SubParsersAction[argparse.ArgumentParser]", commands))
     return parser
@@ -213,6 +221,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if getattr(args, "processes", None):
+        # every stack this command starts (a benchmark's workers' too) reads it
+        # (pnav.launcher.StackOptions.processes)
+        os.environ["PNAV_PROCESSES"] = args.processes
     try:
         return dispatch(args)
     except UsageError as exc:

@@ -99,6 +99,21 @@ def model_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
+PROCESSES_HELP = (
+    "separate: one process per service; composed: strategy, planner, controller and decision "
+    "in one host process (one interpreter, event loop and Zenoh session; a crash of one "
+    "restarts the four); auto (default): composed on a machine of at most 4 cores "
+    '(PNAV_PROCESSES, docs/ARCHITECTURE.md "Processes")'
+)
+
+
+def processes_option(parser: argparse.ArgumentParser) -> None:
+    """``--processes``: how the stack's services share processes (pnav.launcher)."""
+    parser.add_argument(
+        "--processes", choices=("auto", "composed", "separate"), help=PROCESSES_HELP
+    )
+
+
 def stack_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--world", default="warehouse", help="world name or file (warehouse)")
     parser.add_argument(
