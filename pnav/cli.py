@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
@@ -16,6 +15,7 @@ from pnav.cli_args import (
     GOAL_M,
     MAX_TOL_M,
     Parser,
+    apply_processes,
     coordinate,
     count,
     model_option,
@@ -221,10 +221,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if getattr(args, "processes", None):
-        # every stack this command starts (a benchmark's workers' too) reads it
-        # (pnav.launcher.StackOptions.processes)
-        os.environ["PNAV_PROCESSES"] = args.processes
+    apply_processes(args)
     try:
         return dispatch(args)
     except UsageError as exc:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import NoReturn
@@ -112,6 +113,13 @@ def processes_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--processes", choices=("auto", "composed", "separate"), help=PROCESSES_HELP
     )
+
+
+def apply_processes(args: argparse.Namespace) -> None:
+    """``--processes`` for every stack the command starts (a benchmark's workers' too):
+    PNAV_PROCESSES, which pnav.launcher.StackOptions reads."""
+    if getattr(args, "processes", None):
+        os.environ["PNAV_PROCESSES"] = args.processes
 
 
 def stack_options(parser: argparse.ArgumentParser) -> None:
