@@ -11,6 +11,7 @@ ledger nothing is counted.
 from __future__ import annotations
 
 import asyncio
+import contextvars
 import json
 import logging
 import secrets
@@ -79,16 +80,18 @@ def start_router(
     *,
     data_queue: int = DATA_QUEUE_BATCHES,
     ros_domains: tuple[int, ...] = (),
+    hosts: tuple[str, ...] = acl.DEFAULT_HOSTS,
 ) -> zenoh.Session:
     """Run a Zenoh router inside this process, listening on ``listen`` endpoints. With
-    ``users_file`` it is the compose router (common.contract.acl.router_config, one source):
-    it accepts only sessions whose user/password is in that file, and lets each user put only
-    its own keys (and, in ``ros_domains``, the ROS 2 identities speak ROS 2). Without, it
-    checks nothing (a test's or a benchmark's loopback router)."""
+        ``users_file`` it is the compose router (common.contract.acl.router_config, one source):
+        it accepts only sessions whose user/password is in that file, and lets each user put only
+        its own keys (and, in ``ros_domains``, the ROS 2 identities speak ROS 2; ``hosts``: the
+    host identities it knows, acl.host_identity). Without, it
+        checks nothing (a test's or a benchmark's loopback router)."""
     if users_file is None:
         settings = ZenohSettings(mode="router", connect=(), listen=listen, data_queue=data_queue)
         return open_session(settings)
-    config = acl.router_config(listen, users_file, data_queue, ros_domains)
+    config = acl.router_config(listen, users_file, data_queue, ros_domains, hosts)
     try:
         return zenoh.open(zenoh.Config.from_json5(json.dumps(config)))
     except Exception as exc:
@@ -110,13 +113,15 @@ def subscribe(
     """
     loop = loop or asyncio.get_running_loop()
     handler = _counted(key_expr, handler, ledger)
+    # the subscriber's context: a hosted service's handler logs under its name (common.log)
+    context = contextvars.copy_context()
 
     def on_sample(sample: zenoh.Sample) -> None:
         # Runs on a Zenoh thread: copy out of the sample, then cross over to the loop.
         key = str(sample.key_expr)
         payload = sample.payload.to_bytes()
         try:
-            loop.call_soon_threadsafe(handler, key, payload)
+            loop.call_soon_threadsafe(handler, key, payload, context=context)
         except RuntimeError:
             pass  # the loop is closed: the service is shutting down
 

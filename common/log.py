@@ -6,6 +6,7 @@ or the :func:`event` shortcut so a line can be grepped by robot, rule or table.
 
 from __future__ import annotations
 
+import contextvars
 import json
 import logging
 import os
@@ -14,6 +15,15 @@ import time
 from typing import Any
 
 _RESERVED = set(vars(logging.makeLogRecord({})).keys()) | {"message", "asctime"}
+# The service a line is written for, when one process hosts several (pnav.host): each
+# service's task sets it (:func:`speak_as`) and the tasks it starts inherit it, so every line
+# names its own service; unset, the process's service (:func:`setup`) is named.
+_SERVICE: contextvars.ContextVar[str | None] = contextvars.ContextVar("pnav_service", default=None)
+
+
+def speak_as(service: str) -> None:
+    """Name ``service`` on the lines of this task and of the tasks and callbacks it starts."""
+    _SERVICE.set(service)
 
 
 class KeyValueFormatter(logging.Formatter):
@@ -26,7 +36,8 @@ class KeyValueFormatter(logging.Formatter):
     def format(self, record: logging.LogRecord) -> str:
         ts = time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(record.created))
         ms = int(record.msecs)
-        parts = [f"{ts}.{ms:03d}Z", record.levelname, self.service, record.getMessage()]
+        service = _SERVICE.get() or self.service
+        parts = [f"{ts}.{ms:03d}Z", record.levelname, service, record.getMessage()]
         for key, value in record.__dict__.items():
             if key not in _RESERVED and not key.startswith("_"):
                 parts.append(f"{key}={_render(value)}")

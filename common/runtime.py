@@ -43,19 +43,31 @@ class Runtime:
         # taking part in a lockstep run: hand it to every subscription (bus.subscribe)
         self.ledger: lockstep.Ledger | None = None
         self._closers: list[Callable[[], Any]] = []
+        # a host's session (pnav.host) is the host's to close, not this service's
+        self._owns_session = True
 
     @classmethod
     async def open(
-        cls, config: ServiceConfig, *, with_db: bool = True, receipts: bool = True
+        cls,
+        config: ServiceConfig,
+        *,
+        with_db: bool = True,
+        receipts: bool = True,
+        session: zenoh.Session | None = None,
     ) -> Runtime:
         """Connect. With ``config.lockstep`` set the process takes part in a lockstep run: the
         runtime makes its :attr:`ledger` (common.lockstep) and hands it to the sim clock and
         the notifier; whoever subscribes or reports passes it on. ``receipts=False``: a
-        sender-only participant (a benchmark runner), whose subscriptions are not counted."""
+        sender-only participant (a benchmark runner), whose subscriptions are not counted.
+        ``session``: a Zenoh session shared with the other services of a host process
+        (pnav.host), used instead of one of its own and left open by :meth:`close`."""
         runtime = cls(config)
         try:
-            # Zenoh's open blocks while it connects: keep the loop free meanwhile.
-            runtime.session = await asyncio.to_thread(bus.open_session, config.zenoh)
+            if session is not None:
+                runtime.session, runtime._owns_session = session, False
+            else:
+                # Zenoh's open blocks while it connects: keep the loop free meanwhile.
+                runtime.session = await asyncio.to_thread(bus.open_session, config.zenoh)
             if config.lockstep:
                 runtime.ledger = lockstep.Ledger(
                     runtime.session, config.service, config.instance, receipts=receipts
@@ -130,10 +142,14 @@ class Runtime:
             self.db = None
         if self.session is not None:
             session, self.session = self.session, None
-            await asyncio.to_thread(session.close)
+            if self._owns_session:
+                await asyncio.to_thread(session.close)
 
 
 ServiceMain = Callable[[ServiceConfig, asyncio.Event], Awaitable[None]]
+# A service's entry as a host process starts it (pnav.host, entry point group
+# ``pnav.services``): ``serve(config, stop, session)``, the session being the host's.
+HostedMain = Callable[[ServiceConfig, asyncio.Event, "zenoh.Session | None"], Awaitable[None]]
 
 
 def run_service(service: str, main: ServiceMain, argv: list[str] | None = None) -> int:

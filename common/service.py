@@ -375,8 +375,12 @@ class ScenarioService(ABC):
                 logger.warning("final engine_stats write failed", exc_info=True)
 
     @classmethod
-    async def serve(cls, config: ServiceConfig, stop: asyncio.Event) -> None:
-        runtime = await Runtime.open(config)
+    async def serve(
+        cls, config: ServiceConfig, stop: asyncio.Event, session: zenoh.Session | None = None
+    ) -> None:
+        """Run until ``stop`` is set; ``session``: a host's shared Zenoh session (pnav.host,
+        which finds this entry by the service's name in the ``pnav.services`` entry points)."""
+        runtime = await Runtime.open(config, session=session)
         try:
             await cls(runtime).run(stop)
         finally:

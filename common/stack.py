@@ -55,6 +55,7 @@ from zenoh import Session
 
 from common.bus import start_router
 from common.config import DATA_QUEUE_BATCHES, ZenohSettings
+from common.contract import acl
 from common.contract.grants import BUS_IDENTITIES, LOGIN_ROLES, USER, role_name
 from common.contract.migrate import apply_migrations
 from common.contract.roles import bootstrap, is_superuser, role_url
@@ -118,9 +119,10 @@ class BusCredentials:
     passwords: Mapping[str, str] = field(repr=False)
 
     @classmethod
-    def create(cls, directory: Path) -> BusCredentials:
-        """Make the passwords and write the file (mode 0600) in ``directory``."""
-        passwords = {who: secrets.token_hex(16) for who in BUS_IDENTITIES}
+    def create(cls, directory: Path, hosts: tuple[str, ...] = acl.DEFAULT_HOSTS) -> BusCredentials:
+        """Make the passwords and write the file (mode 0600) in ``directory``: one per
+        identity on the bus and per host identity in ``hosts`` (acl.host_identity)."""
+        passwords = {who: secrets.token_hex(16) for who in (*BUS_IDENTITIES, *hosts)}
         path = directory / "zenoh-users.txt"
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
         with os.fdopen(fd, "w") as out:
@@ -205,12 +207,15 @@ async def local_stack(
     local_zenoh: LocalZenoh | None = None,
     bus: BusCredentials | None = None,
     ros_domains: tuple[int, ...] = (),
+    hosts: tuple[str, ...] = acl.DEFAULT_HOSTS,
 ) -> AsyncIterator[LocalStack]:
     """Start Postgres (embedded unless PNAV_DATABASE_URL is set) and a router; migrate.
     ``local_zenoh``: how the stack's processes use Zenoh (default: PNAV_LOCAL_ZENOH);
     ``bus``: the Zenoh users to use (if None: made for this run and removed after it, or
     none at all in peer mode); ``ros_domains``: the ROS 2 domains the router carries for a
-    ROS 2 robot link with no rmw_zenoh router of its own (common.contract.acl)."""
+    ROS 2 robot link with no rmw_zenoh router of its own (common.contract.acl); ``hosts``:
+    the host identities of the processes running several services (pnav.host), each with
+    exactly its services' permissions (common.contract.acl.host_identity)."""
     local_zenoh = local_zenoh if local_zenoh is not None else LocalZenoh.from_env()
     postgres: EmbeddedPostgres | None = None
     lifeline: Lifeline | None = None
@@ -236,7 +241,7 @@ async def local_stack(
     try:
         if bus is None and local_zenoh.authenticated:
             secret_dir = Path(tempfile.mkdtemp(prefix="pnav-bus-"))  # 0700: this OS user's
-            bus = BusCredentials.create(secret_dir)
+            bus = BusCredentials.create(secret_dir, hosts)
         elif bus is None:
             logging.getLogger("pnav.stack").warning(
                 "PNAV_LOCAL_ZENOH=peer: the local Zenoh runs without authentication and "
@@ -249,6 +254,7 @@ async def local_stack(
             str(bus.users_file) if bus is not None else None,
             data_queue=local_zenoh.data_queue,
             ros_domains=ros_domains,
+            hosts=hosts,
         )
         try:
             conn = await asyncpg.connect(url)

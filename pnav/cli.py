@@ -16,6 +16,7 @@ from pnav.cli_args import (
     GOAL_M,
     MAX_TOL_M,
     Parser,
+    apply_processes,
     coordinate,
     count,
     heading_deg,
@@ -25,6 +26,7 @@ from pnav.cli_args import (
     parse_counts,
     port,
     positive,
+    processes_option,
     record_option,
     record_parser,
     robot_link_env,
@@ -49,6 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     up = commands.add_parser("up", help="run the whole stack until Ctrl-C")
     stack_options(up)
+    processes_option(up)
     up.add_argument("--data-dir", type=Path, help="keep Postgres data here (default: fresh)")
     up.add_argument("--zenoh-port", type=port, default=7447, help="router port (7447)")
     up.add_argument("--log-dir", type=Path, help="service logs (default: a temp dir)")
@@ -163,6 +166,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_dashboard_options(demo, None)
     model_option(demo)
     robot_link_options(demo)
+    processes_option(demo)
 
     bench = commands.add_parser("bench", help="benchmarks: print figures and JSON")
     benches = bench.add_subparsers(dest="bench", metavar="BENCH", required=True)
@@ -175,6 +179,7 @@ def build_parser() -> argparse.ArgumentParser:
     startup = benches.add_parser("startup", help="start-up time to first command, and memory")
     startup.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
     startup.add_argument("--runs", type=count, default=3, help="how many start-ups to time")
+    processes_option(startup)
     latency = benches.add_parser(
         "latency", help="sense-to-act latency by stage, CPU and memory per process"
     )
@@ -201,6 +206,7 @@ def build_parser() -> argparse.ArgumentParser:
         "(native,ros2: the ROS 2 link beside the native one in one report; default native)",
     )
     latency.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
+    processes_option(latency)
     nav = benches.add_parser(
         "nav",
         help="navigation: success, SPL and BARN score of every strategy/planner combo per world",
@@ -254,7 +260,9 @@ def build_parser() -> argparse.ArgumentParser:
     nav.add_argument(
         "--compare", type=Path, metavar="FILE", help="compare each run with an earlier --json"
     )
+    processes_option(nav)
     add_faults_parser(benches, positive)
+    processes_option(benches.choices["faults"])
     # _SubParsersAction is invariant in its parser class; ours only makes Parser ones
     add_worlds_parser(cast("argparse._SubParsersAction[argparse.ArgumentParser]", commands))
     add_zone_parser(cast("argparse._SubParsersAction[argparse.ArgumentParser]", commands))
@@ -263,6 +271,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    apply_processes(args)
     try:
         return dispatch(args)
     except UsageError as exc:

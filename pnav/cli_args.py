@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import NoReturn
@@ -143,6 +144,28 @@ def model_option(parser: argparse.ArgumentParser) -> None:
         help="robot model of every robot the world does not give one (models/*.yaml; "
         "default turtlebot3_burger)",
     )
+
+
+PROCESSES_HELP = (
+    "separate: one process per service; composed: strategy, planner, controller and decision "
+    "in one host process (one interpreter, event loop and Zenoh session; a crash of one "
+    "restarts the four); auto (default): composed on a machine of at most 4 cores "
+    '(PNAV_PROCESSES, docs/ARCHITECTURE.md "Processes")'
+)
+
+
+def processes_option(parser: argparse.ArgumentParser) -> None:
+    """``--processes``: how the stack's services share processes (pnav.launcher)."""
+    parser.add_argument(
+        "--processes", choices=("auto", "composed", "separate"), help=PROCESSES_HELP
+    )
+
+
+def apply_processes(args: argparse.Namespace) -> None:
+    """``--processes`` for every stack the command starts (a benchmark's workers' too):
+    PNAV_PROCESSES, which pnav.launcher.StackOptions reads."""
+    if getattr(args, "processes", None):
+        os.environ["PNAV_PROCESSES"] = args.processes
 
 
 def stack_options(parser: argparse.ArgumentParser) -> None:

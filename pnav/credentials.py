@@ -37,6 +37,9 @@ ZENOH_PASSWORDS = {
     "controller": "PNAV_ZENOH_PASSWORD_CONTROLLER",
     "decision": "PNAV_ZENOH_PASSWORD_DECISION",
     "user": "PNAV_ZENOH_PASSWORD_USER",
+    # strategy, planner, controller and decision in one host process
+    # (deploy/docker-compose.composed.yml; common.contract.acl.DEFAULT_HOSTS)
+    "host-strategy-planner-controller-decision": "PNAV_ZENOH_PASSWORD_HOST",
 }
 # The path of the router's dictionary (one user:password a line), for the compose secret.
 ZENOH_USERS_FILE = "PNAV_ZENOH_USERS_FILE"

@@ -1,7 +1,10 @@
 """Start the whole stack on one machine: Postgres, a Zenoh router, and every service.
 
-Used by ``pnav up`` (until Ctrl-C), ``pnav demo`` (for one mission) and the start-up
-benchmark. Services are separate processes under a :class:`~pnav.supervisor.Supervisor`.
+Used by ``pnav up`` (until Ctrl-C), ``pnav demo`` (for one mission) and the benchmarks.
+Services run under a :class:`~pnav.supervisor.Supervisor`, each in a process of its own
+(``processes="separate"``) or, composed, the scenario services together in one host process
+(pnav.host; ``"composed"``, and ``"auto"`` on a machine of at most
+:data:`COMPOSE_AT_MOST_CORES` cores). A replicated or replaced service always runs apart.
 """
 
 from __future__ import annotations
@@ -18,10 +21,12 @@ from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from common.contract import acl
 from common.errors import UsageError
 from common.stack import BusCredentials, LocalStack, local_stack
 from common.testing import free_port
 from pnav import stackfile
+from pnav.composition import HOST_PROCESS, host_spec, hosted, resolve_processes
 from pnav.supervisor import ProcessSpec, Supervisor
 from pnav.supervisor_report import SupervisorReport
 
@@ -94,6 +99,11 @@ class StackOptions:
     record_encoding: str = "foxglove"
     # the dashboard, supervised like the services; None: none (tests and benchmarks)
     dashboard: DashboardOptions | None = None
+    # one process per service ("separate"), the scenario services in one host process
+    # ("composed"), or composed on a machine of few cores ("auto": resolve_processes)
+    processes: str = field(default_factory=lambda: os.environ.get("PNAV_PROCESSES") or "auto")
+    # the services a composed stack runs in its host (those not replicated nor replaced)
+    host_services: tuple[str, ...] = acl.DEFAULT_HOSTED
 
 
 @dataclass
@@ -108,6 +118,11 @@ class RunningStack:
     def dashboard_url(self) -> str | None:
         dashboard = self.options.dashboard
         return None if dashboard is None else dashboard.url
+
+    def process_of(self, service: str) -> str:
+        """The name of the supervised process running ``service`` (the host's when it is
+        composed)."""
+        return HOST_PROCESS if service in hosted(self.options) else service
 
 
 MAX_REPLICAS = 32
@@ -208,12 +223,32 @@ def recorder_spec(local: LocalStack, options: StackOptions) -> list[ProcessSpec]
     return [ProcessSpec("recorder", argv, env)]
 
 
+def sim_options(options: StackOptions, world: Path) -> list[str]:
+    """The sim's command-line options."""
+    argv = ["--world", str(world), "--rate", options.rate]
+    if options.gui:
+        argv.append("--gui")
+    if options.robots is not None:
+        argv += ["--robots", str(options.robots)]
+    if options.battery is not None:
+        argv += ["--battery", str(options.battery)]
+    if options.model is not None:
+        argv += ["--model", options.model]
+    return argv
+
+
 def service_specs(local: LocalStack, options: StackOptions, world: Path) -> list[ProcessSpec]:
     """One process per service; ``options.replicas[name]`` processes for a replicated one,
     named ``name-1``, ``name-2``... with ``PNAV_INSTANCE`` set to that name (a lone process
-    keeps the plain name, and the supervisor gives it instance ``name-1``)."""
+    keeps the plain name, and the supervisor gives it instance ``name-1``). Composed, the
+    hosted services are one host process, started where the first of them would be."""
     specs = []
+    in_host = hosted(options)
     for name in options.services:
+        if name in in_host:
+            if name == in_host[0]:
+                specs.append(host_spec(local, options, in_host))
+            continue
         env = {
             **local.env(),
             **local.zenoh_for(name).to_env(),  # a replacement acts as the service it replaces
@@ -222,15 +257,7 @@ def service_specs(local: LocalStack, options: StackOptions, world: Path) -> list
         }
         argv = options.replace.get(name) or [sys.executable, "-m", f"services.{name}"]
         if name == "sim":
-            argv += ["--world", str(world), "--rate", options.rate]
-            if options.gui:
-                argv.append("--gui")
-            if options.robots is not None:
-                argv += ["--robots", str(options.robots)]
-            if options.battery is not None:
-                argv += ["--battery", str(options.battery)]
-            if options.model is not None:
-                argv += ["--model", options.model]
+            argv += sim_options(options, world)
         replicas = options.replicas.get(name, 1)
         if replicas > 1 and name not in SCENARIO_SERVICES:
             raise UsageError(f"{name} cannot be replicated: only {', '.join(SCENARIO_SERVICES)}")
@@ -307,8 +334,15 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
         check_world(world, options.model)
     log_dir = options.log_dir or Path(tempfile.mkdtemp(prefix="pnav-logs-"))
     ros_domains = _ros_domains(options.extra_env)
+    options = dataclasses.replace(options, processes=resolve_processes(options.processes))
+    in_host = hosted(options)
+    hosts = (acl.host_identity(in_host),) if in_host else ()
     async with local_stack(
-        options.data_dir, options.zenoh_port, bus=options.bus, ros_domains=ros_domains
+        options.data_dir,
+        options.zenoh_port,
+        bus=options.bus,
+        ros_domains=ros_domains,
+        hosts=(*acl.DEFAULT_HOSTS, *hosts),
     ) as local:
         specs = recorder_spec(local, options) + service_specs(local, options, world)
         supervisor = Supervisor(specs, log_dir, echo=options.echo)

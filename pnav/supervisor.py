@@ -3,7 +3,9 @@
 Children run in their own session (so a Ctrl-C in the terminal reaches only the launcher,
 which then stops them in order) and with ``PNAV_PARENT_PID`` set (so they die with the
 launcher even if it is killed). Their output goes, line by line, to a log file per service
-and, if asked, to our stderr prefixed with the service's name.
+and, if asked, to our stderr prefixed with the service's name. A host process running several
+services (pnav.host, ``ProcessSpec.parts``) is one child, but its lines go to each service's
+file by the service a line names (common.log), the host's own lines to the host's file.
 """
 
 from __future__ import annotations
@@ -32,6 +34,8 @@ class ProcessSpec:
     name: str
     argv: list[str]
     env: dict[str, str] = field(default_factory=dict)
+    # the services a host process runs (pnav.host): their lines go to their own log files
+    parts: tuple[str, ...] = ()
 
 
 @dataclass
@@ -93,17 +97,22 @@ class Supervisor:
         child.started = time.monotonic()
         child.pump = asyncio.create_task(self._pump(child, child.process), name=child.spec.name)
 
-    async def _pump(self, child: Child, process: asyncio.subprocess.Process) -> None:
-        name = child.spec.name
+    def _log(self, name: str) -> IO[str]:
         if name not in self._logs:
             self._logs[name] = (self.log_dir / f"{name}.log").open("a", buffering=1)
-        out = self._logs[name]
+        return self._logs[name]
+
+    async def _pump(self, child: Child, process: asyncio.subprocess.Process) -> None:
+        name = writer = child.spec.name
+        parts = child.spec.parts
         assert process.stdout is not None
         async for raw in process.stdout:
             line = raw.decode(errors="replace").rstrip("\n")
-            out.write(line + "\n")
+            if parts:
+                writer = line_writer(line, parts, name, writer)
+            self._log(writer).write(line + "\n")
             if self.echo:
-                print(f"{name:>10} | {line}", file=sys.stderr, flush=True)
+                print(f"{writer:>10} | {line}", file=sys.stderr, flush=True)
 
     def pids(self) -> dict[str, int]:
         return {
@@ -181,6 +190,16 @@ class Supervisor:
         for out in self._logs.values():
             out.close()
         self._logs.clear()
+
+
+def line_writer(line: str, parts: tuple[str, ...], host: str, previous: str) -> str:
+    """Whose log a host's ``line`` goes to: the service it names in its third field
+    (``<time> <LEVEL> <service> ...``, common.log); a line of no such form (a traceback's)
+    continues the previous line's; any other, the host's."""
+    fields = line.split(" ", 3)
+    if len(fields) >= 3 and fields[0][:2].isdigit() and fields[0].endswith("Z"):
+        return fields[2] if fields[2] in parts else host
+    return previous
 
 
 def _alive(child: Child) -> bool:

@@ -60,7 +60,7 @@ async def up(options: StackOptions) -> int:
             database=stack.local.database_url,
             zenoh=stack.local.zenoh.connect[0],
             logs=str(stack.log_dir),
-            services=",".join(stack.supervisor.children),
+            processes=",".join(stack.supervisor.children),
             replicas=",".join(f"{k}={v}" for k, v in sorted(options.replicas.items())) or "-",
             dashboard=stack.dashboard_url or "off",
         )

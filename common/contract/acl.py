@@ -11,6 +11,11 @@ dictionary) and the router lets it put only its own keys:
 - the ``sim`` alone: sensor messages, the clock, the world (and answers on its queryable);
 - the ``bridge`` alone: ``cmd_vel`` and the acknowledgements of collision events.
 
+A host process running several services in one Zenoh session (pnav.host, docs/ARCHITECTURE.md
+"Processes") authenticates as a host identity named after them (:func:`host_identity`:
+``host-strategy-planner-controller-decision``) whose permissions are derived, never written:
+exactly the union of its services' (:func:`hosted_services`).
+
 Everyone may subscribe to, and receive, everything under ``pnav/``: reading is open, as in
 Postgres. Anything else is denied; a client with no valid user/password is refused its
 session. ``python -m common.contract.acl`` prints the router's whole config
@@ -30,7 +35,7 @@ from typing import Any
 
 from common.config import DATA_QUEUE_BATCHES
 from common.contract import keys
-from common.contract.grants import BUS_IDENTITIES, USER, written_tables
+from common.contract.grants import BUS_IDENTITIES, SERVICES, USER, written_tables
 
 # Where the compose file mounts the router's user/password dictionary (a secret).
 DICTIONARY_FILE = "/run/secrets/zenoh_users"
@@ -61,10 +66,40 @@ _EGRESS = [
     "liveliness_query",
 ]
 _ROS2_MESSAGES = _EGRESS
+HOST_PREFIX = "host-"
+# The services a host runs unless told otherwise (pnav.launcher, --processes composed): its
+# identity is in compose's router config, so a composed deployment needs no other ACL.
+DEFAULT_HOSTED = ("strategy", "planner", "controller", "decision")
+
+
+def host_identity(services: tuple[str, ...] | list[str]) -> str:
+    """The Zenoh identity of a host running ``services`` (in CONTRACT.md's order, so one
+    set has one name): ``host-strategy-planner-controller-decision``."""
+    unknown = sorted(set(services) - set(SERVICES))
+    if unknown or len(set(services)) < 2:
+        raise ValueError(f"a host runs two or more of {', '.join(SERVICES)}, not {services}")
+    return HOST_PREFIX + "-".join(s for s in SERVICES if s in services)
+
+
+DEFAULT_HOSTS = (host_identity(DEFAULT_HOSTED),)
+
+
+def hosted_services(identity: str) -> tuple[str, ...] | None:
+    """The services a host identity stands for, or None when ``identity`` names no host."""
+    if not identity.startswith(HOST_PREFIX):
+        return None
+    names = tuple(identity[len(HOST_PREFIX) :].split("-"))
+    try:
+        return names if host_identity(names) == identity else None
+    except ValueError:
+        return None
 
 
 def put_keys(identity: str) -> list[str]:
-    """The key expressions ``identity`` may put on."""
+    """The key expressions ``identity`` may put on (a host's: its services', and no more)."""
+    hosted = hosted_services(identity)
+    if hosted is not None:
+        return list(dict.fromkeys(k for name in hosted for k in put_keys(name)))
     own = [keys.notify_watch(t) for t in sorted(written_tables(identity))]
     if identity == "sim":
         own = [keys.robot_watch(t) for t in keys.SENSOR_TOPICS]
@@ -79,6 +114,9 @@ def put_keys(identity: str) -> list[str]:
 
 def _names(identity: str) -> tuple[str, ...]:
     """The service names ``identity``'s processes go by on the bus."""
+    hosted = hosted_services(identity)
+    if hosted is not None:
+        return hosted
     return USER_SERVICES if identity == USER else (identity,)
 
 
@@ -102,9 +140,19 @@ def ros2_keys(domain: int) -> list[str]:
     return [f"{domain}/**", f"@ros2_lv/{domain}/**"]
 
 
-def access_control(ros_domains: tuple[int, ...] = ()) -> dict[str, Any]:
+def access_control(
+    ros_domains: tuple[int, ...] = (), hosts: tuple[str, ...] = DEFAULT_HOSTS
+) -> dict[str, Any]:
     """The ``access_control`` section of the router's config; with ``ros_domains``, the
-    ROS 2 identities may also speak ROS 2 in those domains (never a pnav/ key)."""
+    ROS 2 identities may also speak ROS 2 in those domains (never a pnav/ key); ``hosts``:
+    the host identities (:func:`host_identity`) besides the one per service."""
+    for host in hosts:
+        if hosted_services(host) is None:
+            raise ValueError(f"{host!r} is not a host identity (acl.host_identity)")
+    identities = (*BUS_IDENTITIES, *dict.fromkeys(h for h in hosts if h not in BUS_IDENTITIES))
+    ros_speakers = [
+        i for i in identities if i in ROS2_IDENTITIES or "bridge" in (hosted_services(i) or ())
+    ]
     rules = [
         _rule("receive everything", _EGRESS, "egress", [EVERYTHING]),
         _rule(
@@ -119,7 +167,7 @@ def access_control(ros_domains: tuple[int, ...] = ()) -> dict[str, Any]:
     policies = [
         {
             "rules": ["receive everything", "subscribe to everything", "ask the sim for the world"],
-            "subjects": list(BUS_IDENTITIES),
+            "subjects": list(identities),
         },
         {"rules": ["serve the world"], "subjects": ["sim"]},
     ]
@@ -127,8 +175,8 @@ def access_control(ros_domains: tuple[int, ...] = ()) -> dict[str, Any]:
         ros2 = [k for d in ros_domains for k in ros2_keys(d)]
         rules.append(_rule("speak ROS 2", _ROS2_MESSAGES, "ingress", ros2))
         rules.append(_rule("hear ROS 2", _ROS2_MESSAGES, "egress", ros2))
-        policies.append({"rules": ["speak ROS 2", "hear ROS 2"], "subjects": list(ROS2_IDENTITIES)})
-    for identity in BUS_IDENTITIES:
+        policies.append({"rules": ["speak ROS 2", "hear ROS 2"], "subjects": ros_speakers})
+    for identity in identities:
         rules.append(_rule(f"{identity} puts", ["put"], "ingress", put_keys(identity)))
         rules.append(
             _rule(f"{identity} is alive", ["liveliness_token"], "ingress", alive_keys(identity))
@@ -140,7 +188,7 @@ def access_control(ros_domains: tuple[int, ...] = ()) -> dict[str, Any]:
         "enabled": True,
         "default_permission": "deny",
         "rules": rules,
-        "subjects": [{"id": name, "usernames": [name]} for name in BUS_IDENTITIES],
+        "subjects": [{"id": name, "usernames": [name]} for name in identities],
         "policies": policies,
     }
 
@@ -159,9 +207,10 @@ HEADER = """\
 // - scouting: nothing is discovered by multicast; clients are told where the router is.
 // - transport.auth.usrpwd: every client authenticates with its user name (its service:
 //   sim, bridge, strategy, planner, controller, decision; `user` for the CLI and
-//   dashboards) and password, checked against the dictionary the compose file mounts as a
-//   secret (one `user:password` a line; `pnav secrets` writes it). No valid password: no
-//   session.
+//   dashboards; host-strategy-planner-controller-decision for those four composed in one
+//   process, with exactly their permissions together) and password, checked against the
+//   dictionary the compose file mounts as a secret (one `user:password` a line; `pnav
+//   secrets` writes it). No valid password: no session.
 // - access_control: deny by default; each user may put only its own keys (docs/DEPLOY.md,
 //   "Zenoh access control"); everyone may subscribe to and receive everything under pnav/.
 // - transport.link.tx.queue.size.data: room for 16 batches a link at the data priority, as
@@ -176,10 +225,12 @@ def router_config(
     dictionary_file: str = DICTIONARY_FILE,
     data_queue: int = DATA_QUEUE_BATCHES,
     ros_domains: tuple[int, ...] = (),
+    hosts: tuple[str, ...] = DEFAULT_HOSTS,
 ) -> dict[str, Any]:
     """The router's whole config: compose's by default; the local stack's router gives its
-    loopback endpoint, its run's user/password file, its queue size and the ROS 2 domains it
-    carries (``pnav up --robot-link ros2`` with no ``--ros-router``)."""
+    loopback endpoint, its run's user/password file, its queue size, the ROS 2 domains it
+    carries (``pnav up --robot-link ros2`` with no ``--ros-router``) and its host
+    identities."""
     return {
         "mode": "router",
         "listen": {"endpoints": list(listen)},
@@ -188,7 +239,7 @@ def router_config(
             "auth": {"usrpwd": {"dictionary_file": dictionary_file}},
             "link": {"tx": {"queue": {"size": {"data": data_queue}}}},
         },
-        "access_control": access_control(ros_domains),
+        "access_control": access_control(ros_domains, hosts),
     }
 
 

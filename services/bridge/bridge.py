@@ -358,10 +358,13 @@ class Bridge:
             log.event(logger, logging.INFO, "bridge counters", **self.counters.snapshot())
 
 
-async def serve(config: ServiceConfig, stop: asyncio.Event) -> None:
+async def serve(
+    config: ServiceConfig, stop: asyncio.Event, session: zenoh.Session | None = None
+) -> None:
+    """Run until ``stop`` is set; ``session``: a host's shared Zenoh session (pnav.host)."""
     settings = BridgeSettings.from_env()
     link = RobotLinkSettings.from_env()
-    runtime = await Runtime.open(config)
+    runtime = await Runtime.open(config, session=session)
     try:
         await Bridge(runtime, settings, link).run(stop)
     finally:

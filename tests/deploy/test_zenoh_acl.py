@@ -39,7 +39,8 @@ from common.stack import BusCredentials
 from common.testing import acl_router, free_port
 
 ROUTER_CONFIG = Path(__file__).resolve().parents[2] / "deploy" / "zenoh" / "router.json5"
-PASSWORDS = {name: f"pw-{name}-{i}" for i, name in enumerate(BUS_IDENTITIES)}
+PASSWORDS = {name: f"pw-{name}-{i}" for i, name in enumerate((*BUS_IDENTITIES, *acl.DEFAULT_HOSTS))}
+HOST = acl.DEFAULT_HOSTS[0]  # strategy, planner, controller and decision in one process
 
 
 def test_the_committed_router_config_is_the_generated_one() -> None:
@@ -225,6 +226,30 @@ def test_each_identity_announces_exactly_the_tables_it_may_write(
         if body == payload and key.startswith("pnav/db/")
     }
     assert arrived == written_tables(identity)
+
+
+def test_a_host_announces_exactly_the_tables_its_services_may_write(
+    fleet: Fleet, heard: Heard
+) -> None:
+    """The host identity (pnav.host) may do what its services may together, and no more."""
+    hosted = acl.hosted_services(HOST)
+    assert hosted == ("strategy", "planner", "controller", "decision")
+    session = fleet.session(HOST)
+    payload = b"the host announces"
+    for table in keys.TABLES:
+        session.put(keys.notify_key(table, "r1"), payload)
+    for name in (*hosted, "bridge", "sim"):
+        session.put(keys.lockstep_key(name, "x-1"), payload)
+    session.put(keys.robot_key("r1", keys.CMD_VEL), payload)
+    session.put(marker_key(HOST), payload)
+    heard.wait_for(marker_key(HOST), payload)
+    arrived = {key for key, body in heard.samples if body == payload} - {marker_key(HOST)}
+    tables = {keys.parse_notify_key(k)[0] for k in arrived if k.startswith("pnav/db/")}
+    assert tables == set().union(*(written_tables(s) for s in hosted))
+    assert {k for k in arrived if k.startswith("pnav/lockstep/")} == {
+        keys.lockstep_key(name, "x-1") for name in hosted
+    }
+    assert keys.robot_key("r1", keys.CMD_VEL) not in arrived
 
 
 def alive(fleet: Fleet, asker: str) -> set[str]:

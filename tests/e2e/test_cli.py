@@ -81,6 +81,10 @@ async def test_up_goal_strategy_cancel_status_down(tmp_path: Path) -> None:
         "--http-port",
         str(http_port),
         "--quiet",
+        # one process per service: a crash of the planner alone (the composed host's crash
+        # and restart: tests/contract/host)
+        "--processes",
+        "separate",
         env=env,
         stdout=asyncio.subprocess.PIPE,
         stderr=asyncio.subprocess.STDOUT,

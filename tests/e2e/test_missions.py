@@ -13,6 +13,7 @@ import pytest
 
 from common.config import ServiceConfig
 from common.runtime import Runtime
+from common.testing import eventually
 from pnav import commands, demo
 from pnav.launcher import RunningStack, StackOptions, launched
 from pnav.mission import MissionLog, MissionMonitor
@@ -93,12 +94,21 @@ async def test_the_mission_completes_when_each_scenario_service_is_killed_in_tur
             for name in ("strategy", "planner", "controller", "decision"):
                 start = (await monitor.poll()).now.stamp
                 assert await monitor.wait_for(lambda log, s=start: log.now.stamp > s + 3, 60)
-                os.kill(stack.supervisor.pids()[name], signal.SIGKILL)
+                # composed, the host: its co-hosted services restart with it (so the host
+                # killed for the previous service may still be restarting)
+                process = stack.process_of(name)
+                pid = await eventually(
+                    lambda p=process: stack.supervisor.pids().get(p),
+                    within=60,
+                    what=f"{process} running",
+                )
+                os.kill(pid, signal.SIGKILL)
             ok = await monitor.wait_for(reached(goal), limit_s=150)
             log = await monitor.poll()
             assert ok, describe(log, stack)
             assert log.collisions == 0, describe(log, stack)
             restarts = {n: c.restarts for n, c in stack.supervisor.children.items()}
-            assert all(restarts[n] >= 1 for n in ("strategy", "planner", "controller", "decision"))
+            scenario = ("strategy", "planner", "controller", "decision")
+            assert all(restarts[stack.process_of(n)] >= 1 for n in scenario)
         finally:
             await rt.close()

@@ -44,7 +44,7 @@ def local() -> LocalStack:
 
 
 def test_each_replica_is_its_own_supervised_process_with_its_own_instance() -> None:
-    options = StackOptions(robots=6, replicas={"controller": 3})
+    options = StackOptions(robots=6, replicas={"controller": 3}, processes="separate")
     specs = service_specs(local(), options, Path("worlds/warehouse.yaml"))
     names = [s.name for s in specs]
     assert names == [
@@ -100,7 +100,7 @@ def test_a_replaced_service_runs_the_given_command_with_the_same_environment() -
     assert replace == {
         "controller": [sys.executable, "-m", "examples.sql_controller", "--flag", "a b"]
     }
-    options = StackOptions(replace=replace, replicas={"controller": 2})
+    options = StackOptions(replace=replace, replicas={"controller": 2}, processes="separate")
     specs = {s.name: s for s in service_specs(local(), options, Path("worlds/open_room.yaml"))}
     for name in ("controller-1", "controller-2"):
         assert specs[name].argv == replace["controller"]
@@ -162,7 +162,10 @@ def test_each_service_connects_as_its_own_role_and_a_replacement_as_the_replaced
 
     roles = {n: f"postgresql://pnav_{n}:pw@/y" for n in ("bridge", "planner", "controller")}
     stack = with_fields(local(), role_urls=roles)
-    options = StackOptions(replace=parse_replace(["controller=python -m examples.sql_controller"]))
+    options = StackOptions(
+        replace=parse_replace(["controller=python -m examples.sql_controller"]),
+        processes="separate",
+    )
     specs = {s.name: s for s in service_specs(stack, options, Path("worlds/open_room.yaml"))}
     assert specs["bridge"].env["PNAV_DATABASE_URL"] == roles["bridge"]
     assert specs["planner"].env["PNAV_DATABASE_URL"] == roles["planner"]

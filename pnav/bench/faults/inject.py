@@ -129,7 +129,8 @@ async def inject(fault: Fault, ctx: Context) -> Injection:
 
 
 async def _kill(fault: Fault, ctx: Context) -> Injection:
-    child = ctx.stack.supervisor.children[fault.target]
+    # a composed service's process is the host: killing it kills its co-hosted services too
+    child = ctx.stack.supervisor.children[ctx.stack.process_of(fault.target)]
     watch = Liveliness(ctx.rt.zenoh, fault.target)
     try:
         assert child.process is not None
@@ -178,7 +179,7 @@ async def _freeze(fault: Fault, ctx: Context) -> Injection:
 
 
 async def _cut(fault: Fault, ctx: Context) -> Injection:
-    child = ctx.stack.supervisor.children[fault.target]
+    child = ctx.stack.supervisor.children[ctx.stack.process_of(fault.target)]
     assert child.process is not None
     await _stop_for(child.process.pid, fault.seconds)
     return Injection()
