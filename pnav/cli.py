@@ -152,6 +152,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="replicas: N of every scenario service, or SERVICE=N (repeatable)",
     )
     latency.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
+    latency.add_argument(
+        "--no-floor",
+        action="store_true",
+        help="skip the design's floor (python -m pnav.bench.chain, 20 Hz) run after each size",
+    )
     nav = benches.add_parser(
         "nav",
         help="navigation: success, SPL and BARN score of every strategy/planner combo per world",
@@ -338,6 +343,7 @@ def _bench(args: argparse.Namespace) -> int:
             args.seconds,
             parse_replicas(args.replicas),
             args.json,
+            with_floor=not args.no_floor,
         )
     if args.bench == "nav":
         from pnav.navbench import runner
