@@ -141,6 +141,9 @@ def test_the_stacks_p99_is_set_beside_the_floor_and_held_to_twice_it() -> None:
     failed = beside_floor(stack_run(8.0), {"error": "no figures"})
     assert failed["floor_target_met"] is None
     assert any("floor not measured: no figures" in x for x in table([failed]))
+    # a stack run without a sample (a machine too loaded) is a line that says so
+    empty = {**failed, "latency_ms": {"share_over_5ms": 0.0, "share_over_50ms": 0.0}}
+    assert any("no samples" in x for x in table([empty]))
 
 
 def test_the_sim_trace_reads_back_what_was_recorded(tmp_path: Path) -> None:
