@@ -150,6 +150,10 @@ class Sequences:
         # successor is counted lost too, as its reader has read the table meanwhile)
         self.lost = 0
 
+    def newest(self, key: str, src: str) -> int | None:
+        """The highest ``seq`` seen from ``src`` on ``key`` (None: nothing yet)."""
+        return self._last.get((key, src))
+
     def gap(self, key: str, src: str | None, seq: int | None) -> bool:
         """Record this notification; whether one from the same publisher was skipped (a
         notification without numbering counts as a gap: nothing can be known)."""

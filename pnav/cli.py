@@ -207,6 +207,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     latency.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
     processes_option(latency)
+    latency.add_argument(
+        "--no-floor",
+        action="store_true",
+        help="skip the design's floor (python -m pnav.bench.chain, 20 Hz) run after each size",
+    )
     nav = benches.add_parser(
         "nav",
         help="navigation: success, SPL and BARN score of every strategy/planner combo per world",
@@ -411,6 +416,7 @@ def _bench(args: argparse.Namespace) -> int:
             parse_replicas(args.replicas),
             args.json,
             latency_report.parse_links(args.robot_link),
+            with_floor=not args.no_floor,
         )
     if args.bench == "nav":
         from pnav.navbench import runner

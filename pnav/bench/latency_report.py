@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+import tempfile
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import uvloop
@@ -14,6 +19,8 @@ from pnav.bench.report import emit, machine, percentiles
 # the issue's targets: robots -> p99 ms, on a 2-core machine
 TARGETS_MS = {1: 5.0, 10: 10.0, 50: 50.0}
 LIMITS_MS = (5.0, 50.0)
+# the stack's p99 within this many times the floor measured in the same run (the chain)
+FLOOR_RATIO_TARGET = 2.0
 
 
 def parse_links(text: str) -> tuple[str, ...]:
@@ -72,8 +79,32 @@ def summarise(run: dict[str, Any]) -> dict[str, Any]:
 
 
 def _label(run: dict[str, Any]) -> str:
-    link = "" if run["link"] == "native" else f", {run['link']} link"
+    link = "" if run.get("link", "native") == "native" else f", {run['link']} link"
     return f"  {run['robots']:>3} robots{link}: "
+
+
+def floor(robots: int, seconds: float) -> dict[str, Any]:
+    """The design's floor at ``robots`` (``python -m pnav.bench.chain``, its own processes,
+    run after the stack's run, not beside it): its figures, or ``{"error": ...}``."""
+    with tempfile.TemporaryDirectory(prefix="pnav-floor-") as tmp:
+        out = Path(tmp) / "chain.json"
+        argv = [sys.executable, "-m", "pnav.bench.chain", "--robots", str(robots)]
+        argv += ["--seconds", f"{seconds:g}", "--json", str(out)]
+        done = subprocess.run(argv, capture_output=True, text=True, timeout=seconds * 4 + 120)
+        if done.returncode != 0 or not out.exists():
+            return {"error": (done.stderr.strip().splitlines() or ["no figures"])[-1][:300]}
+        (run,) = json.loads(out.read_text())["runs"]
+    return {k: run[k] for k in ("samples", "sent", "p50_ms", "p95_ms", "p99_ms", "cpu_pct")}
+
+
+def beside_floor(result: dict[str, Any], measured: dict[str, Any]) -> dict[str, Any]:
+    """``result`` with the floor, the stack's p99 over the floor's, and whether it is within
+    FLOOR_RATIO_TARGET (None: either p99 missing)."""
+    p99 = result["latency_ms"].get("p99")
+    base = measured.get("p99_ms")
+    ratio = round(p99 / base, 2) if p99 is not None and base and base == base else None
+    met = None if ratio is None else ratio <= FLOOR_RATIO_TARGET
+    return {**result, "floor": measured, "p99_over_floor": ratio, "floor_target_met": met}
 
 
 def table(results: Sequence[dict[str, Any]]) -> list[str]:
@@ -90,17 +121,37 @@ def table(results: Sequence[dict[str, Any]]) -> list[str]:
         repl = max(r["replicas"].values(), default=1)
         target = "-" if r["target_p99_ms"] is None else f"<{r['target_p99_ms']:g}"
         mark = {True: " ok", False: " MISS", None: ""}[r["target_met"]]
-        if not lat:
+        if "p50" not in lat:  # no sample: only the shares over the limits, of nothing
             lines.append(
-                f"{r['link']:>6} {r['robots']:>6} {repl:>4} {0:>7}   no samples (see unmatched)"
+                f"{r.get('link', 'native'):>6} {r['robots']:>6} {repl:>4} {0:>7}"
+                "   no samples (see unmatched)"
             )
             continue
         lines.append(
-            f"{r['link']:>6} {r['robots']:>6} {repl:>4} {r['samples']:>7}"
+            f"{r.get('link', 'native'):>6} {r['robots']:>6} {repl:>4} {r['samples']:>7}"
             f" {lat['p50']:>7.2f} {lat['p95']:>7.2f} {lat['p99']:>7.2f} {lat['max']:>7.1f}"
             f" {lat['share_over_5ms']:>6.1%}"
             f" {lat['share_over_50ms']:>6.1%} {target:>7} {rows:>7.0f} {r['sim_rate']:>6.2f}"
             f" {cpu:>6.0f}{mark}"
+        )
+    lines.append("")
+    lines.append(
+        f"the design's floor (python -m pnav.bench.chain at 20 Hz, same robots, right after; "
+        f"target: stack p99 <= {FLOOR_RATIO_TARGET:g}x floor)"
+    )
+    for r in results:
+        f = r.get("floor")
+        if f is None:
+            continue
+        if "error" in f:
+            lines.append(_label(r) + f"floor not measured: {f['error']}")
+            continue
+        ratio = r["p99_over_floor"]
+        mark = {True: " ok", False: " MISS", None: ""}[r["floor_target_met"]]
+        lines.append(
+            _label(r) + f"floor p50/p99 {f['p50_ms']:.2f}/{f['p99_ms']:.2f} ms "
+            f"(CPU {f['cpu_pct']:.0f}%), stack p99 {r['latency_ms'].get('p99', float('nan')):.2f}"
+            f" ms = {'-' if ratio is None else f'{ratio:.2f}'}x the floor{mark}"
         )
     lines.append("")
     lines.append("per stage, p50 / p99 ms")
@@ -142,15 +193,22 @@ def run(
     replicas: dict[str, int] | None = None,
     json_path: str | None = None,
     links: Sequence[str] = ("native",),
+    with_floor: bool = True,
 ) -> int:
     results = []
     for n in robots:
+        runs = []
         for link in links:
             print(
                 f"running {n} robot(s) at {hz:g} Hz for {seconds:g} sim s, {link} link ...",
                 flush=True,
             )
-            results.append(summarise(uvloop.run(measure(n, hz, seconds, replicas or {}, link))))
+            runs.append(summarise(uvloop.run(measure(n, hz, seconds, replicas or {}, link))))
+        if with_floor:  # one floor per size: it has no robot link
+            print(f"the floor at {n} robot(s) for {seconds:g} s ...", flush=True)
+            measured = floor(n, seconds)
+            runs = [beside_floor(result, measured) for result in runs]
+        results.extend(runs)
     for line in table(results):
         print(line)
     emit({"benchmark": "latency", "machine": machine(), "runs": results}, json_path)

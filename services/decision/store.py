@@ -99,6 +99,11 @@ class DecisionStore:
         self.reads = 0  # reads of the live recommendations (tests, benchmarks)
 
     @property
+    def sequences(self) -> Sequences:
+        """The numbering seen per publisher and robot (tests)."""
+        return self._seqs
+
+    @property
     def notifications_lost(self) -> int:
         """Notifications known lost on the way here (common.freshness.Sequences)."""
         return self._seqs.lost

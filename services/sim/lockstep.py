@@ -2,10 +2,11 @@
 
 Pacing by the stack (``--max-lag``, gate.py) bounds how stale a decision may be; between two
 decisions the sim still runs on, so a run depends on the scheduling of a dozen processes.
-In lockstep the sim publishes the clock, then each reading of a step, one at a time, and
-after each waits until every participant (common.lockstep) reports it handled everything
-that followed: the rows written, the engines' activations run, the decisions made and the
-commands received here. The next physics step then starts from the same state every run.
+In lockstep the sim publishes the clock (every 0.05 s of sim time), then each reading of a
+step, one at a time, and after each waits until every participant (common.lockstep) reports
+it handled everything that followed: the rows written, the engines' activations run, the
+decisions made and the commands received here. The next physics step then starts from the
+same state every run.
 
 The check (:meth:`Barrier.quiet`): for every participant's every subscription and every key
 it matches, the receipts it reported are at least what all participants and the sim

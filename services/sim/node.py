@@ -39,9 +39,11 @@ CLOCK_HZ = 30.0
 # paced by the stack (--max-lag), the clock also goes out every this many sim seconds: the
 # services then stamp their decisions with a time at most this far behind the sim's
 GATE_CLOCK_SIM_S = 0.02
-# in lockstep, the clock goes out before every step's readings and at least every this many
-# sim seconds: the engines' F (0.05 s) and the bridge's watchdog run on it. Odometry at
-# 30 Hz already brings one every 0.033 s; each clock costs a wait for the whole stack.
+# in lockstep, the clock goes out every this many sim seconds, before the readings of the
+# step it falls on: the engines' F (0.05 s) and the bridge's watchdog run on it. Each clock
+# costs a wait for the whole stack: it no longer goes out before every step with readings
+# too (odometry at 30 Hz: 30 clocks a sim second instead of 20; the readings carry their
+# own stamps, and a service's sim time is then at most this stale).
 LOCKSTEP_CLOCK_S = 0.05
 # and the world every this many wall seconds, besides the queryable
 WORLD_PERIOD_S = 1.0
@@ -286,8 +288,8 @@ class SimNode:
     def _run_lockstep(
         self, barrier: Barrier, stop: threading.Event, until_sim_s: float | None
     ) -> None:
-        """Step only when the stack is quiet (lockstep.py): the clock, then each reading of
-        a step on its own, each followed by a wait; the clock at least every LOCKSTEP_CLOCK_S."""
+        """Step only when the stack is quiet (lockstep.py): the clock every LOCKSTEP_CLOCK_S,
+        then each reading of a step on its own, each followed by a wait."""
         sim = self.sim
         pacer = Pacer(self.rate, sim.dt)
         self.publish_world()
@@ -309,7 +311,7 @@ class SimNode:
                 stop.wait(pacer.wall_until_next(sim.steps))
                 continue
             sim.step()
-            if self._held or sim.time >= next_clock - 1e-9:
+            if sim.time >= next_clock - 1e-9:
                 self._clock_barrier(barrier, stop)
                 next_clock = sim.time + LOCKSTEP_CLOCK_S
             held, self._held = self._held, []

@@ -10,7 +10,13 @@ from common.trace import CMD_VEL, NO_REF, TraceEvent, Tracer, read_trace
 from pnav.bench import provenance as prov
 from pnav.bench.hall import write_hall
 from pnav.bench.latency import join_trace, notifications_lost
-from pnav.bench.latency_report import latency_figures, parse_links, target_for
+from pnav.bench.latency_report import (
+    beside_floor,
+    latency_figures,
+    parse_links,
+    table,
+    target_for,
+)
 from services.sim.world import load_world
 
 T0 = 1_800_000_000.0  # wall seconds, as Postgres' clock_timestamp() gives them
@@ -109,6 +115,42 @@ def test_figures_and_targets() -> None:
         None,
     )
     assert target_for(5) == 10.0
+
+
+def stack_run(p99: float) -> dict[str, object]:
+    lat = {"p50": 1.0, "p95": 2.0, "p99": p99, "max": 9.0}
+    lat |= {"share_over_5ms": 0.0, "share_over_50ms": 0.0}
+    return {
+        "link": "native",
+        "robots": 10,
+        "replicas": {},
+        "samples": 5,
+        "latency_ms": lat,
+        "rows_per_s": {},
+        "sim_rate": 1.0,
+        "processes": {},
+        "target_p99_ms": 10.0,
+        "target_met": True,
+        "stages_ms": {},
+    }
+
+
+def test_the_stacks_p99_is_set_beside_the_floor_and_held_to_twice_it() -> None:
+    floor = {"samples": 4, "sent": 4, "p50_ms": 3.0, "p95_ms": 4.0, "p99_ms": 4.0, "cpu_pct": 9.0}
+    within = beside_floor(stack_run(8.0), floor)
+    assert within["p99_over_floor"] == 2.0 and within["floor_target_met"] is True
+    over = beside_floor(stack_run(8.4), floor)
+    assert over["p99_over_floor"] == 2.1 and over["floor_target_met"] is False
+    line = next(x for x in table([over]) if "the floor" in x and "robots:" in x)
+    assert "floor p50/p99 3.00/4.00 ms" in line and "8.40 ms = 2.10x the floor MISS" in line
+    # a floor without samples (or one that failed) gives no ratio, and says why
+    assert beside_floor(stack_run(8.0), {**floor, "p99_ms": float("nan")})["p99_over_floor"] is None
+    failed = beside_floor(stack_run(8.0), {"error": "no figures"})
+    assert failed["floor_target_met"] is None
+    assert any("floor not measured: no figures" in x for x in table([failed]))
+    # a stack run without a sample (a machine too loaded) is a line that says so
+    empty = {**failed, "latency_ms": {"share_over_5ms": 0.0, "share_over_50ms": 0.0}}
+    assert any("no samples" in x for x in table([empty]))
 
 
 def test_the_sim_trace_reads_back_what_was_recorded(tmp_path: Path) -> None:

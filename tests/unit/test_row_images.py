@@ -88,9 +88,8 @@ async def test_the_first_notification_on_a_fresh_key_is_not_lost(
 ) -> None:
     # A fresh publisher's first put used to be dropped about half the time (writer-side
     # filtering until the router answers its interest): every robot's first row unannounced.
-    # In bursts of half the link's queue, each waited for: a longer burst can also overflow
-    # the queue when the link's thread waits for a core (congestion control DROP, by design:
-    # pnav/bench/drops.py), which is not what this checks.
+    # In bursts of half the link's queue, each waited for: a longer burst (kept whole by
+    # congestion control BLOCK) is tests/contract/decision/test_notification_burst.py.
     got: set[str] = set()
     listener = bus.open_session(zenoh_settings)
     sub = bus.subscribe_threaded(

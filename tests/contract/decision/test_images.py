@@ -11,7 +11,6 @@ row as committed.
 
 from __future__ import annotations
 
-import asyncio
 from dataclasses import replace
 
 import pytest
@@ -21,7 +20,7 @@ from common.bus import Notification
 from common.config import ServiceConfig
 from common.contract import keys, recommendations
 from common.runtime import Runtime
-from common.testing import ClockPlayer, running_service
+from common.testing import ClockPlayer, eventually, running_service
 from services.decision.service import DecisionService
 from services.decision.store import DecisionStore
 from tests.contract.decision.test_decision_service import add_robot, clock_at, newest_from
@@ -79,7 +78,9 @@ async def test_decided_from_images_without_reading_the_table(
                 assert store.reads == reads  # both decided from their images
             else:
                 assert store.reads >= reads + 2  # a read per notification
-            await asyncio.sleep(0.2)  # let the notifications of the rows arrive
+            # the notifications of both rows arrive (a fixed sleep missed them under load)
+            ids = {first["id"], second["id"]}
+            await eventually(lambda: ids <= {n.id for n in heard}, what="command notes")
     finally:
         watch.undeclare()
     by_id = {n.id: n for n in heard}
