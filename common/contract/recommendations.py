@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import asyncpg
@@ -50,10 +50,10 @@ _REFUSED = (asyncpg.IntegrityConstraintViolationError, asyncpg.DataError)
 
 @dataclass(frozen=True)
 class Recommendation:
-    """A command_recommendation row about to be written: its contract columns, in the
-    order of :data:`RECOMMENDATION_COLUMNS`. The one type every writer uses (the controller,
-    the planner, their scenarios and the monolith); a scenario makes it with
-    :meth:`velocity` or :meth:`system`."""
+    """A command_recommendation row: its contract columns, in the order of
+    :data:`RECOMMENDATION_COLUMNS`. The one type every writer uses (the controller, the
+    planner, their scenarios and the monolith; a scenario makes it with :meth:`velocity` or
+    :meth:`system`) and the decision reads (:meth:`of_row`, with ``id`` and ``treated_by``)."""
 
     robot_id: str
     kind: str  # 'robot' (a velocity) or 'system' (a system command)
@@ -66,6 +66,31 @@ class Recommendation:
     expires_stamp: float
     inputs: dict[str, Any]
     reason: str
+    # what the table adds to a written row: its id (0 before it is written: the sequences
+    # start at 1) and the decision that treated it; not written, so not in values()
+    id: int = field(default=0, kw_only=True)
+    treated_by: int | None = field(default=None, kw_only=True)
+
+    @classmethod
+    def of_row(cls, row: Mapping[str, Any]) -> Recommendation:
+        """From a command_recommendation row: a query's record, an in-memory row or a row
+        image (CONTRACT.md "Row images": ``treated_by`` is NULL in a row just written)."""
+        linear, angular = row.get("linear_mps"), row.get("angular_rps")
+        return cls(
+            str(row["robot_id"]),
+            str(row["kind"]),
+            str(row["source"]),
+            int(row["priority"]),
+            None if linear is None else float(linear),
+            None if angular is None else float(angular),
+            row.get("system_command"),
+            float(row["stamp"]),
+            float(row["expires_stamp"]),
+            dict(row.get("inputs") or {}),
+            str(row.get("reason", "")),
+            id=int(row["id"]),
+            treated_by=row.get("treated_by"),
+        )
 
     @classmethod
     def velocity(

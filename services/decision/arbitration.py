@@ -2,15 +2,18 @@
 
 The decision service knows no scenario by name: it compares ``priority`` among the live
 (unexpired) recommendations of one robot and one kind; ties go to the newest row (highest
-id). A new scenario family is obeyed the moment it writes a row with a priority.
+id). A new scenario family is obeyed the moment it writes a row with a priority. A live row
+is the contract's :class:`~common.contract.recommendations.Recommendation` (with its ``id``
+and ``treated_by``), as every writer wrote it.
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Final
+
+from common.contract.recommendations import Recommendation
 
 # Re-issue the current winner at least this often (sim s), so the bridge's 0.5 s watchdog
 # never stops a robot that has a live recommendation.
@@ -19,41 +22,6 @@ REISSUE_PERIOD_S: Final = 0.1
 _EPS: Final = 1e-9
 
 NO_LIVE_RECOMMENDATION: Final = "no live recommendation"
-
-
-@dataclass(frozen=True)
-class Recommendation:
-    """A live command_recommendation row, as far as arbitration cares."""
-
-    id: int
-    robot_id: str
-    kind: str
-    source: str
-    priority: int
-    linear_mps: float | None
-    angular_rps: float | None
-    system_command: str | None
-    reason: str
-    treated_by: int | None
-    # when it stops being live (sim s): the decision's store drops it then
-    expires_stamp: float = math.inf
-
-    @classmethod
-    def of_row(cls, row: Mapping[str, Any]) -> Recommendation:
-        """From a command_recommendation row (a query's record, or an in-memory row)."""
-        return cls(
-            id=row["id"],
-            robot_id=row["robot_id"],
-            kind=row["kind"],
-            source=row["source"],
-            priority=row["priority"],
-            linear_mps=row["linear_mps"],
-            angular_rps=row["angular_rps"],
-            system_command=row["system_command"],
-            reason=row["reason"],
-            treated_by=row["treated_by"],
-            expires_stamp=row["expires_stamp"],
-        )
 
 
 @dataclass(frozen=True)

@@ -22,8 +22,9 @@ from typing import Any, Final, Protocol
 import asyncpg
 
 from common.contract import keys
+from common.contract.recommendations import Recommendation
 from common.db import Database
-from services.decision.arbitration import Issued, Recommendation, RobotDecision, SystemDecision
+from services.decision.arbitration import Issued, RobotDecision, SystemDecision
 
 logger = logging.getLogger("pnav.decision")
 
@@ -34,11 +35,11 @@ logger = logging.getLogger("pnav.decision")
 # 20 ms for 200k rows against 0.1 ms this way).
 LIVE_SQL: Final = """
 SELECT r.robot_id, c.id, c.kind, c.source, c.priority, c.linear_mps, c.angular_rps,
-       c.system_command, c.reason, c.treated_by, c.expires_stamp
+       c.system_command, c.stamp, c.expires_stamp, c.inputs, c.reason, c.treated_by
 FROM robot r
 LEFT JOIN LATERAL (
-    SELECT id, kind, source, priority, linear_mps, angular_rps, system_command, reason,
-           treated_by, expires_stamp
+    SELECT id, kind, source, priority, linear_mps, angular_rps, system_command, stamp,
+           expires_stamp, inputs, reason, treated_by
     FROM command_recommendation c
     WHERE c.robot_id = r.robot_id AND c.kind IN ('robot', 'system') AND c.expires_stamp > $1
     OFFSET 0

@@ -28,16 +28,16 @@ from typing import Final
 from common import log
 from common.bus import Notification
 from common.contract import keys
+from common.contract.recommendations import Recommendation
 from common.freshness import Sequences
 from common.images import ImageGuard
 from services.decision.arbitration import (
     Issued,
-    Recommendation,
     RobotDecision,
     SystemDecision,
     reissue_due,
 )
-from services.decision.live import LiveRecommendations, recommendation_of
+from services.decision.live import LiveRecommendations
 from services.decision.source import DecisionSource, PgDecisionSource
 
 __all__ = ["REREAD_S", "DecisionSource", "DecisionStore", "PgDecisionSource"]
@@ -173,7 +173,7 @@ class DecisionStore:
             return
         # an image the table would refuse (a forward command in the safety band, another
         # robot's row, a NaN stamp...) is not a row: counted, and the table says
-        rec = self.images.record(note, recommendation_of)
+        rec = self.images.record(note, Recommendation.of_row)
         if rec is None:
             self._stale = True
             return
