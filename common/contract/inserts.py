@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from operator import attrgetter
 from typing import Any
 
@@ -46,6 +47,7 @@ class Insert:
     def columns(self) -> tuple[Column, ...]:
         return self.table.inserted
 
+    @cached_property
     def _getters(self) -> list[tuple[Column, Getter]]:
         return [(c, self.fields.get(c.name) or attrgetter(c.name)) for c in self.columns]
 
@@ -96,7 +98,7 @@ class Insert:
     def args(self, records: Sequence[Any]) -> list[Any]:
         """The argument arrays of :meth:`batch_sql` for ``records``, in its order."""
         out: list[Any] = []
-        for column, get in self._getters():
+        for column, get in self._getters:
             if _is_array(column):
                 flat: list[Any] = []
                 first: list[int] = []
@@ -126,14 +128,13 @@ class Insert:
     def values(self, record: Any) -> list[Any]:
         """The arguments of :meth:`values_sql` for one record."""
         return [
-            list(get(record)) if _is_array(column) else get(record)
-            for column, get in self._getters()
+            list(get(record)) if _is_array(column) else get(record) for column, get in self._getters
         ]
 
     def image(self, record: Any) -> Image:
         """The row's image without its ``id``: every inserted column, as the table holds it."""
         out: Image = {}
-        for column, get in self._getters():
+        for column, get in self._getters:
             shown = self.images.get(column.name)
             if shown is not None:
                 out[column.name] = shown(record)

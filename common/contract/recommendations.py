@@ -14,33 +14,38 @@ import json
 import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Final
 
 import asyncpg
 
-from common.contract import keys
+from common.contract import keys, tables
 from common.db import ASYNC_COMMIT, Database
 
 logger = logging.getLogger("pnav.contract")
 
+# the columns a recommendation is written with, in Recommendation's order: its image, as
+# the table's declaration lists them
+RECOMMENDATION_COLUMNS: Final = tuple(c.name for c in tables.COMMAND_RECOMMENDATION.inserted)
+_TYPES = [c.sql_type for c in tables.COMMAND_RECOMMENDATION.inserted]
+_INPUTS = RECOMMENDATION_COLUMNS.index("inputs")
+
 _RECOMMEND = f"""
-INSERT INTO command_recommendation (robot_id, kind, source, priority, linear_mps, angular_rps,
-    system_command, stamp, expires_stamp, inputs, reason)
-SELECT $1::text, $2::text, $3::text, $4::int, $5::float8, $6::float8, $7::text, $8::float8,
-       $9::float8, $10::jsonb, $11::text
+INSERT INTO command_recommendation ({", ".join(RECOMMENDATION_COLUMNS)})
+SELECT {", ".join(f"${i}::{t}" for i, t in enumerate(_TYPES, 1))}
   FROM {ASYNC_COMMIT}
 RETURNING id
 """
 # RETURNING's rows are paired with the batch's by (robot_id, source), which a batch holds
 # once each (common.writebehind splits a batch that would not); inputs go as JSON text, so
 # the jsonb codec is not asked to encode an array of them.
+_CAST = ", ".join(f"u.{name}::{t}" for name, t in zip(RECOMMENDATION_COLUMNS, _TYPES, strict=True))
+# inputs go as JSON text (see below)
+_ARRAYS = ", ".join(f"${i}::{'text' if t == 'jsonb' else t}[]" for i, t in enumerate(_TYPES, 1))
 _RECOMMEND_MANY = f"""
-INSERT INTO command_recommendation (robot_id, kind, source, priority, linear_mps, angular_rps,
-    system_command, stamp, expires_stamp, inputs, reason)
-SELECT r, k, s, p, l, a, c, st, e, i::jsonb, why
-FROM unnest($1::text[], $2::text[], $3::text[], $4::int[], $5::float8[], $6::float8[],
-            $7::text[], $8::float8[], $9::float8[], $10::text[], $11::text[])
-     AS u(r, k, s, p, l, a, c, st, e, i, why), {ASYNC_COMMIT}
+INSERT INTO command_recommendation ({", ".join(RECOMMENDATION_COLUMNS)})
+SELECT {_CAST}
+FROM unnest({_ARRAYS})
+     AS u({", ".join(RECOMMENDATION_COLUMNS)}), {ASYNC_COMMIT}
 RETURNING id, robot_id, source
 """
 # What a batch refused as data (a robot deleted meanwhile, a value a CHECK refuses): its
@@ -150,13 +155,6 @@ class Recommendation:
         return dict(zip(RECOMMENDATION_COLUMNS, self.values(), strict=True))
 
 
-# the columns a recommendation is written with, in Recommendation's order: its image
-RECOMMENDATION_COLUMNS = (
-    *("robot_id", "kind", "source", "priority", "linear_mps", "angular_rps"),
-    *("system_command", "stamp", "expires_stamp", "inputs", "reason"),
-)
-
-
 def recommendation_key(row: Recommendation) -> tuple[str, str]:
     """(robot, source): what pairs a batch's rows with the ids RETURNING gives, and what a
     store's write-behind outbox keeps one row of (common.writebehind)."""
@@ -180,7 +178,7 @@ async def write_recommendations(db: Database, rows: Sequence[Recommendation]) ->
     if len(rows) == 1:
         return [await write_recommendation(db, rows[0])]
     columns = [list(column) for column in zip(*(row.values() for row in rows), strict=True)]
-    columns[9] = [json.dumps(inputs) for inputs in columns[9]]
+    columns[_INPUTS] = [json.dumps(inputs) for inputs in columns[_INPUTS]]
     try:
         ids = await db.write_rows(
             keys.COMMAND_RECOMMENDATION,

@@ -13,6 +13,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Final
 
+from common.contract import tables
+from common.contract.inserts import Insert
 from common.contract.recommendations import Recommendation
 
 # Re-issue the current winner at least this often (sim s), so the bridge's 0.5 s watchdog
@@ -22,6 +24,10 @@ REISSUE_PERIOD_S: Final = 0.1
 _EPS: Final = 1e-9
 
 NO_LIVE_RECOMMENDATION: Final = "no live recommendation"
+
+# command2robot's INSERT, arguments and image, from its declaration: RobotDecision's fields
+# are the columns' names
+COMMAND2ROBOT: Final = Insert(tables.COMMAND2ROBOT)
 
 
 @dataclass(frozen=True)
@@ -50,17 +56,9 @@ class RobotDecision:
     reason: str
 
     def image(self) -> dict[str, Any]:
-        """The command2robot row's image: its columns as written (CONTRACT.md "Row images")."""
-        return {
-            "robot_id": self.robot_id,
-            "stamp": self.stamp,
-            "linear_mps": self.linear_mps,
-            "angular_rps": self.angular_rps,
-            "recommendation_id": self.recommendation_id,
-            "source": self.source,
-            "considered_ids": list(self.considered_ids),
-            "reason": self.reason,
-        }
+        """The command2robot row's image: its columns as written (CONTRACT.md "Row images"),
+        as its declaration lists them (its fields are the columns' names)."""
+        return COMMAND2ROBOT.image(self)
 
 
 @dataclass(frozen=True)

@@ -6,11 +6,14 @@ not declared, or declared and not migrated, fails here rather than in a running 
 
 from __future__ import annotations
 
+from dataclasses import fields
+
 import asyncpg
 import pytest
 
 from common.contract import tables
 from common.contract.columns import Table
+from common.contract.recommendations import RECOMMENDATION_COLUMNS, Recommendation
 
 _LIVE = """
 SELECT a.attname, format_type(a.atttypid, a.atttypmod), NOT a.attnotnull
@@ -29,3 +32,9 @@ async def test_each_declaration_is_the_live_table(conn: asyncpg.Connection, tabl
 
 def test_every_imaged_table_is_declared() -> None:
     assert set(tables.IMAGED) <= set(tables.DECLARED)
+
+
+def test_a_recommendation_is_its_declared_columns_in_order() -> None:
+    written = [f.name for f in fields(Recommendation) if not f.kw_only]
+    assert written == [c.name for c in tables.COMMAND_RECOMMENDATION.inserted]
+    assert list(RECOMMENDATION_COLUMNS) == written
