@@ -36,7 +36,6 @@ import zenoh
 from common import bus, lockstep, log
 from common.clock import SimClock
 from common.contract import keys
-from common.freshness import Sequences
 from common.tasks import cancel_and_wait
 from services.bridge.counters import Counters, RateLimitedLog
 from services.bridge.images import CommandImages
@@ -137,7 +136,6 @@ class CommandRelay:
         # the newest scan per robot (the bridge hands them over) and what the layer did
         self.safety = SafetyLayer(settings.safety)
         self.notes = SafetyNotes(pool)
-        self._sequences = Sequences()
         self.images = CommandImages(logger, counters.images_refused)
         self._alerts = RateLimitedLog(logger)
         self._subscriber: zenoh.Subscriber[None] | None = None
@@ -200,8 +198,8 @@ class CommandRelay:
             self._wake.set()
             return
         # every notification counts toward the numbering, even one already acted on
-        gap = self._sequences.gap(key, note.src, note.seq)
-        self.counters.command_notes_lost = self._sequences.lost
+        gap = self.images.guard.gap(note, key)
+        self.counters.command_notes_lost = self.images.guard.lost
         if not gap and note.id is not None and note.id <= self.last_sent.get(robot, 0):
             return  # already sent
         command = None if gap else self._from_image(robot, note)

@@ -53,7 +53,7 @@ from common.contract.recommendations import (
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
 from common.controller_core.scenario import Key
 from common.db import Database
-from common.freshness import FreshCache, Sequences
+from common.freshness import FreshCache
 from common.images import ImageGuard
 from common.writebehind import WriteBehind
 
@@ -199,7 +199,6 @@ class ControllerStore:
         # per robot: the newest odometry image and the store clock when it came (None: the
         # last one is unusable, a gap or no image: read the table)
         self._odometry_images: dict[str, tuple[Odometry, float] | None] = {}
-        self._seqs = Sequences()
         # images held to their table's rules before they stand in for a query
         self.images = ImageGuard(logger)
         # images that stood in for a query (tests, benchmarks)
@@ -218,8 +217,8 @@ class ControllerStore:
 
     @property
     def notifications_lost(self) -> int:
-        """Notifications known lost on the way here (common.freshness.Sequences)."""
-        return self._seqs.lost
+        """Notifications known lost on the way here (seq gaps: common.images.ImageGuard.gap)."""
+        return self.images.lost
 
     @property
     def images_refused(self) -> dict[str, int]:
@@ -248,8 +247,7 @@ class ControllerStore:
     def _usable(self, note: Notification) -> bool:
         """Whether ``note``'s image may stand in for the query (CONTRACT.md "Row images");
         records the seq either way."""
-        gap = self._seqs.gap(f"{note.table}/{note.robot}", note.src, note.seq)
-        return note.row is not None and not gap
+        return not self.images.gap(note) and note.row is not None
 
     def _odometry_image(self, robot_id: str, note: Notification) -> None:
         odometry = self.images.record(note, records.odometry_of) if self._usable(note) else None
