@@ -201,43 +201,13 @@ async def _write_alone(db: Database, row: Recommendation) -> int | None:
         return None
 
 
-async def recommend_velocity(
-    db: Database,
-    robot_id: str,
-    *,
-    source: str,
-    priority: int,
-    linear: float,
-    angular: float,
-    stamp: float,
-    ttl_s: float,
-    reason: str,
-    inputs: dict[str, Any] | None = None,
-) -> int:
+async def recommend_velocity(db: Database, robot_id: str, **fields: Any) -> int:
     """Write a robot recommendation valid until ``stamp + ttl_s`` (sim time) and notify,
-    with the row's image."""
-    row = Recommendation.velocity(
-        robot_id, source=source, priority=priority, linear=linear, angular=angular,
-        stamp=stamp, ttl_s=ttl_s, reason=reason, inputs=inputs,
-    )  # fmt: skip
-    return await write_recommendation(db, row)
+    with the row's image; ``fields``: :meth:`Recommendation.velocity`'s keywords."""
+    return await write_recommendation(db, Recommendation.velocity(robot_id, **fields))
 
 
-async def recommend_system(
-    db: Database,
-    robot_id: str,
-    *,
-    source: str,
-    priority: int,
-    command: str,
-    stamp: float,
-    ttl_s: float,
-    reason: str,
-    inputs: dict[str, Any] | None = None,
-) -> int:
-    """Write a system recommendation (e.g. CMD_BATTSAVE) and notify, with the row's image."""
-    row = Recommendation.system(
-        robot_id, source=source, priority=priority, command=command,
-        stamp=stamp, ttl_s=ttl_s, reason=reason, inputs=inputs,
-    )  # fmt: skip
-    return await write_recommendation(db, row)
+async def recommend_system(db: Database, robot_id: str, **fields: Any) -> int:
+    """Write a system recommendation (e.g. CMD_BATTSAVE) and notify, with the row's image;
+    ``fields``: :meth:`Recommendation.system`'s keywords."""
+    return await write_recommendation(db, Recommendation.system(robot_id, **fields))

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import math
 import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
@@ -36,6 +35,7 @@ import zenoh
 from common import bus, lockstep, log
 from common.clock import SimClock
 from common.contract import keys
+from common.contract.limits import clamp
 from common.tasks import cancel_and_wait
 from services.bridge.counters import Counters, RateLimitedLog
 from services.bridge.images import CommandImages
@@ -58,16 +58,6 @@ CROSS JOIN LATERAL (
     WHERE c.robot_id = r.robot_id ORDER BY c.id DESC LIMIT 1
 ) c"""
 _NEWEST_OF = _NEWEST + "\nWHERE r.robot_id = ANY($1::text[])"
-
-
-def clamp(value: float, limit: float) -> float:
-    """``value`` limited to [-limit, limit]; NaN (or a NaN/negative limit) gives 0."""
-    if not limit >= 0:
-        limit = 0.0
-    if math.isnan(value):
-        return 0.0
-    result = max(-limit, min(limit, value))
-    return result if math.isfinite(result) else 0.0
 
 
 @dataclass(frozen=True, slots=True)

@@ -227,7 +227,3 @@ class ScanView:
 
 def describe_sector(sector: Sector) -> str:
     return f"[{math.degrees(sector[0]):+.0f}, {math.degrees(sector[1]):+.0f}] deg"
-
-
-def clamp(value: float, limit: float) -> float:
-    return max(-limit, min(limit, value))
