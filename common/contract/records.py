@@ -7,7 +7,6 @@ asyncpg connection (or pool) and return plain frozen dataclasses.
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, fields
@@ -19,6 +18,7 @@ import numpy as np
 from common.contract import tables
 from common.contract.columns import BOOL, FLOAT, FLOATS, ID, INT, Column, Table
 from common.robotmodel import DEFAULT_MODEL, load_model
+from common.scan import beam_angles, readings
 
 # the robot table's defaults for the model columns are the default model's (schema.sql)
 _DEFAULT_MODEL = load_model(DEFAULT_MODEL)
@@ -56,17 +56,6 @@ class Odometry:
     angular_rps: float
 
 
-@functools.lru_cache(maxsize=16)
-def _beam_angles(
-    angle_min: float, increment: float, n: int
-) -> np.ndarray[Any, np.dtype[np.float64]]:
-    # every scan of a lidar has the same geometry: work the angles out once, not per scan
-    raw = angle_min + increment * np.arange(n)
-    out = np.asarray(np.arctan2(np.sin(raw), np.cos(raw)), dtype=np.float64)
-    out.flags.writeable = False
-    return out
-
-
 @dataclass(frozen=True)
 class LaserScan:
     id: int
@@ -81,14 +70,12 @@ class LaserScan:
     def angles(self) -> np.ndarray[Any, np.dtype[np.float64]]:
         """Beam angles relative to the heading, wrapped to (-pi, pi] (read-only: shared by
         every scan with the same geometry)."""
-        return _beam_angles(self.angle_min, self.angle_increment, len(self.ranges))
+        return beam_angles(self.angle_min, self.angle_increment, len(self.ranges))
 
     def sector_min(self, low: float, high: float) -> float:
         """Closest valid range among beams with angle in [low, high] (rad); inf if none."""
         angles = self.angles()
-        # ranges are float32: a hit at exactly range_min (the sim's reading for anything
-        # closer) must not be lost to rounding against the float64 range_min.
-        mask = (angles >= low) & (angles <= high) & (self.ranges >= self.range_min - 1e-4)
+        mask = (angles >= low) & (angles <= high) & readings(self.ranges, self.range_min)
         return float(self.ranges[mask].min()) if mask.any() else math.inf
 
 
