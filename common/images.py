@@ -6,9 +6,12 @@ publish any image, so an image is held to the rules the table holds its rows to
 (common.contract.tables: the CHECK bounds, declared once; the robot of the key) before it
 stands in for a read. :class:`ImageGuard` is that judgement, for every reader:
 
-- :meth:`ImageGuard.record` gives the reader's record of a note's image, or None when the
-  note has no image or its image breaks the table's rules or does not parse: the reader then
-  reads the table, as for a missing image;
+- :meth:`ImageGuard.fresh` is "use the row image or read the table", for every store: the
+  reader's record of a note's image, or None when a notification was lost before it on its
+  stream (a ``seq`` gap, common.freshness.Sequences, counted in :attr:`ImageGuard.lost`),
+  when the note has no image, or when its image breaks the table's rules or does not parse:
+  the reader then reads the table. :meth:`ImageGuard.gap` and :meth:`ImageGuard.record` are
+  its two halves, for a reader with something to decide between them;
 - a refused image is counted per table (:attr:`ImageGuard.refused`, which each service
   reports with its other counters) and logged at most once per table per ``period_s``,
   with how many were refused since the last line and why the last one was.
@@ -25,6 +28,7 @@ from typing import Any, TypeVar
 from common import log
 from common.bus import Notification
 from common.contract.tables import IMAGED
+from common.freshness import Sequences
 
 T = TypeVar("T")
 
@@ -49,6 +53,36 @@ class ImageGuard:
         self.period_s = period_s
         self._clock = clock
         self._logged: dict[str, tuple[float, int]] = {}  # table -> (when, refused then)
+        self._sequences = Sequences()
+
+    @property
+    def sequences(self) -> Sequences:
+        """The numbering seen per publisher and stream (tests)."""
+        return self._sequences
+
+    @property
+    def lost(self) -> int:
+        """Notifications known lost on the way here (seq gaps, common.freshness.Sequences)."""
+        return self._sequences.lost
+
+    def gap(self, note: Notification, stream: str | None = None) -> bool:
+        """Whether a notification was lost before ``note`` on its stream (``stream``: its
+        key; by default its table and robot). Every notification counts toward the
+        numbering, so call it for each, even one the reader will not act on."""
+        return self._sequences.gap(stream or f"{note.table}/{note.robot}", note.src, note.seq)
+
+    def fresh(
+        self,
+        note: Notification,
+        parse: Callable[[Mapping[str, Any]], T],
+        stream: str | None = None,
+    ) -> T | None:
+        """The record ``parse`` makes of ``note``'s image when it may stand in for reading
+        the table; None: read the table (a notification lost before it, no image, or one
+        refused)."""
+        if self.gap(note, stream):
+            return None
+        return self.record(note, parse)
 
     def image(self, note: Notification) -> Mapping[str, Any] | None:
         """``note``'s image if it keeps its table's rules; None if it has none, or breaks

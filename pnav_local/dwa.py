@@ -33,10 +33,10 @@ import pnav_local.trajectories as tr
 from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
 from common.controller_core.scenario import Command, ControllerScenario
+from common.scan import readings
 from pnav_local.params import DwaParams
 
 PRIORITY = 30
-_RANGE_TOLERANCE_M = 1e-4  # float32 ranges: a hit at range_min reads a hair below it
 
 
 @dataclass(frozen=True)
@@ -68,7 +68,7 @@ def obstacles(scan: LaserScan, reach_m: float) -> tr.FloatArray:
     cos, sin = _beams(scan.angle_min, scan.angle_increment, len(ranges))
     valid = (
         np.isfinite(ranges)
-        & (ranges >= scan.range_min - _RANGE_TOLERANCE_M)
+        & readings(ranges, scan.range_min)
         & (ranges <= min(scan.range_max, reach_m))
     )
     r = ranges[valid]

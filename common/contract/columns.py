@@ -11,6 +11,7 @@ import math
 import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from datetime import datetime
 from typing import Any, Final
 
 import numpy as np
@@ -26,6 +27,20 @@ BOOL: Final = "bool"
 JSON: Final = "json"  # a jsonb object: a map
 FLOATS: Final = "float[]"  # double precision[] or real[]: an array of numbers (or packed bytes)
 INTS: Final = "int[]"  # bigint[]
+TIMESTAMP: Final = "timestamp"  # timestamptz: filled by the database, never in an image
+
+# The Postgres type of each image type, unless a column says otherwise (``Column.sql``).
+SQL_TYPES: Final = {
+    ID: "bigint",
+    INT: "integer",
+    FLOAT: "double precision",
+    TEXT: "text",
+    BOOL: "boolean",
+    JSON: "jsonb",
+    FLOATS: "double precision[]",
+    INTS: "bigint[]",
+    TIMESTAMP: "timestamp with time zone",
+}
 
 ROBOT_ID: Final = re.compile(r"^[A-Za-z0-9_-]+$")  # robot.robot_id's CHECK
 
@@ -38,6 +53,9 @@ class Column:
     an ``abs_high`` bounds ``|v|``); ``finite`` refuses NaN and +-Infinity (``is_finite``);
     ``choices`` lists the only texts accepted. ``checks``: the constraints that enforce them
     in the database, empty for a rule of the table's documented writer (see the module).
+    ``sql``: its Postgres type where it is not the image type's (:data:`SQL_TYPES`);
+    ``inserted``: a writer's INSERT names it (False: the database gives its value, as the
+    id's sequence or a default clock, or a later UPDATE does).
     """
 
     name: str
@@ -51,6 +69,13 @@ class Column:
     choices: tuple[str, ...] = ()
     pattern: re.Pattern[str] | None = None
     checks: tuple[str, ...] = ()
+    sql: str = ""
+    inserted: bool = True
+
+    @property
+    def sql_type(self) -> str:
+        """Its Postgres type, as ``format_type`` names it."""
+        return self.sql or SQL_TYPES[self.type]
 
     def refusal(self, value: Any) -> str | None:
         """Why ``value`` breaks this column's rules (None: it keeps them)."""
@@ -104,6 +129,16 @@ class Table:
     columns: tuple[Column, ...]
     rules: tuple[Rule, ...] = field(default=())
 
+    @property
+    def inserted(self) -> tuple[Column, ...]:
+        """The columns a writer's INSERT names, in order (the row image's, without ``id``)."""
+        return tuple(c for c in self.columns if c.inserted)
+
+    @property
+    def selected(self) -> tuple[str, ...]:
+        """The row image's columns, what a reader selects: ``id`` and the inserted ones."""
+        return tuple(c.name for c in self.columns if c.inserted or c.name == "id")
+
     def column(self, name: str) -> Column:
         for column in self.columns:
             if column.name == name:
@@ -154,6 +189,8 @@ def _typed(kind: str, value: Any) -> bool:
         return isinstance(value, bool)
     if kind == JSON:
         return isinstance(value, dict)
+    if kind == TIMESTAMP:
+        return isinstance(value, datetime)
     if kind == INTS:
         return isinstance(value, list | tuple) and all(type(v) is int for v in value)
     if kind == FLOATS:

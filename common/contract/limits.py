@@ -54,6 +54,17 @@ MAX_STRATEGY_CODE_CHARS: Final = 64
 MAX_STRATEGY_DESCRIPTION_CHARS: Final = 1000
 
 
+def clamp(value: float, limit: float) -> float:
+    """``value`` within ``[-limit, limit]``; NaN (or a NaN or negative limit) gives 0, so a
+    broken number never becomes a speed. The one clamp of a velocity to a robot's limit."""
+    if not limit >= 0:
+        limit = 0.0
+    if math.isnan(value):
+        return 0.0
+    result = max(-limit, min(limit, value))
+    return result if math.isfinite(result) else 0.0
+
+
 def check_goal(x: float, y: float, tolerance_m: float | None) -> None:
     """ContractError naming the first value the goal table would refuse, if any."""
     for name, value in (("x", x), ("y", y)):

@@ -12,35 +12,40 @@ from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Final
 
 import asyncpg
 
-from common.contract import keys
+from common.contract import keys, tables
 from common.db import ASYNC_COMMIT, Database
 
 logger = logging.getLogger("pnav.contract")
 
+# the columns a recommendation is written with, in Recommendation's order: its image, as
+# the table's declaration lists them
+RECOMMENDATION_COLUMNS: Final = tuple(c.name for c in tables.COMMAND_RECOMMENDATION.inserted)
+_TYPES = [c.sql_type for c in tables.COMMAND_RECOMMENDATION.inserted]
+_INPUTS = RECOMMENDATION_COLUMNS.index("inputs")
+
 _RECOMMEND = f"""
-INSERT INTO command_recommendation (robot_id, kind, source, priority, linear_mps, angular_rps,
-    system_command, stamp, expires_stamp, inputs, reason)
-SELECT $1::text, $2::text, $3::text, $4::int, $5::float8, $6::float8, $7::text, $8::float8,
-       $9::float8, $10::jsonb, $11::text
+INSERT INTO command_recommendation ({", ".join(RECOMMENDATION_COLUMNS)})
+SELECT {", ".join(f"${i}::{t}" for i, t in enumerate(_TYPES, 1))}
   FROM {ASYNC_COMMIT}
 RETURNING id
 """
 # RETURNING's rows are paired with the batch's by (robot_id, source), which a batch holds
 # once each (common.writebehind splits a batch that would not); inputs go as JSON text, so
 # the jsonb codec is not asked to encode an array of them.
+_CAST = ", ".join(f"u.{name}::{t}" for name, t in zip(RECOMMENDATION_COLUMNS, _TYPES, strict=True))
+# inputs go as JSON text (see below)
+_ARRAYS = ", ".join(f"${i}::{'text' if t == 'jsonb' else t}[]" for i, t in enumerate(_TYPES, 1))
 _RECOMMEND_MANY = f"""
-INSERT INTO command_recommendation (robot_id, kind, source, priority, linear_mps, angular_rps,
-    system_command, stamp, expires_stamp, inputs, reason)
-SELECT r, k, s, p, l, a, c, st, e, i::jsonb, why
-FROM unnest($1::text[], $2::text[], $3::text[], $4::int[], $5::float8[], $6::float8[],
-            $7::text[], $8::float8[], $9::float8[], $10::text[], $11::text[])
-     AS u(r, k, s, p, l, a, c, st, e, i, why), {ASYNC_COMMIT}
+INSERT INTO command_recommendation ({", ".join(RECOMMENDATION_COLUMNS)})
+SELECT {_CAST}
+FROM unnest({_ARRAYS})
+     AS u({", ".join(RECOMMENDATION_COLUMNS)}), {ASYNC_COMMIT}
 RETURNING id, robot_id, source
 """
 # What a batch refused as data (a robot deleted meanwhile, a value a CHECK refuses): its
@@ -50,10 +55,10 @@ _REFUSED = (asyncpg.IntegrityConstraintViolationError, asyncpg.DataError)
 
 @dataclass(frozen=True)
 class Recommendation:
-    """A command_recommendation row about to be written: its contract columns, in the
-    order of :data:`RECOMMENDATION_COLUMNS`. The one type every writer uses (the controller,
-    the planner, their scenarios and the monolith); a scenario makes it with
-    :meth:`velocity` or :meth:`system`."""
+    """A command_recommendation row: its contract columns, in the order of
+    :data:`RECOMMENDATION_COLUMNS`. The one type every writer uses (the controller, the
+    planner, their scenarios and the monolith; a scenario makes it with :meth:`velocity` or
+    :meth:`system`) and the decision reads (:meth:`of_row`, with ``id`` and ``treated_by``)."""
 
     robot_id: str
     kind: str  # 'robot' (a velocity) or 'system' (a system command)
@@ -66,6 +71,31 @@ class Recommendation:
     expires_stamp: float
     inputs: dict[str, Any]
     reason: str
+    # what the table adds to a written row: its id (0 before it is written: the sequences
+    # start at 1) and the decision that treated it; not written, so not in values()
+    id: int = field(default=0, kw_only=True)
+    treated_by: int | None = field(default=None, kw_only=True)
+
+    @classmethod
+    def of_row(cls, row: Mapping[str, Any]) -> Recommendation:
+        """From a command_recommendation row: a query's record, an in-memory row or a row
+        image (CONTRACT.md "Row images": ``treated_by`` is NULL in a row just written)."""
+        linear, angular = row.get("linear_mps"), row.get("angular_rps")
+        return cls(
+            str(row["robot_id"]),
+            str(row["kind"]),
+            str(row["source"]),
+            int(row["priority"]),
+            None if linear is None else float(linear),
+            None if angular is None else float(angular),
+            row.get("system_command"),
+            float(row["stamp"]),
+            float(row["expires_stamp"]),
+            dict(row.get("inputs") or {}),
+            str(row.get("reason", "")),
+            id=int(row["id"]),
+            treated_by=row.get("treated_by"),
+        )
 
     @classmethod
     def velocity(
@@ -125,13 +155,6 @@ class Recommendation:
         return dict(zip(RECOMMENDATION_COLUMNS, self.values(), strict=True))
 
 
-# the columns a recommendation is written with, in Recommendation's order: its image
-RECOMMENDATION_COLUMNS = (
-    *("robot_id", "kind", "source", "priority", "linear_mps", "angular_rps"),
-    *("system_command", "stamp", "expires_stamp", "inputs", "reason"),
-)
-
-
 def recommendation_key(row: Recommendation) -> tuple[str, str]:
     """(robot, source): what pairs a batch's rows with the ids RETURNING gives, and what a
     store's write-behind outbox keeps one row of (common.writebehind)."""
@@ -155,7 +178,7 @@ async def write_recommendations(db: Database, rows: Sequence[Recommendation]) ->
     if len(rows) == 1:
         return [await write_recommendation(db, rows[0])]
     columns = [list(column) for column in zip(*(row.values() for row in rows), strict=True)]
-    columns[9] = [json.dumps(inputs) for inputs in columns[9]]
+    columns[_INPUTS] = [json.dumps(inputs) for inputs in columns[_INPUTS]]
     try:
         ids = await db.write_rows(
             keys.COMMAND_RECOMMENDATION,
@@ -178,43 +201,13 @@ async def _write_alone(db: Database, row: Recommendation) -> int | None:
         return None
 
 
-async def recommend_velocity(
-    db: Database,
-    robot_id: str,
-    *,
-    source: str,
-    priority: int,
-    linear: float,
-    angular: float,
-    stamp: float,
-    ttl_s: float,
-    reason: str,
-    inputs: dict[str, Any] | None = None,
-) -> int:
+async def recommend_velocity(db: Database, robot_id: str, **fields: Any) -> int:
     """Write a robot recommendation valid until ``stamp + ttl_s`` (sim time) and notify,
-    with the row's image."""
-    row = Recommendation.velocity(
-        robot_id, source=source, priority=priority, linear=linear, angular=angular,
-        stamp=stamp, ttl_s=ttl_s, reason=reason, inputs=inputs,
-    )  # fmt: skip
-    return await write_recommendation(db, row)
+    with the row's image; ``fields``: :meth:`Recommendation.velocity`'s keywords."""
+    return await write_recommendation(db, Recommendation.velocity(robot_id, **fields))
 
 
-async def recommend_system(
-    db: Database,
-    robot_id: str,
-    *,
-    source: str,
-    priority: int,
-    command: str,
-    stamp: float,
-    ttl_s: float,
-    reason: str,
-    inputs: dict[str, Any] | None = None,
-) -> int:
-    """Write a system recommendation (e.g. CMD_BATTSAVE) and notify, with the row's image."""
-    row = Recommendation.system(
-        robot_id, source=source, priority=priority, command=command,
-        stamp=stamp, ttl_s=ttl_s, reason=reason, inputs=inputs,
-    )  # fmt: skip
-    return await write_recommendation(db, row)
+async def recommend_system(db: Database, robot_id: str, **fields: Any) -> int:
+    """Write a system recommendation (e.g. CMD_BATTSAVE) and notify, with the row's image;
+    ``fields``: :meth:`Recommendation.system`'s keywords."""
+    return await write_recommendation(db, Recommendation.system(robot_id, **fields))

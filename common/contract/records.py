@@ -7,22 +7,25 @@ asyncpg connection (or pool) and return plain frozen dataclasses.
 
 from __future__ import annotations
 
-import functools
 import math
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
-from typing import Any, TypeAlias
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, fields, replace
+from typing import Any, Final, TypeAlias, TypeVar
 
 import asyncpg
 import numpy as np
 
+from common.contract import tables
+from common.contract.columns import BOOL, FLOAT, FLOATS, ID, INT, Column, Table
 from common.robotmodel import DEFAULT_MODEL, load_model
+from common.scan import beam_angles, readings
 
 # the robot table's defaults for the model columns are the default model's (schema.sql)
 _DEFAULT_MODEL = load_model(DEFAULT_MODEL)
 
 # A connection or a pool: both have fetch/fetchrow/fetchval.
 Executor: TypeAlias = Any
+_R = TypeVar("_R")
 
 
 @dataclass(frozen=True)
@@ -53,17 +56,6 @@ class Odometry:
     angular_rps: float
 
 
-@functools.lru_cache(maxsize=16)
-def _beam_angles(
-    angle_min: float, increment: float, n: int
-) -> np.ndarray[Any, np.dtype[np.float64]]:
-    # every scan of a lidar has the same geometry: work the angles out once, not per scan
-    raw = angle_min + increment * np.arange(n)
-    out = np.asarray(np.arctan2(np.sin(raw), np.cos(raw)), dtype=np.float64)
-    out.flags.writeable = False
-    return out
-
-
 @dataclass(frozen=True)
 class LaserScan:
     id: int
@@ -78,14 +70,12 @@ class LaserScan:
     def angles(self) -> np.ndarray[Any, np.dtype[np.float64]]:
         """Beam angles relative to the heading, wrapped to (-pi, pi] (read-only: shared by
         every scan with the same geometry)."""
-        return _beam_angles(self.angle_min, self.angle_increment, len(self.ranges))
+        return beam_angles(self.angle_min, self.angle_increment, len(self.ranges))
 
     def sector_min(self, low: float, high: float) -> float:
         """Closest valid range among beams with angle in [low, high] (rad); inf if none."""
         angles = self.angles()
-        # ranges are float32: a hit at exactly range_min (the sim's reading for anything
-        # closer) must not be lost to rounding against the float64 range_min.
-        mask = (angles >= low) & (angles <= high) & (self.ranges >= self.range_min - 1e-4)
+        mask = (angles >= low) & (angles <= high) & readings(self.ranges, self.range_min)
         return float(self.ranges[mask].min()) if mask.any() else math.inf
 
 
@@ -242,51 +232,51 @@ async def newest_scan_and_odometry(
 
 
 # -- records from row images (CONTRACT.md "Row images"): the same record the query gives ----
-def odometry_of(image: Mapping[str, Any]) -> Odometry:
-    """The :class:`Odometry` of an odometry row's image (as :func:`newest_odometry` reads it)."""
-    return Odometry(
-        id=int(image["id"]),
-        robot_id=image["robot_id"],
-        stamp=float(image["stamp"]),
-        x=float(image["x"]),
-        y=float(image["y"]),
-        yaw=float(image["yaw"]),
-        linear_mps=float(image["linear_mps"]),
-        angular_rps=float(image["angular_rps"]),
-    )
+def _floats(column: Column) -> Callable[[Any], Any]:
+    dtype = np.float32 if column.sql_type == "real[]" else np.float64
+
+    def convert(value: Any) -> Any:
+        # an array column: a list of floats (``inf`` kept), or the packed bytes of one
+        if isinstance(value, bytes | bytearray | memoryview):
+            return np.frombuffer(value, dtype=dtype)
+        return np.asarray(value, dtype=dtype)
+
+    return convert
 
 
-def laser_scan_of(image: Mapping[str, Any]) -> LaserScan:
-    """The :class:`LaserScan` of a laser_scan row's image. ``ranges`` is the real[] column:
-    a list of floats (``inf`` kept), or the float32 bytes of one (a writer may pack it)."""
-    ranges = image["ranges"]
-    if isinstance(ranges, bytes | bytearray | memoryview):
-        values = np.frombuffer(ranges, dtype=np.float32)
-    else:
-        values = np.asarray(ranges, dtype=np.float32)
-    return LaserScan(
-        id=int(image["id"]),
-        robot_id=image["robot_id"],
-        stamp=float(image["stamp"]),
-        angle_min=float(image["angle_min"]),
-        angle_increment=float(image["angle_increment"]),
-        range_min=float(image["range_min"]),
-        range_max=float(image["range_max"]),
-        ranges=values,
-    )
+_CONVERT: dict[str, Callable[[Any], Any]] = {ID: int, INT: int, FLOAT: float, BOOL: bool}
 
 
-def battery_of(image: Mapping[str, Any]) -> Battery:
-    """The :class:`Battery` of a battery row's image (as :func:`newest_battery` reads it)."""
-    return Battery(
-        id=int(image["id"]),
-        robot_id=image["robot_id"],
-        stamp=float(image["stamp"]),
-        energy_wh=float(image["energy_wh"]),
-        capacity_wh=float(image["capacity_wh"]),
-        percentage=float(image["percentage"]),
-        charging=bool(image.get("charging", False)),
-    )
+def _parser(cls: type[_R], table: Table) -> Callable[[Mapping[str, Any]], _R]:
+    """How an image of ``table`` becomes a ``cls``: each of its fields from the column of
+    its name, as the column's declared type says (a bool column left out is false)."""
+    converts: list[tuple[str, Callable[[Any], Any] | None, bool]] = []
+    for name in (f.name for f in fields(cls)):  # type: ignore[arg-type]
+        column = table.column(name)
+        convert = _floats(column) if column.type == FLOATS else _CONVERT.get(column.type)
+        converts.append((name, convert, column.type == BOOL))
+
+    def parse(image: Mapping[str, Any]) -> _R:
+        values = {
+            name: (image.get(name, False) if optional else image[name])
+            for name, _, optional in converts
+        }
+        for name, convert, _ in converts:
+            if convert is not None:
+                values[name] = convert(values[name])
+        return cls(**values)
+
+    return parse
+
+
+odometry_of: Final = _parser(Odometry, tables.ODOMETRY)
+odometry_of.__doc__ = "The :class:`Odometry` of an odometry row's image (as the query reads it)."
+laser_scan_of: Final = _parser(LaserScan, tables.LASER_SCAN)
+laser_scan_of.__doc__ = """The :class:`LaserScan` of a laser_scan row's image. ``ranges`` is the
+real[] column: a list of floats (``inf`` kept), or the float32 bytes of one (a writer may pack
+it)."""
+battery_of: Final = _parser(Battery, tables.BATTERY)
+battery_of.__doc__ = "The :class:`Battery` of a battery row's image (as the query reads it)."
 
 
 async def newest_battery(db: Executor, robot_id: str) -> Battery | None:

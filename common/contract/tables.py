@@ -36,14 +36,25 @@ from common.contract.columns import (
     JSON,
     ROBOT_ID,
     TEXT,
+    TIMESTAMP,
     Column,
     Rule,
     Table,
 )
 
 
-def _id(name: str = "id", *, nullable: bool = False) -> Column:
-    return Column(name, ID, nullable=nullable)
+def _id(name: str = "id", *, nullable: bool = False, inserted: bool = True) -> Column:
+    # the row's own id comes from its sequence: never in an INSERT
+    return Column(name, ID, nullable=nullable, inserted=inserted and name != "id")
+
+
+def _clock(name: str) -> Column:
+    # received_at / created_at: the database's clock (a default), never in an image
+    return Column(name, TIMESTAMP, inserted=False)
+
+
+def _seq() -> Column:
+    return Column("seq", INT, sql="bigint")
 
 
 def _robot() -> Column:
@@ -104,7 +115,8 @@ COMMAND_RECOMMENDATION: Final = Table(
         ),
         Column("inputs", JSON),
         Column("reason", TEXT),
-        _id("treated_by", nullable=True),
+        _id("treated_by", nullable=True, inserted=False),  # the decision's UPDATE sets it
+        _clock("created_at"),
     ),
     (
         Rule(
@@ -181,6 +193,11 @@ COMMAND2ROBOT: Final = Table(
         Column("source", TEXT, nullable=True),
         Column("considered_ids", INTS),
         Column("reason", TEXT),
+        _clock("created_at"),
+        # migration 4: what the bridge's safety layer did with it (its one UPDATE)
+        Column("safety", TEXT, nullable=True, inserted=False),
+        Column("sent_linear_mps", FLOAT, nullable=True, inserted=False),
+        Column("sent_angular_rps", FLOAT, nullable=True, inserted=False),
     ),
     (
         Rule(
@@ -199,11 +216,12 @@ ODOMETRY: Final = Table(
         _id(),
         _robot(),
         _finite("stamp", "odometry_finite"),
-        Column("seq", INT),
+        _seq(),
         *(
             _finite(name, "odometry_finite")
             for name in ("x", "y", "yaw", "linear_mps", "angular_rps")
         ),
+        _clock("received_at"),
     ),
 )
 
@@ -213,12 +231,13 @@ LASER_SCAN: Final = Table(
         _id(),
         _robot(),
         _finite("stamp", "laser_scan_finite"),
-        Column("seq", INT),
+        _seq(),
         *(
             _finite(name, "laser_scan_finite")
             for name in ("angle_min", "angle_increment", "range_min", "range_max")
         ),
-        Column("ranges", FLOATS),  # Infinity kept: "nothing within range_max"
+        Column("ranges", FLOATS, sql="real[]"),  # Infinity kept: "nothing within range_max"
+        _clock("received_at"),
     ),
 )
 
@@ -246,6 +265,7 @@ BATTERY: Final = Table(
         Column("percentage", FLOAT, low=0.0, high=100.0, checks=("battery_percentage_check",)),
         Column("charging", BOOL),
         _finite("power_w", "battery_finite"),
+        _clock("received_at"),
     ),
 )
 
@@ -280,6 +300,7 @@ PLANNED_PATH: Final = Table(
         Column("xs", FLOATS),
         Column("ys", FLOATS),
         Column("length_m", FLOAT, finite=True, low=0.0, checks=("planned_path_length_m_check",)),
+        _clock("created_at"),
     ),
     (
         Rule(
@@ -292,8 +313,31 @@ PLANNED_PATH: Final = Table(
     ),
 )
 
+# -- collision_event (writer: the bridge; an event, durable, written once per (robot, run, seq))
+COLLISION_EVENT: Final = Table(
+    keys.COLLISION_EVENT,
+    (
+        _id(),
+        _robot(),
+        _finite("stamp", "collision_event_finite"),
+        Column("other", TEXT),
+        _finite("x", "collision_event_finite"),
+        _finite("y", "collision_event_finite"),
+        _clock("received_at"),
+        # migration 7: NULL in rows older than it, and from writers that send no run
+        Column(
+            "seq", INT, nullable=True, low=0, sql="bigint", checks=("collision_event_seq_check",)
+        ),
+        Column("run", TEXT, nullable=True, checks=("collision_event_run_check",)),
+    ),
+)
+
 # The tables whose row images a shipped reader acts on, by name.
 IMAGED: Final[Mapping[str, Table]] = {
     t.name: t
     for t in (COMMAND_RECOMMENDATION, COMMAND2ROBOT, ODOMETRY, LASER_SCAN, BATTERY, PLANNED_PATH)
 }
+
+# Every declared table, by name: tests/contract/test_declared_tables.py holds each to the
+# live schema (the same columns, types and nullability, in the same order).
+DECLARED: Final[Mapping[str, Table]] = {**IMAGED, COLLISION_EVENT.name: COLLISION_EVENT}

@@ -19,6 +19,8 @@ from abc import abstractmethod
 from dataclasses import dataclass
 from typing import ClassVar
 
+from common.contract.limits import clamp as clamp  # the plug-in interface's clamp
+
 # The entry-point group that names the move scenarios (name = a strategy's planner_scenario).
 SCENARIO_GROUP = "pnav.planner.scenarios"
 
@@ -62,11 +64,6 @@ class MoveScenario:
     ) -> Movement:
         """The velocity for a heading error (rad, CCW positive), the distance left and the
         measured turn rate (rad/s, from the odometry)."""
-
-
-def clamp(value: float, limit: float) -> float:
-    """``value`` within ``[-limit, limit]``."""
-    return max(-limit, min(limit, value))
 
 
 def cruise_speed(max_linear: float, remaining_m: float) -> float:

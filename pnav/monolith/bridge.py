@@ -27,9 +27,9 @@ from typing import Any
 import numpy as np
 
 from common.contract import keys
+from common.contract.limits import clamp
 from pnav.bench.provenance import origin_of
 from pnav.monolith.contract import MemoryContract, Row
-from services.bridge.commands import clamp
 from services.bridge.messages import (
     PARSERS,
     TABLE_OF_TOPIC,

@@ -1,8 +1,8 @@
 """The controller service in one process: its store Protocol over the in-memory contract.
 
 :class:`MemoryControllerSource` answers the controller's reads and write
-(services.controller.store.ControllerSource) from :class:`MemoryContract` rows, as Postgres
-answers :class:`~services.controller.store.PgControllerSource`; the service's own
+(services.controller.source.ControllerSource) from :class:`MemoryContract` rows, as Postgres
+answers :class:`~services.controller.source.PgControllerSource`; the service's own
 :class:`~services.controller.store.ControllerStore`, with its caches, sits on top, and
 :func:`controller_engine` seeds the meta-controller on an engine exactly as
 ``ControllerService.seed`` does.
@@ -23,7 +23,8 @@ from common.controller_core.scenario import installed_scenarios
 from common.engine import Engine
 from pnav.monolith.contract import MemoryContract, Row
 from services.controller.meta import Scenarios, seed_controller
-from services.controller.store import ControllerStore, ScanAndOdometry
+from services.controller.source import ScanAndOdometry
+from services.controller.store import ControllerStore
 
 _ROBOT = (
     *("robot_id", "max_linear_mps", "max_angular_rps", "footprint_radius_m"),
@@ -46,7 +47,7 @@ def _odometry(row: Row | None) -> Odometry | None:
 
 
 class MemoryControllerSource:
-    """:class:`~services.controller.store.ControllerSource` over the in-memory contract."""
+    """:class:`~services.controller.source.ControllerSource` over the in-memory contract."""
 
     def __init__(self, contract: MemoryContract) -> None:
         self.contract = contract

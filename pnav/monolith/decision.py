@@ -14,10 +14,11 @@ from collections.abc import Callable, Sequence
 from datetime import UTC, datetime
 
 from common.contract import keys
+from common.contract.recommendations import Recommendation
 from common.engine import Engine
 from pnav.monolith.contract import MemoryContract, Row
 from services.decision import meta
-from services.decision.arbitration import Issued, Recommendation, RobotDecision, SystemDecision
+from services.decision.arbitration import Issued, RobotDecision, SystemDecision
 from services.decision.store import DecisionStore
 
 _KINDS = ("robot", "system")

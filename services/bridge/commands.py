@@ -24,11 +24,8 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import math
 import time
-from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Callable, Iterable
 
 import asyncpg
 import zenoh
@@ -36,72 +33,18 @@ import zenoh
 from common import bus, lockstep, log
 from common.clock import SimClock
 from common.contract import keys
-from common.freshness import Sequences
+from common.contract.limits import clamp
 from common.tasks import cancel_and_wait
+from services.bridge.command_row import NEWEST, NEWEST_OF, Command
 from services.bridge.counters import Counters, RateLimitedLog
 from services.bridge.images import CommandImages
-from services.bridge.limits import Limits, RobotLimits
+from services.bridge.limits import RobotLimits
 from services.bridge.notes import SafetyNotes
 from services.bridge.safety import LIMITED, STOPPED, UNCHECKED, SafetyLayer, Verdict
 from services.bridge.settings import BridgeSettings
 from services.bridge.watchdog import Watchdog
 
 logger = logging.getLogger("pnav.bridge.commands")
-
-# LATERAL + LIMIT 1 walks the (robot_id, id DESC) index once per robot: the cost stays flat
-# however long command2robot grows (it is not a pruned sensor table).
-_NEWEST = f"""
-SELECT r.robot_id, c.id, c.stamp, c.linear_mps, c.angular_rps,
-       r.max_linear_mps, r.max_angular_rps, r.footprint_radius_m, r.max_linear_accel_mps2
-FROM {keys.ROBOT} r
-CROSS JOIN LATERAL (
-    SELECT id, stamp, linear_mps, angular_rps FROM {keys.COMMAND2ROBOT} c
-    WHERE c.robot_id = r.robot_id ORDER BY c.id DESC LIMIT 1
-) c"""
-_NEWEST_OF = _NEWEST + "\nWHERE r.robot_id = ANY($1::text[])"
-
-
-def clamp(value: float, limit: float) -> float:
-    """``value`` limited to [-limit, limit]; NaN (or a NaN/negative limit) gives 0."""
-    if not limit >= 0:
-        limit = 0.0
-    if math.isnan(value):
-        return 0.0
-    result = max(-limit, min(limit, value))
-    return result if math.isfinite(result) else 0.0
-
-
-@dataclass(frozen=True, slots=True)
-class Command:
-    robot_id: str
-    id: int
-    stamp: float
-    linear: float
-    angular: float
-    max_linear: float
-    max_angular: float
-    footprint: float
-    max_accel: float  # the robot's linear acceleration limit: it brakes no harder
-
-    @classmethod
-    def from_row(cls, row: asyncpg.Record) -> Command:
-        return cls(*row)
-
-    @classmethod
-    def from_image(cls, robot: str, image: Mapping[str, Any], limits: Limits) -> Command | None:
-        """The command of a command2robot image, or None if the image lacks a column the
-        relay needs (or has a wrong type in it, or names another robot)."""
-        row_id = image.get("id")
-        if type(row_id) is not int or image.get("robot_id") != robot:
-            return None
-        values: list[float] = []
-        for column in ("stamp", "linear_mps", "angular_rps"):
-            value = image.get(column)
-            if not isinstance(value, float | int) or isinstance(value, bool):
-                return None  # absent, or not a number
-            values.append(float(value))
-        stamp, linear, angular = values
-        return cls(robot, row_id, stamp, linear, angular, *limits)
 
 
 class CommandRelay:
@@ -137,7 +80,6 @@ class CommandRelay:
         # the newest scan per robot (the bridge hands them over) and what the layer did
         self.safety = SafetyLayer(settings.safety)
         self.notes = SafetyNotes(pool)
-        self._sequences = Sequences()
         self.images = CommandImages(logger, counters.images_refused)
         self._alerts = RateLimitedLog(logger)
         self._subscriber: zenoh.Subscriber[None] | None = None
@@ -161,7 +103,7 @@ class CommandRelay:
         async with self.pool.acquire() as conn:
             await self.limits.read(conn)
             await self.safety.zones.read(conn)
-            rows = await conn.fetch(_NEWEST)
+            rows = await conn.fetch(NEWEST)
         self.counters.command_reads += 1
         self.notes.start()
         for row in rows:
@@ -212,8 +154,8 @@ class CommandRelay:
             self._wake.set()
             return
         # every notification counts toward the numbering, even one already acted on
-        gap = self._sequences.gap(key, note.src, note.seq)
-        self.counters.command_notes_lost = self._sequences.lost
+        gap = self.images.guard.gap(note, key)
+        self.counters.command_notes_lost = self.images.guard.lost
         if not gap and note.id is not None and note.id <= self.last_sent.get(robot, 0):
             return  # already sent
         command = None if gap else self._from_image(robot, note)
@@ -277,8 +219,8 @@ class CommandRelay:
                 return []  # woken for the limits alone
             self.counters.command_reads += 1
             if wanted is None:
-                return list(await conn.fetch(_NEWEST))
-            return list(await conn.fetch(_NEWEST_OF, wanted))
+                return list(await conn.fetch(NEWEST))
+            return list(await conn.fetch(NEWEST_OF, wanted))
 
     def idle(self) -> bool:
         """No read of command2robot under way or asked for."""

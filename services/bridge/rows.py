@@ -1,5 +1,7 @@
 """The sensor tables as the writer writes them: per table, its batched INSERT, the column
-arrays one batch of records becomes, and the image of one row (CONTRACT.md, "Row images").
+arrays one batch of records becomes, and the image of one row (CONTRACT.md, "Row images"),
+all derived from the table's declaration (common.contract.tables, by
+common.contract.inserts): a record's attribute is its column's name but where said here.
 
 Every batch is ONE statement per table, all robots together:
 ``INSERT ... SELECT FROM unnest($1::text[], $2::float8[], ...) RETURNING id, robot_id``,
@@ -20,194 +22,32 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from operator import attrgetter
 from typing import Any
 
 import numpy as np
 
-from common.contract import keys
+from common.contract import tables
+from common.contract.inserts import Insert
 from services.bridge.messages import BatteryState, Collision, LaserScan, Odometry, SensorRecord
 
 Image = dict[str, Any]
 
-_ODOMETRY_SQL = f"""
-INSERT INTO {keys.ODOMETRY} (robot_id, stamp, seq, x, y, yaw, linear_mps, angular_rps)
-SELECT * FROM unnest($1::text[], $2::float8[], $3::int8[], $4::float8[], $5::float8[],
-                     $6::float8[], $7::float8[], $8::float8[])
-RETURNING id, robot_id"""
 
-_LASER_SCAN_SQL = f"""
-INSERT INTO {keys.LASER_SCAN} (robot_id, stamp, seq, angle_min, angle_increment,
-                               range_min, range_max, ranges)
-SELECT u.robot_id, u.stamp, u.seq, u.angle_min, u.angle_increment, u.range_min, u.range_max,
-       ($8::real[])[u.first:u.last]
-FROM unnest($1::text[], $2::float8[], $3::int8[], $4::float8[], $5::float8[], $6::float8[],
-            $7::float8[], $9::int4[], $10::int4[])
-     AS u(robot_id, stamp, seq, angle_min, angle_increment, range_min, range_max, first, last)
-RETURNING id, robot_id"""
-
-_BATTERY_SQL = f"""
-INSERT INTO {keys.BATTERY} (robot_id, stamp, energy_wh, capacity_wh, percentage, charging,
-                            power_w)
-SELECT * FROM unnest($1::text[], $2::float8[], $3::float8[], $4::float8[], $5::float8[],
-                     $6::bool[], $7::float8[])
-RETURNING id, robot_id"""
-
-# The same rows again with the ids they were given, after a Postgres crash may have lost them
-# (replay.py): the ids come last, so the arguments are the INSERT's plus one array.
-_ODOMETRY_REPLAY_SQL = f"""
-INSERT INTO {keys.ODOMETRY} (robot_id, stamp, seq, x, y, yaw, linear_mps, angular_rps, id)
-SELECT * FROM unnest($1::text[], $2::float8[], $3::int8[], $4::float8[], $5::float8[],
-                     $6::float8[], $7::float8[], $8::float8[], $9::int8[])
-ON CONFLICT (id) DO NOTHING
-RETURNING id"""
-
-_LASER_SCAN_REPLAY_SQL = f"""
-INSERT INTO {keys.LASER_SCAN} (robot_id, stamp, seq, angle_min, angle_increment,
-                               range_min, range_max, ranges, id)
-SELECT u.robot_id, u.stamp, u.seq, u.angle_min, u.angle_increment, u.range_min, u.range_max,
-       ($8::real[])[u.first:u.last], u.id
-FROM unnest($1::text[], $2::float8[], $3::int8[], $4::float8[], $5::float8[], $6::float8[],
-            $7::float8[], $9::int4[], $10::int4[], $11::int8[])
-     AS u(robot_id, stamp, seq, angle_min, angle_increment, range_min, range_max, first, last,
-          id)
-ON CONFLICT (id) DO NOTHING
-RETURNING id"""
-
-_BATTERY_REPLAY_SQL = f"""
-INSERT INTO {keys.BATTERY} (robot_id, stamp, energy_wh, capacity_wh, percentage, charging,
-                            power_w, id)
-SELECT * FROM unnest($1::text[], $2::float8[], $3::float8[], $4::float8[], $5::float8[],
-                     $6::bool[], $7::float8[], $8::int8[])
-ON CONFLICT (id) DO NOTHING
-RETURNING id"""
-
-# A resent event (CONTRACT.md, "Robot and sim") finds its row there and adds none; RETURNING
-# then gives fewer rows than the batch, and the writer sends no image (a plain hint).
-_COLLISION_SQL = f"""
-INSERT INTO {keys.COLLISION_EVENT} (robot_id, stamp, other, x, y, seq, run)
-SELECT * FROM unnest($1::text[], $2::float8[], $3::text[], $4::float8[], $5::float8[],
-                     $6::int8[], $7::text[])
-ON CONFLICT (robot_id, run, seq) DO NOTHING
-RETURNING id, robot_id"""
+def _float32s(record: Any) -> list[float]:
+    # real[]: each value rounded to float32 (round to nearest, as the driver and Postgres
+    # do), then widened back, so these are the very floats a SELECT returns
+    scan: LaserScan = record
+    return list(scan.values().astype(np.float32).tolist())
 
 
-def _odometry_args(rows: Sequence[Any]) -> list[Any]:
-    r: Sequence[Odometry] = rows
-    return [
-        [o.robot_id for o in r],
-        [o.stamp for o in r],
-        [o.seq for o in r],
-        [o.x for o in r],
-        [o.y for o in r],
-        [o.yaw for o in r],
-        [o.linear for o in r],
-        [o.angular for o in r],
-    ]
-
-
-def _odometry_image(record: Any) -> Image:
-    o: Odometry = record
-    return {
-        "robot_id": o.robot_id,
-        "stamp": o.stamp,
-        "seq": o.seq,
-        "x": o.x,
-        "y": o.y,
-        "yaw": o.yaw,
-        "linear_mps": o.linear,
-        "angular_rps": o.angular,
-    }
-
-
-def _laser_scan_args(rows: Sequence[Any]) -> list[Any]:
-    r: Sequence[LaserScan] = rows
-    flat: list[float] = []
-    first: list[int] = []
-    last: list[int] = []
-    for s in r:
-        first.append(len(flat) + 1)  # Postgres arrays are 1-based, slices inclusive
-        flat.extend(s.ranges)
-        last.append(len(flat))
-    return [
-        [s.robot_id for s in r],
-        [s.stamp for s in r],
-        [s.seq for s in r],
-        [s.angle_min for s in r],
-        [s.angle_increment for s in r],
-        [s.range_min for s in r],
-        [s.range_max for s in r],
-        flat,
-        first,
-        last,
-    ]
-
-
-def _laser_scan_image(record: Any) -> Image:
-    s: LaserScan = record
-    return {
-        "robot_id": s.robot_id,
-        "stamp": s.stamp,
-        "seq": s.seq,
-        "angle_min": s.angle_min,
-        "angle_increment": s.angle_increment,
-        "range_min": s.range_min,
-        "range_max": s.range_max,
-        # real[]: each value rounded to float32 (round to nearest, as the driver and Postgres
-        # do), then widened back, so these are the very floats a SELECT returns
-        "ranges": s.values().astype(np.float32).tolist(),
-    }
-
-
-def _battery_args(rows: Sequence[Any]) -> list[Any]:
-    r: Sequence[BatteryState] = rows
-    return [
-        [b.robot_id for b in r],
-        [b.stamp for b in r],
-        [b.energy_wh for b in r],
-        [b.capacity_wh for b in r],
-        [b.percentage for b in r],
-        [b.charging for b in r],
-        [b.power_w for b in r],
-    ]
-
-
-def _battery_image(record: Any) -> Image:
-    b: BatteryState = record
-    return {
-        "robot_id": b.robot_id,
-        "stamp": b.stamp,
-        "energy_wh": b.energy_wh,
-        "capacity_wh": b.capacity_wh,
-        "percentage": b.percentage,
-        "charging": b.charging,
-        "power_w": b.power_w,
-    }
-
-
-def _collision_args(rows: Sequence[Any]) -> list[Any]:
-    r: Sequence[Collision] = rows
-    return [
-        [c.robot_id for c in r],
-        [c.stamp for c in r],
-        [c.other for c in r],
-        [c.x for c in r],
-        [c.y for c in r],
-        [c.seq for c in r],
-        [c.run for c in r],
-    ]
-
-
-def _collision_image(record: Any) -> Image:
-    c: Collision = record
-    return {
-        "robot_id": c.robot_id,
-        "stamp": c.stamp,
-        "other": c.other,
-        "x": c.x,
-        "y": c.y,
-        "seq": c.seq,
-        "run": c.run,
-    }
+_ODOMETRY = Insert(
+    tables.ODOMETRY,
+    fields={"linear_mps": attrgetter("linear"), "angular_rps": attrgetter("angular")},
+)
+_LASER_SCAN = Insert(tables.LASER_SCAN, images={"ranges": _float32s})
+_BATTERY = Insert(tables.BATTERY)
+_COLLISION = Insert(tables.COLLISION_EVENT)
 
 
 @dataclass(frozen=True)
@@ -226,26 +66,30 @@ class SensorTable:
     replay_sql: str | None = None
 
 
+def _sensor_table(
+    insert: Insert, *, conflict: str = "", durable: bool = False, replay: bool = True
+) -> SensorTable:
+    return SensorTable(
+        insert.table.name,
+        insert.batch_sql(conflict=conflict),
+        insert.args,
+        insert.image,
+        durable=durable,
+        replay_sql=insert.replay_sql() if replay else None,
+    )
+
+
 SENSOR_TABLES: dict[type, SensorTable] = {
-    Odometry: SensorTable(
-        keys.ODOMETRY,
-        _ODOMETRY_SQL,
-        _odometry_args,
-        _odometry_image,
-        replay_sql=_ODOMETRY_REPLAY_SQL,
-    ),
-    LaserScan: SensorTable(
-        keys.LASER_SCAN,
-        _LASER_SCAN_SQL,
-        _laser_scan_args,
-        _laser_scan_image,
-        replay_sql=_LASER_SCAN_REPLAY_SQL,
-    ),
-    BatteryState: SensorTable(
-        keys.BATTERY, _BATTERY_SQL, _battery_args, _battery_image, replay_sql=_BATTERY_REPLAY_SQL
-    ),
-    Collision: SensorTable(
-        keys.COLLISION_EVENT, _COLLISION_SQL, _collision_args, _collision_image, durable=True
+    Odometry: _sensor_table(_ODOMETRY),
+    LaserScan: _sensor_table(_LASER_SCAN),
+    BatteryState: _sensor_table(_BATTERY),
+    # A resent event (CONTRACT.md, "Robot and sim") finds its row there and adds none;
+    # RETURNING then gives fewer rows than the batch, and the writer sends no image.
+    Collision: _sensor_table(
+        _COLLISION,
+        conflict="ON CONFLICT (robot_id, run, seq) DO NOTHING",
+        durable=True,
+        replay=False,
     ),
 }
 

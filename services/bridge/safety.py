@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from common.scan import beam_angles, readings
 from services.bridge.messages import LaserScan
 from services.bridge.zones import Cap, SpeedZones
 
@@ -49,9 +50,6 @@ FloatArray = npt.NDArray[np.float64]
 # Below this a reduced speed is a stop: creeping at 1 cm/s reaches nothing and only wears the
 # wheels (the controllers use the same threshold for "not translating").
 MIN_MPS = 0.01
-# ranges travel as float32: 0.12 m (range_min, where the sim reports anything closer) reads
-# back as 0.1199999..., a real obstacle, not an invalid beam
-_RANGE_TOLERANCE_M = 1e-4
 
 CLEAR = "clear"
 LIMITED = "limited"
@@ -103,9 +101,9 @@ class Scan:
         if self._xy is None:
             record = self._record
             ranges = record.values()
-            angles = record.angle_min + record.angle_increment * np.arange(len(ranges))
-            # inf is "nothing in range"; below range_min a beam carries no information (ROS)
-            valid = np.isfinite(ranges) & (ranges >= record.range_min - _RANGE_TOLERANCE_M)
+            angles = beam_angles(record.angle_min, record.angle_increment, len(ranges))
+            # inf is "nothing in range" (common.scan.readings says which beams read)
+            valid = np.isfinite(ranges) & readings(ranges, record.range_min)
             r, a = ranges[valid], angles[valid]
             self._xy = (r * np.cos(a), r * np.sin(a))
         return self._xy

@@ -32,10 +32,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
+from common.contract.limits import clamp
 from common.contract.records import LaserScan, Odometry, Robot
 from common.controller_core.params import number
 from common.controller_core.scenario import Command, ControllerScenario
-from services.controller.sectors import Hit, ScanView, Sector, clamp, deg, describe_sector
+from services.controller.sectors import Hit, ScanView, Sector, deg, describe_sector
 
 LEFT, RIGHT = 1, -1
 

@@ -33,10 +33,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from common.contract.limits import clamp
 from common.contract.records import LaserScan, Odometry, Robot
 from common.controller_core.params import number
 from common.controller_core.scenario import Command, ControllerScenario
-from services.controller.sectors import ScanView, clamp, deg
+from services.controller.sectors import ScanView, deg
 
 MOVING_MPS = 0.01  # below this the robot is not translating (odometry noise, creeping)
 # How far the freer side is judged: where the robot can go once it has turned.

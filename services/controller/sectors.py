@@ -23,13 +23,11 @@ import numpy as np
 import numpy.typing as npt
 
 from common.contract.records import LaserScan
+from common.scan import readings
 
 FloatArray = npt.NDArray[np.float64]
 Sector = tuple[float, float]
 
-# Ranges are stored as float32: 0.12 m (the sensor's range_min, where the sim reports anything
-# closer) reads back as 0.1199999..., which is a real obstacle, not an invalid beam.
-_RANGE_TOLERANCE_M = 1e-5
 # Two clearances closer than this are a tie: the lidar's noise (sigma 0.01 m) must not flip
 # the turn direction from one scan to the next in front of a symmetric obstacle.
 TIE_M = 0.03
@@ -122,7 +120,7 @@ class ScanView:
         ranges = np.asarray(scan.ranges, dtype=np.float64)
         # Below range_min (or NaN) a beam carries no information: it counts as free space;
         # inf already means "nothing within range_max".
-        valid = ranges >= scan.range_min - _RANGE_TOLERANCE_M
+        valid = readings(ranges, scan.range_min)
         self.ranges: FloatArray = np.where(valid, ranges, np.inf)
         self._geometry = _geometry(scan)
         self.angles: FloatArray = self._geometry.angles
@@ -227,7 +225,3 @@ class ScanView:
 
 def describe_sector(sector: Sector) -> str:
     return f"[{math.degrees(sector[0]):+.0f}, {math.degrees(sector[1]):+.0f}] deg"
-
-
-def clamp(value: float, limit: float) -> float:
-    return max(-limit, min(limit, value))

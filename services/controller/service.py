@@ -18,7 +18,8 @@ from common.controller_core.scenario import installed_scenarios
 from common.runtime import Runtime
 from common.service import ScenarioService
 from services.controller.meta import seed_controller
-from services.controller.store import ControllerStore, PgControllerSource
+from services.controller.source import PgControllerSource
+from services.controller.store import ControllerStore
 
 logger = logging.getLogger("pnav.controller")
 

@@ -1,8 +1,9 @@
-"""Every read and write of the contract the controller does, and what it keeps of them.
+"""What the controller keeps of its reads and writes of the contract: its store.
 
-- :class:`ControllerSource`: the raw typed reads and the one write, as a Protocol;
-- :class:`PgControllerSource`: them in Postgres (through ``common.contract.records``);
-  pnav/monolith/controller.py has them in memory;
+- :class:`~services.controller.source.ControllerSource`: the raw typed reads and the one
+  write, as a Protocol, and :class:`~services.controller.source.PgControllerSource`, them in
+  Postgres (services/controller/source.py; re-exported here); pnav/monolith/controller.py
+  has them in memory;
 - :class:`ControllerStore`: the one object the service holds. It implements the rules'
   :class:`~common.controller_core.scenario.Host`, keeps the caches, and learns from the
   change notifications (:meth:`ControllerStore.note`, on the event loop) when to read again
@@ -18,9 +19,10 @@ heard for ``recheck_s`` (the scan cache's period, as without images).
 
 A people's lock (CONTRACT.md, *Roles*): the people's role may UPDATE, so lock, ``strategy``,
 which the meta-controller reads with the robots. That read waits behind a lock for
-:data:`STRATEGY_LOCK_WAIT_MS` at most (the service's other statements: its ``lock_timeout``,
-common.db.lock_settings); the store then serves the robots and strategies it read before,
-and reads them again in the background, never in an activation, until a read gets through:
+:data:`~services.controller.source.STRATEGY_LOCK_WAIT_MS` at most (the service's other
+statements: its ``lock_timeout``, common.db.lock_settings); the store then serves the robots
+and strategies it read before, and reads them again in the background, never in an
+activation, until a read gets through:
 safety_stop, which reads scans and odometry only, waits behind a lock once, that long.
 
 Batching across robots (docs/ARCHITECTURE.md): the odometry query asks, in the same round
@@ -35,27 +37,27 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import Awaitable, Callable, Iterable, Sequence
-from typing import Protocol
+from collections.abc import Awaitable, Callable, Iterable
 
 import asyncpg
 
 from common import log
 from common.bus import Notification
 from common.contract import keys, records
-from common.contract.planned_path import PlannedPath, newest_planned_path, planned_path_of
+from common.contract.planned_path import PlannedPath, planned_path_of
 from common.contract.recommendations import (
     Recommendation,
     recommendation_key,
-    write_recommendation,
-    write_recommendations,
 )
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
 from common.controller_core.scenario import Key
-from common.db import Database
-from common.freshness import FreshCache, Sequences
+from common.freshness import FreshCache
 from common.images import ImageGuard
 from common.writebehind import WriteBehind
+from services.controller.source import (
+    ControllerSource,
+    ScanAndOdometry,
+)
 
 logger = logging.getLogger("pnav.controller")
 
@@ -64,78 +66,11 @@ logger = logging.getLogger("pnav.controller")
 RECHECK_S = 0.25
 ODOMETRY_LISTENS = frozenset((keys.ODOMETRY,))  # see ControllerStore.listens
 
-ScanAndOdometry = tuple[LaserScan | None, Odometry | None]
 Tables = tuple[list[Robot], dict[str, ActiveStrategy]]
 
 _META = "robots and strategies"  # the one key of the meta cache: read together, stale together
 _META_TABLES = frozenset((keys.ACTIVE_STRATEGY, keys.STRATEGY, keys.ROBOT))
-# how long a read of the strategies waits behind a lock before the ones held serve
-STRATEGY_LOCK_WAIT_MS = 10
 LOCKED_LOG_S = 10.0  # a lock on the meta tables is logged at most this often (wall time)
-
-
-class ControllerSource(Protocol):
-    """The contract as the controller reads and writes it."""
-
-    async def robots(self) -> list[Robot]: ...
-
-    async def active_strategies(self) -> dict[str, ActiveStrategy]: ...
-
-    async def newest_scan_and_odometry(self, robot_id: str) -> ScanAndOdometry:
-        """The robot's newest scan and newest odometry in one round trip (odometry is None
-        when there is no scan yet, or no odometry)."""
-
-    async def newest_odometry(self, robot_id: str) -> Odometry | None: ...
-
-    async def newest_odometries(self, robot_ids: Sequence[str]) -> dict[str, Odometry | None]:
-        """Each robot's newest odometry (None: none yet), in one round trip."""
-
-    async def newest_planned_path(self, robot_id: str) -> PlannedPath | None:
-        """The path in force for the robot (the planner's newest planned_path row)."""
-
-    async def recommend(self, recommendation: Recommendation) -> int:
-        """Write a command_recommendation row (notified after commit); its id."""
-
-    async def recommend_many(self, recommendations: Sequence[Recommendation]) -> list[int | None]:
-        """Write rows of distinct (robot, source) in one commit, each notified after it;
-        their ids in order (None: refused)."""
-
-
-class PgControllerSource:
-    """:class:`ControllerSource` in Postgres."""
-
-    def __init__(self, db: Database) -> None:
-        self.db = db
-
-    async def robots(self) -> list[Robot]:
-        return await records.robots(self.db)
-
-    async def active_strategies(self) -> dict[str, ActiveStrategy]:
-        # strategy is the one table read here that people may lock (CONTRACT.md, *Roles*):
-        # a plain read waits only behind ACCESS EXCLUSIVE, which no service takes while the
-        # stack runs, so it may give up long before the pool's lock_timeout, and the
-        # activation it runs in (safety_stop's too) barely waits
-        async with self.db.pool.acquire() as conn, conn.transaction(readonly=True):
-            await conn.execute(f"SET LOCAL lock_timeout = '{STRATEGY_LOCK_WAIT_MS}ms'")
-            return await records.active_strategies(conn)
-
-    async def newest_scan_and_odometry(self, robot_id: str) -> ScanAndOdometry:
-        return await records.newest_scan_and_odometry(self.db, robot_id)
-
-    async def newest_odometry(self, robot_id: str) -> Odometry | None:
-        return await records.newest_odometry(self.db, robot_id)
-
-    async def newest_odometries(self, robot_ids: Sequence[str]) -> dict[str, Odometry | None]:
-        return await records.newest_odometries(self.db, robot_ids)
-
-    async def newest_planned_path(self, robot_id: str) -> PlannedPath | None:
-        return await newest_planned_path(self.db, robot_id)
-
-    async def recommend(self, recommendation: Recommendation) -> int:
-        return await write_recommendation(self.db, recommendation)
-
-    async def recommend_many(self, recommendations: Sequence[Recommendation]) -> list[int | None]:
-        return await write_recommendations(self.db, recommendations)
 
 
 def _scan_id(pair: ScanAndOdometry) -> int | None:
@@ -199,7 +134,6 @@ class ControllerStore:
         # per robot: the newest odometry image and the store clock when it came (None: the
         # last one is unusable, a gap or no image: read the table)
         self._odometry_images: dict[str, tuple[Odometry, float] | None] = {}
-        self._seqs = Sequences()
         # images held to their table's rules before they stand in for a query
         self.images = ImageGuard(logger)
         # images that stood in for a query (tests, benchmarks)
@@ -218,8 +152,8 @@ class ControllerStore:
 
     @property
     def notifications_lost(self) -> int:
-        """Notifications known lost on the way here (common.freshness.Sequences)."""
-        return self._seqs.lost
+        """Notifications known lost on the way here (seq gaps: common.images.ImageGuard.gap)."""
+        return self.images.lost
 
     @property
     def images_refused(self) -> dict[str, int]:
@@ -248,8 +182,7 @@ class ControllerStore:
     def _usable(self, note: Notification) -> bool:
         """Whether ``note``'s image may stand in for the query (CONTRACT.md "Row images");
         records the seq either way."""
-        gap = self._seqs.gap(f"{note.table}/{note.robot}", note.src, note.seq)
-        return note.row is not None and not gap
+        return not self.images.gap(note) and note.row is not None
 
     def _odometry_image(self, robot_id: str, note: Notification) -> None:
         odometry = self.images.record(note, records.odometry_of) if self._usable(note) else None

@@ -2,15 +2,20 @@
 
 The decision service knows no scenario by name: it compares ``priority`` among the live
 (unexpired) recommendations of one robot and one kind; ties go to the newest row (highest
-id). A new scenario family is obeyed the moment it writes a row with a priority.
+id). A new scenario family is obeyed the moment it writes a row with a priority. A live row
+is the contract's :class:`~common.contract.recommendations.Recommendation` (with its ``id``
+and ``treated_by``), as every writer wrote it.
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Final
+
+from common.contract import tables
+from common.contract.inserts import Insert
+from common.contract.recommendations import Recommendation
 
 # Re-issue the current winner at least this often (sim s), so the bridge's 0.5 s watchdog
 # never stops a robot that has a live recommendation.
@@ -20,40 +25,9 @@ _EPS: Final = 1e-9
 
 NO_LIVE_RECOMMENDATION: Final = "no live recommendation"
 
-
-@dataclass(frozen=True)
-class Recommendation:
-    """A live command_recommendation row, as far as arbitration cares."""
-
-    id: int
-    robot_id: str
-    kind: str
-    source: str
-    priority: int
-    linear_mps: float | None
-    angular_rps: float | None
-    system_command: str | None
-    reason: str
-    treated_by: int | None
-    # when it stops being live (sim s): the decision's store drops it then
-    expires_stamp: float = math.inf
-
-    @classmethod
-    def of_row(cls, row: Mapping[str, Any]) -> Recommendation:
-        """From a command_recommendation row (a query's record, or an in-memory row)."""
-        return cls(
-            id=row["id"],
-            robot_id=row["robot_id"],
-            kind=row["kind"],
-            source=row["source"],
-            priority=row["priority"],
-            linear_mps=row["linear_mps"],
-            angular_rps=row["angular_rps"],
-            system_command=row["system_command"],
-            reason=row["reason"],
-            treated_by=row["treated_by"],
-            expires_stamp=row["expires_stamp"],
-        )
+# command2robot's INSERT, arguments and image, from its declaration: RobotDecision's fields
+# are the columns' names
+COMMAND2ROBOT: Final = Insert(tables.COMMAND2ROBOT)
 
 
 @dataclass(frozen=True)
@@ -82,17 +56,9 @@ class RobotDecision:
     reason: str
 
     def image(self) -> dict[str, Any]:
-        """The command2robot row's image: its columns as written (CONTRACT.md "Row images")."""
-        return {
-            "robot_id": self.robot_id,
-            "stamp": self.stamp,
-            "linear_mps": self.linear_mps,
-            "angular_rps": self.angular_rps,
-            "recommendation_id": self.recommendation_id,
-            "source": self.source,
-            "considered_ids": list(self.considered_ids),
-            "reason": self.reason,
-        }
+        """The command2robot row's image: its columns as written (CONTRACT.md "Row images"),
+        as its declaration lists them (its fields are the columns' names)."""
+        return COMMAND2ROBOT.image(self)
 
 
 @dataclass(frozen=True)

@@ -20,30 +20,10 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from dataclasses import replace
-from typing import Any
 
-from services.decision.arbitration import Recommendation
+from common.contract.recommendations import Recommendation
 
 KINDS = frozenset(("robot", "system"))
-
-
-def recommendation_of(image: Mapping[str, Any]) -> Recommendation:
-    """The :class:`Recommendation` of a command_recommendation row's image (what LIVE_SQL
-    reads of the row; ``treated_by`` is NULL in a row just written)."""
-    linear, angular = image.get("linear_mps"), image.get("angular_rps")
-    return Recommendation(
-        id=int(image["id"]),
-        robot_id=str(image["robot_id"]),
-        kind=str(image["kind"]),
-        source=str(image["source"]),
-        priority=int(image["priority"]),
-        linear_mps=None if linear is None else float(linear),
-        angular_rps=None if angular is None else float(angular),
-        system_command=image.get("system_command"),
-        reason=str(image.get("reason", "")),
-        treated_by=image.get("treated_by"),
-        expires_stamp=float(image["expires_stamp"]),
-    )
 
 
 class LiveRecommendations:

@@ -28,9 +28,9 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 
 from common.contract import keys
+from common.contract.recommendations import Recommendation
 from common.engine import Engine, Rule
 from services.decision.arbitration import (
-    Recommendation,
     RobotDecision,
     decide_robot,
     decide_system,

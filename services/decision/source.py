@@ -22,8 +22,9 @@ from typing import Any, Final, Protocol
 import asyncpg
 
 from common.contract import keys
+from common.contract.recommendations import Recommendation
 from common.db import Database
-from services.decision.arbitration import Issued, Recommendation, RobotDecision, SystemDecision
+from services.decision.arbitration import COMMAND2ROBOT, Issued, RobotDecision, SystemDecision
 
 logger = logging.getLogger("pnav.decision")
 
@@ -34,11 +35,11 @@ logger = logging.getLogger("pnav.decision")
 # 20 ms for 200k rows against 0.1 ms this way).
 LIVE_SQL: Final = """
 SELECT r.robot_id, c.id, c.kind, c.source, c.priority, c.linear_mps, c.angular_rps,
-       c.system_command, c.reason, c.treated_by, c.expires_stamp
+       c.system_command, c.stamp, c.expires_stamp, c.inputs, c.reason, c.treated_by
 FROM robot r
 LEFT JOIN LATERAL (
-    SELECT id, kind, source, priority, linear_mps, angular_rps, system_command, reason,
-           treated_by, expires_stamp
+    SELECT id, kind, source, priority, linear_mps, angular_rps, system_command, stamp,
+           expires_stamp, inputs, reason, treated_by
     FROM command_recommendation c
     WHERE c.robot_id = r.robot_id AND c.kind IN ('robot', 'system') AND c.expires_stamp > $1
     OFFSET 0
@@ -54,15 +55,12 @@ CROSS JOIN LATERAL (
 ) c
 """
 
-WRITE_COMMAND2ROBOT_SQL: Final = """
+WRITE_COMMAND2ROBOT_SQL: Final = f"""
 WITH decision AS (
-    INSERT INTO command2robot (robot_id, stamp, linear_mps, angular_rps, recommendation_id,
-                               source, considered_ids, reason)
-    VALUES ($1, $2, $3, $4, $5, $6, $7::bigint[], $8)
-    RETURNING id
+{COMMAND2ROBOT.values_sql()}
 ), treated AS (
     UPDATE command_recommendation SET treated_by = decision.id
-    FROM decision WHERE command_recommendation.id = ANY($7::bigint[])
+    FROM decision WHERE command_recommendation.id = ANY({COMMAND2ROBOT.param("considered_ids")})
 )
 SELECT id FROM decision
 """
@@ -115,14 +113,7 @@ async def write_robot_command(db: Database, d: RobotDecision) -> int:
         keys.COMMAND2ROBOT,
         d.robot_id,
         WRITE_COMMAND2ROBOT_SQL,
-        d.robot_id,
-        d.stamp,
-        d.linear_mps,
-        d.angular_rps,
-        d.recommendation_id,
-        d.source,
-        list(d.considered_ids),
-        d.reason,
+        *COMMAND2ROBOT.values(d),
         image=d.image(),
     )
     return int(value)
@@ -132,17 +123,9 @@ async def write_robot_command(db: Database, d: RobotDecision) -> int:
 # each row's considered ids are its slice of one flat bigint[] (Postgres arrays cannot hold
 # rows of arrays of different lengths), and each considered recommendation is marked treated
 # by the command that considered it. RETURNING pairs every new id with its robot.
-WRITE_COMMANDS2ROBOT_SQL: Final = """
+WRITE_COMMANDS2ROBOT_SQL: Final = f"""
 WITH decision AS (
-    INSERT INTO command2robot (robot_id, stamp, linear_mps, angular_rps, recommendation_id,
-                               source, considered_ids, reason)
-    SELECT u.robot_id, u.stamp, u.linear_mps, u.angular_rps, u.recommendation_id, u.source,
-           ($7::bigint[])[u.first:u.last], u.reason
-    FROM unnest($1::text[], $2::float8[], $3::float8[], $4::float8[], $5::int8[], $6::text[],
-                $8::text[], $9::int4[], $10::int4[])
-         AS u(robot_id, stamp, linear_mps, angular_rps, recommendation_id, source, reason,
-              first, last)
-    RETURNING id, robot_id, considered_ids
+{COMMAND2ROBOT.batch_sql(returning="id, robot_id, considered_ids")}
 ), treated AS (
     UPDATE command_recommendation SET treated_by = decision.id
     FROM decision WHERE command_recommendation.id = ANY(decision.considered_ids)
@@ -157,25 +140,7 @@ _REFUSED = (asyncpg.IntegrityConstraintViolationError, asyncpg.DataError)
 
 def commands_args(ds: Sequence[RobotDecision]) -> list[Any]:
     """The column arrays of :data:`WRITE_COMMANDS2ROBOT_SQL` for ``ds``."""
-    flat: list[int] = []
-    first: list[int] = []
-    last: list[int] = []
-    for d in ds:
-        first.append(len(flat) + 1)  # Postgres arrays are 1-based, slices inclusive
-        flat.extend(d.considered_ids)
-        last.append(len(flat))
-    return [
-        [d.robot_id for d in ds],
-        [d.stamp for d in ds],
-        [d.linear_mps for d in ds],
-        [d.angular_rps for d in ds],
-        [d.recommendation_id for d in ds],
-        [d.source for d in ds],
-        flat,
-        [d.reason for d in ds],
-        first,
-        last,
-    ]
+    return COMMAND2ROBOT.args(ds)
 
 
 async def write_robot_commands(db: Database, ds: Sequence[RobotDecision]) -> list[int | None]:

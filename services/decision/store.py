@@ -28,16 +28,16 @@ from typing import Final
 from common import log
 from common.bus import Notification
 from common.contract import keys
+from common.contract.recommendations import Recommendation
 from common.freshness import Sequences
 from common.images import ImageGuard
 from services.decision.arbitration import (
     Issued,
-    Recommendation,
     RobotDecision,
     SystemDecision,
     reissue_due,
 )
-from services.decision.live import LiveRecommendations, recommendation_of
+from services.decision.live import LiveRecommendations
 from services.decision.source import DecisionSource, PgDecisionSource
 
 __all__ = ["REREAD_S", "DecisionSource", "DecisionStore", "PgDecisionSource"]
@@ -93,7 +93,6 @@ class DecisionStore:
         self._live = LiveRecommendations()
         self._stale = True  # read the table at the next look
         self._read_at = -math.inf  # sim time of the last read of the table
-        self._seqs = Sequences()
         # images held to the table's rules (the safety band...) before they count as live
         self.images = ImageGuard(logger)
         self.reads = 0  # reads of the live recommendations (tests, benchmarks)
@@ -101,12 +100,12 @@ class DecisionStore:
     @property
     def sequences(self) -> Sequences:
         """The numbering seen per publisher and robot (tests)."""
-        return self._seqs
+        return self.images.sequences
 
     @property
     def notifications_lost(self) -> int:
-        """Notifications known lost on the way here (common.freshness.Sequences)."""
-        return self._seqs.lost
+        """Notifications known lost on the way here (seq gaps: common.images.ImageGuard.gap)."""
+        return self.images.lost
 
     @property
     def images_refused(self) -> dict[str, int]:
@@ -172,13 +171,13 @@ class DecisionStore:
             if note.table in (keys.ROBOT, ""):
                 self._stale = True  # a robot came or went (or an unreadable hint)
             return
-        gap = self._seqs.gap(f"{note.table}/{note.robot}", note.src, note.seq)
-        if note.row is None or gap or note.robot is None:
+        # no image, one after a lost notification, or one the table would refuse (a forward
+        # command in the safety band, another robot's row, a NaN stamp...): the table says
+        if note.robot is None:
+            self.images.gap(note)  # numbered all the same
             self._stale = True
             return
-        # an image the table would refuse (a forward command in the safety band, another
-        # robot's row, a NaN stamp...) is not a row: counted, and the table says
-        rec = self.images.record(note, recommendation_of)
+        rec = self.images.fresh(note, Recommendation.of_row)
         if rec is None:
             self._stale = True
             return

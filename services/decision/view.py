@@ -10,7 +10,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Protocol
 
-from services.decision.arbitration import Issued, Recommendation, RobotDecision, SystemDecision
+from common.contract.recommendations import Recommendation
+from services.decision.arbitration import Issued, RobotDecision, SystemDecision
 
 
 class DecisionView(Protocol):

@@ -37,7 +37,7 @@ from common.bus import Notification
 from common.contract import keys, records
 from common.contract.offers import Offers
 from common.contract.recommendations import Recommendation, recommendation_key
-from common.freshness import FreshCache, Sequences
+from common.freshness import FreshCache
 from common.images import ImageGuard
 from common.planner_core.scenario import RobotInfo
 from common.writebehind import WriteBehind
@@ -96,7 +96,6 @@ class PlannerStore:
         # newest notification could not stand in for the table)
         self._odometry: dict[str, tuple[records.Odometry, float] | None] = {}
         self._battery: dict[str, tuple[records.Battery, float] | None] = {}  # the same
-        self._seqs = Sequences()
         # images held to their table's rules before they stand in for a query
         self.images = ImageGuard(logger)
         # velocity recommendations held until the activation ends (defer_recommendations);
@@ -107,8 +106,8 @@ class PlannerStore:
 
     @property
     def notifications_lost(self) -> int:
-        """Notifications known lost on the way here (common.freshness.Sequences)."""
-        return self._seqs.lost
+        """Notifications known lost on the way here (seq gaps: common.images.ImageGuard.gap)."""
+        return self.images.lost
 
     @property
     def images_refused(self) -> dict[str, int]:
@@ -162,9 +161,9 @@ class PlannerStore:
     ) -> None:
         """Keep ``note``'s image as the robot's newest row of its table in ``held`` (with the
         store clock when it came), or None when it cannot stand in for the table."""
-        gap = self._seqs.gap(f"{note.table}/{robot_id}", note.src, note.seq)
-        # no image, or one the table's rules refuse (or that does not parse): read the table
-        row = None if gap else self.images.record(note, parse)
+        # a lost notification before it, no image, or one the table's rules refuse (or that
+        # does not parse): read the table
+        row = self.images.fresh(note, parse)
         if row is None:
             held[robot_id] = None
             return

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import math
+
+from common.contract.recommendations import Recommendation
 from services.decision.arbitration import (
     NO_LIVE_RECOMMENDATION,
     Issued,
-    Recommendation,
     decide_robot,
     decide_system,
     explain,
@@ -25,8 +27,9 @@ def rec(
     treated_by: int | None = None,
 ) -> Recommendation:
     return Recommendation(
-        rid, "r1", kind, source, priority, linear, angular, command, reason, treated_by
-    )
+        "r1", kind, source, priority, linear, angular, command, 0.0, math.inf, {}, reason,
+        id=rid, treated_by=treated_by,
+    )  # fmt: skip
 
 
 def test_highest_priority_then_newest() -> None:

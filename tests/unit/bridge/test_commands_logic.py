@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from common.contract.limits import clamp
 from common.errors import ConfigError
-from services.bridge.commands import clamp
 from services.bridge.counters import Counters, RateLimitedLog
 from services.bridge.settings import BridgeSettings
 from services.bridge.watchdog import Watchdog
