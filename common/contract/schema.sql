@@ -717,3 +717,38 @@ CREATE POLICY scenario_offer_insert ON scenario_offer FOR INSERT WITH CHECK (wri
 CREATE POLICY scenario_offer_update ON scenario_offer FOR UPDATE
     USING (writes_as(service)) WITH CHECK (writes_as(service));
 CREATE POLICY scenario_offer_delete ON scenario_offer FOR DELETE USING (writes_as(service));
+
+-- migration 13: reserved (goal poses and routes, merged from its own branch)
+--
+-- Kept empty here so that the numbering runs on to 17; the branch that owns 13 replaces this
+-- section when the two are merged.
+SELECT 1;
+
+-- migration 14: reserved (keepout and speed zones, merged from its own branch)
+--
+-- Kept empty here so that the numbering runs on to 17; the branch that owns 14 replaces this
+-- section when the two are merged.
+SELECT 1;
+
+-- migration 15: reserved (polygon footprints, merged from its own branch)
+--
+-- Kept empty here so that the numbering runs on to 17; the branch that owns 15 replaces this
+-- section when the two are merged.
+SELECT 1;
+
+-- migration 16: reserved (merged from its own branch)
+--
+-- Kept empty here so that the numbering runs on to 17; the branch that owns 16 replaces this
+-- section when the two are merged.
+SELECT 1;
+
+-- migration 17: GOTO_DODGE, GOTO_FAST keeping out of moving obstacles' way
+--
+-- GOTO_FAST (migration 8) with the dodge controller scenario (docs/CONTROLLER.md, "dodge"):
+-- it follows the objects of the robot's scans from scan to scan and, when one that moves is
+-- predicted to meet the robot within 2 s, recommends the evasive motion (yield, step out of
+-- its way) at priority 90, above dwa and recovery; safety_stop keeps the last word.
+INSERT INTO strategy (code, planner_scenario, controller_scenarios, params, description) VALUES
+    ('GOTO_DODGE', 'turn_then_move', '{dwa,dodge,safety_stop}',
+     '{"target": "goal", "planner_drives": false, "recovery": true, "battery_wh_per_m": 0.006, "battery_reserve_wh": 0.05}',
+     'go to the goal at the robot''s speed, keeping out of moving obstacles'' way: dwa along the planned path, dodge, recovery when stuck, safety_stop');
