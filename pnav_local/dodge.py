@@ -97,7 +97,7 @@ def decide_for(tracker: Tracker, scan: LaserScan, odom: Odometry, robot: Robot) 
     if math.isinf(threat.ttc):
         return None
     points, behind = static_hits(scan, tracker)
-    choice = threats.best(threats.motions(v0, w0, robot, movers, points, behind))
+    choice = threats.choose(v0, w0, robot, movers, points, behind)
     mover = next(m for m in movers if m.track == threat.mover)
     if abs(v0) < STANDING_MPS:
         act = "step out of its way" if choice.v != 0.0 else "stand"

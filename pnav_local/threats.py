@@ -57,7 +57,6 @@ class Motion:
     w: float
     ttc: float  # first predicted contact with a mover, s (inf: none within the horizon)
     mover: int | None  # the track it meets first
-    static_ok: bool
 
 
 def rollout(v0: float, w0: float, v: float, w: float, robot: Robot) -> FloatArray:
@@ -123,32 +122,49 @@ def clear_of_static(poses: FloatArray, points: FloatArray, footprint_m: float) -
     (a robot already that close may move if it gets no closer)."""
     if len(points) == 0:
         return True
-    now = float(np.hypot(points[:, 0], points[:, 1]).min())
+    dist = np.hypot(points[:, 0], points[:, 1])
+    now = float(dist.min())
     limit = min(footprint_m + STATIC_MARGIN_M, now - 0.005)
+    # only what the poses can come near matters
+    points = points[dist <= float(np.hypot(poses[:, 0], poses[:, 1]).max()) + limit]
+    if len(points) == 0:
+        return True
     d = np.hypot(poses[:, 0:1] - points[None, :, 0], poses[:, 1:2] - points[None, :, 1])
     return bool(d.min() >= limit)
 
 
-def motions(
+def choose(
     v0: float,
     w0: float,
     robot: Robot,
     movers: list[Mover],
     points: FloatArray,
     sees_behind: bool,
-) -> list[Motion]:
-    """Every evasive motion judged, in a fixed order (fastest forward first)."""
+) -> Motion:
+    """The evasive motion to recommend. Of the motions that meet no mover within the
+    horizon, the straightest (a swerve leaves the path; slowing on it does not), then the
+    fastest forward; if every one meets a mover, the one meeting it latest (then the
+    straighter, then the faster). A motion other than the stop must keep clear of the
+    static hits: tested in that order of preference until one does (the stop always does),
+    so a decision seldom tests more than a few."""
     top, wmax = robot.max_linear_mps, robot.max_angular_rps
     speeds = [s * top for s in SPEEDS] + ([-BACK_SHARE * top] if sees_behind else [])
-    turns = [s * wmax for s in TURNS]
-    out = []
+    judged: list[tuple[Motion, FloatArray]] = []
     for v in speeds:
-        for w in turns if v != 0.0 else [0.0]:
+        for w in [s * wmax for s in TURNS] if v != 0.0 else [0.0]:
             poses = rollout(v0, w0, v, w, robot)
             t, k = ttc(poses, movers, robot.footprint_radius_m)
-            ok = v == 0.0 or clear_of_static(poses, points, robot.footprint_radius_m)
-            out.append(Motion(v, w, t, k, ok))
-    return out
+            judged.append((Motion(v, w, t, k), poses))
+    safe = [mp for mp in judged if math.isinf(mp[0].ttc)]
+    if safe:
+        order = sorted(safe, key=lambda mp: (-abs(mp[0].w), mp[0].v), reverse=True)
+    else:
+        order = sorted(judged, key=lambda mp: (mp[0].ttc, -abs(mp[0].w), mp[0].v), reverse=True)
+    for motion, poses in order:
+        if motion.v == 0.0 or clear_of_static(poses, points, robot.footprint_radius_m):
+            return motion
+    stop = next(m for m, _ in judged if m.v == 0.0)
+    return stop
 
 
 def expected(v0: float, w0: float, robot: Robot, movers: list[Mover]) -> Motion:
@@ -159,18 +175,6 @@ def expected(v0: float, w0: float, robot: Robot, movers: list[Mover]) -> Motion:
     for v in (v0, robot.max_linear_mps if v0 >= -0.01 else v0):
         t, k = ttc(rollout(v0, w0, v, w0, robot), movers, robot.footprint_radius_m)
         if worst is None or t < worst.ttc:
-            worst = Motion(v, w0, t, k, True)
+            worst = Motion(v, w0, t, k)
     assert worst is not None
     return worst
-
-
-def best(options: list[Motion]) -> Motion:
-    """The motion to recommend: of those that meet no mover within the horizon and keep
-    clear of the static hits, the straightest (a swerve leaves the path; slowing on it does
-    not), then the fastest forward; if every one meets a mover, the one meeting it latest
-    (then the straighter, then the faster)."""
-    allowed = [m for m in options if m.static_ok]
-    safe = [m for m in allowed if math.isinf(m.ttc)]
-    if safe:
-        return max(safe, key=lambda m: (-abs(m.w), m.v))
-    return max(allowed, key=lambda m: (m.ttc, -abs(m.w), m.v))
