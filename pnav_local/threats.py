@@ -30,11 +30,11 @@ HORIZON_S = 2.0
 STEPS = 20
 DELAY_S = 0.05  # scan to wheels: the robot keeps its velocity meanwhile
 MARGIN_M = 0.15  # kept beyond the two discs at once...
-MARGIN_MPS = 0.1  # ...plus this for each second ahead (the prediction's growing error)
+MARGIN_MPS = 0.05  # ...plus this for each second ahead (the prediction's growing error)
 STATIC_MARGIN_M = 0.02
 MAX_STATIC = 1024
 GRID_M = 0.04
-SPEEDS = (1.0, 0.75, 0.5, 0.25, 0.0)  # shares of the top speed
+SPEEDS = (1.0, 0.85, 0.7, 0.55, 0.4, 0.25, 0.1, 0.0)  # shares of the top speed
 TURNS = (0.0, 0.5, -0.5)  # shares of the top turn rate, and the measured one
 BACK_SHARE = 0.4  # backing out, where the lidar sees behind
 
@@ -82,7 +82,7 @@ def rollout(v0: float, w0: float, v: float, w: float, robot: Robot) -> FloatArra
 
 
 def times() -> FloatArray:
-    return np.arange(1, STEPS + 1) * (HORIZON_S / STEPS)
+    return np.asarray(np.arange(1, STEPS + 1) * (HORIZON_S / STEPS), dtype=np.float64)
 
 
 def ttc(poses: FloatArray, movers: list[Mover], footprint_m: float) -> tuple[float, int | None]:

@@ -7,12 +7,13 @@ and stays silent among static clutter."""
 from __future__ import annotations
 
 import math
+from typing import cast
 
 import pytest
 
 from common.contract.records import Odometry
-from common.controller_core.scenario import Command, installed_scenarios
-from pnav_local import threats
+from common.controller_core.scenario import Command, Host, ScenarioSpec, installed_scenarios
+from common.engine.supervisor import Ticket
 from pnav_local.dodge import Dodge, decide_for
 from pnav_local.tracks import MAX_TRACKS, Tracker
 from tests.unit.local.scene import JACKAL, Disc, Segment, box, scan_at
@@ -31,6 +32,7 @@ def drive(
     speed: float,
     ticks: int,
     obey: bool = False,
+    period: float = PERIOD,
 ) -> list[tuple[float, Command | None, float]]:
     """``ticks`` scans of a robot heading north from ``start``: at ``speed`` throughout, or,
     with ``obey``, at dodge's command whenever it gives one (reached at once: the Jackal's
@@ -39,7 +41,7 @@ def drive(
     v = speed
     out = []
     for i in range(ticks):
-        t = i * PERIOD
+        t = i * period
         pose = (x, y, NORTH)
         scan = scan_at(pose, discs, walls, t, i + 1)
         odom = Odometry(i + 1, "r1", t, x, y, NORTH, v, 0.0)
@@ -47,7 +49,7 @@ def drive(
         out.append((t, command, v))
         if obey and command is not None:
             v = command.linear
-        y += v * PERIOD
+        y += v * period
     return out
 
 
@@ -155,11 +157,20 @@ def test_the_tracks_are_bounded_whatever_the_scan_holds() -> None:
 
 
 def test_a_recommendation_lives_a_few_scan_periods() -> None:
-    tracker = Tracker()
+    ticket = Ticket(("r1", "dodge"), ScenarioSpec(JACKAL, "GOTO_DODGE", {}))
+    rule = Dodge(cast(Host, None), ticket)  # the host is only needed to run as a rule
+    assert rule.ttl_s() == pytest.approx(0.1), "before a second scan: the floor"
+    tracker = ticket.memory["tracker"]
+    assert isinstance(tracker, Tracker)
     drive(tracker, [], CORRIDOR, start=(2.4, 0.7), speed=1.0, ticks=3)
-    assert tracker.period_s == pytest.approx(PERIOD)
-    # 3 periods of 0.02 s is under the floor: a recommendation lives 0.1 s
-    assert threats.HORIZON_S > 0.1
+    # the Jackal's 50 Hz: 3 periods are 0.06 s, under the floor of 0.1 s
+    assert rule.ttl_s() == pytest.approx(0.1)
+    # a 10 Hz lidar: 3 periods, 0.3 s; a 5 Hz one (the Burger's): the usual 0.5 s at most
+    for period, ttl in ((0.1, 0.3), (0.2, 0.5)):
+        slow = Tracker()
+        drive(slow, [], CORRIDOR, start=(2.4, 0.7), speed=1.0, ticks=3, period=period)
+        ticket.memory["tracker"] = slow
+        assert rule.ttl_s() == pytest.approx(ttl)
 
 
 def test_dodge_is_found_by_its_entry_point() -> None:
