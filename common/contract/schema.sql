@@ -954,3 +954,14 @@ END;
 $$;
 CREATE TRIGGER zone_count_bounded BEFORE INSERT ON zone
     FOR EACH ROW EXECUTE FUNCTION zone_count_bounded();
+
+-- migration 15: GOTO_DODGE, GOTO_FAST keeping out of moving obstacles' way
+--
+-- GOTO_FAST (migration 8) with the dodge controller scenario (docs/CONTROLLER.md, "dodge"):
+-- it follows the objects of the robot's scans from scan to scan and, when one that moves is
+-- predicted to meet the robot within 2 s, recommends the evasive motion (yield, step out of
+-- its way) at priority 90, above dwa and recovery; safety_stop keeps the last word.
+INSERT INTO strategy (code, planner_scenario, controller_scenarios, params, description) VALUES
+    ('GOTO_DODGE', 'turn_then_move', '{dwa,dodge,safety_stop}',
+     '{"target": "goal", "planner_drives": false, "recovery": true, "battery_wh_per_m": 0.006, "battery_reserve_wh": 0.05}',
+     'go to the goal at the robot''s speed, keeping out of moving obstacles'' way: dwa along the planned path, dodge, recovery when stuck, safety_stop');

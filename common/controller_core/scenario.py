@@ -132,6 +132,11 @@ class ControllerScenario(Supervised[Key, ScenarioSpec]):
         spec = self.spec
         return self.decide(scan, odom, spec.robot, spec.params)
 
+    def ttl_s(self) -> float:
+        """How long this recommendation stays valid (sim s): ``validity_s``, unless the
+        scenario knows better (dodge: a few scan periods, so a yield ends with its threat)."""
+        return self.validity_s
+
     # -- lifecycle (common.engine.supervisor) --------------------------------------------------
     def initialise(self) -> None:
         self._log("controller scenario started")
@@ -184,8 +189,8 @@ class ControllerScenario(Supervised[Key, ScenarioSpec]):
                 priority=self.priority,
                 linear=command.linear,
                 angular=command.angular,
-                stamp=scan.stamp,  # the newest input's sim time; expires validity_s later
-                ttl_s=self.validity_s,
+                stamp=scan.stamp,  # the newest input's sim time; expires ttl_s() later
+                ttl_s=self.ttl_s(),
                 reason=command.reason,
                 inputs=inputs,
             )

@@ -58,7 +58,7 @@ def drive(world: BenchmarkWorld, *, to: float = 1.0, speed: float = 0.2, hz: flo
 
 
 def test_the_goal_strategies_of_the_contract_times_the_registered_planners() -> None:
-    goal_strategies = ["GOTO_AVOID", "GOTO_DIRECT", "GOTO_FAST"]
+    goal_strategies = ["GOTO_AVOID", "GOTO_DIRECT", "GOTO_FAST", "GOTO_DODGE"]
     assert runner.navigation_strategies(schema_text()) == goal_strategies
     combos = runner.shipped_combos()
     assert [c.label for c in combos] == [f"{s}/{p}" for s in goal_strategies for p in SCENARIOS]
@@ -90,6 +90,7 @@ def test_combos_are_picked_by_label_strategy_or_planner() -> None:
         "GOTO_AVOID/move_while_turning",
         DIRECT.label,
         "GOTO_FAST/move_while_turning",
+        "GOTO_DODGE/move_while_turning",
     ]
     with pytest.raises(UsageError, match="GOTO_AVOID/turn_then_move"):
         runner.pick_combos("GOTO_AVOID/teleport", shipped)

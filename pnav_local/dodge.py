@@ -1,0 +1,145 @@
+"""dodge: keep out of the way of obstacles that move.
+
+Nothing else in the stack knows that an obstacle moves: dwa and safety_stop judge each scan
+as though everything in it stood still. dodge follows the small objects of a robot's scans
+from one scan to the next (tracks.py: clusters, matched, each one's velocity in the world
+frame from the odometry), and per fresh scan predicts, for the next ``threats.HORIZON_S``,
+whether the robot meets a moving one doing what it is about to do (keeping its measured
+velocity, or speeding up to its top speed on the same turn: what a local controller does
+on a clear way) (threats.py). If not, it says nothing. If so, it recommends the evasive
+motion that meets no mover within the horizon and keeps clear of the static hits, the
+fastest forward one first: slower (yield before crossing a mover's line), a stop, a swerve,
+or driving on or backing out of a standing robot's spot when a mover is heading at it; if
+every motion meets a mover, the one that meets it latest. Its reason names the mover's
+track, its velocity and the time to collision.
+
+Priority 90: above dwa (30), avoid (50) and the planner's recovery (70), below the safety
+band (safety_stop, 100, and the bridge's safety layer, which still check every command
+against the scan in the direction of travel). Its recommendations live a few scan periods
+(``ttl_s``), not the usual 0.5 s, so a yield ends when its threat does.
+
+Deterministic (the tracks follow the scans alone) and bounded (tracks.MAX_CLUSTERS,
+tracks.MAX_TRACKS, threats' fixed motions and threats.MAX_STATIC hits).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from common.contract.records import LaserScan, Odometry, Robot
+from common.controller_core.scenario import Command, ControllerScenario
+from pnav_local import threats
+from pnav_local.tracks import REACH_M, Tracker, robot_pose
+
+PRIORITY = 90
+MIN_TTL_S = 0.1
+MAX_TTL_S = 0.5
+TTL_PERIODS = 3.0  # a recommendation lives this many scan periods (within the two above)
+BEHIND_DEG = 30.0  # backing out needs beams within this of straight behind
+STANDING_MPS = 0.05
+_RANGE_TOLERANCE_M = 1e-4
+
+
+def movers_in_robot_frame(
+    tracker: Tracker, pose: tuple[float, float, float]
+) -> list[threats.Mover]:
+    """The moving tracks seen in the newest scan, in the robot's frame at that scan."""
+    ox, oy, yaw = pose
+    c, s = math.cos(yaw), math.sin(yaw)
+    out = []
+    for k in tracker.moving():
+        dx, dy = k.last_x - ox, k.last_y - oy
+        out.append(
+            threats.Mover(
+                k.id,
+                c * dx + s * dy,
+                -s * dx + c * dy,
+                c * k.vx + s * k.vy,
+                -s * k.vx + c * k.vy,
+                k.radius,
+            )
+        )
+    return out
+
+
+def static_hits(scan: LaserScan, tracker: Tracker) -> tuple[np.ndarray[Any, Any], bool]:
+    """The scan's hits within reach that are not on a moving track (robot frame), and
+    whether the lidar sees behind the robot."""
+    ranges = scan.ranges.astype(np.float64)
+    angles = scan.angles()
+    valid = (
+        np.isfinite(ranges)
+        & (ranges >= scan.range_min - _RANGE_TOLERANCE_M)
+        & (ranges <= min(scan.range_max, REACH_M))
+    )
+    for k in tracker.moving():
+        valid[k.beams[0] : k.beams[1] + 1] = False
+    r, a = ranges[valid], angles[valid]
+    pts = threats.static_points(np.column_stack([r * np.cos(a), r * np.sin(a)]))
+    behind = bool((np.abs(angles) >= math.radians(180.0 - BEHIND_DEG)).any())
+    return pts, behind
+
+
+def decide_for(tracker: Tracker, scan: LaserScan, odom: Odometry, robot: Robot) -> Command | None:
+    """Update the tracks with the scan; the evasive command, or None when no mover threatens
+    what the robot is about to do."""
+    tracker.update(scan, odom)
+    pose = robot_pose(scan, odom)
+    movers = movers_in_robot_frame(tracker, pose)
+    if not movers:
+        return None
+    v0, w0 = odom.linear_mps, odom.angular_rps
+    threat = threats.expected(v0, w0, robot, movers)
+    if math.isinf(threat.ttc):
+        return None
+    points, behind = static_hits(scan, tracker)
+    choice = threats.choose(v0, w0, robot, movers, points, behind)
+    mover = next(m for m in movers if m.track == threat.mover)
+    if abs(v0) < STANDING_MPS:
+        act = "step out of its way" if choice.v != 0.0 else "stand"
+    elif choice.v < v0 - 0.05:
+        act = "yield" if choice.v >= 0 else "back out"
+    else:
+        act = "keep clear"
+    after = "meets none" if math.isinf(choice.ttc) else f"meets one in {choice.ttc:.1f} s"
+    reason = (
+        f"dodge: mover track {mover.track} at ({mover.x:+.2f}, {mover.y:+.2f}) m moving "
+        f"{math.hypot(mover.vx, mover.vy):.2f} m/s toward "
+        f"{math.degrees(math.atan2(mover.vy, mover.vx)):+.0f} deg: contact in "
+        f"{threat.ttc:.1f} s at {threat.v:.2f} m/s; {act}: {choice.v:.2f} m/s, "
+        f"{choice.w:+.2f} rad/s ({after} within {threats.HORIZON_S:g} s)"
+    )
+    return Command(choice.v, choice.w, reason)
+
+
+class Dodge(ControllerScenario):
+    scenario = "dodge"
+    priority = PRIORITY
+    needs_odometry = True
+
+    def _tracker(self) -> Tracker:
+        memory = self.ticket.memory
+        tracker = memory.get("tracker")
+        if not isinstance(tracker, Tracker):
+            tracker = memory["tracker"] = Tracker()
+        return tracker
+
+    @classmethod
+    def decide(
+        cls, scan: LaserScan, odom: Odometry | None, robot: Robot, params: Mapping[str, Any]
+    ) -> Command | None:
+        """A single scan shows no motion: silent (``judge`` has the robot's tracks)."""
+        return None
+
+    def judge(self, scan: LaserScan, odom: Odometry | None) -> Command | None:
+        if odom is None:
+            return None
+        return decide_for(self._tracker(), scan, odom, self.spec.robot)
+
+    def ttl_s(self) -> float:
+        period = self._tracker().period_s
+        return min(MAX_TTL_S, max(MIN_TTL_S, TTL_PERIODS * period))
