@@ -205,6 +205,13 @@ def build_parser() -> argparse.ArgumentParser:
     nav.add_argument(
         "--compare", type=Path, metavar="FILE", help="compare each run with an earlier --json"
     )
+    nav.add_argument(
+        "--keep-db",
+        type=Path,
+        metavar="DIR",
+        help="keep each stack episode's database (every row of the run) in DIR/WORLD__COMBO__RUN "
+        "for `pnav learn dataset --db-dir` (docs/LEARNING.md)",
+    )
     add_faults_parser(benches, positive)
     # _SubParsersAction is invariant in its parser class; ours only makes Parser ones
     add_worlds_parser(cast("argparse._SubParsersAction[argparse.ArgumentParser]", commands))

@@ -25,7 +25,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -152,6 +152,7 @@ class Plan:
     monolith: Callable[[Episode], Any] | None = None
     workers: EpisodeWorkers | None = None  # None: stack episodes in this process
     pacing: str = "lockstep"  # or "lag" (pnav.navbench.episode)
+    keep_db: Path | None = None  # keep each stack episode's database in a folder here
 
 
 async def attempt(plan: Plan, mode: str, episode: Episode, log_dir: Path) -> Outcome | str:
@@ -187,6 +188,9 @@ async def run_one(plan: Plan, world: BenchmarkWorld, combo: Combo, k: int, mode:
         world.world_file, world.goal, combo, world.time_limit_s, k, "r1", tolerance, plan.pacing
     )
     name = f"{world.name}__{combo.strategy}-{combo.planner}"
+    if plan.keep_db is not None and mode == STACK:
+        keep = plan.keep_db / f"{name}__{k}"
+        episode = replace(episode, keep_db=str(keep))
     got = await attempt(plan, mode, episode, plan.logs / f"{name}__{k}")
     rec = to_record(world, combo, k, mode, Outcome("error", 0.0) if isinstance(got, str) else got)
     rec.error = got if isinstance(got, str) else ""
@@ -290,6 +294,7 @@ def run(args: argparse.Namespace) -> int:
     worlds = with_model(worlds, robot, logs / "worlds")
     monolith = load_monolith() if args.monolith else None
     plan = Plan(worlds, combos, args.runs, logs, args.report, monolith, pacing=args.pacing)
+    plan.keep_db = getattr(args, "keep_db", None)
     total = len(worlds) * len(combos) * args.runs * (2 if monolith else 1)
     print(f"{total} episodes; logs in {logs}", file=sys.stderr)
     out = sys.stderr if args.json == "-" else sys.stdout  # keep stdout JSON-only then
