@@ -31,6 +31,7 @@ from pnav.cli_args import (
     tolerance,
 )
 from pnav.dashboard_cli import add_dashboard_options, dashboard_options
+from pnav.learn.cli import add_learn_parser
 from pnav.navbench.worlds_cli import add_worlds_parser
 
 if TYPE_CHECKING:
@@ -215,6 +216,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_faults_parser(benches, positive)
     # _SubParsersAction is invariant in its parser class; ours only makes Parser ones
     add_worlds_parser(cast("argparse._SubParsersAction[argparse.ArgumentParser]", commands))
+    add_learn_parser(cast("argparse._SubParsersAction[argparse.ArgumentParser]", commands))
     return parser
 
 
@@ -263,11 +265,20 @@ def dispatch(args: argparse.Namespace) -> int:
         return info.run(args.file, args.json)
     if args.command == "bench":
         return _bench(args)
-    if args.command == "worlds":
-        from pnav.navbench.worlds_cli import run_worlds
-
-        return run_worlds(args)
+    if args.command in ("worlds", "learn"):
+        return _offline(args)
     raise AssertionError(f"unhandled command {args.command}")  # argparse enforces the choices
+
+
+def _offline(args: argparse.Namespace) -> int:
+    """The commands that need no running stack: worlds, learn."""
+    if args.command == "learn":
+        from pnav.learn.cli import run_learn
+
+        return run_learn(args)
+    from pnav.navbench.worlds_cli import run_worlds
+
+    return run_worlds(args)
 
 
 def _secrets_parser(commands: argparse._SubParsersAction[Parser]) -> None:
