@@ -48,6 +48,7 @@ RETENTION_POLICY: Final = "retention_policy"
 ROBOT_LEASE: Final = "robot_lease"
 PLANNED_PATH: Final = "planned_path"
 SCENARIO_OFFER: Final = "scenario_offer"
+MODEL: Final = "model"
 
 TABLES: Final = (
     SCHEMA_VERSION,
@@ -70,6 +71,7 @@ TABLES: Final = (
     ROBOT_LEASE,
     PLANNED_PATH,
     SCENARIO_OFFER,
+    MODEL,
 )
 
 # Tables written at sensor rate; the retention policy keeps them bounded.

@@ -48,11 +48,14 @@ _ROW = re.compile(r"\(\s*'([A-Z0-9_]+)'\s*,\s*(?:NULL|'[^']*')\s*,\s*'[^']*'\s*,
 
 def navigation_strategies(sql: str) -> list[str]:
     """Codes of the strategy rows ``sql`` inserts whose params target the goal, in order:
-    those drive to a goal a benchmark can give (CHARGE drives to a charger, IDLE nowhere)."""
+    those drive to a goal a benchmark can give (CHARGE drives to a charger, IDLE nowhere).
+    A strategy that runs a learned model (``learned_model``) is left out: the model file is
+    trained from runs like these, so it is no shipped combo (docs/LEARNING.md)."""
     codes = []
     for insert in re.finditer(r"INSERT INTO strategy\b(.*?);", sql, re.S | re.I):
         for code, params in _ROW.findall(insert[1]):
-            if json.loads(params).get("target") == "goal":
+            doc = json.loads(params)
+            if doc.get("target") == "goal" and "learned_model" not in doc:
                 codes.append(code)
     return codes
 
@@ -190,6 +193,7 @@ async def run_one(plan: Plan, world: BenchmarkWorld, combo: Combo, k: int, mode:
     name = f"{world.name}__{combo.strategy}-{combo.planner}"
     if plan.keep_db is not None and mode == STACK:
         keep = plan.keep_db / f"{name}__{k}"
+        plan.keep_db.mkdir(parents=True, exist_ok=True)
         episode = replace(episode, keep_db=str(keep))
     got = await attempt(plan, mode, episode, plan.logs / f"{name}__{k}")
     rec = to_record(world, combo, k, mode, Outcome("error", 0.0) if isinstance(got, str) else got)

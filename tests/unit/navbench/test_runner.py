@@ -430,3 +430,13 @@ def test_a_lockstep_sims_timeouts_and_lost_messages_both_count_as_gate_timeouts(
         "gate_timeouts": 3,
         "gate_waits_per_sim_s": 66.69,
     }
+
+
+def test_a_strategy_running_a_learned_model_is_no_shipped_combo() -> None:
+    sql = """
+    INSERT INTO strategy (code, planner_scenario, controller_scenarios, params) VALUES
+        ('PLAIN', 'turn_then_move', '{dwa}', '{"target": "goal"}'),
+        ('LEARNED', 'turn_then_move', '{learned_drive}',
+         '{"target": "goal", "learned_model": "m.json"}');
+    """
+    assert runner.navigation_strategies(sql) == ["PLAIN"]
