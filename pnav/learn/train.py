@@ -82,7 +82,9 @@ def fit(
     predicted = net.predict((x[test] - x_mean) / x_scale) * y_scale + y_mean
     metrics: dict[str, Any] = {"train_examples": len(train), "held_out": len(test)}
     for i, name in enumerate(TARGETS):
-        metrics[f"{name}_r2"] = float(r2_score(y[test, i], predicted[:, i]))
+        # R^2 of a target that barely varies in the held-out set says nothing (its MAE does)
+        varies = float(np.var(y[test, i])) > 1e-8
+        metrics[f"{name}_r2"] = float(r2_score(y[test, i], predicted[:, i])) if varies else None
         metrics[f"{name}_mae"] = float(mean_absolute_error(y[test, i], predicted[:, i]))
     doc: dict[str, Any] = {
         "format": FORMAT,
