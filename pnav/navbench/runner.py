@@ -46,35 +46,41 @@ STACK, MONOLITH = "stack", "monolith"  # the records' modes (pnav.navbench.repor
 _ROW = re.compile(r"\(\s*'([A-Z0-9_]+)'\s*,\s*(?:NULL|'[^']*')\s*,\s*'[^']*'\s*,\s*'([^']*)'")
 
 
-def navigation_strategies(sql: str) -> list[str]:
+def navigation_strategies(sql: str, learned: bool = False) -> list[str]:
     """Codes of the strategy rows ``sql`` inserts whose params target the goal, in order:
     those drive to a goal a benchmark can give (CHARGE drives to a charger, IDLE nowhere).
     A strategy that runs a learned model (``learned_model``) is left out: the model file is
-    trained from runs like these, so it is no shipped combo (docs/LEARNING.md)."""
+    trained from runs like these, so it is no shipped combo (docs/LEARNING.md); ``learned``:
+    only those."""
     codes = []
     for insert in re.finditer(r"INSERT INTO strategy\b(.*?);", sql, re.S | re.I):
         for code, params in _ROW.findall(insert[1]):
             doc = json.loads(params)
-            if doc.get("target") == "goal" and "learned_model" not in doc:
+            if doc.get("target") == "goal" and ("learned_model" in doc) == learned:
                 codes.append(code)
     return codes
 
 
-def shipped_combos() -> list[Combo]:
+def shipped_combos(learned: bool = False) -> list[Combo]:
     from common.contract.migrate import schema_text
     from pnav.navbench.episode import Combo
     from services.planner.meta import move_scenarios  # installed, the planner's own first
 
     planners = list(move_scenarios())
-    return [Combo(s, p) for s in navigation_strategies(schema_text()) for p in planners]
+    codes = navigation_strategies(schema_text(), learned)
+    return [Combo(s, p) for s in codes for p in planners]
 
 
-def pick_combos(spec: str | None, available: Sequence[Combo]) -> list[Combo]:
+def pick_combos(
+    spec: str | None, available: Sequence[Combo], named_only: Sequence[Combo] = ()
+) -> list[Combo]:
     """``--combos``: comma-separated labels (``GOTO_AVOID/turn_then_move``), or a strategy
-    or a planner alone for all of its combos; case-insensitive. Empty: all."""
+    or a planner alone for all of its combos; case-insensitive. Empty: all ``available``.
+    ``named_only`` (the learned strategies' combos) are picked by label or strategy only."""
     picked: list[Combo] = []
     for token in (t.strip().lower() for t in (spec or "").split(",") if t.strip()):
         found = [c for c in available if token in (c.label.lower(), c.strategy.lower(), c.planner)]
+        found += [c for c in named_only if token in (c.label.lower(), c.strategy.lower())]
         if not found:
             names = ", ".join(c.label for c in available)
             raise UsageError(f"--combos: no combo {token!r}; the shipped ones are {names}")
@@ -284,7 +290,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.runs < 1:
         raise UsageError("--runs must be 1 or more")
-    combos = pick_combos(args.combos, shipped_combos())
+    combos = pick_combos(args.combos, shipped_combos(), shipped_combos(learned=True))
     # what the user typed is checked before the suite loads (seconds for a large one)
     robot = resolve_model(args.model) if getattr(args, "model", None) else None
     before: list[dict[str, Any]] = []

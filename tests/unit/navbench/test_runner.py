@@ -440,3 +440,12 @@ def test_a_strategy_running_a_learned_model_is_no_shipped_combo() -> None:
          '{"target": "goal", "learned_model": "m.json"}');
     """
     assert runner.navigation_strategies(sql) == ["PLAIN"]
+
+
+def test_a_learned_strategy_is_picked_only_by_its_name() -> None:
+    shipped, learned = runner.shipped_combos(), runner.shipped_combos(learned=True)
+    assert [c.label for c in learned] == [f"GOTO_LEARNED/{p}" for p in SCENARIOS]
+    picked = runner.pick_combos("GOTO_LEARNED/turn_then_move", shipped, learned)
+    assert [c.label for c in picked] == ["GOTO_LEARNED/turn_then_move"]
+    by_planner = runner.pick_combos("turn_then_move", shipped, learned)
+    assert "GOTO_LEARNED/turn_then_move" not in [c.label for c in by_planner]
