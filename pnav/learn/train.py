@@ -70,7 +70,8 @@ def fit(
     x_mean, x_scale = x[train].mean(axis=0), x[train].std(axis=0)
     x_scale[x_scale < 1e-9] = 1.0  # a constant feature: leave it as it is
     y_mean, y_scale = y[train].mean(axis=0), y[train].std(axis=0)
-    y_scale[y_scale < 1e-9] = 1.0
+    constant = y_scale < 1e-9  # e.g. dwa at top speed all along an easy run
+    y_scale[constant] = 1.0
     net = MLPRegressor(
         hidden_layer_sizes=hidden,
         activation="relu",
@@ -79,6 +80,9 @@ def fit(
         random_state=seed,
     )
     net.fit((x[train] - x_mean) / x_scale, (y[train] - y_mean) / y_scale)
+    # a target that never varied is its mean, exactly: the network's noise around it is not
+    net.coefs_[-1][:, constant] = 0.0
+    net.intercepts_[-1][constant] = 0.0
     predicted = net.predict((x[test] - x_mean) / x_scale) * y_scale + y_mean
     metrics: dict[str, Any] = {"train_examples": len(train), "held_out": len(test)}
     for i, name in enumerate(TARGETS):

@@ -57,3 +57,21 @@ def test_sources_keep_only_the_decisions_of_those_scenarios(tmp_path: Path) -> N
 
     with pytest.raises(UsageError, match="0 usable examples"):
         train(data, out, name="none", sources=("avoid_left",))
+
+
+def test_a_target_that_never_varies_is_predicted_exactly(tmp_path: Path) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    data, out = tmp_path / "data.parquet", tmp_path / "model.json"
+    synthetic.write(data, n=400)
+    table = pq.read_table(data)
+    table = table.set_column(
+        table.column_names.index("linear_mps_cmd"), "linear_mps_cmd", pa.array([0.22] * 400)
+    )
+    pq.write_table(table, data)
+    doc = train(data, out, name="top speed")
+    assert doc["metrics"]["linear_mps_r2"] is None  # nothing to explain
+    assert doc["metrics"]["linear_mps_mae"] < 1e-12
+    model = load(out)
+    assert model.predict(synthetic.features(1, seed=3)[0])[0] == pytest.approx(0.22, abs=1e-12)
