@@ -64,7 +64,8 @@ async def _dataset(args: argparse.Namespace) -> int:
             raise UsageError(f"--db-dir {args.db_dir}: not a Postgres data directory")
         from common.testing import EmbeddedPostgres
 
-        postgres = EmbeddedPostgres(args.db_dir, persistent=True)
+        # stopped again at the end (the data directory given is never removed)
+        postgres = EmbeddedPostgres(args.db_dir)
         postgres.start()
         dsn = postgres.dsn()
     try:

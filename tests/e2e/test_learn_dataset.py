@@ -40,7 +40,7 @@ def pnav(*argv: str) -> subprocess.CompletedProcess[str]:
 
 
 async def rows(db_dir: Path) -> dict[str, list[asyncpg.Record]]:
-    postgres = EmbeddedPostgres(db_dir, persistent=True)
+    postgres = EmbeddedPostgres(db_dir)  # stopped at the end, the directory kept
     postgres.start()
     try:
         conn = await asyncpg.connect(postgres.dsn())
