@@ -37,6 +37,7 @@ from pnav.cli_args import (
     tolerance,
 )
 from pnav.dashboard_cli import add_dashboard_options, dashboard_options
+from pnav.learn.cli import add_learn_parser
 from pnav.navbench.worlds_cli import add_worlds_parser
 from pnav.zone_cli import add_zone_parser
 
@@ -266,11 +267,19 @@ def build_parser() -> argparse.ArgumentParser:
         "--compare", type=Path, metavar="FILE", help="compare each run with an earlier --json"
     )
     processes_option(nav)
+    nav.add_argument(
+        "--keep-db",
+        type=Path,
+        metavar="DIR",
+        help="keep each stack episode's database (every row of the run) in DIR/WORLD__COMBO__RUN "
+        "for `pnav learn dataset --db-dir` (docs/LEARNING.md)",
+    )
     add_faults_parser(benches, positive)
     processes_option(benches.choices["faults"])
     # _SubParsersAction is invariant in its parser class; ours only makes Parser ones
     add_worlds_parser(cast("argparse._SubParsersAction[argparse.ArgumentParser]", commands))
     add_zone_parser(cast("argparse._SubParsersAction[argparse.ArgumentParser]", commands))
+    add_learn_parser(cast("argparse._SubParsersAction[argparse.ArgumentParser]", commands))
     return parser
 
 
@@ -321,17 +330,22 @@ def dispatch(args: argparse.Namespace) -> int:
         return info.run(args.file, args.json)
     if args.command == "bench":
         return _bench(args)
-    if args.command in ("worlds", "zone"):
+    if args.command in ("worlds", "zone", "learn"):
         return _verbs(args)
     raise AssertionError(f"unhandled command {args.command}")  # argparse enforces the choices
 
 
 def _verbs(args: argparse.Namespace) -> int:
-    """The commands whose verbs live in their own module (``pnav worlds``, ``pnav zone``)."""
+    """The commands whose verbs live in their own module (``pnav worlds``, ``pnav zone``,
+    ``pnav learn``)."""
     if args.command == "zone":
         from pnav.zone_cli import run_zone
 
         return uvloop.run(run_zone(args))
+    if args.command == "learn":
+        from pnav.learn.cli import run_learn
+
+        return run_learn(args)
     from pnav.navbench.worlds_cli import run_worlds
 
     return run_worlds(args)

@@ -50,6 +50,7 @@ ROBOT_LEASE: Final = "robot_lease"
 PLANNED_PATH: Final = "planned_path"
 SCENARIO_OFFER: Final = "scenario_offer"
 ZONE: Final = "zone"
+MODEL: Final = "model"
 
 TABLES: Final = (
     SCHEMA_VERSION,
@@ -74,6 +75,7 @@ TABLES: Final = (
     PLANNED_PATH,
     SCENARIO_OFFER,
     ZONE,
+    MODEL,
 )
 
 # Tables written at sensor rate; the retention policy keeps them bounded.

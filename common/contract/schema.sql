@@ -965,3 +965,29 @@ INSERT INTO strategy (code, planner_scenario, controller_scenarios, params, desc
     ('GOTO_DODGE', 'turn_then_move', '{dwa,dodge,safety_stop}',
      '{"target": "goal", "planner_drives": false, "recovery": true, "battery_wh_per_m": 0.006, "battery_reserve_wh": 0.05}',
      'go to the goal at the robot''s speed, keeping out of moving obstacles'' way: dwa along the planned path, dodge, recovery when stuck, safety_stop');
+
+-- migration 16: learned models as data, and GOTO_LEARNED
+--
+-- A model trained on the records (`pnav learn train`, docs/LEARNING.md) is a file; the `model`
+-- table is the people-written register of them: name, version, where the file is, and the
+-- held-out metrics it was trained to. A strategy's params name the file and the version a
+-- learned scenario must load (`learned_model`, `learned_model_version`), so switching a model
+-- at run time is an UPDATE of the strategy row. GOTO_LEARNED drives with learned_drive along
+-- the planner's path, with the planner's recovery and safety_stop; until a model file is at
+-- `learned_drive.json` (relative to PNAV_MODEL_DIR) learned_drive stands down and the robot
+-- does not drive.
+CREATE TABLE model (
+    name        text NOT NULL CHECK (length(name) BETWEEN 1 AND 64),
+    version     text NOT NULL CHECK (length(version) BETWEEN 1 AND 64),
+    path        text NOT NULL CHECK (length(path) BETWEEN 1 AND 1000),
+    metrics     jsonb NOT NULL DEFAULT '{}'
+        CHECK (jsonb_typeof(metrics) = 'object' AND octet_length(metrics::text) <= 16384),
+    description text NOT NULL DEFAULT '' CHECK (char_length(description) <= 1000),
+    created_at  timestamptz NOT NULL DEFAULT now(),
+    PRIMARY KEY (name, version)
+);
+
+INSERT INTO strategy (code, planner_scenario, controller_scenarios, params, description) VALUES
+    ('GOTO_LEARNED', 'turn_then_move', '{learned_drive,safety_stop}',
+     '{"target": "goal", "planner_drives": false, "recovery": true, "battery_wh_per_m": 0.006, "battery_reserve_wh": 0.05, "learned_model": "learned_drive.json"}',
+     'go to the goal with learned_drive (a model trained on the records) along the planned path, recovery when stuck, safety_stop');

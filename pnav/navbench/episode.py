@@ -91,6 +91,14 @@ class Episode:
     robot: str = "r1"
     goal_tolerance_m: float = SUCCESS_RADIUS_M
     pacing: str = LOCKSTEP
+    # keep the run's database in this directory (a training set: docs/LEARNING.md); "": a
+    # temporary one, removed at the end
+    keep_db: str = ""
+
+
+# rows kept per robot and sensor table when the database is kept: the whole run, not the
+# last seconds that retention_policy keeps by default (30 s of odometry, of scans)
+KEEP_DB_ROWS = 1_000_000
 
 
 @dataclass
@@ -185,6 +193,16 @@ async def ensure_combo(rt: Runtime, combo: Combo) -> None:
     )
 
 
+async def keep_history(rt: Runtime) -> None:
+    """Keep every sensor row of the run: a kept database is a training set."""
+    await rt.database.write(
+        keys.RETENTION_POLICY,
+        None,
+        "UPDATE retention_policy SET keep_rows_per_robot = $1",
+        KEEP_DB_ROWS,
+    )
+
+
 def gate_figures(sim_log: Path) -> dict[str, float]:
     """``gate_waits`` and ``gate_timeouts`` from the sim's last "sim stopped" line ({} if
     there is none: the sim did not stop cleanly, or the log is elsewhere); a lockstep sim's
@@ -244,6 +262,7 @@ async def run_episode(episode: Episode, log_dir: Path | None = None) -> Outcome:
         rate="max",
         zenoh_port=None,
         log_dir=log_dir,
+        data_dir=Path(episode.keep_db) if episode.keep_db else None,
         extra_env={
             **pacing,
             "PNAV_SIM_SEED": str(episode.seed),
@@ -276,6 +295,8 @@ async def run_episode(episode: Episode, log_dir: Path | None = None) -> Outcome:
             if episode.robot not in await commands.robot_ids(rt, wait_s=30.0):
                 raise RuntimeError(f"robot {episode.robot} never registered from {episode.world}")
             await ensure_combo(rt, episode.combo)
+            if episode.keep_db:
+                await keep_history(rt)
             verdict, reason = await commands.send_user_command(
                 rt, episode.robot, "SET_STRATEGY", episode.combo.code, wait_s=15.0
             )

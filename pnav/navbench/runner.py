@@ -25,7 +25,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -46,32 +46,41 @@ STACK, MONOLITH = "stack", "monolith"  # the records' modes (pnav.navbench.repor
 _ROW = re.compile(r"\(\s*'([A-Z0-9_]+)'\s*,\s*(?:NULL|'[^']*')\s*,\s*'[^']*'\s*,\s*'([^']*)'")
 
 
-def navigation_strategies(sql: str) -> list[str]:
+def navigation_strategies(sql: str, learned: bool = False) -> list[str]:
     """Codes of the strategy rows ``sql`` inserts whose params target the goal, in order:
-    those drive to a goal a benchmark can give (CHARGE drives to a charger, IDLE nowhere)."""
+    those drive to a goal a benchmark can give (CHARGE drives to a charger, IDLE nowhere).
+    A strategy that runs a learned model (``learned_model``) is left out: the model file is
+    trained from runs like these, so it is no shipped combo (docs/LEARNING.md); ``learned``:
+    only those."""
     codes = []
     for insert in re.finditer(r"INSERT INTO strategy\b(.*?);", sql, re.S | re.I):
         for code, params in _ROW.findall(insert[1]):
-            if json.loads(params).get("target") == "goal":
+            doc = json.loads(params)
+            if doc.get("target") == "goal" and ("learned_model" in doc) == learned:
                 codes.append(code)
     return codes
 
 
-def shipped_combos() -> list[Combo]:
+def shipped_combos(learned: bool = False) -> list[Combo]:
     from common.contract.migrate import schema_text
     from pnav.navbench.episode import Combo
     from services.planner.meta import move_scenarios  # installed, the planner's own first
 
     planners = list(move_scenarios())
-    return [Combo(s, p) for s in navigation_strategies(schema_text()) for p in planners]
+    codes = navigation_strategies(schema_text(), learned)
+    return [Combo(s, p) for s in codes for p in planners]
 
 
-def pick_combos(spec: str | None, available: Sequence[Combo]) -> list[Combo]:
+def pick_combos(
+    spec: str | None, available: Sequence[Combo], named_only: Sequence[Combo] = ()
+) -> list[Combo]:
     """``--combos``: comma-separated labels (``GOTO_AVOID/turn_then_move``), or a strategy
-    or a planner alone for all of its combos; case-insensitive. Empty: all."""
+    or a planner alone for all of its combos; case-insensitive. Empty: all ``available``.
+    ``named_only`` (the learned strategies' combos) are picked by label or strategy only."""
     picked: list[Combo] = []
     for token in (t.strip().lower() for t in (spec or "").split(",") if t.strip()):
         found = [c for c in available if token in (c.label.lower(), c.strategy.lower(), c.planner)]
+        found += [c for c in named_only if token in (c.label.lower(), c.strategy.lower())]
         if not found:
             names = ", ".join(c.label for c in available)
             raise UsageError(f"--combos: no combo {token!r}; the shipped ones are {names}")
@@ -152,6 +161,7 @@ class Plan:
     monolith: Callable[[Episode], Any] | None = None
     workers: EpisodeWorkers | None = None  # None: stack episodes in this process
     pacing: str = "lockstep"  # or "lag" (pnav.navbench.episode)
+    keep_db: Path | None = None  # keep each stack episode's database in a folder here
 
 
 async def attempt(plan: Plan, mode: str, episode: Episode, log_dir: Path) -> Outcome | str:
@@ -187,6 +197,10 @@ async def run_one(plan: Plan, world: BenchmarkWorld, combo: Combo, k: int, mode:
         world.world_file, world.goal, combo, world.time_limit_s, k, "r1", tolerance, plan.pacing
     )
     name = f"{world.name}__{combo.strategy}-{combo.planner}"
+    if plan.keep_db is not None and mode == STACK:
+        keep = plan.keep_db / f"{name}__{k}"
+        plan.keep_db.mkdir(parents=True, exist_ok=True)
+        episode = replace(episode, keep_db=str(keep))
     got = await attempt(plan, mode, episode, plan.logs / f"{name}__{k}")
     rec = to_record(world, combo, k, mode, Outcome("error", 0.0) if isinstance(got, str) else got)
     rec.error = got if isinstance(got, str) else ""
@@ -276,7 +290,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.runs < 1:
         raise UsageError("--runs must be 1 or more")
-    combos = pick_combos(args.combos, shipped_combos())
+    combos = pick_combos(args.combos, shipped_combos(), shipped_combos(learned=True))
     # what the user typed is checked before the suite loads (seconds for a large one)
     robot = resolve_model(args.model) if getattr(args, "model", None) else None
     before: list[dict[str, Any]] = []
@@ -290,6 +304,7 @@ def run(args: argparse.Namespace) -> int:
     worlds = with_model(worlds, robot, logs / "worlds")
     monolith = load_monolith() if args.monolith else None
     plan = Plan(worlds, combos, args.runs, logs, args.report, monolith, pacing=args.pacing)
+    plan.keep_db = getattr(args, "keep_db", None)
     total = len(worlds) * len(combos) * args.runs * (2 if monolith else 1)
     print(f"{total} episodes; logs in {logs}", file=sys.stderr)
     out = sys.stderr if args.json == "-" else sys.stdout  # keep stdout JSON-only then

@@ -33,5 +33,6 @@ async def test_a_scenario_installed_as_a_package_recommends(
     assert row["expires_stamp"] - row["stamp"] == pytest.approx(0.5)
     # it says at start which scenarios it found
     assert (
-        "controller scenarios names=avoid_left,avoid_right,creep,dwa,safety_stop" in log.read_text()
+        "controller scenarios names=avoid_left,avoid_right,creep,dwa,learned_drive,safety_stop"
+        in log.read_text()
     )

@@ -431,3 +431,22 @@ def test_a_lockstep_sims_timeouts_and_lost_messages_both_count_as_gate_timeouts(
         "gate_timeouts": 3,
         "gate_waits_per_sim_s": 66.69,
     }
+
+
+def test_a_strategy_running_a_learned_model_is_no_shipped_combo() -> None:
+    sql = """
+    INSERT INTO strategy (code, planner_scenario, controller_scenarios, params) VALUES
+        ('PLAIN', 'turn_then_move', '{dwa}', '{"target": "goal"}'),
+        ('LEARNED', 'turn_then_move', '{learned_drive}',
+         '{"target": "goal", "learned_model": "m.json"}');
+    """
+    assert runner.navigation_strategies(sql) == ["PLAIN"]
+
+
+def test_a_learned_strategy_is_picked_only_by_its_name() -> None:
+    shipped, learned = runner.shipped_combos(), runner.shipped_combos(learned=True)
+    assert [c.label for c in learned] == [f"GOTO_LEARNED/{p}" for p in SCENARIOS]
+    picked = runner.pick_combos("GOTO_LEARNED/turn_then_move", shipped, learned)
+    assert [c.label for c in picked] == ["GOTO_LEARNED/turn_then_move"]
+    by_planner = runner.pick_combos("turn_then_move", shipped, learned)
+    assert "GOTO_LEARNED/turn_then_move" not in [c.label for c in by_planner]

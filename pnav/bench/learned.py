@@ -1,0 +1,98 @@
+"""Benchmark: one learned_drive decision against one dwa decision, on the same scenes.
+
+``python -m pnav.bench.learned [--model FILE] [--scenes N] [--json FILE]`` decides the made-up
+scenes of ``pnav.bench.dwa`` (the Jackal in clutter, a path 10 m ahead) with dwa's default
+params and with learned_drive (features, then the model), and prints the milliseconds per
+decision of each (best of the passes, wall and CPU) and their ratio. Without ``--model`` the
+model is a (32, 32) network with random weights: its cost is the cost of any model of that
+shape, which is all a timing needs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import math
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from pnav.bench.dwa import JACKAL, PATH, scenes
+from pnav.bench.report import emit, machine
+from pnav_learned.drive import recommend
+from pnav_learned.features import FEATURES
+from pnav_learned.model import FORMAT, Model, load, parse
+from pnav_local.dwa import choose
+from pnav_local.params import DwaParams
+
+
+def random_model(hidden: tuple[int, ...] = (32, 32)) -> Model:
+    rng = np.random.default_rng(0)
+    n, widths = len(FEATURES), (len(FEATURES), *hidden, 2)
+    layers = [
+        {"w": rng.normal(size=(a, b)).tolist(), "b": [0.0] * b}
+        for a, b in itertools.pairwise(widths)
+    ]
+    doc = {
+        "format": FORMAT,
+        "name": "random",
+        "version": "random",
+        "features": list(FEATURES),
+        "targets": ["linear_mps", "angular_rps"],
+        **{k: [0.0] * n for k in ("x_mean", "x_min")},
+        "x_scale": [1.0] * n,
+        "x_max": [1.0] * n,
+        "y_mean": [0.0, 0.0],
+        "y_scale": [1.0, 1.0],
+        "layers": layers,
+    }
+    return parse(doc, "random")
+
+
+def timed(
+    decide: Callable[[Any, Any], object], data: list[Any], repeat: int
+) -> tuple[float, float]:
+    best = best_cpu = math.inf
+    for _ in range(repeat):
+        started, cpu = time.perf_counter(), time.process_time()
+        for scan, odom in data:
+            decide(scan, odom)
+        best = min(best, time.perf_counter() - started)
+        best_cpu = min(best_cpu, time.process_time() - cpu)
+    return best / len(data) * 1e3, best_cpu / len(data) * 1e3
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m pnav.bench.learned")
+    parser.add_argument("--model", help="a model file (default: random weights, 32x32)")
+    parser.add_argument("--scenes", type=int, default=200)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--repeat", type=int, default=3, help="best of this many passes")
+    parser.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
+    args = parser.parse_args(argv)
+    model = load(args.model) if args.model else random_model()
+    data = scenes(args.scenes, args.seed)
+    params = DwaParams.read({})
+    dwa_ms, dwa_cpu = timed(lambda s, o: choose(s, o, JACKAL, PATH, params), data, args.repeat)
+    ml_ms, ml_cpu = timed(lambda s, o: recommend(model, s, o, JACKAL, PATH), data, args.repeat)
+    results = {
+        "model": model.path,
+        "dwa_ms_per_decision": round(dwa_ms, 3),
+        "dwa_cpu_ms_per_decision": round(dwa_cpu, 3),
+        "learned_ms_per_decision": round(ml_ms, 3),
+        "learned_cpu_ms_per_decision": round(ml_cpu, 3),
+        "learned_share_of_dwa": round(ml_ms / dwa_ms, 4),
+    }
+    print(
+        f"dwa           {dwa_ms:8.3f} ms per decision ({dwa_cpu:.3f} ms CPU)\n"
+        f"learned_drive {ml_ms:8.3f} ms per decision ({ml_cpu:.3f} ms CPU),"
+        f" {100 * ml_ms / dwa_ms:.1f} % of dwa's"
+    )
+    emit({"benchmark": "learned_drive decision", "machine": machine(), **results}, args.json)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,109 @@
+"""``pnav learn dataset`` and ``pnav learn train`` (docs/LEARNING.md). Heavy imports
+(pyarrow, scikit-learn) wait until a command runs: pnav's parser is built on every command."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from common.errors import UsageError
+
+
+def add_learn_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    learn = commands.add_parser("learn", help="datasets from the records, and learned models")
+    steps = learn.add_subparsers(dest="learn", metavar="STEP", required=True)
+    data = steps.add_parser(
+        "dataset", help="one example per decision of a database, to Parquet (docs/LEARNING.md)"
+    )
+    where = data.add_mutually_exclusive_group(required=True)
+    where.add_argument("--dsn", metavar="URL", help="a live stack's database")
+    where.add_argument(
+        "--db-dir", type=Path, metavar="DIR", help="a kept database (pnav bench nav --keep-db)"
+    )
+    data.add_argument("--out", type=Path, required=True, metavar="FILE.parquet")
+    data.add_argument(
+        "--horizon", type=float, default=3.0, metavar="S", help="outcome horizon, sim s (3)"
+    )
+    train = steps.add_parser("train", help="train learned_drive's model on a dataset")
+    train.add_argument("--data", type=Path, required=True, metavar="FILE.parquet")
+    train.add_argument("--out", type=Path, required=True, metavar="MODEL.json")
+    train.add_argument("--name", default="learned_drive", help="the model's name")
+    train.add_argument(
+        "--sources", default="", help="only decisions won by these scenarios, e.g. dwa"
+    )
+    train.add_argument(
+        "--hidden", default="32,32", help="hidden layer widths, comma-separated (32,32)"
+    )
+    train.add_argument("--seed", type=int, default=0)
+
+
+def _hidden(text: str) -> tuple[int, ...]:
+    try:
+        widths = tuple(int(w) for w in text.split(","))
+    except ValueError:
+        raise UsageError(f"--hidden {text!r}: comma-separated integers expected") from None
+    if not 1 <= len(widths) <= 4 or not all(1 <= w <= 256 for w in widths):
+        raise UsageError(f"--hidden {text!r}: 1 to 4 widths, each 1 to 256")
+    return widths
+
+
+async def _dataset(args: argparse.Namespace) -> int:
+    import asyncpg
+
+    from pnav.learn import dataset
+
+    if not args.horizon > 0:
+        raise UsageError(f"--horizon {args.horizon}: must be positive")
+    postgres: Any = None
+    dsn = args.dsn
+    if args.db_dir is not None:
+        if not (args.db_dir / "PG_VERSION").is_file():
+            raise UsageError(f"--db-dir {args.db_dir}: not a Postgres data directory")
+        from common.testing import EmbeddedPostgres
+
+        # stopped again at the end (the data directory given is never removed)
+        postgres = EmbeddedPostgres(args.db_dir)
+        postgres.start()
+        dsn = postgres.dsn()
+    try:
+        conn = await asyncpg.connect(dsn)
+        try:
+            found = await dataset.read(conn, args.horizon)
+        finally:
+            await conn.close()
+    finally:
+        if postgres is not None:
+            postgres.stop()
+    dataset.to_parquet(found, str(args.out), {"pnav.horizon_s": str(args.horizon)})
+    print(
+        f"{found.examples} examples from {found.decisions} decisions"
+        f" ({found.skipped} with no scan, odometry or path) -> {args.out}"
+    )
+    return 0
+
+
+def run_learn(args: argparse.Namespace) -> int:
+    if args.learn == "dataset":
+        import uvloop
+
+        return uvloop.run(_dataset(args))
+    if args.learn == "train":
+        from pnav.learn.train import train
+
+        sources = tuple(s for s in args.sources.split(",") if s)
+        doc = train(
+            args.data,
+            args.out,
+            name=args.name,
+            hidden=_hidden(args.hidden),
+            sources=sources,
+            seed=args.seed,
+        )
+        summary = {k: doc[k] for k in ("name", "version", "data_sha256", "metrics")}
+        json.dump(summary, sys.stdout, indent=1)
+        print()
+        return 0
+    raise AssertionError(f"unhandled learn step {args.learn}")

@@ -1,0 +1,1 @@
+"""Learned scenarios: recommenders trained on the stack's own records (docs/LEARNING.md)."""

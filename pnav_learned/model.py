@@ -1,0 +1,151 @@
+"""A learned model as the scenarios run it: a small multilayer perceptron in a JSON file,
+evaluated with numpy (``pnav learn train`` writes it; docs/LEARNING.md, *The model file*).
+
+JSON and not a pickle: a strategy row, which people write, names the file, and loading a
+pickle runs whatever code it holds; a JSON file can at worst be refused. Everything is
+checked at load, and a refused file says why (:class:`ModelRefused`): it is missing,
+unreadable, not a model of this format, made for other features than the scenario computes,
+of another version than the strategy asks for, or larger than a decision's work may be.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pnav_learned.errors import ModelRefused
+from pnav_learned.features import FEATURES
+
+FORMAT = "pnav-mlp/1"
+TARGETS = ("linear_mps", "angular_rps")
+# bounds on one decision's work and on what a file may make us read, whatever it says
+MAX_FILE_BYTES = 4 * 1024 * 1024
+MAX_LAYERS = 6
+MAX_WIDTH = 256
+
+FloatArray = np.ndarray[tuple[int, ...], np.dtype[np.float64]]
+
+
+@dataclass(frozen=True)
+class Model:
+    name: str
+    version: str
+    path: str
+    x_mean: FloatArray
+    x_scale: FloatArray
+    x_min: FloatArray
+    x_max: FloatArray
+    y_mean: FloatArray
+    y_scale: FloatArray
+    weights: tuple[FloatArray, ...]
+    biases: tuple[FloatArray, ...]
+    metrics: dict[str, Any]
+
+    def predict(self, x: FloatArray) -> tuple[float, float, float]:
+        """(linear, angular, confidence) for one feature vector. Confidence is the share of
+        features within the range the training data covered: a policy is only known to do
+        what it was shown."""
+        h = (x - self.x_mean) / self.x_scale
+        last = len(self.weights) - 1
+        for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
+            h = h @ w + b
+            if i < last:
+                h = np.maximum(h, 0.0)
+        y = h * self.y_scale + self.y_mean
+        inside = float(np.mean((x >= self.x_min) & (x <= self.x_max)))
+        return float(y[0]), float(y[1]), inside
+
+
+def _array(doc: dict[str, Any], key: str, shape: tuple[int, ...]) -> FloatArray:
+    try:
+        a = np.asarray(doc[key], dtype=np.float64)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ModelRefused(f"{key}: missing or not numbers ({exc})") from None
+    if a.shape != shape:
+        raise ModelRefused(f"{key}: shape {a.shape}, expected {shape}")
+    if not np.all(np.isfinite(a)):
+        raise ModelRefused(f"{key}: not all finite")
+    return a
+
+
+def _layers(doc: dict[str, Any]) -> tuple[tuple[FloatArray, ...], tuple[FloatArray, ...]]:
+    layers = doc.get("layers")
+    if not isinstance(layers, list) or not 1 <= len(layers) <= MAX_LAYERS:
+        raise ModelRefused(f"layers: a list of 1 to {MAX_LAYERS} layers expected")
+    weights, biases, width = [], [], len(FEATURES)
+    for i, layer in enumerate(layers):
+        if not isinstance(layer, dict) or not isinstance(layer.get("b"), list):
+            raise ModelRefused(f"layers[{i}]: an object with w and b expected")
+        out = len(layer["b"])
+        if i == len(layers) - 1 and out != len(TARGETS):
+            raise ModelRefused(f"layers[{i}]: {out} outputs, expected {len(TARGETS)}")
+        if not 1 <= out <= MAX_WIDTH:
+            raise ModelRefused(f"layers[{i}]: width {out}, at most {MAX_WIDTH}")
+        weights.append(_array(layer, "w", (width, out)))
+        biases.append(_array(layer, "b", (out,)))
+        width = out
+    return tuple(weights), tuple(biases)
+
+
+def parse(doc: Any, path: str, version: str | None = None) -> Model:
+    """The model in ``doc`` (a decoded model file), or :class:`ModelRefused`."""
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise ModelRefused(f"not a {FORMAT} model file")
+    if doc.get("features") != list(FEATURES):
+        raise ModelRefused(
+            f"made for other features ({len(doc.get('features') or [])} named) than"
+            f" learned_drive computes ({len(FEATURES)}: {', '.join(FEATURES[:3])}...)"
+        )
+    if doc.get("targets") != list(TARGETS):
+        raise ModelRefused(f"targets {doc.get('targets')}, expected {list(TARGETS)}")
+    found = str(doc.get("version", ""))
+    if version is not None and found != version:
+        raise ModelRefused(f"version {found!r}, the strategy asks for {version!r}")
+    n = len(FEATURES)
+    x_scale = _array(doc, "x_scale", (n,))
+    y_scale = _array(doc, "y_scale", (len(TARGETS),))
+    if np.any(x_scale <= 0) or np.any(y_scale <= 0):
+        raise ModelRefused("x_scale, y_scale: must be positive")
+    weights, biases = _layers(doc)
+    metrics = doc.get("metrics") if isinstance(doc.get("metrics"), dict) else {}
+    return Model(
+        name=str(doc.get("name", "")),
+        version=found,
+        path=path,
+        x_mean=_array(doc, "x_mean", (n,)),
+        x_scale=x_scale,
+        x_min=_array(doc, "x_min", (n,)),
+        x_max=_array(doc, "x_max", (n,)),
+        y_mean=_array(doc, "y_mean", (len(TARGETS),)),
+        y_scale=y_scale,
+        weights=weights,
+        biases=biases,
+        metrics=metrics or {},
+    )
+
+
+def load(path: str | Path, version: str | None = None) -> Model:
+    """Read and check the model file at ``path``; ``version``: the one required."""
+    p = Path(path)
+    try:
+        size = p.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise ModelRefused(f"{p}: {size} bytes, at most {MAX_FILE_BYTES}")
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ModelRefused(f"{p}: cannot be read ({exc.strerror or exc})") from None
+    except UnicodeDecodeError:
+        raise ModelRefused(f"{p}: not text") from None
+    try:
+        doc = json.loads(text, parse_constant=lambda c: math.nan)
+    except ValueError as exc:
+        raise ModelRefused(f"{p}: not JSON ({exc})") from None
+    try:
+        return parse(doc, str(p), version)
+    except ModelRefused as exc:
+        raise ModelRefused(f"{p}: {exc}") from None

@@ -1,0 +1,77 @@
+"""`pnav learn train` learns the rule that made a synthetic dataset, and writes a model file
+learned_drive loads; with the targets shuffled away from the features it learns nothing."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pnav.learn.train import train
+from pnav_learned.features import FEATURES
+from pnav_learned.model import load
+from tests.unit.learn import synthetic
+
+pytestmark = pytest.mark.timeout(300)
+
+
+def r2(truth: np.ndarray, predicted: np.ndarray) -> float:
+    return 1.0 - float(np.sum((truth - predicted) ** 2) / np.sum((truth - truth.mean()) ** 2))
+
+
+def test_training_learns_the_rule_that_made_the_data(tmp_path: Path) -> None:
+    data, out = tmp_path / "data.parquet", tmp_path / "model.json"
+    synthetic.write(data)
+    doc = train(data, out, name="synthetic")
+    assert doc["features"] == list(FEATURES)
+    assert doc["data_sha256"] == hashlib.sha256(data.read_bytes()).hexdigest()
+    assert doc["metrics"]["held_out"] == 600 and doc["metrics"]["train_examples"] == 2400
+    assert doc["metrics"]["linear_mps_r2"] > 0.9 and doc["metrics"]["angular_rps_r2"] > 0.9
+
+    # the file as learned_drive reads it, on examples it never saw
+    model = load(out, doc["version"])
+    assert (model.name, model.version) == ("synthetic", doc["version"])
+    fresh = synthetic.features(400, seed=7)
+    linear, angular = synthetic.rule(fresh)
+    got = np.array([model.predict(x)[:2] for x in fresh])
+    assert r2(linear, got[:, 0]) > 0.9 and r2(angular, got[:, 1]) > 0.9
+    assert np.mean(np.abs(got[:, 1] - angular)) < 0.15  # rad/s
+    assert model.predict(fresh[0])[2] == 1.0  # in the training data's range
+    assert json.loads(out.read_text())["version"] == doc["version"]
+
+
+def test_targets_unrelated_to_the_features_are_not_learned(tmp_path: Path) -> None:
+    data, out = tmp_path / "data.parquet", tmp_path / "model.json"
+    synthetic.write(data, shuffle=True)
+    doc = train(data, out, name="noise")
+    assert doc["metrics"]["linear_mps_r2"] < 0.2 and doc["metrics"]["angular_rps_r2"] < 0.2
+
+
+def test_sources_keep_only_the_decisions_of_those_scenarios(tmp_path: Path) -> None:
+    data, out = tmp_path / "data.parquet", tmp_path / "model.json"
+    synthetic.write(data, n=100)
+    from common.errors import UsageError
+
+    with pytest.raises(UsageError, match="0 usable examples"):
+        train(data, out, name="none", sources=("avoid_left",))
+
+
+def test_a_target_that_never_varies_is_predicted_exactly(tmp_path: Path) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    data, out = tmp_path / "data.parquet", tmp_path / "model.json"
+    synthetic.write(data, n=400)
+    table = pq.read_table(data)
+    table = table.set_column(
+        table.column_names.index("linear_mps_cmd"), "linear_mps_cmd", pa.array([0.22] * 400)
+    )
+    pq.write_table(table, data)
+    doc = train(data, out, name="top speed")
+    assert doc["metrics"]["linear_mps_r2"] is None  # nothing to explain
+    assert doc["metrics"]["linear_mps_mae"] < 1e-12
+    model = load(out)
+    assert model.predict(synthetic.features(1, seed=3)[0])[0] == pytest.approx(0.22, abs=1e-12)
