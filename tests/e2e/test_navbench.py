@@ -54,7 +54,10 @@ def test_bench_nav_runs_one_easy_world_and_writes_json_and_report(tmp_path: Path
         math.dist(first[1:], (2.4, 0.6)) < 0.1 and math.dist(last[1:], (2.4, 6.0)) <= 0.301
     )  # JSON: mm
     assert run["cpu_s"] > 0 and 0 < run["run_wall_s"] < run["wall_s"]
-    assert {"sim", "postgres", "planner", "decision"} <= set(run["cpu_by_role"])
+    roles = set(run["cpu_by_role"])
+    assert {"sim", "postgres", "bridge"} <= roles
+    # one process each, or (the default on a machine of few cores) one host runs them
+    assert {"planner", "decision"} <= roles or "host" in roles
     assert run["gate_timeouts"] is not None
     summary = doc["summary"]["stack"]["by_combo"]["GOTO_AVOID/turn_then_move"]
     assert summary["runs"] == 1 and summary["success_rate"] == 1.0
