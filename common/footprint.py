@@ -44,7 +44,7 @@ MIN_VERTICES = 3
 MAX_VERTICES = 64  # the robot table's bound: a CHECK costs O(n^2) and no body needs more
 MAX_COORD_M = 5.0  # a vertex within 5 m of the centre: a ground robot 10 m across
 MIN_CENTRE_ROOM_M = 0.001  # the centre at least 1 mm inside the outline
-# how many headings the planner's check tries while a robot turns at a path's corner
+# the default step between the headings checked while a robot turns in place
 TURN_STEP_RAD = math.radians(15.0)
 
 
@@ -389,11 +389,12 @@ _CORNERS = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
 
 
 def path_poses(
-    points: Sequence[tuple[float, float]], step_m: float
+    points: Sequence[tuple[float, float]], step_m: float, turn_step_rad: float = TURN_STEP_RAD
 ) -> list[tuple[float, float, float]]:
     """Poses along a path of points, heading along each leg, ``step_m`` apart at most, and at
-    each corner the headings a robot turning in place there passes (TURN_STEP_RAD apart): what
-    the planner checks the footprint at."""
+    each corner the headings a robot turning in place there passes (``turn_step_rad`` apart:
+    ``step_m / circumscribed radius`` moves no corner farther than ``step_m``): what the
+    planner checks the footprint at."""
     out: list[tuple[float, float, float]] = []
     previous: float | None = None
     for (x0, y0), (x1, y1) in itertools.pairwise(points):
@@ -403,7 +404,7 @@ def path_poses(
         yaw = math.atan2(y1 - y0, x1 - x0)
         if previous is not None:
             turn = math.remainder(yaw - previous, 2.0 * math.pi)
-            k = int(abs(turn) // TURN_STEP_RAD)
+            k = int(abs(turn) // turn_step_rad)
             out += [(x0, y0, previous + turn * (i + 1) / (k + 1)) for i in range(k)]
         n = max(1, math.ceil(length / step_m))
         out += [(x0 + (x1 - x0) * i / n, y0 + (y1 - y0) * i / n, yaw) for i in range(n + 1)]

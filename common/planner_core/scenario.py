@@ -19,6 +19,8 @@ from abc import abstractmethod
 from dataclasses import dataclass
 from typing import ClassVar
 
+from common.footprint import Footprint, Polygon
+
 # The entry-point group that names the move scenarios (name = a strategy's planner_scenario).
 SCENARIO_GROUP = "pnav.planner.scenarios"
 
@@ -45,6 +47,13 @@ class RobotInfo:
     max_linear_mps: float
     max_angular_rps: float
     footprint_radius_m: float
+    # the row's footprint_polygon (robot frame, counter-clockwise); None: the disc
+    footprint_polygon: Polygon | None = None
+
+    @property
+    def footprint(self) -> Footprint:
+        """The robot's footprint: its polygon, or the disc of ``footprint_radius_m``."""
+        return Footprint.of(self.footprint_radius_m, self.footprint_polygon)
 
 
 class MoveScenario:

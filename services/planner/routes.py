@@ -18,9 +18,11 @@ from typing import Any
 
 import numpy as np
 
+import services.planner.fit as fit
 import services.planner.reachability as reachability
 from common import log
 from common.contract import records
+from services.planner.grid import PlanGrid
 from services.planner.obstacles import Points, Seen, buckets, known, recent
 from services.planner.path import path_length, plan_path, with_obstacles
 from services.planner.tracking import Progress, Route, follow
@@ -155,9 +157,11 @@ class Router:
         data = self.world.map_for(state.info)
         if target.kind != "goal" or data is None:
             return None
-        key = (target.key, data.version, state.info.footprint_radius_m)
+        footprint = state.info.footprint
+        key = (target.key, data.version, footprint)
         if state.spot is None or state.spot[0] != key:
-            inflation = inflation_m(state.info.footprint_radius_m)
+            # the least room the robot needs, at the heading it arrives with
+            inflation = inflation_m(footprint.inscribed_m)
             why = reachability.spot_problem(data, inflation, target.x, target.y, target.reach_m)
             state.spot = (key, why)
         return state.spot[1]
@@ -168,7 +172,7 @@ class Router:
         data = self.world.map_for(state.info)
         if target.kind != "goal" or data is None:
             return None
-        grid = data.grid(state.info.footprint_radius_m)
+        grid = data.grid(state.info.footprint.inscribed_m)
         if not reachability.cut_off(grid, (x, y), (target.x, target.y), target.reach_m):
             return None
         return f"no path on the map from ({x:.2f}, {y:.2f}) to the goal"
@@ -182,15 +186,26 @@ class Router:
         obstacles: Points | None = None,
     ) -> list[tuple[float, float]] | None:
         """A* on the robot's map, around ``obstacles`` too if given (None: no map, or no path
-        on it)."""
+        on it); for a footprint polygon, a path it fits along (fit.py)."""
         data = self.world.map_for(state.info)
         if data is None:
             return None
         started = time.perf_counter()
-        grid = data.grid(state.info.footprint_radius_m)
+        footprint = state.info.footprint
+        # inflated by the inscribed radius: the heading is known along a path, and the
+        # polygon is checked along it below (for a disc, both radii are its radius)
+        grid = data.grid(footprint.inscribed_m)
         if obstacles is not None and len(obstacles):
             grid = with_obstacles(grid, obstacles)
         points = plan_path(grid, start, goal)
+        fitting = "disc"
+        if points and not footprint.is_disc:
+
+            def wide() -> PlanGrid:
+                g = data.grid(footprint.circumscribed_m)
+                return with_obstacles(g, obstacles) if obstacles is not None else g
+
+            points, fitting = fit.fitted(footprint, points, data, grid, wide, plan_path, obstacles)
         elapsed_ms = (time.perf_counter() - started) * 1000
         log.event(
             logger,
@@ -201,6 +216,7 @@ class Router:
             waypoints=len(points) - 1 if points else 0,
             length_m=round(path_length(points), 2) if points else None,
             unmapped=len(obstacles) if obstacles is not None else 0,
+            footprint=fitting,
             ms=round(elapsed_ms, 1),
         )
         return points
