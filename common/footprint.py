@@ -250,32 +250,35 @@ class Footprint:
         """How far (m) the robot can go straight ahead (``forward``) or back before its outline
         meets one of ``points`` (robot frame); inf when none is in its way. A point already
         inside gives 0."""
+        each = self.travel_each(points, forward)
+        return float(np.min(each)) if len(each) else math.inf
+
+    def travel_each(self, points: FloatArray, forward: bool = True) -> FloatArray:
+        """Per point (robot frame), how far the robot goes straight ahead (``forward``) or
+        back before its outline meets it: inf for a point beside or behind its way, 0 for
+        one already inside. Measured from the outline's front (or back) edge at the
+        point's y, so a box's corners count and its sides do not bulge as a disc's would."""
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        if not len(pts):
-            return math.inf
         if not forward:
             pts = -pts  # backing up is driving ahead in the robot turned round
             shape = Footprint(self.radius_m, None if self.polygon is None else _turned(self))
         else:
             shape = self
-        if np.any(shape.contains(pts)):
-            return 0.0
+        out: FloatArray = np.full(len(pts), np.inf)
+        if not len(pts):
+            return out
         if shape.polygon is None:
             r = shape.radius_m
-            ahead = pts[(pts[:, 0] > 0) & (np.abs(pts[:, 1]) < r)]
-            if not len(ahead):
-                return math.inf
-            return float(np.min(ahead[:, 0] - np.sqrt(r * r - ahead[:, 1] ** 2)))
-        # the front of the outline at each point's y: the largest x of the polygon at that y
-        v = shape.vertices
-        lo, hi = float(np.min(v[:, 1])), float(np.max(v[:, 1]))
-        ahead = pts[(pts[:, 1] > lo) & (pts[:, 1] < hi)]
-        if not len(ahead):
-            return math.inf
-        front = _front_x(v, ahead[:, 1])
-        gaps = ahead[:, 0] - front
-        gaps = gaps[gaps >= 0.0]
-        return float(np.min(gaps)) if len(gaps) else math.inf
+            ahead = (pts[:, 0] > 0) & (np.abs(pts[:, 1]) < r)
+            out[ahead] = pts[ahead, 0] - np.sqrt(r * r - pts[ahead, 1] ** 2)
+        else:
+            # the front of the outline at each point's y: the largest x of the polygon there
+            v = shape.vertices
+            ahead = (pts[:, 1] > np.min(v[:, 1])) & (pts[:, 1] < np.max(v[:, 1]))
+            gaps = pts[ahead, 0] - _front_x(v, pts[ahead, 1])
+            out[ahead] = np.where(gaps >= 0.0, gaps, np.inf)
+        out[shape.contains(pts)] = 0.0
+        return out
 
 
 @functools.lru_cache(maxsize=64)

@@ -7,12 +7,16 @@ Pure geometry and bookkeeping here, no I/O; :mod:`.commands` and the reference's
 (``pnav/monolith/bridge.py``) both call :meth:`SafetyLayer.judge`.
 
 The geometry, for a commanded linear speed ``v`` (the angular speed is always kept: turning in
-place sweeps nothing new for a round robot, and is how it gets out):
+place sweeps nothing new for a round robot, and is how it gets out; a polygon's corners do
+sweep, and the sim stops a turn that would push one into something):
 
 - the swept corridor: straight ahead for ``v > 0`` (behind for ``v < 0``), as wide as the
-  footprint disc (radius ``R``). A return at (x, y) in the robot's frame (the lidar sits at the
-  centre, CONTRACT.md) with ``x`` in the direction of travel and ``|y| < R`` is touched after
-  ``|x| - sqrt(R^2 - y^2)`` of travel: the nearest such is the free travel ``d``;
+  footprint. For the disc of radius ``R``, a return at (x, y) in the robot's frame (the lidar
+  sits at the centre, CONTRACT.md) with ``x`` in the direction of travel and ``|y| < R`` is
+  touched after ``|x| - sqrt(R^2 - y^2)`` of travel; for a footprint polygon, after ``|x|``
+  less the outline's front (or back) edge at that ``y`` (common/footprint.py,
+  ``Footprint.travel_each``): a box's flat front and square corners, not a disc's bulge. The
+  nearest such is the free travel ``d``;
 - the distance needed: ``|v| * latency + v^2 / (2 * decel) + margin`` (``decel``: the robot
   row's ``max_linear_accel_mps2``, the hardest its model brakes), plus what the robot
   may have travelled since the scan (``age * |last speed sent|``, when that speed was in the
@@ -36,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from common.footprint import Footprint
 from services.bridge.messages import LaserScan
 
 FloatArray = npt.NDArray[np.float64]
@@ -104,10 +109,21 @@ class Scan:
             self._xy = (r * np.cos(a), r * np.sin(a))
         return self._xy
 
-    def free_travel(self, direction: int, radius: float) -> tuple[float, float, float]:
-        """(free travel, range, bearing) of the nearest return a disc of ``radius`` would
-        touch moving straight ahead (``direction`` 1) or back (-1): (inf, inf, 0) if none."""
+    def free_travel(
+        self, direction: int, footprint: Footprint | float
+    ) -> tuple[float, float, float]:
+        """(free travel, range, bearing) of the nearest return the footprint (a polygon, or
+        the disc of a radius) would touch moving straight ahead (``direction`` 1) or back
+        (-1), the travel measured from its outline's edge: (inf, inf, 0) if none."""
         xs, ys = self._returns()
+        if isinstance(footprint, Footprint) and not footprint.is_disc:
+            travel_each = footprint.travel_each(np.stack([xs, ys], axis=1), direction > 0)
+            if not len(travel_each) or not np.isfinite(travel_each).any():
+                return math.inf, math.inf, 0.0
+            i = int(np.argmin(travel_each))
+            bearing = math.degrees(math.atan2(float(ys[i]), float(xs[i])))
+            return float(travel_each[i]), math.hypot(float(xs[i]), float(ys[i])), bearing
+        radius = footprint.radius_m if isinstance(footprint, Footprint) else footprint
         along = xs * direction
         ahead = (along > 0.0) & (np.abs(ys) < radius)
         if not ahead.any():
@@ -164,12 +180,18 @@ class SafetyLayer:
             self.scans[record.robot_id] = Scan(record)
 
     def judge(
-        self, robot: str, linear: float, radius: float, now: float | None, decel_mps2: float
+        self,
+        robot: str,
+        linear: float,
+        radius: Footprint | float,
+        now: float | None,
+        decel_mps2: float,
     ) -> Verdict:
         """The verdict on sending ``linear`` (already clamped) to ``robot`` of footprint
-        ``radius`` that brakes at ``decel_mps2`` (its acceleration limit; the params' value
-        instead if set) at sim time ``now`` (None: no clock yet, the newest scan counts as
-        fresh). Records the speed the verdict sends as the robot's last."""
+        ``radius`` (its polygon, or a disc's radius) that brakes at ``decel_mps2`` (its
+        acceleration limit; the params' value instead if set) at sim time ``now`` (None: no
+        clock yet, the newest scan counts as fresh). Records the speed the verdict sends as
+        the robot's last."""
         decel = self.params.decel_mps2 if self.params.decel_mps2 is not None else decel_mps2
         verdict = self._judge(robot, linear, radius, now, decel)
         self.sent[robot] = verdict.linear
@@ -180,7 +202,7 @@ class SafetyLayer:
         self.sent[robot] = 0.0
 
     def _judge(
-        self, robot: str, linear: float, radius: float, now: float | None, decel: float
+        self, robot: str, linear: float, radius: Footprint | float, now: float | None, decel: float
     ) -> Verdict:
         p = self.params
         if not p.enabled or linear == 0.0:
@@ -202,7 +224,7 @@ class SafetyLayer:
         why = (
             f"obstacle {range_m:.2f} m {way} at {bearing:+.0f} deg in the scan of "
             f"{age:.2f} s ago leaves {max(budget, 0.0):.3f} m of travel (footprint "
-            f"{radius:.3f} m, margin {p.margin_m:.2f} m, {moved:.3f} m moved since); "
+            f"{_shown(radius)}, margin {p.margin_m:.2f} m, {moved:.3f} m moved since); "
             f"{speed:.2f} m/s needs {stopping_m(speed, p.latency_s, decel):.3f} m "
             f"braking at {decel:g} m/s^2"
         )
@@ -219,3 +241,12 @@ class SafetyLayer:
         if cap < MIN_MPS:
             return Verdict(0.0, STOPPED, f"stopped: {window}, blind speed cap {cap:g} m/s")
         return Verdict(math.copysign(cap, linear), LIMITED, f"limited to {cap:g} m/s: {window}")
+
+
+def _shown(footprint: Footprint | float) -> str:
+    """The footprint as a reason names it."""
+    if isinstance(footprint, Footprint):
+        if footprint.is_disc:
+            return f"{footprint.radius_m:.3f} m"
+        return f"polygon, {footprint.circumscribed_m:.3f} m reach"
+    return f"{footprint:.3f} m"

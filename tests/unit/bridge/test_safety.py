@@ -247,3 +247,32 @@ def test_a_validated_scan_is_judged_as_the_same_scan_built_by_hand() -> None:
 def _scan_body(record: LaserScan) -> dict[str, object]:
     fields = ("stamp", "angle_min", "angle_increment", "range_min", "range_max", "ranges")
     return {name: getattr(record, name) for name in fields}
+
+
+def test_a_polygon_is_measured_from_its_edge_not_a_disc() -> None:
+    from common.footprint import Footprint
+
+    box = Footprint.of(0.22, ((0.254, -0.215), (0.254, 0.215), (-0.254, 0.215), (-0.254, -0.215)))
+    # a return 0.40 m ahead and 0.21 m left: 0.146 m from the box's flat front, which a disc
+    # of 0.22 m would put at 0.40 - sqrt(0.22^2 - 0.21^2) = 0.334 m
+    at = (math.hypot(0.40, 0.21), math.degrees(math.atan2(0.21, 0.40)))
+    disc_layer, box_layer = layer(), layer()
+    for safety in (disc_layer, box_layer):
+        safety.scan(scan(10.0, at))
+    # 0.5 m/s needs 0.05 + 0.05 + 0.05 m margin of room braking at 2.5 m/s^2
+    assert disc_layer.judge("r1", 0.5, 0.22, 10.0, DECEL).outcome == CLEAR
+    verdict = box_layer.judge("r1", 0.5, box, 10.0, DECEL)
+    assert verdict.outcome == LIMITED and "polygon" in verdict.reason
+    free, _, _ = box_layer.scans["r1"].free_travel(1, box)
+    assert free == pytest.approx(0.40 - 0.254, abs=0.01)  # the 1-degree beam rounds y a little
+    # a return beside the box (0.218 m left, clear of its 0.215 m side) is no obstacle
+    # ahead, though the disc of the same row (0.22 m) meets it
+    beside = layer()
+    beside.scan(scan(10.0, (0.371, 36.0)))
+    assert beside.judge("r1", 1.0, box, 10.0, DECEL).outcome == CLEAR
+    assert beside.judge("r1", 1.0, 0.22, 10.0, DECEL).outcome != CLEAR
+    # backing up: measured from the back edge
+    behind = layer()
+    behind.scan(scan(10.0, (0.5, 180.0)))
+    free_back, _, _ = behind.scans["r1"].free_travel(-1, box)
+    assert free_back == pytest.approx(0.5 - 0.254)
