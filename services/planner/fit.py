@@ -6,8 +6,8 @@ whatever its heading. Inflating by the circumscribed radius instead would be saf
 heading, but shuts a box out of every gap it fits straight on (a Jackal's corners reach
 0.333 m; its sides 0.215 m). The heading is known along a path, so the inscribed plan is
 checked: the footprint at poses along each leg (heading along it), and at each corner at the
-headings it turns through in place (common.footprint.path_poses), against the map's own cells
-and the unmapped obstacles seen (common.footprint's checks, the same the sim's contact test
+headings it turns through in place (common.collision.path_poses), against the map's own cells
+and the unmapped obstacles seen (common.collision's checks, the same the sim's contact test
 agrees with). Where a pose collides, its cell is blocked and A* runs again, up to
 MAX_REFITS times; then the plan falls back to the circumscribed inflation, which fits at any
 heading; when even that finds no way, the inscribed path stands (a robot that turns while
@@ -23,7 +23,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from common.footprint import Footprint, collides_on_grid, collides_with_points, path_poses
+from common.collision import collides_on_grid, collides_with_points, path_poses
+from common.footprint import Footprint
 from services.planner.grid import XY, PlanGrid
 from services.planner.obstacles import Points
 from services.planner.world import MapData

@@ -24,9 +24,10 @@ from typing import Any, ClassVar
 import numpy as np
 
 from common import log
+from common.collision import collides_with_points
 from common.contract import records
 from common.engine.supervisor import Ticket
-from common.footprint import Footprint, collides_with_points
+from common.footprint import Footprint
 from services.planner.recovery import NOTHING, Action, Machine, Observation, RecoveryParams
 from services.planner.scenario import ODOM_MAX_AGE_S
 from services.planner.target import RuleKey, Spec, TargetRule

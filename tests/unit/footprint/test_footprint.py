@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 import yaml
 
+from common.collision import collides_with_points
 from common.errors import ModelError
-from common.footprint import Footprint, collides_with_points, polygon_problem
+from common.footprint import Footprint, polygon_problem
 from common.robotmodel import load_model
 
 BOX = ((0.254, -0.215), (0.254, 0.215), (-0.254, 0.215), (-0.254, -0.215))

@@ -1,5 +1,5 @@
 """A Jackal's box fits a 0.45 m gap straight on but not at an angle: the sim's contact test
-(pybullet, the body built from the model's polygon) and common.footprint's grid check (the
+(pybullet, the body built from the model's polygon) and common.collision's grid check (the
 planner's, and local planners') agree, pose by pose."""
 
 from __future__ import annotations
@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.footprint import Footprint, collides_on_grid, square_gaps
+from common.collision import collides_on_grid, square_gaps
+from common.footprint import Footprint
 from common.robotmodel import load_model
 from services.sim.mapserver import OCCUPIED
 from services.sim.physics import CONTACT_TOLERANCE_M, Scene
