@@ -26,7 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from common.contract import keys
+from common.contract import keys, records
+from common.footprint import Footprint
 from pnav.bench.provenance import origin_of
 from pnav.monolith.contract import MemoryContract, Row
 from services.bridge.commands import clamp
@@ -117,8 +118,11 @@ class Bridge:
                 continue
             angular = clamp(row["angular_rps"], robot["max_angular_rps"])
             linear = clamp(row["linear_mps"], robot["max_linear_mps"])
-            radius, decel = robot["footprint_radius_m"], robot["max_linear_accel_mps2"]
-            verdict = self.safety.judge(robot_id, linear, radius, now, decel)
+            footprint = Footprint.of(
+                robot["footprint_radius_m"], records.polygon_of(robot.get("footprint_polygon"))
+            )
+            decel = robot["max_linear_accel_mps2"]
+            verdict = self.safety.judge(robot_id, linear, footprint, now, decel)
             linear = verdict.linear
             self.set_command(robot_id, linear, angular)
             if verdict.noted:  # the bridge's one UPDATE of the row, after the send
