@@ -10,7 +10,9 @@ The footprint itself, its radii and its outline's geometry are in common/footpri
 - :func:`collides_with_points`: against points (a scan's returns in the world frame,
   obstacles), within a margin;
 - :func:`square_gaps`: the gap to each of a set of squares (what the grid check weighs);
-- :func:`path_poses`: the poses a path puts the robot in, turns in place included.
+- :func:`path_poses`: the poses a path puts the robot in, turns in place included;
+- :func:`first_contact`: the first of a roll-out's poses at which the footprint meets a
+  scan's returns (what a local planner scoring trajectories asks).
 """
 
 from __future__ import annotations
@@ -127,3 +129,28 @@ def path_poses(
         out += [(x0 + (x1 - x0) * i / n, y0 + (y1 - y0) * i / n, yaw) for i in range(n + 1)]
         previous = yaw
     return out
+
+
+def first_contact(
+    footprint: Footprint, poses: FloatArray, points: FloatArray, margin_m: float = 0.0
+) -> int | None:
+    """The index of the first of ``poses`` (k x 3: x, y, yaw, e.g. a roll-out's, in the frame
+    of ``points``) at which the footprint comes within ``margin_m`` of one of ``points``
+    (n x 2: a scan's returns in the robot's frame); None when none does. One pass for all
+    poses: each pose's points near enough to matter (within the circumscribed radius plus
+    the margin) are tested against the outline."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    ps = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    if not len(pts) or not len(ps):
+        return None
+    reach = footprint.circumscribed_m + margin_m
+    dx = pts[None, :, 0] - ps[:, None, 0]  # k x n
+    dy = pts[None, :, 1] - ps[:, None, 1]
+    near = dx * dx + dy * dy <= reach * reach
+    k, j = np.nonzero(near)
+    if not len(k):
+        return None
+    c, s = np.cos(ps[k, 2]), np.sin(ps[k, 2])
+    local = np.stack([c * dx[k, j] + s * dy[k, j], -s * dx[k, j] + c * dy[k, j]], axis=1)
+    hit = footprint.clearance(local) <= margin_m
+    return int(k[hit].min()) if hit.any() else None

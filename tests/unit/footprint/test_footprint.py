@@ -98,3 +98,23 @@ def test_collides_with_points_turns_with_the_pose() -> None:
     assert not collides_with_points(fp, (0.0, 0.0, 0.0), point)
     assert collides_with_points(fp, (0.0, 0.0, math.pi / 2), point)
     assert collides_with_points(fp, (0.0, 0.0, 0.0), point, margin_m=0.03)
+
+
+def test_first_contact_along_a_roll_out() -> None:
+    from common.collision import first_contact
+
+    fp = Footprint.of(0.22, BOX)
+    # straight ahead at 0.1 m steps toward a return 1 m ahead: the front edge (0.254) meets
+    # it once the centre is past 0.746 m
+    poses = np.array([[0.1 * i, 0.0, 0.0] for i in range(12)])
+    assert first_contact(fp, poses, np.array([[1.0, 0.1]])) == 8
+    # a return beside the box's flank is never met driving straight; turning in place it is
+    assert first_contact(fp, poses, np.array([[0.0, 0.24]])) is None
+    turning = np.array([[0.0, 0.0, math.radians(10 * i)] for i in range(10)])
+    assert first_contact(fp, turning, np.array([[0.0, 0.24]])) is not None
+    assert first_contact(fp, poses, np.empty((0, 2))) is None
+    # it agrees with the one-pose check at every pose
+    points = np.array([[1.0, 0.1], [0.5, -0.3], [0.2, 0.25]])
+    for i in range(len(turning)):
+        one = collides_with_points(fp, tuple(turning[i]), points)
+        assert one == (first_contact(fp, turning[i : i + 1], points) == 0)
