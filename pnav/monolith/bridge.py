@@ -122,7 +122,7 @@ class Bridge:
                 robot["footprint_radius_m"], records.polygon_of(robot.get("footprint_polygon"))
             )
             decel = robot["max_linear_accel_mps2"]
-            verdict = self.safety.judge(robot_id, linear, footprint, now, decel)
+            verdict = self.safety.judge(robot_id, linear, footprint, now, decel, angular)
             linear = verdict.linear
             self.set_command(robot_id, linear, angular)
             if verdict.noted:  # the bridge's one UPDATE of the row, after the send

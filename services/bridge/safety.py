@@ -15,8 +15,9 @@ sweep, and the sim stops a turn that would push one into something):
   sits at the centre, CONTRACT.md) with ``x`` in the direction of travel and ``|y| < R`` is
   touched after ``|x| - sqrt(R^2 - y^2)`` of travel; for a footprint polygon, after ``|x|``
   less the outline's front (or back) edge at that ``y`` (common/footprint.py,
-  ``Footprint.travel_each``): a box's flat front and square corners, not a disc's bulge. The
-  nearest such is the free travel ``d``;
+  ``Footprint.travel_each``): a box's flat front and square corners, not a disc's bulge. A
+  polygon commanded to turn as it drives is rolled out along that arc instead
+  (:meth:`Scan.arc_travel`): its corners swing. The nearest such is the free travel ``d``;
 - the distance needed: ``|v| * latency + v^2 / (2 * decel) + margin`` (``decel``: the robot
   row's ``max_linear_accel_mps2``, the hardest its model brakes), plus what the robot
   may have travelled since the scan (``age * |last speed sent|``, when that speed was in the
@@ -40,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from common.collision import first_contact
 from common.footprint import Footprint
 from services.bridge.messages import LaserScan
 
@@ -109,6 +111,38 @@ class Scan:
             self._xy = (r * np.cos(a), r * np.sin(a))
         return self._xy
 
+    def arc_travel(
+        self, footprint: Footprint, direction: int, turn_per_m: float, reach_m: float
+    ) -> tuple[float, float, float]:
+        """(free travel, range, bearing) of the first return the footprint polygon meets
+        driving ahead (``direction`` 1) or back (-1) along the arc that turns ``turn_per_m``
+        rad per metre (the turn rate over the speed), for up to ``reach_m`` of it, ARC_STEP_M
+        apart; the travel is the last free pose's (inf, inf, 0 if none is met within reach)."""
+        xs, ys = self._returns()
+        if not len(xs):
+            return math.inf, math.inf, 0.0
+        n = max(1, math.ceil(reach_m / ARC_STEP_M))
+        s = np.arange(1, n + 1) * (reach_m / n)
+        w = turn_per_m
+        yaw = w * s
+        if abs(w) > 1e-9:
+            x, y = direction * np.sin(yaw) / w, direction * (1.0 - np.cos(yaw)) / w
+        else:
+            x, y = direction * s, np.zeros_like(s)
+        poses = np.stack([x, y, yaw], axis=1)
+        points = np.stack([xs, ys], axis=1)
+        hit = first_contact(footprint, poses, points)
+        if hit is None:
+            return math.inf, math.inf, 0.0
+        travel = float(s[hit - 1]) if hit > 0 else 0.0
+        # the return nearest the outline at the pose of contact names it
+        c, sn = math.cos(poses[hit, 2]), math.sin(poses[hit, 2])
+        dx, dy = xs - poses[hit, 0], ys - poses[hit, 1]
+        local = np.stack([c * dx + sn * dy, -sn * dx + c * dy], axis=1)
+        i = int(np.argmin(footprint.clearance(local)))
+        bearing = math.degrees(math.atan2(float(ys[i]), float(xs[i])))
+        return travel, math.hypot(float(xs[i]), float(ys[i])), bearing
+
     def free_travel(
         self, direction: int, footprint: Footprint | float
     ) -> tuple[float, float, float]:
@@ -135,6 +169,11 @@ class Scan:
         i = int(index[best])
         bearing = math.degrees(math.atan2(float(ys[i]), float(xs[i])))
         return float(travel[best]), math.hypot(float(xs[i]), float(ys[i])), bearing
+
+
+# how far past the distance it needs a polygon's arc is rolled out, and the step of it, m
+ARC_SLACK_M = 0.1
+ARC_STEP_M = 0.02
 
 
 @dataclass(frozen=True, slots=True)
@@ -186,14 +225,16 @@ class SafetyLayer:
         radius: Footprint | float,
         now: float | None,
         decel_mps2: float,
+        angular: float = 0.0,
     ) -> Verdict:
         """The verdict on sending ``linear`` (already clamped) to ``robot`` of footprint
         ``radius`` (its polygon, or a disc's radius) that brakes at ``decel_mps2`` (its
         acceleration limit; the params' value instead if set) at sim time ``now`` (None: no
-        clock yet, the newest scan counts as fresh). Records the speed the verdict sends as
-        the robot's last."""
+        clock yet, the newest scan counts as fresh); ``angular``, the turn rate going out with
+        it, bends a footprint polygon's corridor into the arc it drives. Records the speed the
+        verdict sends as the robot's last."""
         decel = self.params.decel_mps2 if self.params.decel_mps2 is not None else decel_mps2
-        verdict = self._judge(robot, linear, radius, now, decel)
+        verdict = self._judge(robot, linear, radius, now, decel, angular)
         self.sent[robot] = verdict.linear
         return verdict
 
@@ -202,7 +243,13 @@ class SafetyLayer:
         self.sent[robot] = 0.0
 
     def _judge(
-        self, robot: str, linear: float, radius: Footprint | float, now: float | None, decel: float
+        self,
+        robot: str,
+        linear: float,
+        radius: Footprint | float,
+        now: float | None,
+        decel: float,
+        angular: float = 0.0,
     ) -> Verdict:
         p = self.params
         if not p.enabled or linear == 0.0:
@@ -212,9 +259,15 @@ class SafetyLayer:
         if scan is None or age > p.scan_max_age_s:
             return self._blind(linear, None if scan is None else age)
         direction = 1 if linear > 0 else -1
-        travel, range_m, bearing = scan.free_travel(direction, radius)
         last = self.sent.get(robot, 0.0)
         moved = age * abs(last) if last * direction > 0 else 0.0
+        if isinstance(radius, Footprint) and not radius.is_disc and angular != 0.0:
+            # as far as the stopping distance at this speed could take it, and a little more
+            reach = stopping_m(abs(linear), p.latency_s, decel) + p.margin_m + moved + ARC_SLACK_M
+            turn_per_m = angular / abs(linear)
+            travel, range_m, bearing = scan.arc_travel(radius, direction, turn_per_m, reach)
+        else:
+            travel, range_m, bearing = scan.free_travel(direction, radius)
         budget = travel - p.margin_m - moved
         speed = abs(linear)
         if budget >= stopping_m(speed, p.latency_s, decel):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import pytest
 
@@ -276,3 +277,32 @@ def test_a_polygon_is_measured_from_its_edge_not_a_disc() -> None:
     behind.scan(scan(10.0, (0.5, 180.0)))
     free_back, _, _ = behind.scans["r1"].free_travel(-1, box)
     assert free_back == pytest.approx(0.5 - 0.254)
+
+
+def test_a_polygon_turning_as_it_drives_is_judged_along_its_arc() -> None:
+    from common.footprint import Footprint
+
+    box = Footprint.of(0.22, ((0.254, -0.215), (0.254, 0.215), (-0.254, 0.215), (-0.254, -0.215)))
+    # a return ahead on the left, beside the straight corridor (0.35 m > the 0.215 m flank):
+    # driving straight or turning right passes it, turning left at 1 rad/m swings the front
+    # left corner into it about 0.4 m on
+    at = (math.hypot(0.6, 0.35), math.degrees(math.atan2(0.35, 0.6)))
+    outcomes = {}
+    for angular in (0.0, -1.5, 1.5):
+        safety = layer()
+        safety.scan(scan(10.0, at))
+        outcomes[angular] = safety.judge("r1", 1.5, box, 10.0, DECEL, angular)
+    assert outcomes[0.0].outcome == CLEAR and outcomes[-1.5].outcome == CLEAR
+    assert outcomes[1.5].outcome in (LIMITED, STOPPED)
+    assert outcomes[1.5].linear < 1.5
+    travel, _, bearing = layer_scan(at).arc_travel(box, 1, 1.0, 1.0)
+    assert 0.3 < travel < 0.5 and bearing == pytest.approx(at[1], abs=1.0)
+    # backing up while turning: the arc runs behind
+    travel_back, _, _ = layer_scan((0.5, 180.0)).arc_travel(box, -1, 0.5, 1.0)
+    assert 0.2 < travel_back < 0.26
+
+
+def layer_scan(*obstacles: tuple[float, float]) -> Any:
+    safety = layer()
+    safety.scan(scan(10.0, *obstacles))
+    return safety.scans["r1"]
