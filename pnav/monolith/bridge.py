@@ -124,6 +124,7 @@ class Bridge:
             decel = robot["max_linear_accel_mps2"]
             verdict = self.safety.judge(robot_id, linear, footprint, now, decel, angular)
             linear = verdict.linear
+            angular = angular if verdict.angular is None else verdict.angular
             self.set_command(robot_id, linear, angular)
             if verdict.noted:  # the bridge's one UPDATE of the row, after the send
                 row |= {"safety": verdict.reason, "sent_linear_mps": linear}

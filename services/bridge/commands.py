@@ -318,6 +318,7 @@ class CommandRelay:
         now = self.clock.now() if self.clock.started else None
         linear = clamp(cmd.linear, cmd.max_linear)
         verdict = self.safety.judge(robot, linear, cmd.footprint, now, cmd.max_accel, angular)
+        angular = angular if verdict.angular is None else verdict.angular
         try:
             self._send(robot, verdict.linear, angular, cmd.id, decided_stamp=cmd.stamp)
         except Exception as exc:  # Zenoh closing

@@ -143,6 +143,31 @@ class Scan:
         bearing = math.degrees(math.atan2(float(ys[i]), float(xs[i])))
         return travel, math.hypot(float(xs[i]), float(ys[i])), bearing
 
+    def turn_blocked(self, footprint: Footprint, sweep_rad: float) -> tuple[float, float] | None:
+        """(range, bearing) of a return a corner of the polygon would come within
+        TURN_MARGIN_M of turning in place by ``sweep_rad``; None if none would."""
+        xs, ys = self._returns()
+        if not len(xs):
+            return None
+        steps = max(1, math.ceil(abs(sweep_rad) / TURN_STEP_RAD))
+        yaw = sweep_rad * np.arange(1, steps + 1) / steps
+        near = np.hypot(xs, ys) <= footprint.circumscribed_m + TURN_MARGIN_M
+        px, py = xs[near], ys[near]
+        if not len(px):
+            return None
+        now = footprint.clearance(np.stack([px, py], axis=1))
+        # each near return in the frame of each heading turned through: (steps x n) clearances
+        c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
+        local = np.stack([c * px + s * py, -s * px + c * py], axis=2).reshape(-1, 2)
+        later = footprint.clearance(local).reshape(steps, -1)
+        # a corner coming within the margin of a return, and nearer it than now: a return
+        # the outline already touches is no reason not to turn away from it
+        closing = (later <= TURN_MARGIN_M) & (later < now[None, :] - 1e-6)
+        if not closing.any():
+            return None
+        i = int(np.flatnonzero(closing.any(axis=0))[0])
+        return math.hypot(float(px[i]), float(py[i])), math.degrees(math.atan2(py[i], px[i]))
+
     def free_travel(
         self, direction: int, footprint: Footprint | float
     ) -> tuple[float, float, float]:
@@ -174,6 +199,11 @@ class Scan:
 # how far past the distance it needs a polygon's arc is rolled out, and the step of it, m
 ARC_SLACK_M = 0.1
 ARC_STEP_M = 0.02
+# a polygon's turn is judged over this long at the commanded rate (at least twice the
+# latency: the time it acts, and as long to stop), its corners kept this far from returns
+TURN_HORIZON_S = 0.2
+TURN_MARGIN_M = 0.01
+TURN_STEP_RAD = math.radians(2.0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -183,6 +213,9 @@ class Verdict:
     linear: float
     outcome: str  # CLEAR, LIMITED, STOPPED or UNCHECKED
     reason: str = ""
+    # the turn rate to send instead of the command's (None: the command's): a footprint
+    # polygon whose turn would swing a corner into a return is not turned
+    angular: float | None = None
 
     @property
     def noted(self) -> bool:
@@ -235,8 +268,36 @@ class SafetyLayer:
         verdict sends as the robot's last."""
         decel = self.params.decel_mps2 if self.params.decel_mps2 is not None else decel_mps2
         verdict = self._judge(robot, linear, radius, now, decel, angular)
+        if isinstance(radius, Footprint) and not radius.is_disc and angular != 0.0:
+            verdict = self._turn(robot, verdict, radius, now, angular)
         self.sent[robot] = verdict.linear
         return verdict
+
+    def _turn(
+        self, robot: str, verdict: Verdict, footprint: Footprint, now: float | None, angular: float
+    ) -> Verdict:
+        """``verdict`` with the turn taken away when turning ``angular`` for TURN_HORIZON_S
+        (the time the command acts, and as long again to stop) would bring a corner of the
+        polygon within TURN_MARGIN_M of a return of a fresh scan."""
+        p = self.params
+        scan = self.scans.get(robot)
+        if not p.enabled or scan is None:
+            return verdict
+        if now is not None and now - scan.stamp > p.scan_max_age_s:
+            return verdict
+        sweep = angular * max(TURN_HORIZON_S, 2.0 * p.latency_s)
+        blocked = scan.turn_blocked(footprint, sweep)
+        if blocked is None:
+            return verdict
+        range_m, bearing = blocked
+        why = (
+            f"turn stopped: turning {math.degrees(sweep):+.0f} deg would bring a corner "
+            f"within {TURN_MARGIN_M:.2f} m of the obstacle {range_m:.2f} m away at "
+            f"{bearing:+.0f} deg (footprint {_shown(footprint)})"
+        )
+        outcome = verdict.outcome if verdict.outcome == STOPPED else LIMITED
+        reason = f"{verdict.reason}; {why}" if verdict.reason else why
+        return Verdict(verdict.linear, outcome, reason, 0.0)
 
     def sent_stop(self, robot: str) -> None:
         """A stop went out without a verdict (watchdog, shutdown)."""

@@ -306,3 +306,23 @@ def layer_scan(*obstacles: tuple[float, float]) -> Any:
     safety = layer()
     safety.scan(scan(10.0, *obstacles))
     return safety.scans["r1"]
+
+
+def test_a_polygon_is_not_turned_into_what_its_corner_would_hit() -> None:
+    from common.footprint import Footprint
+
+    box = Footprint.of(0.22, ((0.254, -0.215), (0.254, 0.215), (-0.254, 0.215), (-0.254, -0.215)))
+    # a post 0.34 m out at 45 degrees left: a left turn swings the front left corner past it
+    # within 1 cm, a right turn swings nothing that far out near it
+    post = (0.34, 45.0)
+    left, right, disc = layer(), layer(), layer()
+    for safety in (left, right, disc):
+        safety.scan(scan(10.0, post))
+    stopped = left.judge("r1", 0.0, box, 10.0, DECEL, 4.0)
+    assert (
+        stopped.angular == 0.0 and stopped.outcome == LIMITED and "turn stopped" in stopped.reason
+    )
+    turned = right.judge("r1", 0.0, box, 10.0, DECEL, -4.0)
+    assert turned.angular is None and turned.outcome == CLEAR
+    # a disc's turn sweeps nothing
+    assert disc.judge("r1", 0.0, 0.22, 10.0, DECEL, 4.0).angular is None
