@@ -33,6 +33,7 @@ import yaml
 from common import yamldoc
 from common.contract import limits
 from common.errors import ModelError
+from common.footprint import Footprint, Polygon, polygon_problem
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "models"
@@ -107,7 +108,9 @@ class LidarModel:
 
 @dataclass(frozen=True)
 class RobotModel:
-    """A differential-drive robot, round footprint; field names end in the contract's units."""
+    """A differential-drive robot; field names end in the contract's units. Its footprint is
+    ``footprint_polygon`` when the model gives one (robot frame, counter-clockwise,
+    common/footprint.py), else the disc of ``footprint_radius_m``."""
 
     name: str
     footprint_radius_m: float
@@ -120,6 +123,11 @@ class RobotModel:
     battery_capacity_wh: float
     height_m: float
     lidar: LidarModel
+    footprint_polygon: Polygon | None = None
+
+    @property
+    def footprint(self) -> Footprint:
+        return Footprint.of(self.footprint_radius_m, self.footprint_polygon)
 
     def robot_row(self) -> dict[str, object]:
         """The ``robot`` table's model columns (CONTRACT.md), as the world message carries
@@ -132,6 +140,11 @@ class RobotModel:
             "max_linear_mps": self.max_linear_mps,
             "max_angular_rps": self.max_angular_rps,
             "footprint_radius_m": self.footprint_radius_m,
+            "footprint_polygon": (
+                None
+                if self.footprint_polygon is None
+                else [list(v) for v in self.footprint_polygon]
+            ),
             "battery_capacity_wh": self.battery_capacity_wh,
             "max_linear_accel_mps2": self.max_linear_accel_mps2,
             "max_angular_accel_rps2": self.max_angular_accel_rps2,
@@ -145,7 +158,11 @@ class RobotModel:
         }
 
 
-ROBOT_FIELDS = tuple(f.name for f in fields(RobotModel) if f.name not in ("name", "lidar"))
+ROBOT_FIELDS = tuple(
+    f.name for f in fields(RobotModel) if f.name not in ("name", "lidar", "footprint_polygon")
+)
+# optional in a file: absent, the footprint is the disc of footprint_radius_m
+OPTIONAL_FIELDS = ("footprint_polygon",)
 LIDAR_FIELDS = tuple(f.name for f in fields(LidarModel))
 # optional in a file: a cross-check of beams against the field of view, never stored
 LIDAR_CHECK_FIELDS = ("angle_increment_rad",)
@@ -215,7 +232,7 @@ def _merged(doc: dict[str, Any], overrides: Mapping[str, object], where: str) ->
 
 def parse_model(doc: Mapping[str, Any], where: str) -> RobotModel:
     """A model from its YAML document; ``where`` (the file) starts every error message."""
-    _no_unknown(doc, where, "", ("name", *ROBOT_FIELDS, "lidar"))
+    _no_unknown(doc, where, "", ("name", *ROBOT_FIELDS, *OPTIONAL_FIELDS, "lidar"))
     name = doc.get("name")
     if not isinstance(name, str) or not name or not all(c.isalnum() or c in "_-" for c in name):
         raise ModelError(f"{where}: name: must be a name matching [A-Za-z0-9_-]+, got {name!r}")
@@ -227,7 +244,21 @@ def parse_model(doc: Mapping[str, Any], where: str) -> RobotModel:
     values = {key: _positive(doc, key, where, "") for key in ROBOT_FIELDS}
     for key, bound in ROBOT_BOUNDS.items():
         _at_most(values[key], bound[0], where, key, bound)
-    return RobotModel(name=name, lidar=_lidar(lidar_doc, where), **values)
+    polygon = _polygon(doc, where)
+    return RobotModel(
+        name=name, lidar=_lidar(lidar_doc, where), footprint_polygon=polygon, **values
+    )
+
+
+def _polygon(doc: Mapping[str, Any], where: str) -> Polygon | None:
+    """The optional footprint polygon, checked as the robot table's CHECKs check it."""
+    value = doc.get("footprint_polygon")
+    if value is None:
+        return None
+    problem = polygon_problem(value)
+    if problem is not None:
+        raise ModelError(f"{where}: footprint_polygon: {problem}")
+    return tuple((float(x), float(y)) for x, y in value)
 
 
 def _lidar(doc: Mapping[str, Any], where: str) -> LidarModel:

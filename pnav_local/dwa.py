@@ -247,9 +247,9 @@ class Dwa(ControllerScenario):
         return None
 
     def footprint_polygon(self) -> Sequence[Sequence[float]] | None:
-        """The outline the roll-outs are checked with (robot frame, metres, CCW); None: the
-        disc of the robot row's ``footprint_radius_m``. The robot row has no polygon yet."""
-        return None
+        """The outline the roll-outs are checked with (robot frame, metres, CCW): the robot
+        row's ``footprint_polygon``; None: the disc of its ``footprint_radius_m``."""
+        return self.spec.robot.footprint_polygon
 
     def judge(self, scan: LaserScan, odom: Odometry | None) -> Command | None:
         path = self.path

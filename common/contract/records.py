@@ -17,6 +17,7 @@ import numpy as np
 
 from common.contract import tables
 from common.contract.columns import BOOL, FLOAT, FLOATS, ID, INT, Column, Table
+from common.footprint import Footprint, Polygon
 from common.robotmodel import DEFAULT_MODEL, load_model
 from common.scan import beam_angles, readings
 
@@ -38,6 +39,14 @@ class Robot:
     # the hardest the robot speeds up and brakes (its model's; stopping distances use them)
     max_linear_accel_mps2: float = _DEFAULT_MODEL.max_linear_accel_mps2
     max_angular_accel_rps2: float = _DEFAULT_MODEL.max_angular_accel_rps2
+    # the row's footprint_polygon (robot frame, counter-clockwise); None: the disc of
+    # footprint_radius_m. Read it through ``footprint``.
+    footprint_polygon: Polygon | None = None
+
+    @property
+    def footprint(self) -> Footprint:
+        """The robot's footprint: its polygon, or the disc of ``footprint_radius_m``."""
+        return Footprint.of(self.footprint_radius_m, self.footprint_polygon)
 
     def braking_m(self, speed_mps: float) -> float:
         """Distance the robot needs to stop from ``speed_mps`` at its acceleration limit."""
@@ -148,10 +157,19 @@ class ChargingStation:
 async def robots(db: Executor) -> list[Robot]:
     rows = await db.fetch(
         "SELECT robot_id, max_linear_mps, max_angular_rps, footprint_radius_m, "
-        "battery_capacity_wh, max_linear_accel_mps2, max_angular_accel_rps2 "
+        "battery_capacity_wh, max_linear_accel_mps2, max_angular_accel_rps2, footprint_polygon "
         "FROM robot ORDER BY robot_id"
     )
-    return [Robot(**dict(r)) for r in rows]
+    return [
+        Robot(**{**dict(r), "footprint_polygon": polygon_of(r["footprint_polygon"])}) for r in rows
+    ]
+
+
+def polygon_of(value: Any) -> Polygon | None:
+    """A robot row's ``footprint_polygon`` (an array of [x, y] rows, or NULL) as a tuple."""
+    if value is None:
+        return None
+    return tuple((float(x), float(y)) for x, y in value)
 
 
 async def newest_odometry(db: Executor, robot_id: str) -> Odometry | None:

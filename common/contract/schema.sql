@@ -991,3 +991,126 @@ INSERT INTO strategy (code, planner_scenario, controller_scenarios, params, desc
     ('GOTO_LEARNED', 'turn_then_move', '{learned_drive,safety_stop}',
      '{"target": "goal", "planner_drives": false, "recovery": true, "battery_wh_per_m": 0.006, "battery_reserve_wh": 0.05, "learned_model": "learned_drive.json"}',
      'go to the goal with learned_drive (a model trained on the records) along the planned path, recovery when stuck, safety_stop');
+
+-- migration 17: a robot's footprint may be a polygon
+--
+-- Every robot was a disc of footprint_radius_m. A Jackal is a 508 x 430 mm box: the disc
+-- inscribed in it lets its corners (0.33 m from the centre) into gaps the disc fits, and the
+-- circumscribed one keeps it out of gaps it fits straight on. footprint_polygon gives the true
+-- outline: vertices [x, y] in metres in the robot's frame (x forward, y left), in order,
+-- counter-clockwise, the centre inside; a two-dimensional array, one row per vertex. NULL:
+-- the disc of footprint_radius_m, as before (which stays, and keeps its meaning for readers
+-- that take a radius). The bridge writes it from the robot's model. Three CHECKs, each naming
+-- what is wrong (checked in the order of their names, so a malformed array is refused as
+-- such, and a self-intersecting one before its centre is looked for):
+-- robot_footprint_polygon_bounded (3 to 64 vertices, [x, y] each, finite, within 5 m of the
+-- centre on each axis), robot_footprint_polygon_simple (no two edges cross or touch but
+-- neighbours at their shared vertex, counter-clockwise), robot_footprint_polygon_surrounds_centre
+-- (the centre inside, at least 1 mm from the outline). common/footprint.py
+-- applies the same rules before the database does. Rows already present have NULL.
+ALTER TABLE robot ADD COLUMN footprint_polygon double precision[];
+
+CREATE FUNCTION footprint_polygon_bounded(p double precision[]) RETURNS boolean
+LANGUAGE sql IMMUTABLE PARALLEL SAFE AS $$
+    SELECT p IS NULL OR (
+        array_ndims(p) = 2 AND array_lower(p, 1) = 1 AND array_lower(p, 2) = 1
+        AND array_length(p, 2) = 2 AND array_length(p, 1) BETWEEN 3 AND 64
+        AND NOT EXISTS (SELECT 1 FROM unnest(p) AS v
+                         WHERE v IS NULL OR NOT is_finite(v) OR abs(v) > 5))
+$$;
+
+-- the centre (0, 0) strictly inside, at least 1 mm from every edge (crossing number, then
+-- the distance to each edge); true for what footprint_polygon_bounded refuses
+CREATE FUNCTION footprint_polygon_surrounds_centre(p double precision[]) RETURNS boolean
+LANGUAGE plpgsql IMMUTABLE PARALLEL SAFE AS $$
+DECLARE
+    n integer;
+    inside boolean := false;
+    x1 double precision; y1 double precision; x2 double precision; y2 double precision;
+    ex double precision; ey double precision; t double precision;
+BEGIN
+    IF p IS NULL OR NOT footprint_polygon_bounded(p) THEN
+        RETURN true;
+    END IF;
+    n := array_length(p, 1);
+    FOR i IN 1..n LOOP
+        x1 := p[i][1]; y1 := p[i][2];
+        x2 := p[i % n + 1][1]; y2 := p[i % n + 1][2];
+        IF (y1 > 0) <> (y2 > 0) AND 0 < x1 + (0 - y1) * (x2 - x1) / (y2 - y1) THEN
+            inside := NOT inside;
+        END IF;
+        ex := x2 - x1; ey := y2 - y1;
+        t := CASE WHEN ex * ex + ey * ey = 0 THEN 0
+                  ELSE greatest(0, least(1, (-x1 * ex - y1 * ey) / (ex * ex + ey * ey))) END;
+        IF sqrt((x1 + t * ex) ^ 2 + (y1 + t * ey) ^ 2) < 0.001 THEN
+            RETURN false;
+        END IF;
+    END LOOP;
+    RETURN inside;
+END;
+$$;
+
+-- no edge meets another but its neighbours at their shared vertex (no repeated vertex, no
+-- neighbour folding back along its edge), and the signed area positive (counter-clockwise);
+-- true for what footprint_polygon_bounded refuses
+CREATE FUNCTION footprint_polygon_simple(p double precision[]) RETURNS boolean
+LANGUAGE plpgsql IMMUTABLE PARALLEL SAFE AS $$
+DECLARE
+    n integer;
+    area double precision := 0;
+    xa double precision; ya double precision; xb double precision; yb double precision;
+    xc double precision; yc double precision; xd double precision; yd double precision;
+    o1 double precision; o2 double precision; o3 double precision; o4 double precision;
+BEGIN
+    IF p IS NULL OR NOT footprint_polygon_bounded(p) THEN
+        RETURN true;
+    END IF;
+    n := array_length(p, 1);
+    FOR i IN 1..n LOOP
+        xa := p[i][1]; ya := p[i][2];
+        xb := p[i % n + 1][1]; yb := p[i % n + 1][2];
+        xc := p[(i + 1) % n + 1][1]; yc := p[(i + 1) % n + 1][2];
+        IF xa = xb AND ya = yb THEN
+            RETURN false;
+        END IF;
+        area := area + xa * yb - ya * xb;
+        -- the next edge folding back along this one
+        IF (xb - xa) * (yc - ya) - (yb - ya) * (xc - xa) = 0
+           AND (xb - xa) * (xc - xb) + (yb - ya) * (yc - yb) < 0 THEN
+            RETURN false;
+        END IF;
+        FOR j IN i + 2..n LOOP
+            CONTINUE WHEN i = 1 AND j = n;  -- neighbours through vertex 1
+            xc := p[j][1]; yc := p[j][2];
+            xd := p[j % n + 1][1]; yd := p[j % n + 1][2];
+            o1 := (xb - xa) * (yc - ya) - (yb - ya) * (xc - xa);
+            o2 := (xb - xa) * (yd - ya) - (yb - ya) * (xd - xa);
+            o3 := (xd - xc) * (ya - yc) - (yd - yc) * (xa - xc);
+            o4 := (xd - xc) * (yb - yc) - (yd - yc) * (xb - xc);
+            IF sign(o1) * sign(o2) < 0 AND sign(o3) * sign(o4) < 0 THEN
+                RETURN false;
+            END IF;
+            -- touching: an end of one on the other
+            IF (o1 = 0 AND xc BETWEEN least(xa, xb) AND greatest(xa, xb)
+                       AND yc BETWEEN least(ya, yb) AND greatest(ya, yb))
+               OR (o2 = 0 AND xd BETWEEN least(xa, xb) AND greatest(xa, xb)
+                          AND yd BETWEEN least(ya, yb) AND greatest(ya, yb))
+               OR (o3 = 0 AND xa BETWEEN least(xc, xd) AND greatest(xc, xd)
+                          AND ya BETWEEN least(yc, yd) AND greatest(yc, yd))
+               OR (o4 = 0 AND xb BETWEEN least(xc, xd) AND greatest(xc, xd)
+                          AND yb BETWEEN least(yc, yd) AND greatest(yc, yd)) THEN
+                RETURN false;
+            END IF;
+        END LOOP;
+    END LOOP;
+    RETURN area > 0;
+END;
+$$;
+
+ALTER TABLE robot
+    ADD CONSTRAINT robot_footprint_polygon_bounded
+        CHECK (footprint_polygon_bounded(footprint_polygon)),
+    ADD CONSTRAINT robot_footprint_polygon_surrounds_centre
+        CHECK (footprint_polygon_surrounds_centre(footprint_polygon)),
+    ADD CONSTRAINT robot_footprint_polygon_simple
+        CHECK (footprint_polygon_simple(footprint_polygon));

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from common.contract.limits import clamp as clamp  # the plug-in interface's clamp
+from common.footprint import Footprint, Polygon
 
 # The entry-point group that names the move scenarios (name = a strategy's planner_scenario).
 SCENARIO_GROUP = "pnav.planner.scenarios"
@@ -47,6 +48,13 @@ class RobotInfo:
     max_linear_mps: float
     max_angular_rps: float
     footprint_radius_m: float
+    # the row's footprint_polygon (robot frame, counter-clockwise); None: the disc
+    footprint_polygon: Polygon | None = None
+
+    @property
+    def footprint(self) -> Footprint:
+        """The robot's footprint: its polygon, or the disc of ``footprint_radius_m``."""
+        return Footprint.of(self.footprint_radius_m, self.footprint_polygon)
 
 
 class MoveScenario:

@@ -26,8 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from common.contract import keys
+from common.contract import keys, records
 from common.contract.limits import clamp
+from common.footprint import Footprint
 from pnav.bench.provenance import origin_of
 from pnav.monolith.contract import MemoryContract, Row
 from services.bridge.messages import (
@@ -117,9 +118,13 @@ class Bridge:
                 continue
             angular = clamp(row["angular_rps"], robot["max_angular_rps"])
             linear = clamp(row["linear_mps"], robot["max_linear_mps"])
-            radius, decel = robot["footprint_radius_m"], robot["max_linear_accel_mps2"]
-            verdict = self.safety.judge(robot_id, linear, radius, now, decel)
+            footprint = Footprint.of(
+                robot["footprint_radius_m"], records.polygon_of(robot.get("footprint_polygon"))
+            )
+            decel = robot["max_linear_accel_mps2"]
+            verdict = self.safety.judge(robot_id, linear, footprint, now, decel, angular)
             linear = verdict.linear
+            angular = angular if verdict.angular is None else verdict.angular
             self.set_command(robot_id, linear, angular)
             if verdict.noted:  # the bridge's one UPDATE of the row, after the send
                 row |= {"safety": verdict.reason, "sent_linear_mps": linear}

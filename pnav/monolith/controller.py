@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from common.contract import keys, offers
+from common.contract import keys, offers, records
 from common.contract.planned_path import PlannedPath, planned_path_of
 from common.contract.recommendations import Recommendation
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot, Strategy
@@ -54,7 +54,14 @@ class MemoryControllerSource:
 
     async def robots(self) -> list[Robot]:
         rows = self.contract[keys.ROBOT].all_rows()
-        return sorted((Robot(**_pick(r, _ROBOT)) for r in rows), key=lambda r: r.robot_id)
+        robots = (
+            Robot(
+                **_pick(r, _ROBOT),
+                footprint_polygon=records.polygon_of(r.get("footprint_polygon")),
+            )
+            for r in rows
+        )
+        return sorted(robots, key=lambda r: r.robot_id)
 
     async def active_strategies(self) -> dict[str, ActiveStrategy]:
         # the strategy join; a robot's newest active_strategy row is its row (an upsert)

@@ -58,6 +58,7 @@ class MemoryPlannerSource:
                 r["max_linear_mps"],
                 r["max_angular_rps"],
                 r["footprint_radius_m"],
+                records.polygon_of(r.get("footprint_polygon")),
             )
             for r in self.contract[keys.ROBOT].all_rows()
         ]

@@ -21,8 +21,10 @@ challenge's Jackal (top speed 2 m/s). The layout, in cells of ``cell_m``::
 
 The side walls run the whole length, so the only way to the goal is through the field. A
 world is kept only if the model's disc, grown by the planner's margin, finds a path (the
-same check as the default protocol, ``pnav.navbench.generator``), else the field is drawn
-again from the same random stream.
+same check as the default protocol, ``pnav.navbench.generator``) and, for a model with a
+footprint polygon (the Jackal's box), the polygon keeps 2 cm from every obstacle along that
+path heading along each leg (:func:`fits`), else the field is drawn again from the same
+random stream.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from common.collision import collides_on_grid, path_poses
 from common.errors import UsageError
 from pnav.navbench.automaton import AutomatonRule, BoolGrid, grow_field
 from pnav.navbench.difficulty import Difficulty, measure
@@ -42,6 +45,9 @@ from pnav.navbench.robots import RobotFit
 from pnav.navbench.search import Point, ReferencePath, reference_path
 
 PROTOCOL = "barn"
+# what a footprint polygon keeps from the obstacles along the reference path (as the
+# planner's path check keeps, services/planner/fit.py), m
+POLYGON_MARGIN_M = 0.02
 BARN_TOP_SPEED_MPS = 2.0  # the Jackal's, as the challenge computes OT
 BARN_TIME_LIMIT_S = 100.0  # the challenge's, for that speed
 GOAL_TOLERANCE_M = 1.0
@@ -248,7 +254,7 @@ def generate_barn_world(
         ref = reference_path(
             occupied, layout.resolution_m, ORIGIN, (x0, y0), layout.goal, inflation
         )
-        if ref is not None:
+        if ref is not None and fits(robot, occupied, layout, ref.points):
             return BarnWorld(
                 name=name or f"barn_{level}_s{seed}",
                 level=level,
@@ -269,6 +275,21 @@ def generate_barn_world(
     raise UsageError(
         f"no {level} world passable for {robot.name} "
         f"(footprint {robot.footprint_radius_m} m) in {max_attempts} fields (seed {seed})"
+    )
+
+
+def fits(robot: RobotFit, occupied: BoolGrid, layout: BarnLayout, points: Sequence[Point]) -> bool:
+    """Whether a robot with a footprint polygon keeps POLYGON_MARGIN_M from every obstacle
+    along the reference path, heading along each leg (a disc: the inflated search said so
+    already). Turns are not checked in place: the reference path's bends hug the inflated
+    obstacles, and a robot drives through them."""
+    footprint = robot.footprint
+    if footprint.is_disc:
+        return True
+    res = layout.resolution_m
+    return not any(
+        collides_on_grid(footprint, pose, occupied, res, ORIGIN, POLYGON_MARGIN_M)
+        for pose in path_poses(points, res, math.inf)
     )
 
 

@@ -21,6 +21,7 @@ from pnav.navbench.barn import (
     GOAL_TOLERANCE_M,
     LEVELS,
     OBSTACLE_HEIGHT_M,
+    POLYGON_MARGIN_M,
     PROTOCOL,
     WALL_HEIGHT_M,
     BarnWorld,
@@ -28,6 +29,7 @@ from pnav.navbench.barn import (
 )
 from pnav.navbench.generator import ORIGIN
 from pnav.navbench.metrics import optimal_time
+from pnav.navbench.robots import RobotFit
 from pnav.navbench.worldfile import FORMAT, FREE_PX, OCCUPIED_PX
 from services.sim.mapserver import encode_pgm, map_yaml
 
@@ -205,7 +207,7 @@ def barn_suite_markdown(worlds: Sequence[BarnWorld], command: str) -> str:
                 "## The protocol",
                 f"- Robot: `{robot.name}` (top speed {robot.max_linear_mps} m/s, footprint "
                 f"radius {robot.footprint_radius_m} m); every world has a path for its disc "
-                f"grown by {layout.margin_m} m.\n"
+                f"grown by {layout.margin_m} m{_polygon(robot)}.\n"
                 f"- The obstacle field ({layout.field_cols} x {layout.field_rows} cells of "
                 f"{layout.cell_m} m) is made of world obstacles (boxes): the map the planner "
                 "gets has the walls only; the lidar alone sees the obstacles.\n"
@@ -227,4 +229,16 @@ def barn_suite_markdown(worlds: Sequence[BarnWorld], command: str) -> str:
             ]
         )
         + "\n"
+    )
+
+
+def _polygon(robot: RobotFit) -> str:
+    """What SUITE.md adds for a robot with a footprint polygon (the worlds' second check)."""
+    if robot.footprint_polygon is None:
+        return ""
+    corners = ", ".join(f"({x:g}, {y:g})" for x, y in robot.footprint_polygon)
+    return (
+        f", along which its footprint polygon ({corners}; circumscribed radius "
+        f"{robot.footprint.circumscribed_m:.3f} m) keeps {POLYGON_MARGIN_M} m from every "
+        "obstacle, heading along each leg"
     )

@@ -16,6 +16,7 @@ import yaml
 
 from common import yamldoc
 from common.errors import UsageError
+from common.footprint import Footprint, Polygon
 
 if TYPE_CHECKING:
     from pnav.navbench.worldfile import BenchmarkWorld
@@ -31,6 +32,12 @@ class RobotFit:
     # what a world file's robot entry names for the sim to load it: a shipped model's name,
     # or a model file's absolute path ("": the name)
     ref: str = ""
+    # the model's footprint polygon (common/footprint.py); None: the disc of the radius
+    footprint_polygon: Polygon | None = None
+
+    @property
+    def footprint(self) -> Footprint:
+        return Footprint.of(self.footprint_radius_m, self.footprint_polygon)
 
     @property
     def world_ref(self) -> str:
@@ -51,7 +58,9 @@ def resolve_model(name: str) -> RobotFit:
 
     model = load_model(name)
     ref = name if name in model_names() else str(Path(name).resolve())
-    return RobotFit(model.name, model.max_linear_mps, model.footprint_radius_m, ref)
+    return RobotFit(
+        model.name, model.max_linear_mps, model.footprint_radius_m, ref, model.footprint_polygon
+    )
 
 
 def for_model(world: BenchmarkWorld, robot: RobotFit, folder: Path) -> BenchmarkWorld:

@@ -11,13 +11,15 @@ from typing import Any
 import asyncpg
 
 from common.contract import keys
-from services.bridge.limits import Limits
+from common.footprint import Footprint
+from services.bridge.limits import Limits, limits_of
 
 # LATERAL + LIMIT 1 walks the (robot_id, id DESC) index once per robot: the cost stays flat
 # however long command2robot grows (it is not a pruned sensor table).
 NEWEST = f"""
 SELECT r.robot_id, c.id, c.stamp, c.linear_mps, c.angular_rps,
-       r.max_linear_mps, r.max_angular_rps, r.footprint_radius_m, r.max_linear_accel_mps2
+       r.max_linear_mps, r.max_angular_rps, r.footprint_radius_m, r.footprint_polygon,
+       r.max_linear_accel_mps2
 FROM {keys.ROBOT} r
 CROSS JOIN LATERAL (
     SELECT id, stamp, linear_mps, angular_rps FROM {keys.COMMAND2ROBOT} c
@@ -35,12 +37,17 @@ class Command:
     angular: float
     max_linear: float
     max_angular: float
-    footprint: float
+    footprint: Footprint  # its polygon, or the disc of its radius
     max_accel: float  # the robot's linear acceleration limit: it brakes no harder
 
     @classmethod
     def from_row(cls, row: asyncpg.Record) -> Command:
-        return cls(*row)
+        values = tuple(row)
+        max_linear, max_angular, footprint, max_accel = limits_of(values[5:])
+        robot, row_id, stamp, linear, angular = values[:5]
+        return cls(
+            robot, row_id, stamp, linear, angular, max_linear, max_angular, footprint, max_accel
+        )
 
     @classmethod
     def from_image(cls, robot: str, image: Mapping[str, Any], limits: Limits) -> Command | None:

@@ -266,7 +266,8 @@ class CommandRelay:
         angular = clamp(cmd.angular, cmd.max_angular)
         now = self.clock.now() if self.clock.started else None
         linear = clamp(cmd.linear, cmd.max_linear)
-        verdict = self.safety.judge(robot, linear, cmd.footprint, now, cmd.max_accel)
+        verdict = self.safety.judge(robot, linear, cmd.footprint, now, cmd.max_accel, angular)
+        angular = angular if verdict.angular is None else verdict.angular
         try:
             self._send(robot, verdict.linear, angular, cmd.id, decided_stamp=cmd.stamp)
         except Exception as exc:  # Zenoh closing

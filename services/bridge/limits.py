@@ -18,19 +18,32 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import asyncpg
 
-from common.contract import keys
+from common.contract import keys, records
+from common.footprint import Footprint
 from common.freshness import FreshCache
 
-# (max_linear_mps, max_angular_rps, footprint_radius_m, max_linear_accel_mps2): the clamp's,
-# and the safety layer's (the swept corridor's width, the stopping distance's deceleration)
-Limits = tuple[float, float, float, float]
-LIMIT_COLUMNS = "max_linear_mps, max_angular_rps, footprint_radius_m, max_linear_accel_mps2"
+# (max_linear_mps, max_angular_rps, footprint, max_linear_accel_mps2): the clamp's, and the
+# safety layer's (the swept corridor's shape, the stopping distance's deceleration); the
+# footprint is the row's footprint_polygon, or the disc of its footprint_radius_m
+Limits = tuple[float, float, Footprint, float]
+LIMIT_COLUMNS = (
+    "max_linear_mps, max_angular_rps, footprint_radius_m, footprint_polygon, max_linear_accel_mps2"
+)
 
 _READ = f"SELECT robot_id, {LIMIT_COLUMNS} FROM {keys.ROBOT}"
+
+
+def limits_of(row: Sequence[Any]) -> Limits:
+    """The :data:`Limits` of the LIMIT_COLUMNS of a row (in that order)."""
+    footprint = Footprint.of(row[2], records.polygon_of(row[3]))
+    return (row[0], row[1], footprint, row[4])
+
+
 _TABLE = keys.ROBOT  # the one key of the cache: the whole table is read as one unit
 
 
@@ -68,7 +81,7 @@ class RobotLimits:
 
         async def fetch() -> dict[str, Limits]:
             rows = await conn.fetch(_READ)
-            return {r[0]: (r[1], r[2], r[3], r[4]) for r in rows}
+            return {r[0]: limits_of(tuple(r)[1:]) for r in rows}
 
         try:
             await self._cache.get(_TABLE, fetch)

@@ -12,12 +12,17 @@ zone), and the capped speed is then judged against the scan as any other. The ca
 whether or not the scan check is enabled: it is people's rule, not a tunable.
 
 The geometry, for a commanded linear speed ``v`` (the angular speed is always kept: turning in
-place sweeps nothing new for a round robot, and is how it gets out):
+place sweeps nothing new for a round robot, and is how it gets out; a polygon's corners do
+sweep, and the sim stops a turn that would push one into something):
 
 - the swept corridor: straight ahead for ``v > 0`` (behind for ``v < 0``), as wide as the
-  footprint disc (radius ``R``). A return at (x, y) in the robot's frame (the lidar sits at the
-  centre, CONTRACT.md) with ``x`` in the direction of travel and ``|y| < R`` is touched after
-  ``|x| - sqrt(R^2 - y^2)`` of travel: the nearest such is the free travel ``d``;
+  footprint. For the disc of radius ``R``, a return at (x, y) in the robot's frame (the lidar
+  sits at the centre, CONTRACT.md) with ``x`` in the direction of travel and ``|y| < R`` is
+  touched after ``|x| - sqrt(R^2 - y^2)`` of travel; for a footprint polygon, after ``|x|``
+  less the outline's front (or back) edge at that ``y`` (common/footprint.py,
+  ``Footprint.travel_each``): a box's flat front and square corners, not a disc's bulge. A
+  polygon commanded to turn as it drives is rolled out along that arc instead
+  (:meth:`Scan.arc_travel`): its corners swing. The nearest such is the free travel ``d``;
 - the distance needed: ``|v| * latency + v^2 / (2 * decel) + margin`` (``decel``: the robot
   row's ``max_linear_accel_mps2``, the hardest its model brakes), plus what the robot
   may have travelled since the scan (``age * |last speed sent|``, when that speed was in the
@@ -41,6 +46,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from common.collision import first_contact
+from common.footprint import Footprint
 from common.scan import beam_angles, readings
 from services.bridge.messages import LaserScan
 from services.bridge.zones import Cap, SpeedZones
@@ -108,10 +115,78 @@ class Scan:
             self._xy = (r * np.cos(a), r * np.sin(a))
         return self._xy
 
-    def free_travel(self, direction: int, radius: float) -> tuple[float, float, float]:
-        """(free travel, range, bearing) of the nearest return a disc of ``radius`` would
-        touch moving straight ahead (``direction`` 1) or back (-1): (inf, inf, 0) if none."""
+    def arc_travel(
+        self, footprint: Footprint, direction: int, turn_per_m: float, reach_m: float
+    ) -> tuple[float, float, float]:
+        """(free travel, range, bearing) of the first return the footprint polygon meets
+        driving ahead (``direction`` 1) or back (-1) along the arc that turns ``turn_per_m``
+        rad per metre (the turn rate over the speed), for up to ``reach_m`` of it, ARC_STEP_M
+        apart; the travel is the last free pose's (inf, inf, 0 if none is met within reach)."""
         xs, ys = self._returns()
+        if not len(xs):
+            return math.inf, math.inf, 0.0
+        n = max(1, math.ceil(reach_m / ARC_STEP_M))
+        s = np.arange(1, n + 1) * (reach_m / n)
+        w = turn_per_m
+        yaw = w * s
+        if abs(w) > 1e-9:
+            x, y = direction * np.sin(yaw) / w, direction * (1.0 - np.cos(yaw)) / w
+        else:
+            x, y = direction * s, np.zeros_like(s)
+        poses = np.stack([x, y, yaw], axis=1)
+        points = np.stack([xs, ys], axis=1)
+        hit = first_contact(footprint, poses, points)
+        if hit is None:
+            return math.inf, math.inf, 0.0
+        travel = float(s[hit - 1]) if hit > 0 else 0.0
+        # the return nearest the outline at the pose of contact names it
+        c, sn = math.cos(poses[hit, 2]), math.sin(poses[hit, 2])
+        dx, dy = xs - poses[hit, 0], ys - poses[hit, 1]
+        local = np.stack([c * dx + sn * dy, -sn * dx + c * dy], axis=1)
+        i = int(np.argmin(footprint.clearance(local)))
+        bearing = math.degrees(math.atan2(float(ys[i]), float(xs[i])))
+        return travel, math.hypot(float(xs[i]), float(ys[i])), bearing
+
+    def turn_blocked(self, footprint: Footprint, sweep_rad: float) -> tuple[float, float] | None:
+        """(range, bearing) of a return a corner of the polygon would come within
+        TURN_MARGIN_M of turning in place by ``sweep_rad``; None if none would."""
+        xs, ys = self._returns()
+        if not len(xs):
+            return None
+        steps = max(1, math.ceil(abs(sweep_rad) / TURN_STEP_RAD))
+        yaw = sweep_rad * np.arange(1, steps + 1) / steps
+        near = np.hypot(xs, ys) <= footprint.circumscribed_m + TURN_MARGIN_M
+        px, py = xs[near], ys[near]
+        if not len(px):
+            return None
+        now = footprint.clearance(np.stack([px, py], axis=1))
+        # each near return in the frame of each heading turned through: (steps x n) clearances
+        c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
+        local = np.stack([c * px + s * py, -s * px + c * py], axis=2).reshape(-1, 2)
+        later = footprint.clearance(local).reshape(steps, -1)
+        # a corner coming within the margin of a return, and nearer it than now: a return
+        # the outline already touches is no reason not to turn away from it
+        closing = (later <= TURN_MARGIN_M) & (later < now[None, :] - 1e-6)
+        if not closing.any():
+            return None
+        i = int(np.flatnonzero(closing.any(axis=0))[0])
+        return math.hypot(float(px[i]), float(py[i])), math.degrees(math.atan2(py[i], px[i]))
+
+    def free_travel(
+        self, direction: int, footprint: Footprint | float
+    ) -> tuple[float, float, float]:
+        """(free travel, range, bearing) of the nearest return the footprint (a polygon, or
+        the disc of a radius) would touch moving straight ahead (``direction`` 1) or back
+        (-1), the travel measured from its outline's edge: (inf, inf, 0) if none."""
+        xs, ys = self._returns()
+        if isinstance(footprint, Footprint) and not footprint.is_disc:
+            travel_each = footprint.travel_each(np.stack([xs, ys], axis=1), direction > 0)
+            if not len(travel_each) or not np.isfinite(travel_each).any():
+                return math.inf, math.inf, 0.0
+            i = int(np.argmin(travel_each))
+            bearing = math.degrees(math.atan2(float(ys[i]), float(xs[i])))
+            return float(travel_each[i]), math.hypot(float(xs[i]), float(ys[i])), bearing
+        radius = footprint.radius_m if isinstance(footprint, Footprint) else footprint
         along = xs * direction
         ahead = (along > 0.0) & (np.abs(ys) < radius)
         if not ahead.any():
@@ -125,6 +200,16 @@ class Scan:
         return float(travel[best]), math.hypot(float(xs[i]), float(ys[i])), bearing
 
 
+# how far past the distance it needs a polygon's arc is rolled out, and the step of it, m
+ARC_SLACK_M = 0.1
+ARC_STEP_M = 0.02
+# a polygon's turn is judged over this long at the commanded rate (at least twice the
+# latency: the time it acts, and as long to stop), its corners kept this far from returns
+TURN_HORIZON_S = 0.2
+TURN_MARGIN_M = 0.01
+TURN_STEP_RAD = math.radians(2.0)
+
+
 @dataclass(frozen=True, slots=True)
 class Verdict:
     """What the layer made of a command: the linear speed to send, and why."""
@@ -133,6 +218,9 @@ class Verdict:
     outcome: str  # CLEAR, LIMITED, STOPPED or UNCHECKED
     reason: str = ""
     zone: str | None = None  # the speed zone that capped the speed, if one did
+    # the turn rate to send instead of the command's (None: the command's): a footprint
+    # polygon whose turn would swing a corner into a return is not turned
+    angular: float | None = None
 
     @property
     def noted(self) -> bool:
@@ -171,42 +259,91 @@ class SafetyLayer:
             self.scans[record.robot_id] = Scan(record)
 
     def judge(
-        self, robot: str, linear: float, radius: float, now: float | None, decel_mps2: float
+        self,
+        robot: str,
+        linear: float,
+        radius: Footprint | float,
+        now: float | None,
+        decel_mps2: float,
+        angular: float = 0.0,
     ) -> Verdict:
         """The verdict on sending ``linear`` (already clamped) to ``robot`` of footprint
-        ``radius`` that brakes at ``decel_mps2`` (its acceleration limit; the params' value
-        instead if set) at sim time ``now`` (None: no clock yet, the newest scan counts as
-        fresh). Records the speed the verdict sends as the robot's last."""
+        ``radius`` (its polygon, or a disc's radius) that brakes at ``decel_mps2`` (its
+        acceleration limit; the params' value instead if set) at sim time ``now`` (None: no
+        clock yet, the newest scan counts as fresh); ``angular``, the turn rate going out with
+        it, bends a footprint polygon's corridor into the arc it drives. Records the speed the
+        verdict sends as the robot's last."""
         decel = self.params.decel_mps2 if self.params.decel_mps2 is not None else decel_mps2
         cap = self.zones.cap(robot)
         if cap is None or abs(linear) <= cap.mps:
-            verdict = self._judge(robot, linear, radius, now, decel)
+            verdict = self._judge(robot, linear, radius, now, decel, angular)
         else:
-            verdict = self._capped(robot, linear, cap, radius, now, decel)
+            verdict = self._capped(robot, linear, cap, radius, now, decel, angular)
+        if isinstance(radius, Footprint) and not radius.is_disc and angular != 0.0:
+            verdict = self._turn(robot, verdict, radius, now, angular)
         self.sent[robot] = verdict.linear
         return verdict
 
     def _capped(
-        self, robot: str, linear: float, cap: Cap, radius: float, now: float | None, decel: float
+        self,
+        robot: str,
+        linear: float,
+        cap: Cap,
+        radius: Footprint | float,
+        now: float | None,
+        decel: float,
+        angular: float,
     ) -> Verdict:
         """The verdict on ``linear`` above a speed zone's cap: the cap, then the scan's
         judgement of the capped speed (which may lower it further, or stop)."""
         capped = math.copysign(cap.mps, linear)
         why = f"speed zone '{cap.zone}' caps {cap.mps:g} m/s ({abs(linear):.3f} m/s decided)"
-        verdict = self._judge(robot, capped, radius, now, decel)
+        verdict = self._judge(robot, capped, radius, now, decel, angular)
         if verdict.outcome in (CLEAR, UNCHECKED):
             reason = f"limited to {cap.mps:g} m/s: {why}"
             if verdict.outcome == UNCHECKED:
                 reason += f"; {verdict.reason}"
-            return Verdict(capped, LIMITED, reason, cap.zone)
-        return Verdict(verdict.linear, verdict.outcome, f"{verdict.reason}; {why}", cap.zone)
+            return Verdict(capped, LIMITED, reason, zone=cap.zone)
+        return Verdict(verdict.linear, verdict.outcome, f"{verdict.reason}; {why}", zone=cap.zone)
+
+    def _turn(
+        self, robot: str, verdict: Verdict, footprint: Footprint, now: float | None, angular: float
+    ) -> Verdict:
+        """``verdict`` with the turn taken away when turning ``angular`` for TURN_HORIZON_S
+        (the time the command acts, and as long again to stop) would bring a corner of the
+        polygon within TURN_MARGIN_M of a return of a fresh scan."""
+        p = self.params
+        scan = self.scans.get(robot)
+        if not p.enabled or scan is None:
+            return verdict
+        if now is not None and now - scan.stamp > p.scan_max_age_s:
+            return verdict
+        sweep = angular * max(TURN_HORIZON_S, 2.0 * p.latency_s)
+        blocked = scan.turn_blocked(footprint, sweep)
+        if blocked is None:
+            return verdict
+        range_m, bearing = blocked
+        why = (
+            f"turn stopped: turning {math.degrees(sweep):+.0f} deg would bring a corner "
+            f"within {TURN_MARGIN_M:.2f} m of the obstacle {range_m:.2f} m away at "
+            f"{bearing:+.0f} deg (footprint {_shown(footprint)})"
+        )
+        outcome = verdict.outcome if verdict.outcome == STOPPED else LIMITED
+        reason = f"{verdict.reason}; {why}" if verdict.reason else why
+        return Verdict(verdict.linear, outcome, reason, zone=verdict.zone, angular=0.0)
 
     def sent_stop(self, robot: str) -> None:
         """A stop went out without a verdict (watchdog, shutdown)."""
         self.sent[robot] = 0.0
 
     def _judge(
-        self, robot: str, linear: float, radius: float, now: float | None, decel: float
+        self,
+        robot: str,
+        linear: float,
+        radius: Footprint | float,
+        now: float | None,
+        decel: float,
+        angular: float = 0.0,
     ) -> Verdict:
         p = self.params
         if not p.enabled or linear == 0.0:
@@ -216,9 +353,15 @@ class SafetyLayer:
         if scan is None or age > p.scan_max_age_s:
             return self._blind(linear, None if scan is None else age)
         direction = 1 if linear > 0 else -1
-        travel, range_m, bearing = scan.free_travel(direction, radius)
         last = self.sent.get(robot, 0.0)
         moved = age * abs(last) if last * direction > 0 else 0.0
+        if isinstance(radius, Footprint) and not radius.is_disc and angular != 0.0:
+            # as far as the stopping distance at this speed could take it, and a little more
+            reach = stopping_m(abs(linear), p.latency_s, decel) + p.margin_m + moved + ARC_SLACK_M
+            turn_per_m = angular / abs(linear)
+            travel, range_m, bearing = scan.arc_travel(radius, direction, turn_per_m, reach)
+        else:
+            travel, range_m, bearing = scan.free_travel(direction, radius)
         budget = travel - p.margin_m - moved
         speed = abs(linear)
         if budget >= stopping_m(speed, p.latency_s, decel):
@@ -228,7 +371,7 @@ class SafetyLayer:
         why = (
             f"obstacle {range_m:.2f} m {way} at {bearing:+.0f} deg in the scan of "
             f"{age:.2f} s ago leaves {max(budget, 0.0):.3f} m of travel (footprint "
-            f"{radius:.3f} m, margin {p.margin_m:.2f} m, {moved:.3f} m moved since); "
+            f"{_shown(radius)}, margin {p.margin_m:.2f} m, {moved:.3f} m moved since); "
             f"{speed:.2f} m/s needs {stopping_m(speed, p.latency_s, decel):.3f} m "
             f"braking at {decel:g} m/s^2"
         )
@@ -245,3 +388,12 @@ class SafetyLayer:
         if cap < MIN_MPS:
             return Verdict(0.0, STOPPED, f"stopped: {window}, blind speed cap {cap:g} m/s")
         return Verdict(math.copysign(cap, linear), LIMITED, f"limited to {cap:g} m/s: {window}")
+
+
+def _shown(footprint: Footprint | float) -> str:
+    """The footprint as a reason names it."""
+    if isinstance(footprint, Footprint):
+        if footprint.is_disc:
+            return f"{footprint.radius_m:.3f} m"
+        return f"polygon, {footprint.circumscribed_m:.3f} m reach"
+    return f"{footprint:.3f} m"

@@ -19,6 +19,7 @@ from typing import Any, cast
 from common import bus
 from common.contract import keys
 from common.db import Database
+from common.footprint import polygon_problem
 from common.robotmodel import (
     DEFAULT_MODEL,
     FULL_TURN,
@@ -100,6 +101,8 @@ class RobotInfo:
     lidar_noise_m: float
     lidar_rate_hz: float
     lidar_beams: int
+    # robot frame, counter-clockwise (common/footprint.py); None: the disc of the radius
+    footprint_polygon: list[list[float]] | None = None
 
     def columns(self) -> dict[str, Any]:
         """The robot row's model columns (and robot_id), as CONTRACT.md names them."""
@@ -183,7 +186,15 @@ def _parse_robot(body: dict[str, Any]) -> RobotInfo:
         raise MalformedMessage(OUT_OF_RANGE, "'lidar_range_max_m' must exceed lidar_range_min_m")
     beams = integer(body, "lidar_beams", 1, MAX_BEAMS) if "lidar_beams" in body else DEFAULT_BEAMS
     model = text(body, "model") if "model" in body else DEFAULT_MODEL
-    return RobotInfo(robot_id=robot_id, model=model, lidar_beams=beams, **limits)
+    polygon = body.get("footprint_polygon")
+    if polygon is not None:
+        problem = polygon_problem(polygon)
+        if problem is not None:
+            raise MalformedMessage(OUT_OF_RANGE, f"'footprint_polygon' {problem}")
+        polygon = [[float(x), float(y)] for x, y in polygon]
+    return RobotInfo(
+        robot_id=robot_id, model=model, lidar_beams=beams, footprint_polygon=polygon, **limits
+    )
 
 
 def _parse_station(body: dict[str, Any]) -> StationInfo:

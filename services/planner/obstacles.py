@@ -116,7 +116,7 @@ def see(world: World, state: RobotState, scan: records.LaserScan) -> None:
     with np.errstate(invalid="ignore"):
         valid = (ranges >= scan.range_min - 1e-4) & (ranges <= SEEN_RANGE_M)
     angles = scan.angles()[valid] + yaw
-    grid = data.grid(state.info.footprint_radius_m)
+    grid = data.grid(state.info.footprint.inscribed_m)
     reach = ranges[valid] + SURFACE_PUSH_CELLS * grid.resolution
     hits = np.column_stack((x + reach * np.cos(angles), y + reach * np.sin(angles)))
     if grid.clearance is not None and len(hits):

@@ -26,8 +26,10 @@ import numpy as np
 import services.planner.arrival as arrival
 import services.planner.waypoints as waypoints
 from common import log
+from common.collision import collides_with_points
 from common.contract import records
 from common.engine.supervisor import Ticket
+from common.footprint import Footprint
 from services.planner.recovery import NOTHING, Action, Machine, Observation, RecoveryParams
 from services.planner.scenario import ODOM_MAX_AGE_S
 from services.planner.target import RuleKey, Spec, TargetRule
@@ -43,12 +45,19 @@ EVAL_PERIOD_S = 0.1  # sim s between two steps: a recommendation each, well insi
 REAR_MARGIN_M = 0.1  # beyond the footprint and the distance to back up
 FREER_HORIZON_M = 1.0  # how far the freer side is judged
 REAR_CONE_RAD = math.radians(30)  # beams this close to straight back see the rear
+TURN_MARGIN_M = 0.02  # room a turning footprint keeps from the returns, m
 
 
 def surroundings(
-    scan: records.LaserScan, footprint_m: float, back_up_m: float
+    scan: records.LaserScan, footprint: Footprint, back_up_m: float, rotate_rad: float = 0.0
 ) -> tuple[bool, bool]:
-    """(nothing seen behind within the back-up's reach, the left half is the freer one).
+    """(nothing seen behind within the back-up's reach, the left is the side to turn to).
+
+    The room is measured from the footprint's outline: backing up, from its back edge (the
+    straight travel back before the outline meets a return, plus REAR_MARGIN_M); turning,
+    by whether the footprint turned by up to ``rotate_rad`` either way meets a return (a
+    polygon's corners sweep; a disc's outline does not move). When only one side's turn is
+    free it is the one; otherwise the side whose beams see farther.
 
     A lidar with no beams behind (the Jackal's 270 degrees) cannot say the rear is clear:
     it is not, and recovery rotates instead of backing up blind (safety_stop would stop
@@ -58,14 +67,38 @@ def surroundings(
     valid = np.isfinite(ranges) & (ranges >= scan.range_min - 1e-4)
     finite = np.where(valid, ranges, 0.0)  # inf x cos(90 deg) would be nan
     x, y = finite * np.cos(angles), finite * np.sin(angles)
-    behind = valid & (x < 0) & (np.abs(y) < footprint_m + 0.05)
-    behind &= -x < footprint_m + back_up_m + REAR_MARGIN_M
+    points = np.stack([x, y], axis=1)[valid]
+    if footprint.is_disc:
+        r = footprint.radius_m  # a band a little wider than the disc, as it always was
+        behind = valid & (x < 0) & (np.abs(y) < r + 0.05) & (-x < r + back_up_m + REAR_MARGIN_M)
+        rear_clear = not bool(behind.any())
+    else:
+        rear_clear = footprint.travel_m(points, forward=False) >= back_up_m + REAR_MARGIN_M
     sees_back = bool((np.abs(angles) >= math.pi - REAR_CONE_RAD).any())
     capped = np.where(valid, np.minimum(ranges, FREER_HORIZON_M), FREER_HORIZON_M)
     left, right = angles > 0, angles < 0
     left_open = float(capped[left].mean()) if left.any() else 0.0
     right_open = float(capped[right].mean()) if right.any() else 0.0
-    return sees_back and not bool(behind.any()), left_open >= right_open
+    left_freer = left_open >= right_open
+    if not footprint.is_disc and rotate_rad > 0:
+        turns = (
+            _turn_free(footprint, points, rotate_rad),
+            _turn_free(footprint, points, -rotate_rad),
+        )
+        if turns[0] != turns[1]:
+            left_freer = turns[0]
+    return sees_back and rear_clear, left_freer
+
+
+def _turn_free(footprint: Footprint, points: np.ndarray[Any, Any], turn: float) -> bool:
+    """Whether the footprint turning in place by ``turn`` (rad) meets none of ``points``."""
+    near = points[np.hypot(points[:, 0], points[:, 1]) <= footprint.circumscribed_m + TURN_MARGIN_M]
+    # headings close enough that the outline moves at most half the margin between two
+    steps = max(1, math.ceil(abs(turn) * footprint.circumscribed_m / (TURN_MARGIN_M / 2)))
+    return not any(
+        collides_with_points(footprint, (0.0, 0.0, turn * k / steps), near, TURN_MARGIN_M)
+        for k in range(1, steps + 1)
+    )
 
 
 class Recovery(TargetRule):
@@ -100,12 +133,15 @@ class Recovery(TargetRule):
         assert self.odom is not None and self.goal is not None
         params = RecoveryParams.read(self.robot.strategy.params)
         info = self.robot.info
-        o = self._observe(self.odom, self.goal, info.footprint_radius_m)
+        radius = info.footprint_radius_m
+        o = self._observe(self.odom, self.goal, radius)
         if self.machine.wants_scan(o, params):
             scan = await view.newest_scan(self.robot_id)
             if scan is not None:
-                clear, left = surroundings(scan, info.footprint_radius_m, params.back_up_m)
-                o = self._observe(self.odom, self.goal, info.footprint_radius_m, clear, left)
+                clear, left = surroundings(
+                    scan, info.footprint, params.back_up_m, params.rotate_rad
+                )
+                o = self._observe(self.odom, self.goal, radius, clear, left)
         params = RecoveryParams(
             **{**vars(params), "back_up_mps": min(params.back_up_mps, info.max_linear_mps)}
         )

@@ -19,10 +19,12 @@ from typing import Any
 
 import numpy as np
 
+import services.planner.fit as fit
 import services.planner.reachability as reachability
 from common import log
 from common.contract import records
 from common.contract.limits import DEFAULT_YAW_TOLERANCE_RAD
+from services.planner.grid import PlanGrid
 from services.planner.keepout import names as keepout_names
 from services.planner.keepout import zones_key
 from services.planner.obstacles import Points, Seen, buckets, known, recent
@@ -190,10 +192,12 @@ class Router:
         data = self.world.map_for(state.info)
         if target.kind != "goal" or data is None:
             return None
+        footprint = state.info.footprint
         keepouts = self.world.keepouts(state.info)
-        key = (target.key, data.version, state.info.footprint_radius_m, zones_key(keepouts))
+        key = (target.key, data.version, footprint, zones_key(keepouts))
         if state.spot is None or state.spot[0] != key:
-            inflation = inflation_m(state.info.footprint_radius_m)
+            # the least room the robot needs, at the heading it arrives with
+            inflation = inflation_m(footprint.inscribed_m)
             why = reachability.spot_problem(
                 data, inflation, target.x, target.y, target.reach_m, keepouts
             )
@@ -207,11 +211,11 @@ class Router:
         if target.kind != "goal" or data is None:
             return None
         keepouts = self.world.keepouts(state.info)
-        grid = data.grid(state.info.footprint_radius_m, keepouts)
+        grid = data.grid(state.info.footprint.inscribed_m, keepouts)
         if not reachability.cut_off(grid, (x, y), (target.x, target.y), target.reach_m):
             return None
         if keepouts:
-            alone = data.grid(state.info.footprint_radius_m)
+            alone = data.grid(state.info.footprint.inscribed_m)
             if not reachability.cut_off(alone, (x, y), (target.x, target.y), target.reach_m):
                 return (
                     f"no path on the map from ({x:.2f}, {y:.2f}) to the goal outside keepout "
@@ -228,15 +232,27 @@ class Router:
         obstacles: Points | None = None,
     ) -> list[tuple[float, float]] | None:
         """A* on the robot's map, around ``obstacles`` too if given (None: no map, or no path
-        on it)."""
+        on it); for a footprint polygon, a path it fits along (fit.py)."""
         data = self.world.map_for(state.info)
         if data is None:
             return None
         started = time.perf_counter()
-        grid = data.grid(state.info.footprint_radius_m, self.world.keepouts(state.info))
+        footprint = state.info.footprint
+        # inflated by the inscribed radius: the heading is known along a path, and the
+        # polygon is checked along it below (for a disc, both radii are its radius)
+        keepouts = self.world.keepouts(state.info)
+        grid = data.grid(footprint.inscribed_m, keepouts)
         if obstacles is not None and len(obstacles):
             grid = with_obstacles(grid, obstacles)
         points = plan_path(grid, start, goal)
+        fitting = "disc"
+        if points and not footprint.is_disc:
+
+            def wide() -> PlanGrid:
+                g = data.grid(footprint.circumscribed_m, keepouts)
+                return with_obstacles(g, obstacles) if obstacles is not None else g
+
+            points, fitting = fit.fitted(footprint, points, data, grid, wide, plan_path, obstacles)
         elapsed_ms = (time.perf_counter() - started) * 1000
         log.event(
             logger,
@@ -247,6 +263,7 @@ class Router:
             waypoints=len(points) - 1 if points else 0,
             length_m=round(path_length(points), 2) if points else None,
             unmapped=len(obstacles) if obstacles is not None else 0,
+            footprint=fitting,
             ms=round(elapsed_ms, 1),
         )
         return points

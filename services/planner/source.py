@@ -22,7 +22,8 @@ from services.planner.paths import PathRow
 from services.planner.world import MapRow, Station
 
 ROBOTS_SQL = (
-    "SELECT robot_id, world, max_linear_mps, max_angular_rps, footprint_radius_m FROM robot"
+    "SELECT robot_id, world, max_linear_mps, max_angular_rps, footprint_radius_m, "
+    "footprint_polygon FROM robot"
 )
 MAP_VERSIONS_SQL = "SELECT map_id, loaded_at FROM map"
 MAP_SQL = (
@@ -114,7 +115,12 @@ class PgPlannerSource:
         self.db = db
 
     async def robots(self) -> list[RobotInfo]:
-        return [RobotInfo(**dict(r)) for r in await self.db.fetch(ROBOTS_SQL)]
+        return [
+            RobotInfo(
+                **{**dict(r), "footprint_polygon": records.polygon_of(r["footprint_polygon"])}
+            )
+            for r in await self.db.fetch(ROBOTS_SQL)
+        ]
 
     async def map_versions(self) -> dict[str, str]:
         rows = await self.db.fetch(MAP_VERSIONS_SQL)

@@ -1,10 +1,11 @@
 """The lidar of every robot that scans in a physics step, cast together in closed form: the
 walls and obstacles as the world's outline (services/sim/outline.py), the other robots as the
-upright cylinders they are.
+upright cylinders or polygon prisms their footprints are (common/footprint.py).
 
 A beam is a horizontal ray from its robot's centre at the lidar's height. It meets a body
 only if that height is within the body's (from the floor to its top), and then where it
-first crosses one of the body's faces or enters its disc. For each scanning robot and each
+first crosses one of the body's faces or enters its disc (a robot with a footprint polygon
+is its faces, placed where the robot stands at each cast). For each scanning robot and each
 face or disc within its reach that rises to its beams (and, for a face, is turned towards
 it), the beams within the shape's angular extent as seen from the robot are found, and only
 those are tested exactly; each beam keeps its nearest meeting. A robot's own body is never
@@ -51,11 +52,29 @@ class FleetCast:
         self, outline: Outline, models: Sequence[RobotModel], lidars: Sequence[Lidar]
     ) -> None:
         self.outline = outline
-        n = len(models)
-        # every disc: the outline's, then one per robot (its owner's index; -1: static)
-        self.radius = np.concatenate([outline.radius, [m.footprint_radius_m for m in models]])
-        self.top = np.concatenate([outline.disc_top, [m.height_m for m in models]])
-        self.owner = np.concatenate([np.full(len(outline.radius), -1), np.arange(n)])
+        # every disc: the outline's, then one per round robot (its owner's index; -1: static)
+        round_ = [i for i, m in enumerate(models) if m.footprint.is_disc]
+        self.round = np.array(round_, dtype=np.intp)
+        self.radius = np.concatenate(
+            [outline.radius, [models[i].footprint_radius_m for i in round_]]
+        )
+        self.top = np.concatenate([outline.disc_top, [models[i].height_m for i in round_]])
+        self.owner = np.concatenate([np.full(len(outline.radius), -1), self.round])
+        # every face of the polygon robots, in their own frames, turned so that the outside
+        # is on the left as the outline's faces are: (start, end, owner, top)
+        starts, ends, owners, tops = [], [], [], []
+        for i, m in enumerate(models):
+            if m.footprint.is_disc:
+                continue
+            v = m.footprint.vertices
+            starts.append(np.roll(v, -1, axis=0))  # a counter-clockwise edge reversed
+            ends.append(v)
+            owners.append(np.full(len(v), i, dtype=np.intp))
+            tops.append(np.full(len(v), m.height_m))
+        self.body_a = np.concatenate(starts) if starts else np.empty((0, 2))
+        self.body_b = np.concatenate(ends) if ends else np.empty((0, 2))
+        self.body_owner = np.concatenate(owners) if owners else np.empty(0, dtype=np.intp)
+        self.body_top = np.concatenate(tops) if tops else np.empty(0)
         self.beams = np.array([lidar.params.beams for lidar in lidars], dtype=np.intp)
         inc = np.array([lidar.params.angle_increment for lidar in lidars])
         # a one-beam partial lidar has no increment: any width stands in (windows only choose
@@ -77,7 +96,6 @@ class FleetCast:
         self.cos = np.concatenate([p.cos for p in parts]) if parts else np.empty(0)
         self.sin = np.concatenate([p.sin for p in parts]) if parts else np.empty(0)
         self.face_e = outline.b - outline.a
-        self.face_length2 = np.maximum(np.sum(self.face_e**2, axis=1), 1e-300)
 
     def __call__(self, poses: Sequence[Pose], scanning: Sequence[int]) -> list[Cast]:
         """(hit, fraction along the ray) per beam of each robot in ``scanning`` (indices into
@@ -90,7 +108,7 @@ class FleetCast:
         yaw = np.array([poses[i][2] for i in scanning])
         # every shape that may meet a scanner's beams, faces first: its scanner (a position
         # in ``index``), which one, and its angular extent from the scanner
-        fk, face, f_bearing, f_half = self._faces(index, xy[index])
+        fk, fa, fe, f_bearing, f_half = self._faces(index, xy[index], xy, yaw_all(poses))
         dk, disc, dist, d_bearing, d_half = self._discs(index, xy)
         k = np.concatenate([fk, dk])
         aim = yaw[k] + self.angle_min[index[k]]  # beam 0's direction
@@ -102,7 +120,7 @@ class FleetCast:
         f_src = src[on_face]
         scanner = fk[f_src]
         d = self._rays(index[scanner], beam[on_face], yaw[scanner])
-        f_met, f_along = self._cross(face[f_src], xy[index[scanner]], d)
+        f_met, f_along = _cross(fa[f_src], fe[f_src], xy[index[scanner]], d)
         # the discs
         d_src = src[~on_face] - len(fk)
         reach = self.range_max[index[dk[d_src]]]
@@ -125,42 +143,41 @@ class FleetCast:
         return ray
 
     def _faces(
-        self, index: IntArray, origin: FloatArray
-    ) -> tuple[IntArray, IntArray, FloatArray, FloatArray]:
-        """The outline's faces turned towards each scanner, within its reach and as tall as
-        its beams: (scanner, face, bearing of the face's middle direction, half its angular
-        width), angles in rad in the world's frame."""
+        self, index: IntArray, origin: FloatArray, xy: FloatArray, yaws: FloatArray
+    ) -> tuple[IntArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        """The faces (the outline's, then the polygon robots' where they stand) turned
+        towards each scanner, within its reach and as tall as its beams: (scanner, face start,
+        face vector, bearing of the face's middle direction, half its angular width), angles
+        in rad in the world's frame."""
         out = self.outline
         k, f = out.near(origin, self.range_max[index])
-        rel = origin[k] - out.a[f]  # the scanner from each face's start
-        e = self.face_e[f]
+        a, e, top = out.a[f], self.face_e[f], out.face_top[f]
+        if len(self.body_owner):
+            # every scanner against every other robot's faces (few: a handful per robot)
+            owner = self.body_owner
+            c, s = np.cos(yaws[owner]), np.sin(yaws[owner])
+            ba = xy[owner] + _turn(self.body_a, c, s)
+            be = xy[owner] + _turn(self.body_b, c, s) - ba
+            kk, j = np.nonzero(owner[None, :] != index[:, None])
+            k = np.concatenate([k, kk])
+            a = np.concatenate([a, ba[j]])
+            e = np.concatenate([e, be[j]])
+            top = np.concatenate([top, self.body_top[j]])
+        rel = origin[k] - a  # the scanner from each face's start
         # turned towards the scanner (it is on the free side, the face's left), within reach
         facing = e[:, 0] * rel[:, 1] - e[:, 1] * rel[:, 0] > 0.0
-        along = (rel[:, 0] * e[:, 0] + rel[:, 1] * e[:, 1]) / self.face_length2[f]
+        length2 = np.maximum(np.sum(e**2, axis=1), 1e-300)
+        along = (rel[:, 0] * e[:, 0] + rel[:, 1] * e[:, 1]) / length2
         gap = rel - np.clip(along, 0.0, 1.0)[:, None] * e
         near = gap[:, 0] ** 2 + gap[:, 1] ** 2 <= self.range_max[index[k]] ** 2
-        tall = self.beam_z[index[k]] <= out.face_top[f]
+        tall = self.beam_z[index[k]] <= top
         keep = facing & near & tall
-        k, f = k[keep], f[keep]
+        k, a, e = k[keep], a[keep], e[keep]
         # the face's angular extent from the scanner, under half a turn (it faces the scanner)
-        to_a, to_b = out.a[f] - origin[k], out.b[f] - origin[k]
+        to_a, to_b = a - origin[k], a + e - origin[k]
         phi_a = np.arctan2(to_a[:, 1], to_a[:, 0])
         half = np.mod(np.arctan2(to_b[:, 1], to_b[:, 0]) - phi_a, TWO_PI) / 2.0
-        return k, f, phi_a + half, half
-
-    def _cross(
-        self, face: IntArray, start: FloatArray, d: FloatArray
-    ) -> tuple[npt.NDArray[np.bool_], FloatArray]:
-        """Whether each ray start + s d crosses its face a + u e from the free side, s in
-        [0, 1) and u in [0, 1], and the s of those that do."""
-        w = self.outline.a[face] - start
-        e = self.face_e[face]
-        denom = d[:, 0] * e[:, 1] - d[:, 1] * e[:, 0]
-        safe = np.where(denom > 0.0, denom, 1.0)
-        s = (w[:, 0] * e[:, 1] - w[:, 1] * e[:, 0]) / safe
-        u = (w[:, 0] * d[:, 1] - w[:, 1] * d[:, 0]) / safe
-        met = (denom > 0.0) & (s >= 0.0) & (s < 1.0) & (u >= -CORNER) & (u <= 1.0 + CORNER)
-        return met, s[met]
+        return k, a, e, phi_a + half, half
 
     def _discs(
         self, index: IntArray, xy: FloatArray
@@ -168,7 +185,7 @@ class FleetCast:
         """The discs (cylinder obstacles, the other robots) within each scanner's reach and as
         tall as its beams: (scanner, disc, distance between the centres, bearing of the disc's
         centre, half its angular width), angles in rad in the world's frame."""
-        centres = np.concatenate([self.outline.centre, xy])
+        centres = np.concatenate([self.outline.centre, xy[self.round]])
         offsets = centres[None, :, :] - xy[index][:, None, :]
         dist = np.hypot(offsets[..., 0], offsets[..., 1])
         near = dist <= (self.range_max[index][:, None] + self.radius[None, :])
@@ -212,6 +229,30 @@ class FleetCast:
         which, beam = spans(lo, np.maximum(hi - lo + 1, 0))  # every (copy, beam) within
         off = beam * inc[which] - centre_rad[which]
         return src[which], beam % n[which], off
+
+
+def yaw_all(poses: Sequence[Pose]) -> FloatArray:
+    return np.array([yaw for _, _, yaw in poses], dtype=np.float64)
+
+
+def _turn(v: FloatArray, c: FloatArray, s: FloatArray) -> FloatArray:
+    """Points ``v`` (robot frame, one per row) turned by each row's (cos, sin)."""
+    out: FloatArray = np.stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]], axis=1)
+    return out
+
+
+def _cross(
+    a: FloatArray, e: FloatArray, start: FloatArray, d: FloatArray
+) -> tuple[npt.NDArray[np.bool_], FloatArray]:
+    """Whether each ray start + s d crosses its face a + u e from the free side, s in
+    [0, 1) and u in [0, 1], and the s of those that do."""
+    w = a - start
+    denom = d[:, 0] * e[:, 1] - d[:, 1] * e[:, 0]
+    safe = np.where(denom > 0.0, denom, 1.0)
+    s = (w[:, 0] * e[:, 1] - w[:, 1] * e[:, 0]) / safe
+    u = (w[:, 0] * d[:, 1] - w[:, 1] * d[:, 0]) / safe
+    met = (denom > 0.0) & (s >= 0.0) & (s < 1.0) & (u >= -CORNER) & (u <= 1.0 + CORNER)
+    return met, s[met]
 
 
 def _enter(

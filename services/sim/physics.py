@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import pybullet as p
 
+from common.footprint import Footprint
 from services.sim.world import World
 
 # distance under which two bodies count as touching, m
@@ -24,6 +25,8 @@ CLEARANCE_REACH_M = 0.3
 # bisection rounds to find how far a blocked move can go: the robot stops within
 # step / 2**rounds of the obstacle (under 0.03 mm for a 0.9 mm step)
 BISECTION_ROUNDS = 5
+# the collision margin of a polygon robot's convex hull, m (see Scene.__init__)
+HULL_MARGIN_M = 1e-5
 
 
 # the 12 outward-facing triangles of a prism whose vertices are the 4 bottom corners
@@ -62,16 +65,18 @@ class Scene:
             p.configureDebugVisualizer(p.COV_ENABLE_GUI, 0, physicsClientId=self.client)
         self._build_static(world)
         self.robot_bodies: list[int] = []
-        # per body: its model's footprint radius and height (robots of several models share a
-        # world)
+        # per body: how far its footprint reaches from its centre (the circumscribed radius),
+        # its height, and whether turning in place can touch anything (a polygon's corners
+        # sweep; a disc's outline does not move)
         self.radius: dict[int, float] = {}
         self.height: dict[int, float] = {}
-        shapes: dict[tuple[float, float], tuple[int, int]] = {}
+        self.turns_free: dict[int, bool] = {}
+        shapes: dict[tuple[Footprint, float], tuple[int, int]] = {}
         for spec in world.robots:
-            radius, height = spec.model.footprint_radius_m, spec.model.height_m
-            if (radius, height) not in shapes:
-                shapes[(radius, height)] = self._cylinder(radius, height)
-            shape, visual = shapes[(radius, height)]
+            footprint, height = spec.model.footprint, spec.model.height_m
+            if (footprint, height) not in shapes:
+                shapes[(footprint, height)] = self._body_shape(footprint, height)
+            shape, visual = shapes[(footprint, height)]
             body = p.createMultiBody(
                 baseMass=0.0,
                 baseCollisionShapeIndex=shape,
@@ -80,14 +85,42 @@ class Scene:
                 baseOrientation=p.getQuaternionFromEuler([0, 0, spec.yaw]),
                 physicsClientId=self.client,
             )
+            if not footprint.is_disc:
+                # a convex hull gets a 4 cm margin by default, the body that much rounder; none
+                # at all and Bullet's ray test misses it: a hundredth of a millimetre
+                p.changeDynamics(
+                    body, -1, collisionMargin=HULL_MARGIN_M, physicsClientId=self.client
+                )
             self.names[body] = spec.robot_id
             self.robot_bodies.append(body)
-            self.radius[body], self.height[body] = radius, height
+            self.radius[body], self.height[body] = footprint.circumscribed_m, height
+            self.turns_free[body] = footprint.is_disc
             # placed once more as every later move places it, so a body's transform is always
             # the one _place gives for its pose
             self._place(body, spec.x, spec.y, spec.yaw)
 
     # -- building --------------------------------------------------------------------------
+    def _body_shape(self, footprint: Footprint, height: float) -> tuple[int, int]:
+        """A robot body's collision and visual shapes: the upright cylinder of a disc, or the
+        prism of a polygon (its convex hull: Bullet's convex shapes are what its contact
+        test is exact for; a concave outline is filled in)."""
+        if footprint.is_disc:
+            return self._cylinder(footprint.radius_m, height)
+        half = height / 2.0
+        vertices = [[x, y, z] for z in (-half, half) for x, y in footprint.vertices.tolist()]
+        shape: int = p.createCollisionShape(
+            p.GEOM_MESH, vertices=vertices, physicsClientId=self.client
+        )
+        visual = -1
+        if self.gui:
+            visual = p.createVisualShape(
+                p.GEOM_MESH,
+                vertices=vertices,
+                rgbaColor=[0.1, 0.3, 0.9, 1.0],
+                physicsClientId=self.client,
+            )
+        return shape, visual
+
     def _cylinder(self, radius: float, height: float) -> tuple[int, int]:
         """A robot body's collision and visual shapes."""
         shape: int = p.createCollisionShape(
@@ -255,8 +288,9 @@ class Scene:
         self, index: int, old: tuple[float, float, float], new: tuple[float, float, float]
     ) -> MoveResult:
         """Move robot ``index`` from ``old`` to ``new`` unless that would penetrate something;
-        if it would, go as far along the step as is free (the body is a cylinder, so turning
-        in place is always free) and report what it touches."""
+        if it would, go as far along the step as is free and report what it touches. A disc
+        turns in place freely; a polygon whose turn would push a corner into something keeps
+        its old heading for the step (and then moves as far as is free at that heading)."""
         body = self.robot_bodies[index]
         nx, ny, nyaw = new
         self._place(body, nx, ny, nyaw)
@@ -265,13 +299,17 @@ class Scene:
             clearance = min(dist.values(), default=CLEARANCE_REACH_M)
             return MoveResult(nx, ny, nyaw, 1.0, self._touching(dist), clearance)
         blockers = {self.names[b] for b, d in dist.items() if d < 0.0}
-        ox, oy, _ = old
+        ox, oy, oyaw = old
+        if not self.turns_free[body] and nyaw != oyaw:
+            self._place(body, ox, oy, nyaw)
+            if self._penetrates(body, ox, oy):
+                nyaw = oyaw  # the turn itself is blocked
         lo, hi = 0.0, 1.0  # lo is known free (the old position was accepted)
         for _ in range(BISECTION_ROUNDS):
             mid = (lo + hi) / 2.0
             mx, my = ox + (nx - ox) * mid, oy + (ny - oy) * mid
             self._place(body, mx, my, nyaw)
-            if any(d < 0.0 for d in self._distances(body, mx, my, CONTACT_TOLERANCE_M).values()):
+            if self._penetrates(body, mx, my):
                 hi = mid
             else:
                 lo = mid
@@ -279,6 +317,9 @@ class Scene:
         self._place(body, fx, fy, nyaw)
         touching = self._touching(self._distances(body, fx, fy, CONTACT_TOLERANCE_M))
         return MoveResult(fx, fy, nyaw, lo, touching | blockers, 0.0)
+
+    def _penetrates(self, body: int, x: float, y: float) -> bool:
+        return any(d < 0.0 for d in self._distances(body, x, y, CONTACT_TOLERANCE_M).values())
 
     def probe(self, index: int, x: float, y: float) -> tuple[frozenset[str], float]:
         """What robot ``index`` touches where it stands, and its clearance (for a robot that

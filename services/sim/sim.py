@@ -21,6 +21,7 @@ import services.sim.messages as messages
 from common.contract import keys
 from common.errors import ConfigError
 from common.log import event
+from common.robotmodel import RobotModel
 from services.sim.battery import Battery, BatteryModel
 from services.sim.clock import Every
 from services.sim.fleetcast import Cast, FleetCast
@@ -123,9 +124,11 @@ class Simulation:
         self.max_after_command_m = 0.0
         self.counts: dict[str, int] = {SCAN: 0, ODOM: 0, BATTERY: 0, COLLISION: 0}
         # contact tests skipped per robot while its clearance lasts; the closing speed bound
-        # is two robots driving at each other flat out, or a robot and the fastest mover
+        # is two robots driving at each other flat out (a polygon's corners swinging round at
+        # its top turn rate on top: a disc's outline does not move as it turns), or a robot
+        # and the fastest mover
         self._unchecked = [0 for _ in self.robots]
-        top = max(r.model.max_linear_mps for r in self.robots)
+        top = max(_outline_speed(r.model) for r in self.robots)
         self._closing = (top + max(top, self.movers.top_speed_mps)) * self.dt
         for i, r in enumerate(self.robots):
             self._touching[i] = self.scene.probe(i, r.x, r.y)[0]
@@ -227,7 +230,9 @@ class Simulation:
                 old = (robot.x, robot.y, robot.yaw)
                 moved = self.scene.move(i, old, integrate(*old, v, w, self.dt))
                 robot.x, robot.y, robot.yaw = moved.x, moved.y, moved.yaw
-                robot.linear, robot.angular = v * moved.fraction, w
+                # a polygon whose turn was blocked kept its heading: it did not turn
+                turned = moved.yaw != old[2]
+                robot.linear, robot.angular = v * moved.fraction, w if turned else 0.0
                 touching, clearance = moved.touching, moved.clearance
             # this robot and any other close in by at most _closing per step, and the walls
             # not at all (a box mover's corner may jump by turn_jump_m where its path turns):
@@ -287,3 +292,11 @@ def _start_percent(override: float | None, from_world: float | None) -> float:
     if override is not None:
         return override
     return 100.0 if from_world is None else from_world
+
+
+def _outline_speed(model: RobotModel) -> float:
+    """The fastest any point of a robot's outline moves, m/s."""
+    fp = model.footprint
+    return model.max_linear_mps + (
+        0.0 if fp.is_disc else model.max_angular_rps * fp.circumscribed_m
+    )

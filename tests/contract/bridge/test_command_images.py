@@ -15,6 +15,7 @@ import pytest
 
 from common.bus import Notification
 from common.contract import keys
+from common.footprint import Footprint
 from common.testing import eventually
 from services.bridge import Bridge, BridgeSettings
 from tests.contract.bridge.conftest import BridgeFactory, FakeSim, Inbox, command, ready, vel
@@ -122,7 +123,8 @@ async def test_limits_changed_by_a_robot_notification_are_read_before_the_next_i
     await conn.execute("UPDATE robot SET max_linear_mps = 0.5 WHERE robot_id = 'r1'")
     sim.notifier.notify(keys.ROBOT, "r1", None)
     await eventually(
-        lambda: bridge.commands.limits.of("r1") == (0.5, 2.84, 0.105, 2.5), what="new limits"
+        lambda: bridge.commands.limits.of("r1") == (0.5, 2.84, Footprint.of(0.105), 2.5),
+        what="new limits",
     )
     row_id, image = await decided(conn, 1.0, 0.0)
     sim.notifier.notify(keys.COMMAND2ROBOT, "r1", row_id, image)
@@ -139,7 +141,8 @@ async def test_limits_changed_without_a_notification_are_caught_by_the_periodic_
     await conn.execute("UPDATE robot SET max_angular_rps = 1.0 WHERE robot_id = 'r1'")
     # the periodic read returns r1's limits with its command, sees them differ, re-reads
     await eventually(
-        lambda: bridge.commands.limits.of("r1") == (0.22, 1.0, 0.105, 2.5), what="new limits"
+        lambda: bridge.commands.limits.of("r1") == (0.22, 1.0, Footprint.of(0.105), 2.5),
+        what="new limits",
     )
     row_id, image = await decided(conn, 0.0, -2.0)
     sim.notifier.notify(keys.COMMAND2ROBOT, "r1", row_id, image)

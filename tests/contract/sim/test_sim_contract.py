@@ -84,6 +84,7 @@ WORLD_ROBOT = {
     "max_linear_mps": float,
     "max_angular_rps": float,
     "footprint_radius_m": float,
+    "footprint_polygon": (list, type(None)),  # [[x, y], ...], nil for a round robot
     "battery_capacity_wh": float,
     "max_linear_accel_mps2": float,
     "max_angular_accel_rps2": float,
@@ -110,14 +111,14 @@ HELD = {"cmd_timeout_s": 0.0}
 DT = 1.0 / 240.0  # the physics step
 
 
-def check(payload: Any, schema: Mapping[str, type]) -> None:
+def check(payload: Any, schema: Mapping[str, type | tuple[type, ...]]) -> None:
     assert isinstance(payload, dict)
     assert set(payload) == set(schema), f"fields {sorted(payload)} != {sorted(schema)}"
     for field, kind in schema.items():
         value = payload[field]
         # bool is an int in Python: an int field must not be a bool, and vice versa
         assert isinstance(value, kind) and (kind is bool or not isinstance(value, bool)), (
-            f"{field}={value!r} is not {kind.__name__}"
+            f"{field}={value!r} is not {kind}"
         )
 
 

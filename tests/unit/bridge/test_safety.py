@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import pytest
 
@@ -247,3 +248,81 @@ def test_a_validated_scan_is_judged_as_the_same_scan_built_by_hand() -> None:
 def _scan_body(record: LaserScan) -> dict[str, object]:
     fields = ("stamp", "angle_min", "angle_increment", "range_min", "range_max", "ranges")
     return {name: getattr(record, name) for name in fields}
+
+
+def test_a_polygon_is_measured_from_its_edge_not_a_disc() -> None:
+    from common.footprint import Footprint
+
+    box = Footprint.of(0.22, ((0.254, -0.215), (0.254, 0.215), (-0.254, 0.215), (-0.254, -0.215)))
+    # a return 0.40 m ahead and 0.21 m left: 0.146 m from the box's flat front, which a disc
+    # of 0.22 m would put at 0.40 - sqrt(0.22^2 - 0.21^2) = 0.334 m
+    at = (math.hypot(0.40, 0.21), math.degrees(math.atan2(0.21, 0.40)))
+    disc_layer, box_layer = layer(), layer()
+    for safety in (disc_layer, box_layer):
+        safety.scan(scan(10.0, at))
+    # 0.5 m/s needs 0.05 + 0.05 + 0.05 m margin of room braking at 2.5 m/s^2
+    assert disc_layer.judge("r1", 0.5, 0.22, 10.0, DECEL).outcome == CLEAR
+    verdict = box_layer.judge("r1", 0.5, box, 10.0, DECEL)
+    assert verdict.outcome == LIMITED and "polygon" in verdict.reason
+    free, _, _ = box_layer.scans["r1"].free_travel(1, box)
+    assert free == pytest.approx(0.40 - 0.254, abs=0.01)  # the 1-degree beam rounds y a little
+    # a return beside the box (0.218 m left, clear of its 0.215 m side) is no obstacle
+    # ahead, though the disc of the same row (0.22 m) meets it
+    beside = layer()
+    beside.scan(scan(10.0, (0.371, 36.0)))
+    assert beside.judge("r1", 1.0, box, 10.0, DECEL).outcome == CLEAR
+    assert beside.judge("r1", 1.0, 0.22, 10.0, DECEL).outcome != CLEAR
+    # backing up: measured from the back edge
+    behind = layer()
+    behind.scan(scan(10.0, (0.5, 180.0)))
+    free_back, _, _ = behind.scans["r1"].free_travel(-1, box)
+    assert free_back == pytest.approx(0.5 - 0.254)
+
+
+def test_a_polygon_turning_as_it_drives_is_judged_along_its_arc() -> None:
+    from common.footprint import Footprint
+
+    box = Footprint.of(0.22, ((0.254, -0.215), (0.254, 0.215), (-0.254, 0.215), (-0.254, -0.215)))
+    # a return ahead on the left, beside the straight corridor (0.35 m > the 0.215 m flank):
+    # driving straight or turning right passes it, turning left at 1 rad/m swings the front
+    # left corner into it about 0.4 m on
+    at = (math.hypot(0.6, 0.35), math.degrees(math.atan2(0.35, 0.6)))
+    outcomes = {}
+    for angular in (0.0, -1.5, 1.5):
+        safety = layer()
+        safety.scan(scan(10.0, at))
+        outcomes[angular] = safety.judge("r1", 1.5, box, 10.0, DECEL, angular)
+    assert outcomes[0.0].outcome == CLEAR and outcomes[-1.5].outcome == CLEAR
+    assert outcomes[1.5].outcome in (LIMITED, STOPPED)
+    assert outcomes[1.5].linear < 1.5
+    travel, _, bearing = layer_scan(at).arc_travel(box, 1, 1.0, 1.0)
+    assert 0.3 < travel < 0.5 and bearing == pytest.approx(at[1], abs=1.0)
+    # backing up while turning: the arc runs behind
+    travel_back, _, _ = layer_scan((0.5, 180.0)).arc_travel(box, -1, 0.5, 1.0)
+    assert 0.2 < travel_back < 0.26
+
+
+def layer_scan(*obstacles: tuple[float, float]) -> Any:
+    safety = layer()
+    safety.scan(scan(10.0, *obstacles))
+    return safety.scans["r1"]
+
+
+def test_a_polygon_is_not_turned_into_what_its_corner_would_hit() -> None:
+    from common.footprint import Footprint
+
+    box = Footprint.of(0.22, ((0.254, -0.215), (0.254, 0.215), (-0.254, 0.215), (-0.254, -0.215)))
+    # a post 0.34 m out at 45 degrees left: a left turn swings the front left corner past it
+    # within 1 cm, a right turn swings nothing that far out near it
+    post = (0.34, 45.0)
+    left, right, disc = layer(), layer(), layer()
+    for safety in (left, right, disc):
+        safety.scan(scan(10.0, post))
+    stopped = left.judge("r1", 0.0, box, 10.0, DECEL, 4.0)
+    assert (
+        stopped.angular == 0.0 and stopped.outcome == LIMITED and "turn stopped" in stopped.reason
+    )
+    turned = right.judge("r1", 0.0, box, 10.0, DECEL, -4.0)
+    assert turned.angular is None and turned.outcome == CLEAR
+    # a disc's turn sweeps nothing
+    assert disc.judge("r1", 0.0, 0.22, 10.0, DECEL, 4.0).angular is None

@@ -122,3 +122,28 @@ def test_a_model_column_the_contract_refuses_is_refused_before_sql(
     body["robots"][0][field] = value
     with pytest.raises(MalformedMessage):
         parse_world(pack(body))
+
+
+@pytest.mark.parametrize(
+    ("polygon", "says"),
+    [
+        ([[0.2, 0.2], [-0.2, -0.2], [0.2, -0.2], [-0.2, 0.2]], "self-intersecting"),
+        ([[1.0, -0.2], [1.5, -0.2], [1.5, 0.2], [1.0, 0.2]], "centre"),
+        ([[0.2, -0.2], [float("nan"), 0.2], [-0.2, 0.0]], "finite"),
+        ("box", "list of [x, y]"),
+    ],
+)
+def test_a_footprint_polygon_the_table_would_refuse_is_refused_naming_it(
+    polygon: object, says: str
+) -> None:
+    body = payloads.world()
+    body["robots"][0]["footprint_polygon"] = polygon
+    with pytest.raises(MalformedMessage) as caught:
+        parse_world(pack(body))
+    assert "footprint_polygon" in str(caught.value) and says in str(caught.value)
+
+
+def test_a_robot_without_a_polygon_is_its_disc() -> None:
+    body = payloads.world()
+    body["robots"][0].pop("footprint_polygon", None)
+    assert parse_world(pack(body)).robots[0].footprint_polygon is None

@@ -76,6 +76,7 @@ def test_robot_row_names_every_model_column_of_the_contract() -> None:
         "max_linear_mps",
         "max_angular_rps",
         "footprint_radius_m",
+        "footprint_polygon",
         "battery_capacity_wh",
         "max_linear_accel_mps2",
         "max_angular_accel_rps2",

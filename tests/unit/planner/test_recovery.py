@@ -10,6 +10,7 @@ import pytest
 
 from common.contract import keys
 from common.contract.records import LaserScan
+from common.footprint import Footprint
 from services.planner.recovery import (
     BACK_UP,
     FAILED,
@@ -154,8 +155,38 @@ def test_a_lidar_with_no_beams_behind_never_calls_the_rear_clear() -> None:
         ranges = np.full(beams, np.inf, dtype=np.float32)
         return LaserScan(1, "r1", 1.0, math.radians(first_deg), math.radians(1), 0.1, 30.0, ranges)
 
-    assert surroundings(sweep(0.0, 360), 0.22, 0.3)[0]  # all round and nothing near: clear
-    assert not surroundings(sweep(-135.0, 270), 0.22, 0.3)[0]  # the Jackal's: blind behind
+    disc = Footprint.of(0.22)
+    assert surroundings(sweep(0.0, 360), disc, 0.3)[0]  # all round and nothing near: clear
+    assert not surroundings(sweep(-135.0, 270), disc, 0.3)[0]  # the Jackal's: blind behind
+
+
+def test_backing_and_turning_room_are_measured_from_a_polygon() -> None:
+    from services.planner.recovery_rule import surroundings
+
+    box = Footprint.of(0.22, ((0.254, -0.215), (0.254, 0.215), (-0.254, 0.215), (-0.254, -0.215)))
+
+    def scan_with(points: list[tuple[float, float]]) -> LaserScan:
+        # a full-turn 1-degree lidar seeing only ``points`` (robot frame)
+        ranges = np.full(360, np.inf, dtype=np.float32)
+        for x, y in points:
+            beam = round(math.degrees(math.atan2(y, x))) % 360
+            ranges[beam] = math.hypot(x, y)
+        return LaserScan(1, "r1", 1.0, 0.0, math.radians(1), 0.1, 30.0, ranges)
+
+    # backing 0.3 m needs 0.4 m behind the back edge (x = -0.254)
+    assert not surroundings(scan_with([(-0.6, 0.0)]), box, 0.3)[0]  # 0.346 m
+    assert surroundings(scan_with([(-0.7, 0.0)]), box, 0.3)[0]  # 0.446 m
+    # a post 0.34 m out at 45 degrees left: turning left swings the front right corner
+    # (0.333 m out) by it within 1 cm, turning right nothing within 2 cm; a wall
+    # 0.9 m away on the right makes the left look the more open side
+    wall = [(0.9 * math.cos(a), 0.9 * math.sin(a)) for a in np.radians(np.arange(-120, -59))]
+    post = (0.34 * math.cos(math.pi / 4), 0.34 * math.sin(math.pi / 4))
+    assert not surroundings(scan_with([post, *wall]), box, 0.3, 1.57)[1]  # turn right
+    # without the turn's check (a disc), the more open side wins: left
+    assert surroundings(scan_with([post, *wall]), Footprint.of(0.22), 0.3, 1.57)[1]
+    # mirrored: left
+    mirrored = [(x, -y) for x, y in (post, *wall)]
+    assert surroundings(scan_with(mirrored), box, 0.3, 1.57)[1]
 
 
 def test_a_robot_turning_at_its_pose_is_never_stuck_and_a_new_leg_is_watched_afresh() -> None:

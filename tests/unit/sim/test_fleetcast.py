@@ -131,16 +131,26 @@ def static_reference(world: World, lidar: Lidar, pose: Pose) -> np.ndarray:
 
 def reference(world: World, lidars: Sequence[Lidar], poses: Sequence[Pose], i: int) -> Cast:
     """Robot i's beams as the lidar is defined, written out another way than the fleet cast:
-    the first wall or obstacle (:func:`static_reference`) or other robot's disc (a body whose
-    top reaches the beams' height) each beam's ray enters."""
+    the first wall or obstacle (:func:`static_reference`) or other robot's body (a body whose
+    top reaches the beams' height: a disc, or the box of its footprint polygon, in its frame)
+    each beam's ray enters."""
     lidar = lidars[i]
     best = static_reference(world, lidar, poses[i])
     starts, ends = rays(lidar, poses[i])
-    for j, (x, y, _) in enumerate(poses):
+    for j, (x, y, yaw) in enumerate(poses):
         model = world.models[j]
-        if j != i and model.height_m >= lidar.height:
-            d = ends[:, :2] - starts[:, :2]
+        if j == i or model.height_m < lidar.height:
+            continue
+        d = ends[:, :2] - starts[:, :2]
+        fp = model.footprint
+        if fp.is_disc:
             best = np.minimum(best, _disc(starts[:, :2], d, (x, y), model.footprint_radius_m))
+            continue
+        c, s = math.cos(-yaw), math.sin(-yaw)
+        turn = np.array([[c, -s], [s, c]])
+        lo, hi = fp.vertices.min(axis=0), fp.vertices.max(axis=0)  # the models' are boxes
+        o = (starts[:, :2] - (x, y)) @ turn.T
+        best = np.minimum(best, _slab(o, d @ turn.T, lo[None], hi[None]))
     hit = best <= 1.0
     return hit, np.where(hit, best, 1.0)
 
@@ -155,9 +165,14 @@ def grazing(world: World, lidar: Lidar, poses: Sequence[Pose], i: int) -> np.nda
     outline = Outline.of(world)
     corners = [(x, y, 0.0) for x, y in np.concatenate([outline.a, outline.b])]
     discs = [(x, y, r) for (x, y), r in zip(outline.centre, outline.radius, strict=True)]
-    discs += [
-        (x, y, world.models[j].footprint_radius_m) for j, (x, y, _) in enumerate(poses) if j != i
-    ]
+    for j, (x, y, yaw) in enumerate(poses):
+        fp = world.models[j].footprint
+        if j == i:
+            continue
+        if fp.is_disc:
+            discs.append((x, y, fp.radius_m))
+        else:
+            corners += [(cx, cy, 0.0) for cx, cy in fp.at(x, y, yaw)]
     out = np.zeros(len(starts), dtype=bool)
     for x, y, r in corners + discs:
         along = (x - x0) * ux + (y - y0) * uy
@@ -391,7 +406,8 @@ def test_a_fleet_of_mixed_models_sees_each_body_that_reaches_its_beams(
             while len(poses) < len(robots):
                 x, y = rng.uniform(0.35, 2.75), rng.uniform(0.35, 2.75)
                 clear = world.blocked(x, y, 0.221) is None
-                if clear and all(math.hypot(x - px, y - py) >= 0.441 for px, py, _ in poses):
+                # apart by the bodies' reach (a Jackal's box reaches 0.333 m from its centre)
+                if clear and all(math.hypot(x - px, y - py) >= 0.667 for px, py, _ in poses):
                     poses.append((x, y, float(rng.uniform(-math.pi, math.pi))))
             for i, pose in enumerate(poses):
                 scene.place(i, *pose)
