@@ -4,6 +4,7 @@ what it accepts, exit 2, no traceback, nothing written."""
 from __future__ import annotations
 
 import asyncio
+import logging
 import math
 from pathlib import Path
 from typing import Any
@@ -20,11 +21,19 @@ from pnav import cli, commands
 
 
 def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    """``pnav ARGV`` in this process: (exit code, stdout, stderr)."""
+    """``pnav ARGV`` in this process: (exit code, stdout, stderr). The root logger is put back
+    as it was: a command that sets logging up (`pnav up`) would otherwise leave its handler
+    and level to every later command of this process, which a command run as its own process
+    never has."""
+    root = logging.getLogger()
+    handlers, level = root.handlers[:], root.level
     try:
         code = cli.main(argv)
     except SystemExit as exc:  # argparse's usage errors exit
         code = int(exc.code or 0)
+    finally:
+        root.handlers[:] = handlers
+        root.setLevel(level)
     out, err = capsys.readouterr()
     return code, out, err
 
@@ -141,7 +150,7 @@ def test_an_unknown_strategy_is_refused_with_the_known_ones(
         code,
         err,
         "unknown strategy 'NO_SUCH_THING'",
-        "CHARGE, GOTO_AVOID, GOTO_DIRECT, GOTO_FAST, GOTO_LEARNED, IDLE",
+        "CHARGE, GOTO_AVOID, GOTO_DIRECT, GOTO_DODGE, GOTO_FAST, GOTO_LEARNED, IDLE",
     )
 
 
