@@ -357,6 +357,8 @@ class ScenarioService(ABC):
                     await asyncio.wait_for(engine_task, self.config.engine.period_s * 4 + 5.0)
                 except TimeoutError:
                     logger.error("engine did not drain in time; cancelled")
+            if not self.engine.running:
+                self.engine.close()  # the running behaviours end ("the service stopped")
             if offer is not None:
                 await offer.withdraw()
             await self.stop_leases()

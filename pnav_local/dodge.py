@@ -31,7 +31,8 @@ from typing import Any
 import numpy as np
 
 from common.contract.records import LaserScan, Odometry, Robot
-from common.controller_core.scenario import Command, ControllerScenario
+from common.controller_core.scenario import Command, ControllerScenario, Key, ScenarioSpec
+from common.engine import Behaviour
 from pnav_local import threats
 from pnav_local.tracks import REACH_M, Tracker, robot_pose
 
@@ -121,12 +122,14 @@ class Dodge(ControllerScenario):
     priority = PRIORITY
     needs_odometry = True
 
-    def _tracker(self) -> Tracker:
-        memory = self.ticket.memory
-        tracker = memory.get("tracker")
-        if not isinstance(tracker, Tracker):
-            tracker = memory["tracker"] = Tracker()
-        return tracker
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.tracker = Tracker()  # the robot's tracks, scan after scan
+
+    def resume(self, lost: Behaviour[Key, ScenarioSpec]) -> None:
+        # restarted after an error: the tracks seen so far still hold
+        if isinstance(lost, Dodge):
+            self.tracker = lost.tracker
 
     @classmethod
     def decide(
@@ -138,8 +141,8 @@ class Dodge(ControllerScenario):
     def judge(self, scan: LaserScan, odom: Odometry | None) -> Command | None:
         if odom is None:
             return None
-        return decide_for(self._tracker(), scan, odom, self.spec.robot)
+        return decide_for(self.tracker, scan, odom, self.spec.robot)
 
     def ttl_s(self) -> float:
-        period = self._tracker().period_s
+        period = self.tracker.period_s
         return min(MAX_TTL_S, max(MIN_TTL_S, TTL_PERIODS * period))

@@ -8,12 +8,14 @@ drive it tick by tick). The base does the rest the same way for every scenario:
 1. data acquisition: the robot's newest laser scan; if it is one to act on (new to this
    scenario, fresh), the odometry read with it (if ``needs_odometry``) and ``decide``'s
    command for it;
-2. activation guards: the scenario is still wanted (its ticket is live), the scan is one
+2. activation guards: the scenario is still wanted (it is live), the scan is one
    this scenario has not recommended on yet, and it is fresh (stamp within
    ``scan_max_age_s`` of sim now);
 3. conditions: ``decide`` returned a command;
 4. actions: write the recommendation (priority, validity from the scan's stamp, inputs);
-5. rule generation: a clone, while the meta-controller's supervisor keeps the ticket live.
+5. rule generation: the same object again, while the meta-controller's supervisor keeps it
+   running (a :class:`~common.engine.Behaviour`: ``initialise`` when its robot's strategy
+   names it, ``terminate`` when that ends; what it keeps between scans lives in ``self``).
 
 Scenarios are found, not listed: the controller loads every class named under the
 entry-point group :data:`SCENARIO_GROUP` when it starts (docs/CONTROLLER.md, "Adding a
@@ -34,7 +36,7 @@ from common.contract.planned_path import PlannedPath
 from common.contract.recommendations import Recommendation
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
 from common.controller_core.params import number
-from common.engine.supervisor import Supervised, Ticket
+from common.engine.behaviour import Behaviour
 from common.errors import InternalError
 from common.plugins import load_scenarios
 
@@ -64,7 +66,7 @@ class Command:
 @dataclass(frozen=True)
 class ScenarioSpec:
     """What a running scenario follows: its robot (limits), the strategy naming it, and the
-    strategy's params. A change is applied in place (``Supervised.update``)."""
+    strategy's params. A change is applied in place (``Behaviour.reconfigure``)."""
 
     robot: Robot
     strategy: str
@@ -100,7 +102,7 @@ class Host(Protocol):
         activation and writes the activation's rows in one statement)."""
 
 
-class ControllerScenario(Supervised[Key, ScenarioSpec]):
+class ControllerScenario(Behaviour[Key, ScenarioSpec]):
     """Base target rule; subclasses set ``scenario``, ``priority`` and ``decide``."""
 
     scenario: ClassVar[str] = ""
@@ -108,9 +110,9 @@ class ControllerScenario(Supervised[Key, ScenarioSpec]):
     validity_s: ClassVar[float] = 0.5  # CONTRACT.md, "Conventions the shipped scenarios follow"
     needs_odometry: ClassVar[bool] = False
 
-    def __init__(self, host: Host, ticket: Ticket[Key, ScenarioSpec]) -> None:
-        super().__init__(ticket)
-        self.robot_id = ticket.key[0]  # a wake for this robot runs it (docs/ENGINE.md)
+    def __init__(self, host: Host, key: Key, spec: ScenarioSpec) -> None:
+        super().__init__(key, spec)
+        self.robot_id = key[0]  # a wake for this robot runs it (docs/ENGINE.md)
         self.host = host
         self.now: float | None = None
         self.scan: LaserScan | None = None
@@ -137,7 +139,7 @@ class ControllerScenario(Supervised[Key, ScenarioSpec]):
         scenario knows better (dodge: a few scan periods, so a yield ends with its threat)."""
         return self.validity_s
 
-    # -- lifecycle (common.engine.supervisor) --------------------------------------------------
+    # -- lifecycle (common.engine.behaviour) ---------------------------------------------------
     def initialise(self) -> None:
         self._log("controller scenario started")
 

@@ -37,6 +37,13 @@ Our additions to the thesis:
 - A rule run over ``settings.rule_budget_s`` is counted and logged, once per rule type per
   10 s (common.engine.budget): the engine cannot stop synchronous Python, so a rule's work
   is bounded by construction, and F cuts what comes after it.
+- Long-lived target rules are :class:`~common.engine.behaviour.Behaviour` objects: the same
+  object runs in every activation (no clone) from ``initialise`` to ``terminate``;
+  :meth:`Engine.close` ends those still running when the service stops.
+
+Running one rule's five steps is the engine's collaborator's job (``steps``, a
+:class:`~common.engine.steps.StepRunner`); the queues, N, F and when activations start are
+the engine's.
 """
 
 from __future__ import annotations
@@ -48,6 +55,7 @@ from collections import deque
 from collections.abc import Awaitable, Callable, Iterable
 
 from common.config import EngineSettings
+from common.engine.behaviour import STOPPED, Behaviour
 from common.engine.budget import BudgetLog
 from common.engine.errorlog import ErrorLog, error_key
 from common.engine.rule import Rule
@@ -62,7 +70,7 @@ RuleFactory = Callable[[], Rule]
 ActivationEnd = Callable[[], Awaitable[None]]
 
 
-class Engine(StepRunner):
+class Engine:
     def __init__(
         self,
         settings: EngineSettings | None = None,
@@ -70,9 +78,12 @@ class Engine(StepRunner):
         *,
         trigger: Trigger | None = None,
         clock: Clock | None = None,
+        fatal: tuple[type[Exception], ...] = (),
     ) -> None:
         """``trigger`` says when activations start (default :class:`Periodic`); ``clock``
-        counts F, within an activation and between two (default: monotonic wall time)."""
+        counts F, within an activation and between two (default: monotonic wall time);
+        ``fatal``: errors a rule's step raises that stop the engine instead of discarding
+        the rule (the monolith's own plumbing failing, not a rule's error)."""
         self.settings = settings or EngineSettings()
         self.name = name
         self.current: deque[Rule] = deque()
@@ -81,12 +92,21 @@ class Engine(StepRunner):
         self.trigger: Trigger = trigger if trigger is not None else Periodic()
         self.clock: Clock = clock if clock is not None else time.monotonic
         self.signals = Signals()
-        self._stats: dict[type[Rule], RuleStats] = {}
         self._meta_factories: dict[type[Rule], RuleFactory] = {}
         self._running = False
         # errors are counted every time (stats), logged once per distinct error + a count
         self.error_log = ErrorLog(log)
         self.budget_log = BudgetLog(log, name)
+        self.steps = StepRunner(
+            name,
+            self.settings,
+            self.next,
+            self.counters,
+            self.error_log,
+            self.budget_log,
+            self._meta_factories,
+            fatal,
+        )
         # When the last full activation started, on ``clock`` (None: none yet): F counts
         # from it (see the module's docstring).
         self.full_started: float | None = None
@@ -198,7 +218,7 @@ class Engine(StepRunner):
             current.clear()
             current.extend(rest)
             for rule in first:
-                await self.run_rule(rule)
+                await self.steps.run(rule)
             self.counters.safety_run += len(first)
         return len(first)
 
@@ -222,7 +242,7 @@ class Engine(StepRunner):
                 self.counters.capped_by_f += 1
                 self.cut = True
                 break
-            await self.run_rule(current.popleft())
+            await self.steps.run(current.popleft())
             ran += 1
             others += 1
         if not safety_ran:
@@ -258,7 +278,7 @@ class Engine(StepRunner):
                 self.cut = True
                 break
             current.popleft()
-            await self.run_rule(rule)
+            await self.steps.run(rule)
             ran += 1
             others += 1
         if not safety_ran:
@@ -269,10 +289,10 @@ class Engine(StepRunner):
     # -- statistics --------------------------------------------------------------------------
     def stats(self) -> list[RuleStats]:
         """A snapshot of the statistics per rule type (copies; safe to keep)."""
-        return [RuleStats(**s.as_dict()) for s in self._stats.values()]
+        return [RuleStats(**s.as_dict()) for s in self.steps.stats.values()]
 
     def stats_for(self, rule_type: type[Rule]) -> RuleStats:
-        return self._stats.get(rule_type) or RuleStats(rule_type.__name__, rule_type.scenario)
+        return self.steps.stats.get(rule_type) or RuleStats(rule_type.__name__, rule_type.scenario)
 
     # -- the activation loop ---------------------------------------------------------------
     def wake(self, robot: str | None = None) -> None:
@@ -353,6 +373,23 @@ class Engine(StepRunner):
         """Ask :meth:`run` to return after the activation under way (drain, don't cut)."""
         self.signals.stopping = True
         self.signals.look()
+
+    def close(self, why: str = STOPPED) -> int:
+        """End the behaviours still running in the queues (``terminate(why)``), once the
+        engine no longer runs (the service stops); how many ended. A hook that raises is
+        logged and the others still end."""
+        if self._running:
+            raise UsageError(f"engine {self.name} still runs: stop it before closing")
+        ended = 0
+        for rule in (*self.current, *self.next):
+            if not isinstance(rule, Behaviour):
+                continue
+            try:
+                ended += rule.stop(why)
+            except Exception:
+                log.exception("terminate hook failed", extra={"engine": self.name})
+                ended += 1
+        return ended
 
     @property
     def running(self) -> bool:

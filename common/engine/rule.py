@@ -9,8 +9,9 @@ The steps, run in this order by :class:`~common.engine.Engine` (thesis, figure 3
 4. ``actions()``           run only if guards and conditions all held. An exception is
    logged, counted, and the rule discarded (no rule generation).
 5. ``rule_generation()``   runs whether or not the rule was activated; the rules it returns
-   go to the end of the engine's ``next`` queue. A rule that must live on returns a clone of
-   itself here (``return [self.clone()]``).
+   go to the end of the engine's ``next`` queue. A continuous rule (a meta rule) returns a
+   clone of itself here (``return [self.clone()]``); a long-lived target scenario is a
+   :class:`~common.engine.behaviour.Behaviour` instead, one object from start to end.
 
 A rule discarded on an error is told so (``discarded(step)``), so a supervisor that keeps
 it alive can start it again (common.engine.supervisor).

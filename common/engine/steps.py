@@ -29,23 +29,35 @@ RuleFactory = Callable[[], Rule]
 
 
 class StepRunner:
-    """Runs rules' five steps; the Engine provides the state below."""
+    """Runs rules' five steps into the engine's ``next`` queue, with their statistics."""
 
-    name: str
-    settings: EngineSettings
-    next: deque[Rule]
-    counters: EngineCounters
-    error_log: ErrorLog
-    budget_log: BudgetLog
-    _stats: dict[type[Rule], RuleStats]
-    _meta_factories: dict[type[Rule], RuleFactory]
+    def __init__(
+        self,
+        name: str,
+        settings: EngineSettings,
+        next_queue: deque[Rule],
+        counters: EngineCounters,
+        error_log: ErrorLog,
+        budget_log: BudgetLog,
+        meta_factories: dict[type[Rule], RuleFactory],
+        fatal: tuple[type[Exception], ...] = (),
+    ) -> None:
+        self.name = name
+        self.settings = settings
+        self.next = next_queue  # the engine's: generated rules go to its end
+        self.counters = counters
+        self.error_log = error_log
+        self.budget_log = budget_log
+        self.meta_factories = meta_factories  # the engine's: a meta rule lost is re-seeded
+        self.fatal = fatal  # errors raised, never discarded
+        self.stats: dict[type[Rule], RuleStats] = {}
 
-    async def run_rule(self, rule: Rule) -> None:
+    async def run(self, rule: Rule) -> None:
         """Run the five steps of ``rule`` (thesis figure 3.2) and file its statistics."""
         cls = type(rule)
-        stats = self._stats.get(cls)
+        stats = self.stats.get(cls)
         if stats is None:
-            stats = self._stats[cls] = RuleStats(rule.name, cls.scenario)
+            stats = self.stats[cls] = RuleStats(rule.name, cls.scenario)
         started = time.perf_counter()
         stats.executed += 1
         steps = cls._steps
@@ -162,9 +174,10 @@ class StepRunner:
 
     def _discard_on_error(self, rule: Rule, stats: RuleStats, step: str) -> None:
         """Count, log and discard ``rule`` after an error in ``step``; call it inside the
-        ``except`` that caught the error (subclasses, e.g. the monolith's, override it with
-        this signature and read the error the same way)."""
+        ``except`` that caught the error. A ``fatal`` error is raised instead."""
         exc = sys.exc_info()[1]
+        if exc is not None and isinstance(exc, self.fatal):
+            raise exc
         stats.errors += 1
         what = _describe(exc) if exc is not None else "unknown error"
         self._report(rule, step, f"error in {step}; rule discarded: {what}", exc)
@@ -174,7 +187,7 @@ class StepRunner:
             self._report(
                 rule, "discarded hook", f"discarded hook raised {_describe(hook_exc)}", hook_exc
             )
-        factory = self._meta_factories.get(type(rule))
+        factory = self.meta_factories.get(type(rule))
         if factory is not None:
             self.next.append(factory())
             self.counters.meta_reseeded += 1

@@ -16,12 +16,10 @@ in-memory stores exactly as they await Postgres in the stack.
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Callable
 
 from common.config import EngineSettings
-from common.engine import Engine, Rule
-from common.engine.stats import RuleStats
+from common.engine import Engine
 from pnav.monolith.contract import AdapterError
 
 
@@ -32,7 +30,9 @@ class SteppedEngine(Engine):
         # F, N and P as the services read them (PNAV_ENGINE_*; defaults 50 ms, 1000, 0).
         # F also bounds one activation; sim time stands still while one runs, so it never
         # cuts one short (in the stack F is wall time: a slow rule can leave work for later)
-        super().__init__(EngineSettings.from_env(), name=name, clock=now)
+        # A failure of the monolith's own plumbing (AdapterError) must stop the run, not be
+        # discarded like a rule's error.
+        super().__init__(EngineSettings.from_env(), name=name, clock=now, fatal=(AdapterError,))
         self.signals.woken = True  # a service's first activation starts at once
 
     def due(self, now: float) -> bool:
@@ -49,11 +49,3 @@ class SteppedEngine(Engine):
     def errors(self) -> int:
         """Errors the engine counted: a rule's own failures, survived as in the stack."""
         return sum(s.errors for s in self.stats())
-
-    def _discard_on_error(self, rule: Rule, stats: RuleStats, step: str) -> None:
-        # Called inside the engine's ``except``: a failure of the monolith's own plumbing
-        # must stop the run, not be discarded like a rule's error.
-        failure = sys.exc_info()[1]
-        if isinstance(failure, AdapterError):
-            raise failure
-        super()._discard_on_error(rule, stats, step)

@@ -7,10 +7,10 @@ and their active strategies, works out which (robot, scenario) pairs are wanted 
 which spec (robot, strategy code, params), and hands that to a
 :class:`~common.engine.supervisor.Supervisor`, which
 
-- starts a newly named scenario: a fresh target rule on its own ticket;
+- starts a newly named scenario: a fresh target rule (a ``Behaviour``, initialised once);
 - ends a scenario no longer named (or whose robot left, or is now owned by another replica
-  of the controller, docs/REPLICAS.md): its ticket dies, so its rule recommends nothing
-  more and stops cloning itself;
+  of the controller, docs/REPLICAS.md): it is terminated, recommends nothing more and
+  leaves the queue;
 - updates a scenario still named in place when the strategy's params or the robot's limits
   change;
 - restarts a target rule the engine discarded on an error (e.g. while the database
@@ -35,7 +35,7 @@ from common.contract import keys
 from common.contract.records import ActiveStrategy, Robot
 from common.controller_core.scenario import ControllerScenario, Host, Key, ScenarioSpec
 from common.engine import Engine, Rule
-from common.engine.supervisor import Supervisor, Ticket
+from common.engine import Behaviour, Supervisor
 
 logger = logging.getLogger("pnav.controller")
 
@@ -120,13 +120,13 @@ class MetaController(Rule):
 
 
 def out_of_date(
-    running: Mapping[Key, Ticket[Key, ScenarioSpec]], wanted: Mapping[Key, ScenarioSpec]
+    running: Mapping[Key, Behaviour[Key, ScenarioSpec]], wanted: Mapping[Key, ScenarioSpec]
 ) -> bool:
     """Whether ``Supervisor.reconcile(wanted)`` has anything to do (start, end, restart,
     update): a pure test, for the meta rule's conditions."""
     if running.keys() != wanted.keys():
         return True
-    return any(ticket.lost or ticket.spec != wanted[key] for key, ticket in running.items())
+    return any(rule.lost or rule.spec != wanted[key] for key, rule in running.items())
 
 
 def seed_controller(
@@ -138,8 +138,8 @@ def seed_controller(
     """Seed the meta-controller on ``engine``, running ``scenarios`` against ``host``; its
     state (for tests and the monolith to look at)."""
 
-    def start(ticket: Ticket[Key, ScenarioSpec]) -> ControllerScenario:
-        return scenarios[ticket.key[1]](host, ticket)
+    def start(key: Key, spec: ScenarioSpec) -> ControllerScenario:
+        return scenarios[key[1]](host, key, spec)
 
     state = ControllerState(Supervisor("controller", start), scenarios)
     engine.add_meta(lambda: MetaController(host, state, owns))

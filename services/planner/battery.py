@@ -23,7 +23,6 @@ from typing import Any, ClassVar
 
 from common import log
 from common.contract import records
-from common.engine.supervisor import Ticket
 from services.planner.routes import Target
 from services.planner.scenario import ODOM_MAX_AGE_S
 from services.planner.target import RuleKey, Spec, TargetRule
@@ -82,8 +81,8 @@ def number(params: dict[str, Any], key: str) -> float | None:
 class _BatteryRule(TargetRule):
     kind: ClassVar[str] = "battery"
 
-    def __init__(self, view: PlannerView, ticket: Ticket[RuleKey, Spec]) -> None:
-        super().__init__(view, ticket)
+    def __init__(self, view: PlannerView, key: RuleKey, spec: Spec) -> None:
+        super().__init__(view, key, spec)
         self.quiet_until = float("-inf")  # sim time before which we do not recommend again
         self.robot: RobotState | None = None
         self.params: dict[str, Any] = {}
@@ -152,8 +151,8 @@ class _BatteryRule(TargetRule):
 class BatteryCheck(_BatteryRule):
     scenario = "battery_check"
 
-    def __init__(self, view: PlannerView, ticket: Ticket[RuleKey, Spec]) -> None:
-        super().__init__(view, ticket)
+    def __init__(self, view: PlannerView, key: RuleKey, spec: Spec) -> None:
+        super().__init__(view, key, spec)
         self.need_wh = 0.0
         self.remaining_m = 0.0
         self.wh_per_m = 0.0
@@ -200,8 +199,8 @@ class BatteryCheck(_BatteryRule):
 class ChargeComplete(_BatteryRule):
     scenario = "charge_complete"
 
-    def __init__(self, view: PlannerView, ticket: Ticket[RuleKey, Spec]) -> None:
-        super().__init__(view, ticket)
+    def __init__(self, view: PlannerView, key: RuleKey, spec: Spec) -> None:
+        super().__init__(view, key, spec)
         self.need_wh: float | None = None
         self._need_key: tuple[Any, ...] | None = None
         self._need_m = 0.0

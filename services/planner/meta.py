@@ -13,8 +13,8 @@ wants alive, per robot this replica owns (docs/REPLICAS.md):
 - (robot, "battery"): ``BatteryCheck`` when the strategy drives to the goal,
   ``ChargeComplete`` when it drives to the nearest charger.
 
-A ``common.engine.supervisor.Supervisor`` does the rest: a rule no longer wanted (IDLE, a
-robot gone or owned by another replica) ends, its next generation does not clone it; a
+A ``common.engine.Supervisor`` does the rest: a rule no longer wanted (IDLE, a robot gone
+or owned by another replica) is terminated and leaves the queue after its next run; a
 changed spec (another scenario, or another strategy) ends the old rule and starts the new
 one in the same activation, with no overlap; a rule the engine discarded after an error is
 started again at the next run of the meta-planner.
@@ -28,7 +28,7 @@ from collections.abc import Callable, Iterable, Mapping
 from common import log
 from common.contract import keys, offers, records
 from common.engine import Engine, Rule
-from common.engine.supervisor import Supervisor, Ticket
+from common.engine import Supervisor
 from common.planner_core.scenario import SCENARIO_GROUP, MoveScenario
 from common.plugins import load_scenarios
 from services.planner.battery import BatteryCheck, ChargeComplete
@@ -80,17 +80,17 @@ class PlannerRules:
             "planner", self._start, restart_on=lambda _old, _new: True
         )
 
-    def _start(self, ticket: Ticket[RuleKey, Spec]) -> TargetRule:
-        robot_id, _kind = ticket.key
+    def _start(self, key: RuleKey, spec: Spec) -> TargetRule:
+        robot_id, _kind = key
         log.event(
             logger,
             logging.INFO,
             "planner rule started",
             robot=robot_id,
-            rule=ticket.spec.rule.scenario,
-            strategy=ticket.spec.strategy,
+            rule=spec.rule.scenario,
+            strategy=spec.strategy,
         )
-        return ticket.spec.rule(self.view, ticket)
+        return spec.rule(self.view, key, spec)
 
     def running(self, robot_id: str) -> list[str]:
         """The kinds of rule running for the robot ("move", "battery")."""

@@ -28,7 +28,6 @@ import services.planner.waypoints as waypoints
 from common import log
 from common.collision import collides_with_points
 from common.contract import records
-from common.engine.supervisor import Ticket
 from common.footprint import Footprint
 from services.planner.recovery import NOTHING, Action, Machine, Observation, RecoveryParams
 from services.planner.scenario import ODOM_MAX_AGE_S
@@ -105,8 +104,8 @@ class Recovery(TargetRule):
     scenario = "recovery"
     kind: ClassVar[str] = "recovery"
 
-    def __init__(self, view: PlannerView, ticket: Ticket[RuleKey, Spec]) -> None:
-        super().__init__(view, ticket)
+    def __init__(self, view: PlannerView, key: RuleKey, spec: Spec) -> None:
+        super().__init__(view, key, spec)
         self.machine = Machine()
         self.robot: RobotState | None = None
         self.odom: records.Odometry | None = None

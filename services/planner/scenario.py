@@ -4,8 +4,8 @@ error into a velocity (``select``, common/planner_core/scenario.py).
 A scenario is a ``common.planner_core.scenario.MoveScenario`` subclass in any package,
 registered under the ``pnav.planner.scenarios`` entry points (docs/PLANNER.md); it needs
 nothing of this service's. :func:`move_rule` makes it into a :class:`MoveRule`: one rule per
-robot, started by the meta-planner's supervisor and cloning itself while it is still the
-robot's planner scenario (its ticket lives). The rule stays here, not in common/, because
+robot, started by the meta-planner's supervisor, one object running while it is still the
+robot's planner scenario (a ``common.engine.Behaviour``). The rule stays here, not in common/, because
 everything it does is the planner's own: the target (routes.Target), the route and its
 progress (tracking.py), the planned_path rows (paths.py), the robot's state (world.py) and
 the store's view (view.py). Per activation:
@@ -37,7 +37,6 @@ import services.planner.arrival as arrival
 import services.planner.waypoints as waypoints
 from common import log
 from common.contract import records
-from common.engine.supervisor import Ticket
 from common.planner_core.scenario import Movement, MoveScenario
 from services.planner.cadence import RECOMMEND_PERIOD_S, Said, due
 from services.planner.paths import PathKey, PathRow, empty_key, empty_row, route_row
@@ -85,8 +84,8 @@ class MoveRule(TargetRule, MoveScenario):
 
     kind: ClassVar[str] = "move"
 
-    def __init__(self, view: PlannerView, ticket: Ticket[RuleKey, Spec]) -> None:
-        super().__init__(view, ticket)
+    def __init__(self, view: PlannerView, key: RuleKey, spec: Spec) -> None:
+        super().__init__(view, key, spec)
         self.turning = False  # turn_then_move's hysteresis: turning in place last time
         self.last_said: tuple[Any, ...] | None = None  # (odometry id, target key) handled
         self.said: Said | None = None  # the last velocity recommended

@@ -1,7 +1,7 @@
-"""What the planner's target rules share: a supervised rule per robot and kind.
+"""What the planner's target rules share: a behaviour per robot and kind.
 
 The meta-planner wants, per robot, one "move" rule (the strategy's planner scenario) and one
-"battery" rule; ``common.engine.supervisor.Supervisor`` starts, ends and restarts them
+"battery" rule; ``common.engine.Supervisor`` starts, ends and restarts them
 (meta.py). Each is keyed ``(robot_id, kind)`` and its spec names the rule class and the
 strategy that wants it: any change of either ends the rule and starts a new one in the same
 activation, so a new strategy always starts from a blank rule.
@@ -13,7 +13,7 @@ import logging
 from typing import ClassVar, NamedTuple
 
 from common import log
-from common.engine.supervisor import Supervised, Ticket
+from common.engine.behaviour import Behaviour
 from services.planner.view import PlannerView
 from services.planner.world import RobotState
 
@@ -28,18 +28,18 @@ class Spec(NamedTuple):
     why: str = ""  # why the strategy cannot run (unrunnable.py); "" for any other rule
 
 
-class TargetRule(Supervised[RuleKey, Spec]):
-    """A planner target rule: it sees the store through ``view`` and lives while its ticket
-    does (the base's rule generation clones it then)."""
+class TargetRule(Behaviour[RuleKey, Spec]):
+    """A planner target rule: it sees the store through ``view``; one object runs from its
+    start to its end (the base's rule generation queues it again while it lives)."""
 
     robot_id: str  # always one robot's rule
 
     kind: ClassVar[str] = ""  # "move" or "battery": one of each per robot
 
-    def __init__(self, view: PlannerView, ticket: Ticket[RuleKey, Spec]) -> None:
-        super().__init__(ticket)
+    def __init__(self, view: PlannerView, key: RuleKey, spec: Spec) -> None:
+        super().__init__(key, spec)
         self.view = view
-        self.robot_id = ticket.key[0]
+        self.robot_id = key[0]
 
     def claim(self) -> RobotState | None:
         """The robot's state while this rule is still wanted (None once it has ended)."""

@@ -19,7 +19,6 @@ from typing import ClassVar
 
 from common import log
 from common.contract import records
-from common.engine.supervisor import Ticket
 from services.planner.paths import empty_row
 from services.planner.target import RuleKey, Spec, TargetRule
 from services.planner.view import PlannerView
@@ -32,9 +31,9 @@ class Unrunnable(TargetRule):
     scenario = "unrunnable"
     kind: ClassVar[str] = "move"
 
-    def __init__(self, view: PlannerView, ticket: Ticket[RuleKey, Spec]) -> None:
-        super().__init__(view, ticket)
-        self.why = ticket.spec.why
+    def __init__(self, view: PlannerView, key: RuleKey, spec: Spec) -> None:
+        super().__init__(view, key, spec)
+        self.why = spec.why
         self.robot: RobotState | None = None
         self.goal: records.Goal | None = None
         self.path_cleared = False

@@ -1,7 +1,7 @@
 """The meta-controller tick by tick (as py_trees' tests go): one engine activation per step,
 on the in-memory contract through the real store, the expected state written beside each.
 
-A step's state: which (robot, scenario) pairs run (the supervisor's tickets), which rules
+A step's state: which (robot, scenario) pairs run (the supervisor's behaviours), which rules
 wait in the queue for the next activation, and which scenarios recommended during it.
 """
 
@@ -73,7 +73,7 @@ async def test_a_strategy_switch_ends_one_scenario_and_starts_another(rig: Rig) 
     # the meta runs first: avoid_left ends before it reads the scan, safety_stop starts
     assert await rig.tick() == ["blurt"]
     assert rig.running() == [("r1", "blurt"), ("r1", "safety_stop")]
-    assert rig.queued() == ["Blurt", "MetaController", "SafetyStop"]  # no AvoidLeft clone
+    assert rig.queued() == ["Blurt", "MetaController", "SafetyStop"]  # AvoidLeft not queued again
     assert rig.state.supervisor.running[("r1", "blurt")] is blurt  # blurt went on untouched
     assert (rig.state.supervisor.started, rig.state.supervisor.ended) == (3, 1)
 
@@ -81,12 +81,12 @@ async def test_a_strategy_switch_ends_one_scenario_and_starts_another(rig: Rig) 
 async def test_a_params_change_updates_a_running_scenario_in_place(rig: Rig) -> None:
     rig.set_strategy("r1", ONE)
     await rig.tick()  # running: blurt at the default speed
-    ticket = rig.state.supervisor.running[("r1", "blurt")]
+    blurt = rig.state.supervisor.running[("r1", "blurt")]
     rig.set_strategy("r1", Strategy("ONE", None, ("blurt",), {"speed": 0.3}))
     rig.new_scan()
-    assert await rig.tick() == ["blurt"]  # same ticket, new params, in this very activation
-    assert rig.state.supervisor.running[("r1", "blurt")] is ticket
-    assert ticket.spec.params == {"speed": 0.3}
+    assert await rig.tick() == ["blurt"]  # same rule, new params, in this very activation
+    assert rig.state.supervisor.running[("r1", "blurt")] is blurt
+    assert blurt.spec.params == {"speed": 0.3}
     assert rig.recommendations()[-1]["linear_mps"] == 0.3
     assert (rig.state.supervisor.started, rig.state.supervisor.ended) == (1, 0)
 

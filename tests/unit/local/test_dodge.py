@@ -13,7 +13,6 @@ import pytest
 
 from common.contract.records import Odometry
 from common.controller_core.scenario import Command, Host, ScenarioSpec, installed_scenarios
-from common.engine.supervisor import Ticket
 from pnav_local.dodge import Dodge, decide_for
 from pnav_local.tracks import MAX_TRACKS, Tracker
 from tests.unit.local.scene import JACKAL, Disc, Segment, box, scan_at
@@ -157,10 +156,10 @@ def test_the_tracks_are_bounded_whatever_the_scan_holds() -> None:
 
 
 def test_a_recommendation_lives_a_few_scan_periods() -> None:
-    ticket = Ticket(("r1", "dodge"), ScenarioSpec(JACKAL, "GOTO_DODGE", {}))
-    rule = Dodge(cast(Host, None), ticket)  # the host is only needed to run as a rule
+    spec = ScenarioSpec(JACKAL, "GOTO_DODGE", {})
+    rule = Dodge(cast(Host, None), ("r1", "dodge"), spec)  # the host: only to run as a rule
     assert rule.ttl_s() == pytest.approx(0.1), "before a second scan: the floor"
-    tracker = ticket.memory["tracker"]
+    tracker = rule.tracker
     assert isinstance(tracker, Tracker)
     drive(tracker, [], CORRIDOR, start=(2.4, 0.7), speed=1.0, ticks=3)
     # the Jackal's 50 Hz: 3 periods are 0.06 s, under the floor of 0.1 s
@@ -169,7 +168,7 @@ def test_a_recommendation_lives_a_few_scan_periods() -> None:
     for period, ttl in ((0.1, 0.3), (0.2, 0.5)):
         slow = Tracker()
         drive(slow, [], CORRIDOR, start=(2.4, 0.7), speed=1.0, ticks=3, period=period)
-        ticket.memory["tracker"] = slow
+        rule.tracker = slow
         assert rule.ttl_s() == pytest.approx(ttl)
 
 

@@ -150,8 +150,8 @@ class Planner:
     def running(self) -> dict[str, tuple[str, str]]:
         """kind -> (rule, strategy) of the robot's live rules."""
         return {
-            kind: (ticket.spec.rule.__name__, ticket.spec.strategy)
-            for (_robot, kind), ticket in self.rules.supervisor.running.items()
+            kind: (rule.spec.rule.__name__, rule.spec.strategy)
+            for (_robot, kind), rule in self.rules.supervisor.running.items()
         }
 
     def queue(self) -> list[str]:
@@ -159,9 +159,9 @@ class Planner:
         return [rule.name for rule in self.engine.current]
 
     def live_rule(self, kind: str) -> TargetRule:
-        ticket = self.rules.supervisor.ticket((ROBOT, kind))
-        assert ticket is not None and isinstance(ticket.rule, TargetRule)
-        return ticket.rule
+        rule = self.rules.supervisor.rule((ROBOT, kind))
+        assert isinstance(rule, TargetRule)
+        return rule
 
     def recommendations(self, source: str | None = None) -> list[dict[str, Any]]:
         rows = self.contract[keys.COMMAND_RECOMMENDATION].rows(ROBOT)

@@ -2,7 +2,7 @@
 on the in-memory contract with the real store, the state expected after it beside it.
 
 ``running``: kind -> (rule, strategy) of the robot's live target rules (the supervisor's
-tickets); ``queue``: the rules the next activation runs, in order."""
+behaviours); ``queue``: the rules the next activation runs, in order."""
 
 from __future__ import annotations
 
@@ -38,9 +38,9 @@ async def test_a_strategy_switch_replaces_the_rules_in_one_activation_and_idle_e
     p.strategy("CHARGE")
     await p.tick()  # the old rules run first (still wanted), then the meta-planner swaps them
     assert p.running() == CHARGE
-    assert not old_move.live and not old_battery.live  # ended: they will not clone again
+    assert not old_move.live and not old_battery.live  # ended: they will not queue again
     assert p.queue() == [
-        "TurnThenMove",  # the old rule's last clone, made before the switch: it will not act
+        "TurnThenMove",  # the old rule, queued before the switch: it will not act
         "BatteryCheck",
         "TurnThenMove",  # the new ones, started in the same activation
         "ChargeComplete",
@@ -48,7 +48,7 @@ async def test_a_strategy_switch_replaces_the_rules_in_one_activation_and_idle_e
     ]
     said = len(p.recommendations())
 
-    await p.tick()  # the old clones find their ticket dead: no action, no clone
+    await p.tick()  # the old rules find they ended: no action, not queued again
     assert p.running() == CHARGE
     assert p.queue() == ["TurnThenMove", "ChargeComplete", "MetaPlanner"]
     new = p.recommendations()[said:]
@@ -104,7 +104,7 @@ async def test_a_target_rule_discarded_on_an_error_starts_again_at_the_next_meta
     first = p.live_rule("move")
 
     await p.tick()  # the rule raises and is discarded; the meta-planner runs after it
-    assert first.ticket.lost
+    assert first.lost
     assert p.rules.supervisor.restarted == 1
     assert p.live_rule("move") is not first
     assert p.queue() == ["BatteryCheck", "Stumbling", "MetaPlanner"]
@@ -152,7 +152,7 @@ async def test_forgetting_a_robot_ends_its_rules_before_they_run_again() -> None
     p.rules.forget({ROBOT})
     assert p.running() == {} and not old.live
     said = len(p.recommendations())
-    await p.tick()  # the old clones stop; the meta-planner starts new ones (still owned)
+    await p.tick()  # the old rules stop; the meta-planner starts new ones (still owned)
     assert p.running() == GOTO and p.live_rule("move") is not old
     assert len(p.recommendations()) == said
 
