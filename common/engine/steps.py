@@ -1,12 +1,14 @@
 """Running one rule's five steps (thesis figure 3.2), with its statistics and its errors.
 
-:class:`StepRunner` is the part of :class:`~common.engine.Engine` that runs a rule: data
-acquisition, activation guards, conditions, actions, rule generation; a test that is not a
-bool (or raises) counts as false; an error in acquisition, actions or generation discards
-the rule (``Rule.discarded`` is told; a meta rule is re-seeded from its factory). Errors are
-counted every time and logged once per distinct error, then as a count now and then
-(common.engine.errorlog). A run longer than the settings' rule budget is counted and logged
-the same way (common.engine.budget). The queues and when activations run are the Engine's.
+:class:`StepRunner` runs a rule for its :class:`~common.engine.Engine` (``engine.steps``, a
+collaborator the engine makes): data acquisition, activation guards, conditions, actions,
+rule generation; a test that is not a bool (or raises) counts as false; an error in
+acquisition, actions or generation discards the rule (``Rule.discarded`` is told; a meta rule
+is re-seeded from its factory), unless it is one of the engine's ``fatal`` errors, which is
+raised (the monolith's own plumbing failing). Errors are counted every time and logged once
+per distinct error, then as a count now and then (common.engine.errorlog). A run longer than
+the settings' rule budget is counted and logged the same way (common.engine.budget). The
+queues and when activations run are the Engine's.
 """
 
 from __future__ import annotations

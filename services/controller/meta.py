@@ -34,8 +34,7 @@ from common import log
 from common.contract import keys
 from common.contract.records import ActiveStrategy, Robot
 from common.controller_core.scenario import ControllerScenario, Host, Key, ScenarioSpec
-from common.engine import Engine, Rule
-from common.engine import Behaviour, Supervisor
+from common.engine import Behaviour, Engine, Rule, Supervisor
 
 logger = logging.getLogger("pnav.controller")
 

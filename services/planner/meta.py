@@ -27,8 +27,7 @@ from collections.abc import Callable, Iterable, Mapping
 
 from common import log
 from common.contract import keys, offers, records
-from common.engine import Engine, Rule
-from common.engine import Supervisor
+from common.engine import Engine, Rule, Supervisor
 from common.planner_core.scenario import SCENARIO_GROUP, MoveScenario
 from common.plugins import load_scenarios
 from services.planner.battery import BatteryCheck, ChargeComplete

@@ -4,11 +4,11 @@ error into a velocity (``select``, common/planner_core/scenario.py).
 A scenario is a ``common.planner_core.scenario.MoveScenario`` subclass in any package,
 registered under the ``pnav.planner.scenarios`` entry points (docs/PLANNER.md); it needs
 nothing of this service's. :func:`move_rule` makes it into a :class:`MoveRule`: one rule per
-robot, started by the meta-planner's supervisor, one object running while it is still the
-robot's planner scenario (a ``common.engine.Behaviour``). The rule stays here, not in common/, because
-everything it does is the planner's own: the target (routes.Target), the route and its
-progress (tracking.py), the planned_path rows (paths.py), the robot's state (world.py) and
-the store's view (view.py). Per activation:
+robot, started by the meta-planner's supervisor: one object that runs while it is still
+the robot's planner scenario (a ``common.engine.Behaviour``). The rule stays here, not in
+common/, because everything it does is the planner's own: the target (routes.Target), the
+route and its progress (tracking.py), the planned_path rows (paths.py), the robot's state
+(world.py) and the store's view (view.py). Per activation:
 
 1. acquisition: the newest odometry (at most every EVAL_PERIOD_S of sim time, unless a
    goal notification came or a recommendation is due by the cadence), the target (the active
