@@ -122,9 +122,11 @@ class Dodge(ControllerScenario):
     priority = PRIORITY
     needs_odometry = True
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        self.tracker = Tracker()  # the robot's tracks, scan after scan
+    tracker: Tracker  # the robot's tracks, scan after scan
+
+    def initialise(self) -> None:
+        super().initialise()
+        self.tracker = Tracker()
 
     def resume(self, lost: Behaviour[Key, ScenarioSpec]) -> None:
         # restarted after an error: the tracks seen so far still hold

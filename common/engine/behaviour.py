@@ -62,8 +62,8 @@ class Behaviour(Rule, Generic[K, S]):
         """The scenario ended (``why``: no longer wanted, lost, the service stopped)."""
 
     def resume(self, lost: Behaviour[K, S]) -> None:
-        """Started again in place of ``lost``, which the engine discarded on an error: take
-        from it what must outlive the error (the default takes nothing)."""
+        """Started (initialised) again in place of ``lost``, which the engine discarded on an
+        error: take from it what must outlive the error (the default takes nothing)."""
 
     # -- the supervisor's and the engine's side -------------------------------------------------
     def start(self) -> None:

@@ -99,9 +99,9 @@ class Supervisor(Generic[K, S]):
 
     def _launch(self, key: K, spec: S, lost: Behaviour[K, S] | None) -> Rule:
         rule = self._start(key, spec)
+        rule.start()
         if lost is not None:
             rule.resume(lost)
-        rule.start()
         self.running[key] = rule
         self.started += 1
         return rule

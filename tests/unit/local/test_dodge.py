@@ -158,6 +158,7 @@ def test_the_tracks_are_bounded_whatever_the_scan_holds() -> None:
 def test_a_recommendation_lives_a_few_scan_periods() -> None:
     spec = ScenarioSpec(JACKAL, "GOTO_DODGE", {})
     rule = Dodge(cast(Host, None), ("r1", "dodge"), spec)  # the host: only to run as a rule
+    rule.start()  # as its supervisor does: initialise() sets up its tracks
     assert rule.ttl_s() == pytest.approx(0.1), "before a second scan: the floor"
     tracker = rule.tracker
     assert isinstance(tracker, Tracker)
