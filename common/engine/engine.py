@@ -37,13 +37,10 @@ Our additions to the thesis:
 - A rule run over ``settings.rule_budget_s`` is counted and logged, once per rule type per
   10 s (common.engine.budget): the engine cannot stop synchronous Python, so a rule's work
   is bounded by construction, and F cuts what comes after it.
-- Long-lived target rules are :class:`~common.engine.behaviour.Behaviour` objects: the same
-  object runs in every activation (no clone) from ``initialise`` to ``terminate``;
-  :meth:`Engine.close` ends those still running when the service stops.
-
-Running one rule's five steps is the engine's collaborator's job (``steps``, a
-:class:`~common.engine.steps.StepRunner`); the queues, N, F and when activations start are
-the engine's.
+- Long-lived target rules are :class:`~common.engine.behaviour.Behaviour` objects, one object
+  from ``initialise`` to ``terminate`` (no clone); :meth:`Engine.close` ends those still
+  running when the service stops. One rule's five steps are run by ``steps``, a
+  :class:`~common.engine.steps.StepRunner` the engine owns.
 """
 
 from __future__ import annotations
@@ -60,13 +57,12 @@ from common.engine.budget import BudgetLog
 from common.engine.errorlog import ErrorLog, error_key
 from common.engine.rule import Rule
 from common.engine.stats import EngineCounters, RuleStats
-from common.engine.steps import StepRunner
+from common.engine.steps import RuleFactory, StepRunner
 from common.engine.trigger import Clock, Periodic, Signals, Trigger
 from common.errors import UsageError
 
 log = logging.getLogger("pnav.engine")
 
-RuleFactory = Callable[[], Rule]
 ActivationEnd = Callable[[], Awaitable[None]]
 
 
@@ -375,9 +371,8 @@ class Engine:
         self.signals.look()
 
     def close(self, why: str = STOPPED) -> int:
-        """End the behaviours still running in the queues (``terminate(why)``), once the
-        engine no longer runs (the service stops); how many ended. A hook that raises is
-        logged and the others still end."""
+        """After :meth:`run`: end the behaviours still queued (``terminate(why)``, a hook that
+        raises is logged); how many ended."""
         if self._running:
             raise UsageError(f"engine {self.name} still runs: stop it before closing")
         ended = 0
