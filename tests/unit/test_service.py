@@ -12,7 +12,7 @@ import pytest
 from common import bus
 from common.config import EngineSettings, ServiceConfig, ZenohSettings
 from common.contract import keys
-from common.engine import Rule
+from common.engine import Behaviour, Rule
 from common.runtime import Runtime
 from common.service import ScenarioService
 
@@ -159,6 +159,37 @@ async def test_the_service_publishes_liveliness_and_engine_stats_and_stops_clean
         lambda: list(writer.zenoh.liveliness().get(keys.alive_watch("watcher"), timeout=1))
     )
     assert [r for r in replies if r.ok is not None] == []  # the token went with the service
+
+
+class Lingering(Behaviour[str, str]):
+    """A long-lived rule that only records how it ended."""
+
+    scenario = "linger"
+
+    def __init__(self) -> None:
+        super().__init__("r1", "spec")
+        self.ended: list[str] = []
+
+    def terminate(self, why: str) -> None:
+        self.ended.append(why)
+
+
+async def test_a_stopping_service_terminates_the_behaviours_still_running(
+    db_url: str, zenoh_settings: ZenohSettings, writer: Runtime
+) -> None:
+    service, stop, task = await started_service(db_url, zenoh_settings, period_s=0.05)
+    lingering = Lingering()
+    lingering.start()
+    service.engine.add(lingering)
+    try:
+        await asyncio.sleep(0.3)  # a few activations: it stays queued, the same object
+        engine = service.engine  # (its steps never await: it is in one queue or the other)
+        assert lingering.live and lingering in (*engine.current, *engine.next)
+    finally:
+        stop.set()
+        await asyncio.wait_for(task, 10)
+        await service.runtime.close()
+    assert lingering.ended == ["the service stopped"] and not lingering.live
 
 
 async def test_notifications_decode_back_to_what_was_sent() -> None:
