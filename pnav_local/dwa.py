@@ -30,9 +30,11 @@ import numpy as np
 
 import pnav_local.clearance as clearance
 import pnav_local.trajectories as tr
+import pnav_local.veto as veto
 from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
 from common.controller_core.scenario import Command, ControllerScenario
+from common.footprint import Footprint
 from common.scan import readings
 from pnav_local.params import DwaParams
 
@@ -51,6 +53,7 @@ class Choice:
     local: tr.Local
     v_cap: float
     blocked: bool = False  # the path ahead runs into a lidar hit
+    vetoed: int = 0  # better admissible arcs the safety layer's test refused (veto.py)
 
 
 @functools.lru_cache(maxsize=8)
@@ -199,8 +202,13 @@ def choose(
         wide = clearance.Index(points, foot.reach_m + p.clearance_cap_m)
         gaps[contenders] = clearance.gaps(*at_cap, wide, foot, p.clearance_cap_m)
     scores = scored(gaps, bound)
-    best = int(np.argmax(np.where(ok, scores.total, -np.inf)))
-    return Choice(win, ok, scores, best, local, v_cap, blocked)
+    top_arc = int(np.argmax(np.where(ok, scores.total, -np.inf)))
+    best: int | None = top_arc
+    vetoed = 0
+    if polygon is not None:
+        outline = Footprint.of(radius, polygon)
+        best, vetoed = veto.winner(top_arc, scores.total, ok, win.v, win.w, scan, robot, outline)
+    return Choice(win, ok, scores, best, local, v_cap, blocked, vetoed)
 
 
 def command_for(choice: Choice, path: PlannedPath, note: str = "") -> Command:
@@ -208,7 +216,13 @@ def command_for(choice: Choice, path: PlannedPath, note: str = "") -> Command:
     inputs = {"planned_path": path.id}
     n, admitted = len(choice.window.v), int(choice.ok.sum())
     if choice.best is None or choice.scores is None:
-        reason = f"dwa: none of {n} trajectories is admissible: brake{note}"
+        if choice.vetoed:
+            reason = (
+                f"dwa: the safety layer would stop each of the {choice.vetoed} best of"
+                f" {admitted}/{n} admissible trajectories: brake{note}"
+            )
+        else:
+            reason = f"dwa: none of {n} trajectories is admissible: brake{note}"
         return Command(0.0, 0.0, reason, inputs)
     i, s = choice.best, choice.scores
     v, w = float(choice.window.v[i]), float(choice.window.w[i])
@@ -219,6 +233,7 @@ def command_for(choice: Choice, path: PlannedPath, note: str = "") -> Command:
         f" path {s.path[i]:.2f}, heading {s.heading[i]:.2f}, clearance {s.clearance[i]:.2f},"
         f" speed {s.speed[i]:.2f}; {choice.local.remaining_m:.2f} m of path left"
         + (" (blocked ahead: rounding it)" if choice.blocked else "")
+        + (f" ({choice.vetoed} better ones the safety layer would stop)" if choice.vetoed else "")
         + note,
         inputs,
     )

@@ -22,7 +22,8 @@ sweep, and the sim stops a turn that would push one into something):
   less the outline's front (or back) edge at that ``y`` (common/footprint.py,
   ``Footprint.travel_each``): a box's flat front and square corners, not a disc's bulge. A
   polygon commanded to turn as it drives is rolled out along that arc instead
-  (:meth:`Scan.arc_travel`): its corners swing. The nearest such is the free travel ``d``;
+  (common/sweep.py, ``Returns.arc_travel``): its corners swing. The nearest such is the
+  free travel ``d``;
 - the distance needed: ``|v| * latency + v^2 / (2 * decel) + margin`` (``decel``: the robot
   row's ``max_linear_accel_mps2``, the hardest its model brakes), plus what the robot
   may have travelled since the scan (``age * |last speed sent|``, when that speed was in the
@@ -46,17 +47,21 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from common.collision import first_contact
+from common import sweep
 from common.footprint import Footprint
-from common.scan import beam_angles, readings
+from common.sweep import (
+    MIN_MPS,
+    TURN_MARGIN_M,
+    Returns,
+    arc_reach,
+    max_speed,
+    stopping_m,
+    turn_sweep,
+)
 from services.bridge.messages import LaserScan
 from services.bridge.zones import Cap, SpeedZones
 
 FloatArray = npt.NDArray[np.float64]
-
-# Below this a reduced speed is a stop: creeping at 1 cm/s reaches nothing and only wears the
-# wheels (the controllers use the same threshold for "not translating").
-MIN_MPS = 0.01
 
 CLEAR = "clear"
 LIMITED = "limited"
@@ -74,9 +79,9 @@ class SafetyParams:
     decel_mps2: float | None = None
     # how long a command acts before the next one is checked: the decision re-issues at
     # least every 0.1 s of sim time
-    latency_s: float = 0.1
+    latency_s: float = sweep.LATENCY_S
     # distance kept between the footprint and the nearest return once stopped
-    margin_m: float = 0.05
+    margin_m: float = sweep.MARGIN_M
     scan_max_age_s: float = 0.5
     # speed cap with no fresh scan; inf: unchecked, unchanged
     blind_mps: float = math.inf
@@ -89,125 +94,45 @@ class Scan:
     the next before a moving command is judged against them.
     """
 
-    __slots__ = ("_record", "_xy", "stamp")
+    __slots__ = ("_record", "_returns", "stamp")
 
     def __init__(self, record: LaserScan) -> None:
         self.stamp = record.stamp
         self._record = record
-        self._xy: tuple[FloatArray, FloatArray] | None = None
+        self._returns: Returns | None = None
 
     @property
     def x(self) -> FloatArray:
-        return self._returns()[0]
+        return self.returns.xs
 
     @property
     def y(self) -> FloatArray:
-        return self._returns()[1]
+        return self.returns.ys
 
-    def _returns(self) -> tuple[FloatArray, FloatArray]:
-        if self._xy is None:
-            record = self._record
-            ranges = record.values()
-            angles = beam_angles(record.angle_min, record.angle_increment, len(ranges))
-            # inf is "nothing in range" (common.scan.readings says which beams read)
-            valid = np.isfinite(ranges) & readings(ranges, record.range_min)
-            r, a = ranges[valid], angles[valid]
-            self._xy = (r * np.cos(a), r * np.sin(a))
-        return self._xy
+    @property
+    def returns(self) -> Returns:
+        if self._returns is None:
+            r = self._record
+            self._returns = Returns.of_ranges(
+                r.values(), r.angle_min, r.angle_increment, r.range_min
+            )
+        return self._returns
 
     def arc_travel(
         self, footprint: Footprint, direction: int, turn_per_m: float, reach_m: float
     ) -> tuple[float, float, float]:
-        """(free travel, range, bearing) of the first return the footprint polygon meets
-        driving ahead (``direction`` 1) or back (-1) along the arc that turns ``turn_per_m``
-        rad per metre (the turn rate over the speed), for up to ``reach_m`` of it, ARC_STEP_M
-        apart; the travel is the last free pose's (inf, inf, 0 if none is met within reach)."""
-        xs, ys = self._returns()
-        if not len(xs):
-            return math.inf, math.inf, 0.0
-        n = max(1, math.ceil(reach_m / ARC_STEP_M))
-        s = np.arange(1, n + 1) * (reach_m / n)
-        w = turn_per_m
-        yaw = w * s
-        if abs(w) > 1e-9:
-            x, y = direction * np.sin(yaw) / w, direction * (1.0 - np.cos(yaw)) / w
-        else:
-            x, y = direction * s, np.zeros_like(s)
-        poses = np.stack([x, y, yaw], axis=1)
-        points = np.stack([xs, ys], axis=1)
-        hit = first_contact(footprint, poses, points)
-        if hit is None:
-            return math.inf, math.inf, 0.0
-        travel = float(s[hit - 1]) if hit > 0 else 0.0
-        # the return nearest the outline at the pose of contact names it
-        c, sn = math.cos(poses[hit, 2]), math.sin(poses[hit, 2])
-        dx, dy = xs - poses[hit, 0], ys - poses[hit, 1]
-        local = np.stack([c * dx + sn * dy, -sn * dx + c * dy], axis=1)
-        i = int(np.argmin(footprint.clearance(local)))
-        bearing = math.degrees(math.atan2(float(ys[i]), float(xs[i])))
-        return travel, math.hypot(float(xs[i]), float(ys[i])), bearing
+        """common.sweep's :meth:`~common.sweep.Returns.arc_travel` on this scan."""
+        return self.returns.arc_travel(footprint, direction, turn_per_m, reach_m)
 
     def turn_blocked(self, footprint: Footprint, sweep_rad: float) -> tuple[float, float] | None:
-        """(range, bearing) of a return a corner of the polygon would come within
-        TURN_MARGIN_M of turning in place by ``sweep_rad``; None if none would."""
-        xs, ys = self._returns()
-        if not len(xs):
-            return None
-        steps = max(1, math.ceil(abs(sweep_rad) / TURN_STEP_RAD))
-        yaw = sweep_rad * np.arange(1, steps + 1) / steps
-        near = np.hypot(xs, ys) <= footprint.circumscribed_m + TURN_MARGIN_M
-        px, py = xs[near], ys[near]
-        if not len(px):
-            return None
-        now = footprint.clearance(np.stack([px, py], axis=1))
-        # each near return in the frame of each heading turned through: (steps x n) clearances
-        c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
-        local = np.stack([c * px + s * py, -s * px + c * py], axis=2).reshape(-1, 2)
-        later = footprint.clearance(local).reshape(steps, -1)
-        # a corner coming within the margin of a return, and nearer it than now: a return
-        # the outline already touches is no reason not to turn away from it
-        closing = (later <= TURN_MARGIN_M) & (later < now[None, :] - 1e-6)
-        if not closing.any():
-            return None
-        i = int(np.flatnonzero(closing.any(axis=0))[0])
-        return math.hypot(float(px[i]), float(py[i])), math.degrees(math.atan2(py[i], px[i]))
+        """common.sweep's :meth:`~common.sweep.Returns.turn_blocked` on this scan."""
+        return self.returns.turn_blocked(footprint, sweep_rad)
 
     def free_travel(
         self, direction: int, footprint: Footprint | float
     ) -> tuple[float, float, float]:
-        """(free travel, range, bearing) of the nearest return the footprint (a polygon, or
-        the disc of a radius) would touch moving straight ahead (``direction`` 1) or back
-        (-1), the travel measured from its outline's edge: (inf, inf, 0) if none."""
-        xs, ys = self._returns()
-        if isinstance(footprint, Footprint) and not footprint.is_disc:
-            travel_each = footprint.travel_each(np.stack([xs, ys], axis=1), direction > 0)
-            if not len(travel_each) or not np.isfinite(travel_each).any():
-                return math.inf, math.inf, 0.0
-            i = int(np.argmin(travel_each))
-            bearing = math.degrees(math.atan2(float(ys[i]), float(xs[i])))
-            return float(travel_each[i]), math.hypot(float(xs[i]), float(ys[i])), bearing
-        radius = footprint.radius_m if isinstance(footprint, Footprint) else footprint
-        along = xs * direction
-        ahead = (along > 0.0) & (np.abs(ys) < radius)
-        if not ahead.any():
-            return math.inf, math.inf, 0.0
-        index = np.flatnonzero(ahead)
-        y = ys[index]
-        travel = along[index] - np.sqrt(radius * radius - y * y)
-        best = int(np.argmin(travel))
-        i = int(index[best])
-        bearing = math.degrees(math.atan2(float(ys[i]), float(xs[i])))
-        return float(travel[best]), math.hypot(float(xs[i]), float(ys[i])), bearing
-
-
-# how far past the distance it needs a polygon's arc is rolled out, and the step of it, m
-ARC_SLACK_M = 0.1
-ARC_STEP_M = 0.02
-# a polygon's turn is judged over this long at the commanded rate (at least twice the
-# latency: the time it acts, and as long to stop), its corners kept this far from returns
-TURN_HORIZON_S = 0.2
-TURN_MARGIN_M = 0.01
-TURN_STEP_RAD = math.radians(2.0)
+        """common.sweep's :meth:`~common.sweep.Returns.free_travel` on this scan."""
+        return self.returns.free_travel(direction, footprint)
 
 
 @dataclass(frozen=True, slots=True)
@@ -226,18 +151,6 @@ class Verdict:
     def noted(self) -> bool:
         """Whether the row gets the reason written on it (everything but a plain pass)."""
         return self.outcome != CLEAR
-
-
-def max_speed(budget_m: float, latency_s: float, decel_mps2: float) -> float:
-    """The largest speed v with ``v * latency + v^2 / (2 decel) <= budget`` (0 if none)."""
-    if not budget_m > 0.0:
-        return 0.0
-    t, a = latency_s, decel_mps2
-    return a * (math.sqrt(t * t + 2.0 * budget_m / a) - t)
-
-
-def stopping_m(speed: float, latency_s: float, decel_mps2: float) -> float:
-    return speed * latency_s + speed * speed / (2.0 * decel_mps2)
 
 
 class SafetyLayer:
@@ -311,14 +224,14 @@ class SafetyLayer:
     ) -> Verdict:
         """``verdict`` with the turn taken away when turning ``angular`` for TURN_HORIZON_S
         (the time the command acts, and as long again to stop) would bring a corner of the
-        polygon within TURN_MARGIN_M of a return of a fresh scan."""
+        polygon within TURN_MARGIN_M of a return of a fresh scan (both common.sweep's)."""
         p = self.params
         scan = self.scans.get(robot)
         if not p.enabled or scan is None:
             return verdict
         if now is not None and now - scan.stamp > p.scan_max_age_s:
             return verdict
-        sweep = angular * max(TURN_HORIZON_S, 2.0 * p.latency_s)
+        sweep = turn_sweep(angular, p.latency_s)
         blocked = scan.turn_blocked(footprint, sweep)
         if blocked is None:
             return verdict
@@ -355,13 +268,10 @@ class SafetyLayer:
         direction = 1 if linear > 0 else -1
         last = self.sent.get(robot, 0.0)
         moved = age * abs(last) if last * direction > 0 else 0.0
-        if isinstance(radius, Footprint) and not radius.is_disc and angular != 0.0:
-            # as far as the stopping distance at this speed could take it, and a little more
-            reach = stopping_m(abs(linear), p.latency_s, decel) + p.margin_m + moved + ARC_SLACK_M
-            turn_per_m = angular / abs(linear)
-            travel, range_m, bearing = scan.arc_travel(radius, direction, turn_per_m, reach)
-        else:
-            travel, range_m, bearing = scan.free_travel(direction, radius)
+        # a polygon's arc as far as the stopping distance at this speed could take it, and a
+        # little more (common.sweep: what a local controller asks too)
+        reach = arc_reach(linear, p.latency_s, decel, p.margin_m) + moved
+        travel, range_m, bearing = scan.returns.travel(radius, linear, angular, reach)
         budget = travel - p.margin_m - moved
         speed = abs(linear)
         if budget >= stopping_m(speed, p.latency_s, decel):

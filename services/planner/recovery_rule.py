@@ -54,9 +54,9 @@ def surroundings(
 
     The room is measured from the footprint's outline: backing up, from its back edge (the
     straight travel back before the outline meets a return, plus REAR_MARGIN_M); turning,
-    by whether the footprint turned by up to ``rotate_rad`` either way meets a return (a
-    polygon's corners sweep; a disc's outline does not move). When only one side's turn is
-    free it is the one; otherwise the side whose beams see farther.
+    by how far the footprint turns either way, up to ``rotate_rad``, before it meets a return
+    (a polygon's corners sweep; a disc's outline does not move). The side that turns farther
+    is the one; when both turn as far, the side whose beams see farther.
 
     A lidar with no beams behind (the Jackal's 270 degrees) cannot say the rear is clear:
     it is not, and recovery rotates instead of backing up blind (safety_stop would stop
@@ -80,24 +80,26 @@ def surroundings(
     right_open = float(capped[right].mean()) if right.any() else 0.0
     left_freer = left_open >= right_open
     if not footprint.is_disc and rotate_rad > 0:
-        turns = (
-            _turn_free(footprint, points, rotate_rad),
-            _turn_free(footprint, points, -rotate_rad),
-        )
-        if turns[0] != turns[1]:
-            left_freer = turns[0]
+        # the side that turns farther before a corner meets a return: a box wedged beside
+        # a post may turn some way from it and not at all toward it, though neither turn is
+        # free all the way round
+        left_turn = _free_turn(footprint, points, rotate_rad)
+        right_turn = _free_turn(footprint, points, -rotate_rad)
+        if left_turn != right_turn:
+            left_freer = left_turn > right_turn
     return sees_back and rear_clear, left_freer
 
 
-def _turn_free(footprint: Footprint, points: np.ndarray[Any, Any], turn: float) -> bool:
-    """Whether the footprint turning in place by ``turn`` (rad) meets none of ``points``."""
+def _free_turn(footprint: Footprint, points: np.ndarray[Any, Any], turn: float) -> float:
+    """How far (rad, up to ``|turn|``) the footprint turns in place toward ``turn``'s side
+    before it meets one of ``points``."""
     near = points[np.hypot(points[:, 0], points[:, 1]) <= footprint.circumscribed_m + TURN_MARGIN_M]
     # headings close enough that the outline moves at most half the margin between two
     steps = max(1, math.ceil(abs(turn) * footprint.circumscribed_m / (TURN_MARGIN_M / 2)))
-    return not any(
-        collides_with_points(footprint, (0.0, 0.0, turn * k / steps), near, TURN_MARGIN_M)
-        for k in range(1, steps + 1)
-    )
+    for k in range(1, steps + 1):
+        if collides_with_points(footprint, (0.0, 0.0, turn * k / steps), near, TURN_MARGIN_M):
+            return abs(turn) * (k - 1) / steps
+    return abs(turn)
 
 
 class Recovery(TargetRule):

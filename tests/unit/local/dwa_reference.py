@@ -17,8 +17,11 @@ from dataclasses import replace
 import numpy as np
 
 import pnav_local.trajectories as tr
+import pnav_local.veto as veto
+from common import sweep
 from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
+from common.footprint import Footprint
 from pnav_local.dwa import Choice, path_in_robot_frame, stopping_speed
 from pnav_local.params import DwaParams
 
@@ -159,8 +162,29 @@ def choose(
     if blocked:
         weights = replace(weights, path=weights.path * p.blocked_path_factor)
     scores = score(win, (xs, ys, yaws), g, local, start, top, p, weights)
-    best = int(np.argmax(np.where(ok, scores.total, -np.inf)))
-    return Choice(win, ok, scores, best, local, v_cap, blocked)
+    best: int | None = int(np.argmax(np.where(ok, scores.total, -np.inf)))
+    vetoed = 0
+    if polygon is not None:
+        best, vetoed = _vetted(scan, robot, Footprint.of(robot.footprint_radius_m, polygon),
+                               win, ok, scores.total)  # fmt: skip
+    return Choice(win, ok, scores, best, local, v_cap, blocked, vetoed)
+
+
+def _vetted(
+    scan: LaserScan, robot: Robot, foot: Footprint, win: tr.Window, ok: Array, total: Array
+) -> tuple[int | None, int]:
+    """The safety layer's test put to the admissible arcs best first, every return of the
+    scan considered (veto.py keeps only those near enough to matter)."""
+    returns = sweep.Returns.of_ranges(
+        scan.ranges.astype(np.float64), scan.angle_min, scan.angle_increment, scan.range_min
+    )
+    ranked = sorted(np.flatnonzero(ok).tolist(), key=lambda i: (-total[i], i))
+    for tried, i in enumerate(ranked[: veto.MAX_TRIES]):
+        if sweep.passes(returns, foot, float(win.v[i]), float(win.w[i]),
+                        margin_m=sweep.MARGIN_M, latency_s=sweep.LATENCY_S,
+                        decel_mps2=robot.max_linear_accel_mps2):  # fmt: skip
+            return i, tried
+    return None, min(len(ranked), veto.MAX_TRIES)
 
 
 def score(

@@ -58,7 +58,7 @@ def scene(rng: np.random.Generator, i: int) -> tuple[LaserScan, Odometry, Planne
 @pytest.mark.parametrize("polygon", [None, BOX], ids=["disc", "box"])
 def test_the_fast_decision_is_the_plain_one(polygon: tuple[tuple[float, float], ...]) -> None:
     rng = np.random.default_rng(30)
-    decided = refused_some = blocked = 0
+    decided = refused_some = blocked = vetoed = 0
     for i in range(120 if polygon is None else 40):
         scan, odom, path = scene(rng, i + 1)
         p = DwaParams.read(ROWS[i % len(ROWS)])
@@ -74,6 +74,9 @@ def test_the_fast_decision_is_the_plain_one(polygon: tuple[tuple[float, float], 
         decided += 1
         refused_some += not fast.ok.all()
         blocked += fast.blocked
+        vetoed += fast.vetoed > 0
     # the scenes reach the branches that matter: arcs refused for a hit, a blocked path
     assert decided > 0 and refused_some > decided // 4
     assert blocked > 0
+    # and, for the box, winners the safety layer's test refused (veto.py)
+    assert polygon is None or vetoed > 0
