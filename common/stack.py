@@ -46,6 +46,7 @@ import os
 import secrets
 import shutil
 import tempfile
+import time
 from collections.abc import AsyncIterator, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -60,7 +61,7 @@ from common.contract.grants import BUS_IDENTITIES, LOGIN_ROLES, USER, role_name
 from common.contract.migrate import apply_migrations
 from common.contract.roles import bootstrap, is_superuser, role_url
 from common.errors import ConfigError
-from common.postmaster import Keeper, Lifeline, start_lifeline
+from common.postmaster import Keeper, Lifeline, seed_from_template, start_lifeline
 from common.testing import EmbeddedPostgres, free_port
 
 # Every local peer listens on loopback only, on a port of the kernel's choosing: the router
@@ -156,6 +157,12 @@ class LocalStack:
     role_urls: dict[str, str] = field(default_factory=dict)
     # None: the router accepts anyone and checks no put (peer mode)
     bus: BusCredentials | None = None
+    # how long each step of setting it up took, seconds (pnav bench startup): postgres
+    # (its data directory made and the server started), router, roles (roles, passwords,
+    # migrations); and whether the data directory was copied from the template cluster
+    # (common.postmaster.seed_from_template) rather than made by initdb
+    phases: dict[str, float] = field(default_factory=dict)
+    seeded: bool = False
 
     def env(self) -> dict[str, str]:
         """The variables a process needs to join this stack (as the setup account: tests and
@@ -221,12 +228,18 @@ async def local_stack(
     lifeline: Lifeline | None = None
     keeper: Keeper | None = None
     url = os.environ.get("PNAV_DATABASE_URL", "").strip()
+    phases: dict[str, float] = {}
+    seeded = False
+    started = time.monotonic()
     if not url:
         # pgserver narrates every pg_ctl run at INFO; a restart would repeat all of it
         logging.getLogger("pgserver").setLevel(logging.WARNING)
         postgres = EmbeddedPostgres(data_dir)
         lifeline = start_lifeline(postgres.data_dir, temporary=postgres.temporary)
         try:
+            if postgres.temporary:
+                # a copy of a cluster initdb made once, not initdb (common.postmaster)
+                seeded = seed_from_template(postgres.data_dir)
             postgres.start()
         except BaseException:
             postgres.stop()
@@ -235,6 +248,7 @@ async def local_stack(
         url = postgres.dsn()
         _require_passwords(postgres.data_dir)
         keeper = Keeper(postgres)
+        phases["postgres"] = time.monotonic() - started
     stop_keeper = asyncio.Event()
     keeping: asyncio.Task[None] | None = None
     secret_dir: Path | None = None
@@ -249,6 +263,7 @@ async def local_stack(
                 "key, sensor messages and cmd_vel included (docs/DEPLOY.md)"
             )
         endpoint = f"tcp/127.0.0.1:{zenoh_port or free_port()}"
+        started = time.monotonic()
         router = start_router(
             (endpoint,),
             str(bus.users_file) if bus is not None else None,
@@ -256,7 +271,9 @@ async def local_stack(
             ros_domains=ros_domains,
             hosts=hosts,
         )
+        phases["router"] = time.monotonic() - started
         try:
+            started = time.monotonic()
             conn = await asyncpg.connect(url)
             try:
                 if postgres is not None:
@@ -264,11 +281,12 @@ async def local_stack(
                 role_urls = await _set_up_roles(conn, url)
             finally:
                 await conn.close()
+            phases["roles"] = time.monotonic() - started
             if keeper is not None:
                 keeping = asyncio.create_task(keeper.run(stop_keeper), name="postgres-keeper")
             zenoh = local_zenoh.settings(endpoint)
             zenoh = bus.apply(zenoh, USER) if bus is not None else zenoh
-            yield LocalStack(url, zenoh, router, postgres, keeper, role_urls, bus)
+            yield LocalStack(url, zenoh, router, postgres, keeper, role_urls, bus, phases, seeded)
         finally:
             stop_keeper.set()
             if keeping is not None:
