@@ -32,6 +32,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Protocol
 
@@ -194,11 +195,12 @@ def _log_tail(data_dir: Path, lines: int = 2) -> str:
 # -- the template cluster ------------------------------------------------------------------
 
 
-def template_dir() -> Path | None:
+def template_dir(variant: str = "") -> Path | None:
     """Where this user's template cluster for this Postgres build lives (under
     ``$XDG_CACHE_HOME/pnav``, else ``~/.cache/pnav``), or None when ``PNAV_PG_TEMPLATE=0``
     or pgserver is not installed. Its name changes with the build (the ``postgres`` binary's
-    path, size and time), so a new pgserver never copies an old build's cluster."""
+    path, size and time), so a new pgserver never copies an old build's cluster, and with
+    ``variant`` (what the caller put in it: the contract's migrations, common.stack)."""
     if os.environ.get("PNAV_PG_TEMPLATE", "").strip().lower() in ("0", "false", "no", "off"):
         return None
     # pgserver wants a runtime dir at import time (as common.testing.EmbeddedPostgres.start)
@@ -212,22 +214,27 @@ def template_dir() -> Path | None:
         binary = (POSTGRES_BIN_PATH / "postgres").stat()
     except OSError:
         return None
-    build = f"{POSTGRES_BIN_PATH}:{binary.st_size}:{binary.st_mtime_ns}:{os.getuid()}"
+    build = f"{POSTGRES_BIN_PATH}:{binary.st_size}:{binary.st_mtime_ns}:{os.getuid()}:{variant}"
     cache = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return Path(cache) / "pnav" / f"pg-template-{hashlib.sha256(build.encode()).hexdigest()[:16]}"
 
 
-def _make_template(target: Path) -> None:
+def _make_template(target: Path, prepare: Callable[[str], None] | None) -> None:
     """initdb a cluster at ``target`` the way pgserver does (it starts the server on it once;
-    stopped cleanly, it is a cluster at rest), made aside and renamed into place so that two
-    stacks starting together never copy a half-made one."""
+    stopped cleanly, it is a cluster at rest), ``prepare(dsn)`` it while it runs, made aside
+    and renamed into place so that two stacks starting together never copy a half-made
+    one."""
     import pgserver
 
     target.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
     making = Path(tempfile.mkdtemp(prefix=f"{target.name}.", dir=target.parent))
     try:
         server = pgserver.get_server(making, cleanup_mode="stop")  # type: ignore[attr-defined]
-        server.cleanup()
+        try:
+            if prepare is not None:
+                prepare(server.get_uri())
+        finally:
+            server.cleanup()
         for leftover in ("log", ".handle_pids.json", "postmaster.pid"):
             with contextlib.suppress(FileNotFoundError):
                 (making / leftover).unlink()
@@ -265,16 +272,19 @@ def _copy_tree(template: Path, data_dir: Path) -> None:
             raise subprocess.CalledProcessError(code, copy.args)
 
 
-def seed_from_template(data_dir: Path) -> bool:
-    """Copy the template cluster (made now if there is none) into the empty ``data_dir``;
-    True if copied. False, and ``data_dir`` left empty for pgserver's own initdb, when
-    there is no template to use (PNAV_PG_TEMPLATE=0, an unwritable cache, a failed copy)."""
-    template = template_dir()
+def seed_from_template(
+    data_dir: Path, *, variant: str = "", prepare: Callable[[str], None] | None = None
+) -> bool:
+    """Copy the template cluster of ``variant`` (made now if there is none: initdb, then
+    ``prepare(dsn)`` on it) into the empty ``data_dir``; True if copied. False, and
+    ``data_dir`` left empty for pgserver's own initdb, when there is no template to use
+    (PNAV_PG_TEMPLATE=0, an unwritable cache, a failed copy)."""
+    template = template_dir(variant)
     if template is None or any(data_dir.iterdir()):
         return False
     try:
         if not (template / "PG_VERSION").is_file():
-            _make_template(template)
+            _make_template(template, prepare)
         _copy_tree(template, data_dir)
     except (OSError, subprocess.CalledProcessError) as exc:
         logger.warning("no template cluster (%s): running initdb", exc)

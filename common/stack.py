@@ -40,6 +40,7 @@ may then put any key, ``cmd_vel`` included; the launcher says so in a warning.
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import contextlib
 import logging
 import os
@@ -58,7 +59,7 @@ from common.bus import start_router
 from common.config import DATA_QUEUE_BATCHES, ZenohSettings
 from common.contract import acl
 from common.contract.grants import BUS_IDENTITIES, LOGIN_ROLES, USER, role_name
-from common.contract.migrate import apply_migrations
+from common.contract.migrate import apply_migrations, contract_migrations
 from common.contract.roles import bootstrap, is_superuser, role_url
 from common.errors import ConfigError
 from common.postmaster import Keeper, Lifeline, seed_from_template, start_lifeline
@@ -202,6 +203,27 @@ async def _set_up_roles(conn: asyncpg.Connection, url: str) -> dict[str, str]:
     return {role: role_url(url, role_name(role), pw) for role, pw in passwords.items()}
 
 
+def _contract_version() -> str:
+    """What a template cluster's schema is: every migration's checksum."""
+    return ",".join(m.checksum for m in contract_migrations())
+
+
+def _migrate_template(dsn: str) -> None:
+    """Give a template cluster the contract's roles (no passwords: each stack sets its own,
+    common.contract.roles.ensure_roles), migrations and grants, as a stack's start would.
+    Called from the running loop's thread: on a loop of its own, in a thread."""
+
+    async def migrate() -> None:
+        conn = await asyncpg.connect(dsn)
+        try:
+            await bootstrap(conn, {})
+        finally:
+            await conn.close()
+
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        pool.submit(asyncio.run, migrate()).result()
+
+
 def _require_passwords(data_dir: Path) -> None:
     """Ask every role but the superuser for its password (read at the next reload)."""
     (data_dir / "pg_hba.conf").write_text(_PASSWORD_HBA)
@@ -238,8 +260,11 @@ async def local_stack(
         lifeline = start_lifeline(postgres.data_dir, temporary=postgres.temporary)
         try:
             if postgres.temporary:
-                # a copy of a cluster initdb made once, not initdb (common.postmaster)
-                seeded = seed_from_template(postgres.data_dir)
+                # a copy of a cluster made once (initdb, then the contract's migrations),
+                # not initdb and every migration for each stack (common.postmaster)
+                seeded = seed_from_template(
+                    postgres.data_dir, variant=_contract_version(), prepare=_migrate_template
+                )
             postgres.start()
         except BaseException:
             postgres.stop()

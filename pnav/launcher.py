@@ -20,14 +20,18 @@ import tempfile
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import cast
 
+from zenoh import Session
+
+from common.config import ZenohSettings
 from common.contract import acl
 from common.errors import UsageError
 from common.stack import BusCredentials, LocalStack, local_stack
 from common.testing import free_port
 from pnav import stackfile
 from pnav.composition import HOST_PROCESS, host_spec, hosted, resolve_processes
-from pnav.supervisor import ProcessSpec, Supervisor
+from pnav.supervisor import Prestart, ProcessSpec, Supervisor
 from pnav.supervisor_report import SupervisorReport
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -318,6 +322,14 @@ def service_database(local: LocalStack, name: str) -> dict[str, str]:
     return {"PNAV_DATABASE_URL": local.url_for(name)}
 
 
+def planned(options: StackOptions, world: Path) -> list[tuple[str, list[str]]]:
+    """The name and command of every process the stack will run, before the stack exists
+    (their commands do not depend on it, only their environments do)."""
+    stand_in = LocalStack("", ZenohSettings(), cast(Session, None), None)
+    specs = recorder_spec(stand_in, options) + service_specs(stand_in, options, world)
+    return [(spec.name, spec.argv) for spec in specs]
+
+
 def _ros_domains(env: dict[str, str]) -> tuple[int, ...]:
     """The ROS 2 domain the stack's own router carries: a ROS 2 robot link with no rmw_zenoh
     router of its own (``--ros-router``) speaks ROS 2 through it."""
@@ -337,6 +349,25 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
     options = dataclasses.replace(options, processes=resolve_processes(options.processes))
     in_host = hosted(options)
     hosts = (acl.host_identity(in_host),) if in_host else ()
+    # the services import their code while Postgres gets ready (pnav.prestart)
+    prestart = Prestart()
+    try:
+        await prestart.start(planned(options, world))
+        async with _stack(options, log_dir, world, ros_domains, hosts, prestart) as running:
+            yield running
+    finally:
+        await prestart.close()
+
+
+@contextlib.asynccontextmanager
+async def _stack(
+    options: StackOptions,
+    log_dir: Path,
+    world: Path,
+    ros_domains: tuple[int, ...],
+    hosts: tuple[str, ...],
+    prestart: Prestart,
+) -> AsyncIterator[RunningStack]:
     async with local_stack(
         options.data_dir,
         options.zenoh_port,
@@ -345,7 +376,7 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
         hosts=(*acl.DEFAULT_HOSTS, *hosts),
     ) as local:
         specs = recorder_spec(local, options) + service_specs(local, options, world)
-        supervisor = Supervisor(specs, log_dir, echo=options.echo)
+        supervisor = Supervisor(specs, log_dir, echo=options.echo, prestarted=prestart)
         running = RunningStack(local, supervisor, options, world, log_dir)
         stackfile.write(
             stackfile.StackInfo(
@@ -368,6 +399,7 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
         report = SupervisorReport(supervisor, local.router)  # restarts, for /metrics
         try:
             await supervisor.start()
+            await prestart.close()  # any not taken: a process the stack no longer runs
             report.start()
             watcher = asyncio.create_task(supervisor.watch(stop_watching), name="supervise")
             yield running
