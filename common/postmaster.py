@@ -220,14 +220,17 @@ def template_dir(variant: str = "") -> Path | None:
 
 
 def _make_template(target: Path, prepare: Callable[[str], None] | None) -> None:
-    """initdb a cluster at ``target`` the way pgserver does (it starts the server on it once;
-    stopped cleanly, it is a cluster at rest), ``prepare(dsn)`` it while it runs, made aside
-    and renamed into place so that two stacks starting together never copy a half-made
-    one."""
+    """initdb a cluster the way pgserver does (it starts the server on it once; stopped
+    cleanly, it is a cluster at rest) and ``prepare(dsn)`` it while it runs. It is made in
+    a short temporary path (pgserver puts the socket in the data directory only if its
+    path is short, else in a directory every pgserver on the machine shares, on the same
+    port), then moved beside ``target`` and renamed into place, so that two stacks
+    starting together never copy a half-made one."""
     import pgserver
 
     target.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
-    making = Path(tempfile.mkdtemp(prefix=f"{target.name}.", dir=target.parent))
+    making = Path(tempfile.mkdtemp(prefix="pnav-pgt-"))
+    staging = Path(tempfile.mkdtemp(prefix=f"{target.name}.", dir=target.parent))
     try:
         server = pgserver.get_server(making, cleanup_mode="stop")  # type: ignore[attr-defined]
         try:
@@ -238,13 +241,15 @@ def _make_template(target: Path, prepare: Callable[[str], None] | None) -> None:
         for leftover in ("log", ".handle_pids.json", "postmaster.pid"):
             with contextlib.suppress(FileNotFoundError):
                 (making / leftover).unlink()
+        _copy_tree(making, staging)
         try:
-            making.rename(target)
+            staging.rename(target)
         except OSError:
             if not (target / "PG_VERSION").is_file():  # not another stack's, made meanwhile
                 raise
     finally:
         shutil.rmtree(making, ignore_errors=True)
+        shutil.rmtree(staging, ignore_errors=True)
 
 
 def _copy_tree(template: Path, data_dir: Path) -> None:
