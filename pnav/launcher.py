@@ -342,17 +342,18 @@ def _ros_domains(env: dict[str, str]) -> tuple[int, ...]:
 async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
     world = resolve_world(options.world)
     options = resolve_dashboard(options)
-    if "sim" in options.services and "sim" not in options.replace:
-        check_world(world, options.model)
-    log_dir = options.log_dir or Path(tempfile.mkdtemp(prefix="pnav-logs-"))
-    ros_domains = _ros_domains(options.extra_env)
     options = dataclasses.replace(options, processes=resolve_processes(options.processes))
-    in_host = hosted(options)
-    hosts = (acl.host_identity(in_host),) if in_host else ()
-    # the services import their code while Postgres gets ready (pnav.prestart)
+    # the services import their code while the world is checked and Postgres gets ready
+    # (pnav.prestart)
     prestart = Prestart()
     try:
         await prestart.start(planned(options, world))
+        if "sim" in options.services and "sim" not in options.replace:
+            check_world(world, options.model)
+        log_dir = options.log_dir or Path(tempfile.mkdtemp(prefix="pnav-logs-"))
+        ros_domains = _ros_domains(options.extra_env)
+        in_host = hosted(options)
+        hosts = (acl.host_identity(in_host),) if in_host else ()
         async with _stack(options, log_dir, world, ros_domains, hosts, prestart) as running:
             yield running
     finally:
