@@ -158,9 +158,10 @@ class LocalStack:
     role_urls: dict[str, str] = field(default_factory=dict)
     # None: the router accepts anyone and checks no put (peer mode)
     bus: BusCredentials | None = None
-    # how long each step of setting it up took, seconds (pnav bench startup): postgres
-    # (its data directory made and the server started), router, roles (roles, passwords,
-    # migrations); and whether the data directory was copied from the template cluster
+    # how long each step of setting it up took, seconds (pnav bench startup): postgres_dir
+    # (the data directory made: copied, or by initdb), postgres_start (the server started,
+    # pgserver's pg_ctl), router, roles (roles, passwords, migrations, grants); and whether
+    # the data directory was copied from the template cluster
     # (common.postmaster.seed_from_template) rather than made by initdb
     phases: dict[str, float] = field(default_factory=dict)
     seeded: bool = False
@@ -265,6 +266,7 @@ async def local_stack(
                 seeded = seed_from_template(
                     postgres.data_dir, variant=_contract_version(), prepare=_migrate_template
                 )
+            phases["postgres_dir"] = time.monotonic() - started
             postgres.start()
         except BaseException:
             postgres.stop()
@@ -273,7 +275,7 @@ async def local_stack(
         url = postgres.dsn()
         _require_passwords(postgres.data_dir)
         keeper = Keeper(postgres)
-        phases["postgres"] = time.monotonic() - started
+        phases["postgres_start"] = time.monotonic() - started - phases["postgres_dir"]
     stop_keeper = asyncio.Event()
     keeping: asyncio.Task[None] | None = None
     secret_dir: Path | None = None
