@@ -65,3 +65,19 @@ async def test_an_interpreter_setting_that_changed_is_not_taken() -> None:
         assert prestart.take("probe", PROBE, env) is None
     finally:
         await prestart.close()
+
+
+def _imports_node(code: str) -> bool:
+    import subprocess
+
+    probe = f"{code}; import sys; print('services.sim.node' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    return out.stdout.strip().splitlines()[-1] == "True"
+
+
+def test_warming_a_module_runs_its_prestart_hook() -> None:
+    """The sim imports its node only once it runs; started ahead, it imports it while it
+    waits (services/sim/__main__.py, prestart)."""
+    assert not _imports_node("import services.sim.__main__")
+    assert _imports_node("from pnav.prestart import warm; warm('services.sim', [])")
