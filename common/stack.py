@@ -62,7 +62,8 @@ from common.contract.grants import BUS_IDENTITIES, LOGIN_ROLES, USER, role_name
 from common.contract.migrate import apply_migrations, contract_migrations
 from common.contract.roles import bootstrap, is_superuser, role_url
 from common.errors import ConfigError
-from common.postmaster import Keeper, Lifeline, seed_from_template, start_lifeline
+from common.pgtemplate import seed_from_template
+from common.postmaster import Keeper, Lifeline, start_lifeline
 from common.testing import EmbeddedPostgres, free_port
 
 # Every local peer listens on loopback only, on a port of the kernel's choosing: the router
@@ -262,7 +263,7 @@ async def local_stack(
         try:
             if postgres.temporary:
                 # a copy of a cluster made once (initdb, then the contract's migrations),
-                # not initdb and every migration for each stack (common.postmaster)
+                # not initdb and every migration for each stack (common.pgtemplate)
                 seeded = seed_from_template(
                     postgres.data_dir, variant=_contract_version(), prepare=_migrate_template
                 )

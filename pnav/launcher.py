@@ -31,7 +31,8 @@ from common.stack import BusCredentials, LocalStack, local_stack
 from common.testing import free_port
 from pnav import stackfile
 from pnav.composition import HOST_PROCESS, host_spec, hosted, resolve_processes
-from pnav.supervisor import Prestart, ProcessSpec, Supervisor
+from pnav.prestart import Prestart
+from pnav.supervisor import ProcessSpec, Supervisor
 from pnav.supervisor_report import SupervisorReport
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 import os
 import signal
@@ -21,7 +20,10 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO
+from typing import IO, TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from pnav.prestart import Prestart
 
 log = logging.getLogger("pnav.supervisor")
 
@@ -48,106 +50,6 @@ class Child:
     backoff: float = _BACKOFF_FIRST_S
     pump: asyncio.Task[None] | None = None
     last_exit: int | None = None  # the exit code of its last run, None before any
-
-
-@dataclass
-class Warm:
-    """A process started before its environment (pnav.prestart), waiting on ``gate``."""
-
-    argv: list[str]
-    process: asyncio.subprocess.Process
-    gate: int  # the write end of its pipe
-    env: dict[str, str]  # what it was started with
-
-
-# what only an interpreter's start reads: a process started without the final value of one
-# of these is not used (a new one is started)
-_AT_EXEC = ("PYTHON", "LD_", "MALLOC_")
-GATE = "PNAV_PRESTART_FD"  # pnav.prestart.GATE
-
-
-class Prestart:
-    """The service processes started while the launcher makes the stack ready, each up to
-    the end of its imports (pnav.prestart): the supervisor takes them instead of starting
-    new ones. ``PNAV_PRESTART=0`` starts none."""
-
-    def __init__(self) -> None:
-        self.warm: dict[str, Warm] = {}
-        self._leaving: list[asyncio.subprocess.Process] = []  # let go, to reap
-
-    @staticmethod
-    def enabled() -> bool:
-        return os.environ.get("PNAV_PRESTART", "").strip().lower() not in ("0", "false", "no")
-
-    async def start(self, plan: list[tuple[str, list[str]]]) -> None:
-        """Start each ``(name, argv)`` of ``plan`` that runs ``python -m MODULE``."""
-        if not self.enabled():
-            return
-        for name, argv in plan:
-            if len(argv) < 3 or argv[:2] != [sys.executable, "-m"]:
-                continue  # not a module of ours to import ahead (a --replace command)
-            read, write = os.pipe()  # neither end is inherited but the read end, passed
-            env = {**os.environ, "PNAV_PARENT_PID": str(os.getpid())}
-            try:
-                process = await asyncio.create_subprocess_exec(
-                    sys.executable,
-                    "-m",
-                    "pnav.prestart",
-                    *argv[2:],
-                    env={**env, GATE: str(read)},
-                    stdout=asyncio.subprocess.PIPE,
-                    stderr=asyncio.subprocess.STDOUT,
-                    start_new_session=True,
-                    pass_fds=(read,),
-                )
-            except BaseException:
-                os.close(write)
-                raise
-            finally:
-                os.close(read)
-            self.warm[name] = Warm(argv, process, write, env)
-
-    def take(self, name: str, argv: list[str], env: dict[str, str]) -> Warm | None:
-        """The process started for ``name`` with ``env`` sent to it, if it runs ``argv``
-        and was started with what ``env`` gives the interpreter's start; else None (and
-        it is let go)."""
-        warm = self.warm.pop(name, None)
-        if warm is None:
-            return None
-        started = {k: v for k, v in warm.env.items() if k.startswith(_AT_EXEC)}
-        wanted = {k: v for k, v in env.items() if k.startswith(_AT_EXEC)}
-        if warm.argv != argv or started != wanted or warm.process.returncode is not None:
-            self._let_go(warm)
-            return None
-        data = json.dumps(env).encode()
-        try:
-            while data:  # a pipe's buffer holds any environment; a child reads it at once
-                data = data[os.write(warm.gate, data) :]
-        except OSError:
-            self._let_go(warm)
-            return None
-        os.close(warm.gate)
-        return warm
-
-    def _let_go(self, warm: Warm) -> None:
-        """Close its pipe empty: the process ends on its own (pnav.prestart)."""
-        with contextlib.suppress(OSError):
-            os.close(warm.gate)
-        self._leaving.append(warm.process)
-
-    async def close(self, wait_s: float = 5.0) -> None:
-        """Let every process not taken go, and reap them."""
-        for warm in list(self.warm.values()):
-            self._let_go(warm)
-        self.warm.clear()
-        for process in self._leaving:
-            try:
-                await asyncio.wait_for(process.communicate(), wait_s)
-            except TimeoutError:
-                with contextlib.suppress(ProcessLookupError):
-                    process.kill()
-                await process.wait()
-        self._leaving.clear()
 
 
 class Supervisor:

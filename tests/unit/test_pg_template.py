@@ -10,7 +10,7 @@ from pathlib import Path
 import asyncpg
 import pytest
 
-from common.postmaster import seed_from_template, template_dir
+from common.pgtemplate import seed_from_template, template_dir
 from common.testing import EmbeddedPostgres
 
 pytestmark = pytest.mark.timeout(120)

@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from pnav.supervisor import Prestart
+from pnav.prestart import Prestart
 
 pytestmark = pytest.mark.timeout(60)
 
