@@ -34,6 +34,13 @@ log = logging.getLogger(__name__)
 
 Handler = Callable[[str, bytes], None]
 
+# Zenoh 1.x puts every payload over 3 KB (scans, maps, the world) in a 16 MB shared-memory
+# pool of the publishing process (/dev/shm/*.zenoh), which the router and each receiver map
+# too: 5-8 MB of every process's PSS a few seconds after start, growing towards the pool's
+# size, to spare a copy of a few kilobytes over loopback (docs/BENCHMARKS.md, "Start-up:
+# where the seconds and megabytes went"). A config file (PNAV_ZENOH_CONFIG) may turn it on.
+SHARED_MEMORY = False
+
 
 def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
     """A Zenoh config: the file (if any) first, then the settings on top of it."""
@@ -44,6 +51,7 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
             raise ConfigError(f"PNAV_ZENOH_CONFIG={settings.config_file!r}: {exc}") from exc
     else:
         config = zenoh.Config()
+        config.insert_json5("transport/shared_memory/enabled", json.dumps(SHARED_MEMORY))
     config.insert_json5("mode", json.dumps(settings.mode))
     config.insert_json5("scouting/multicast/enabled", json.dumps(settings.multicast))
     if settings.mode != "router" or settings.connect:
@@ -90,10 +98,16 @@ def start_router(
         checks nothing (a test's or a benchmark's loopback router)."""
     if users_file is None:
         settings = ZenohSettings(mode="router", connect=(), listen=listen, data_queue=data_queue)
-        return open_session(settings)
-    config = acl.router_config(listen, users_file, data_queue, ros_domains, hosts)
+        config = zenoh_config(settings)
+    else:
+        acl_config = acl.router_config(listen, users_file, data_queue, ros_domains, hosts)
+        config = zenoh.Config.from_json5(json.dumps(acl_config))
+        config.insert_json5("transport/shared_memory/enabled", json.dumps(SHARED_MEMORY))
+    # Opening a router waits scouting's delay (500 ms) for peers to scout; this one scouts
+    # none (multicast off, nothing to connect to): the processes connect to it.
+    config.insert_json5("scouting/delay", "0")
     try:
-        return zenoh.open(zenoh.Config.from_json5(json.dumps(config)))
+        return zenoh.open(config)
     except Exception as exc:
         raise ConnectionFailure(f"cannot open a Zenoh router on {','.join(listen)}: {exc}") from exc
 

@@ -40,12 +40,14 @@ may then put any key, ``cmd_vel`` included; the launcher says so in a warning.
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import contextlib
 import logging
 import os
 import secrets
 import shutil
 import tempfile
+import time
 from collections.abc import AsyncIterator, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -57,9 +59,10 @@ from common.bus import start_router
 from common.config import DATA_QUEUE_BATCHES, ZenohSettings
 from common.contract import acl
 from common.contract.grants import BUS_IDENTITIES, LOGIN_ROLES, USER, role_name
-from common.contract.migrate import apply_migrations
+from common.contract.migrate import apply_migrations, contract_migrations
 from common.contract.roles import bootstrap, is_superuser, role_url
 from common.errors import ConfigError
+from common.pgtemplate import seed_from_template
 from common.postmaster import Keeper, Lifeline, start_lifeline
 from common.testing import EmbeddedPostgres, free_port
 
@@ -156,6 +159,13 @@ class LocalStack:
     role_urls: dict[str, str] = field(default_factory=dict)
     # None: the router accepts anyone and checks no put (peer mode)
     bus: BusCredentials | None = None
+    # how long each step of setting it up took, seconds (pnav bench startup): postgres_dir
+    # (the data directory made: copied, or by initdb), postgres_start (the server started,
+    # pgserver's pg_ctl), router, roles (roles, passwords, migrations, grants); and whether
+    # the data directory was copied from the template cluster
+    # (common.postmaster.seed_from_template) rather than made by initdb
+    phases: dict[str, float] = field(default_factory=dict)
+    seeded: bool = False
 
     def env(self) -> dict[str, str]:
         """The variables a process needs to join this stack (as the setup account: tests and
@@ -195,6 +205,27 @@ async def _set_up_roles(conn: asyncpg.Connection, url: str) -> dict[str, str]:
     return {role: role_url(url, role_name(role), pw) for role, pw in passwords.items()}
 
 
+def _contract_version() -> str:
+    """What a template cluster's schema is: every migration's checksum."""
+    return ",".join(m.checksum for m in contract_migrations())
+
+
+def _migrate_template(dsn: str) -> None:
+    """Give a template cluster the contract's roles (no passwords: each stack sets its own,
+    common.contract.roles.ensure_roles), migrations and grants, as a stack's start would.
+    Called from the running loop's thread: on a loop of its own, in a thread."""
+
+    async def migrate() -> None:
+        conn = await asyncpg.connect(dsn)
+        try:
+            await bootstrap(conn, {})
+        finally:
+            await conn.close()
+
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        pool.submit(asyncio.run, migrate()).result()
+
+
 def _require_passwords(data_dir: Path) -> None:
     """Ask every role but the superuser for its password (read at the next reload)."""
     (data_dir / "pg_hba.conf").write_text(_PASSWORD_HBA)
@@ -221,12 +252,22 @@ async def local_stack(
     lifeline: Lifeline | None = None
     keeper: Keeper | None = None
     url = os.environ.get("PNAV_DATABASE_URL", "").strip()
+    phases: dict[str, float] = {}
+    seeded = False
+    started = time.monotonic()
     if not url:
         # pgserver narrates every pg_ctl run at INFO; a restart would repeat all of it
         logging.getLogger("pgserver").setLevel(logging.WARNING)
         postgres = EmbeddedPostgres(data_dir)
         lifeline = start_lifeline(postgres.data_dir, temporary=postgres.temporary)
         try:
+            if postgres.temporary:
+                # a copy of a cluster made once (initdb, then the contract's migrations),
+                # not initdb and every migration for each stack (common.pgtemplate)
+                seeded = seed_from_template(
+                    postgres.data_dir, variant=_contract_version(), prepare=_migrate_template
+                )
+            phases["postgres_dir"] = time.monotonic() - started
             postgres.start()
         except BaseException:
             postgres.stop()
@@ -235,6 +276,7 @@ async def local_stack(
         url = postgres.dsn()
         _require_passwords(postgres.data_dir)
         keeper = Keeper(postgres)
+        phases["postgres_start"] = time.monotonic() - started - phases["postgres_dir"]
     stop_keeper = asyncio.Event()
     keeping: asyncio.Task[None] | None = None
     secret_dir: Path | None = None
@@ -249,6 +291,7 @@ async def local_stack(
                 "key, sensor messages and cmd_vel included (docs/DEPLOY.md)"
             )
         endpoint = f"tcp/127.0.0.1:{zenoh_port or free_port()}"
+        started = time.monotonic()
         router = start_router(
             (endpoint,),
             str(bus.users_file) if bus is not None else None,
@@ -256,7 +299,9 @@ async def local_stack(
             ros_domains=ros_domains,
             hosts=hosts,
         )
+        phases["router"] = time.monotonic() - started
         try:
+            started = time.monotonic()
             conn = await asyncpg.connect(url)
             try:
                 if postgres is not None:
@@ -264,11 +309,12 @@ async def local_stack(
                 role_urls = await _set_up_roles(conn, url)
             finally:
                 await conn.close()
+            phases["roles"] = time.monotonic() - started
             if keeper is not None:
                 keeping = asyncio.create_task(keeper.run(stop_keeper), name="postgres-keeper")
             zenoh = local_zenoh.settings(endpoint)
             zenoh = bus.apply(zenoh, USER) if bus is not None else zenoh
-            yield LocalStack(url, zenoh, router, postgres, keeper, role_urls, bus)
+            yield LocalStack(url, zenoh, router, postgres, keeper, role_urls, bus, phases, seeded)
         finally:
             stop_keeper.set()
             if keeping is not None:

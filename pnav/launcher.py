@@ -20,13 +20,18 @@ import tempfile
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import cast
 
+from zenoh import Session
+
+from common.config import ZenohSettings
 from common.contract import acl
 from common.errors import UsageError
 from common.stack import BusCredentials, LocalStack, local_stack
 from common.testing import free_port
 from pnav import stackfile
 from pnav.composition import HOST_PROCESS, host_spec, hosted, resolve_processes
+from pnav.prestart import Prestart
 from pnav.supervisor import ProcessSpec, Supervisor
 from pnav.supervisor_report import SupervisorReport
 
@@ -318,6 +323,14 @@ def service_database(local: LocalStack, name: str) -> dict[str, str]:
     return {"PNAV_DATABASE_URL": local.url_for(name)}
 
 
+def planned(options: StackOptions, world: Path) -> list[tuple[str, list[str]]]:
+    """The name and command of every process the stack will run, before the stack exists
+    (their commands do not depend on it, only their environments do)."""
+    stand_in = LocalStack("", ZenohSettings(), cast(Session, None), None)
+    specs = recorder_spec(stand_in, options) + service_specs(stand_in, options, world)
+    return [(spec.name, spec.argv) for spec in specs]
+
+
 def _ros_domains(env: dict[str, str]) -> tuple[int, ...]:
     """The ROS 2 domain the stack's own router carries: a ROS 2 robot link with no rmw_zenoh
     router of its own (``--ros-router``) speaks ROS 2 through it."""
@@ -330,13 +343,33 @@ def _ros_domains(env: dict[str, str]) -> tuple[int, ...]:
 async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
     world = resolve_world(options.world)
     options = resolve_dashboard(options)
-    if "sim" in options.services and "sim" not in options.replace:
-        check_world(world, options.model)
-    log_dir = options.log_dir or Path(tempfile.mkdtemp(prefix="pnav-logs-"))
-    ros_domains = _ros_domains(options.extra_env)
     options = dataclasses.replace(options, processes=resolve_processes(options.processes))
-    in_host = hosted(options)
-    hosts = (acl.host_identity(in_host),) if in_host else ()
+    # the services import their code while the world is checked and Postgres gets ready
+    # (pnav.prestart)
+    prestart = Prestart()
+    try:
+        await prestart.start(planned(options, world))
+        if "sim" in options.services and "sim" not in options.replace:
+            check_world(world, options.model)
+        log_dir = options.log_dir or Path(tempfile.mkdtemp(prefix="pnav-logs-"))
+        ros_domains = _ros_domains(options.extra_env)
+        in_host = hosted(options)
+        hosts = (acl.host_identity(in_host),) if in_host else ()
+        async with _stack(options, log_dir, world, ros_domains, hosts, prestart) as running:
+            yield running
+    finally:
+        await prestart.close()
+
+
+@contextlib.asynccontextmanager
+async def _stack(
+    options: StackOptions,
+    log_dir: Path,
+    world: Path,
+    ros_domains: tuple[int, ...],
+    hosts: tuple[str, ...],
+    prestart: Prestart,
+) -> AsyncIterator[RunningStack]:
     async with local_stack(
         options.data_dir,
         options.zenoh_port,
@@ -345,7 +378,7 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
         hosts=(*acl.DEFAULT_HOSTS, *hosts),
     ) as local:
         specs = recorder_spec(local, options) + service_specs(local, options, world)
-        supervisor = Supervisor(specs, log_dir, echo=options.echo)
+        supervisor = Supervisor(specs, log_dir, echo=options.echo, prestarted=prestart)
         running = RunningStack(local, supervisor, options, world, log_dir)
         stackfile.write(
             stackfile.StackInfo(
@@ -368,6 +401,7 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
         report = SupervisorReport(supervisor, local.router)  # restarts, for /metrics
         try:
             await supervisor.start()
+            await prestart.close()  # any not taken: a process the stack no longer runs
             report.start()
             watcher = asyncio.create_task(supervisor.watch(stop_watching), name="supervise")
             yield running

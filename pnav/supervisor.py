@@ -20,7 +20,10 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO
+from typing import IO, TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from pnav.prestart import Prestart
 
 log = logging.getLogger("pnav.supervisor")
 
@@ -50,8 +53,17 @@ class Child:
 
 
 class Supervisor:
-    def __init__(self, specs: list[ProcessSpec], log_dir: Path, *, echo: bool = False) -> None:
+    def __init__(
+        self,
+        specs: list[ProcessSpec],
+        log_dir: Path,
+        *,
+        echo: bool = False,
+        prestarted: Prestart | None = None,
+    ) -> None:
         self.children = {spec.name: Child(spec) for spec in specs}
+        # processes started ahead (pnav.prestart), taken by the first start of each child
+        self.prestarted = prestarted
         self.log_dir = log_dir
         self.echo = echo
         self._stopping = False
@@ -87,13 +99,19 @@ class Supervisor:
     async def _spawn(self, child: Child) -> None:
         env = {**os.environ, **child.spec.env, "PNAV_PARENT_PID": str(os.getpid())}
         env.setdefault("PNAV_INSTANCE", f"{child.spec.name}-1")
-        child.process = await asyncio.create_subprocess_exec(
-            *child.spec.argv,
-            env=env,
-            stdout=asyncio.subprocess.PIPE,
-            stderr=asyncio.subprocess.STDOUT,
-            start_new_session=True,
-        )
+        warm = None
+        if self.prestarted is not None:
+            warm = self.prestarted.take(child.spec.name, child.spec.argv, env)
+        if warm is not None:
+            child.process = warm.process
+        else:
+            child.process = await asyncio.create_subprocess_exec(
+                *child.spec.argv,
+                env=env,
+                stdout=asyncio.subprocess.PIPE,
+                stderr=asyncio.subprocess.STDOUT,
+                start_new_session=True,
+            )
         child.started = time.monotonic()
         child.pump = asyncio.create_task(self._pump(child, child.process), name=child.spec.name)
 

@@ -13,6 +13,7 @@ it cleanly.
 from __future__ import annotations
 
 import argparse
+import importlib
 import logging
 import os
 import sys
@@ -274,6 +275,14 @@ def announce_world(world: World) -> int:
     finally:
         signals.close()
     return 0
+
+
+def prestart(args: list[str]) -> None:
+    """What the sim imports only once it runs (pnav.prestart imports it ahead, while the
+    launcher makes Postgres ready): the node and its gate and tracer (:func:`serve`) and
+    numpy's random module (the world's noise, numpy imports it on first use)."""
+    for module in ("numpy.random", "common.trace", "services.sim.gate", "services.sim.node"):
+        importlib.import_module(module)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -177,3 +177,13 @@ def test_the_stack_file_gives_a_process_started_by_hand_its_identity() -> None:
     assert env["PNAV_ZENOH_MODE"] == "client"
     with pytest.raises(UsageError, match="no role 'nobody' in this stack"):
         info.env_for("nobody")
+
+
+def test_local_sessions_use_no_shared_memory() -> None:
+    """Zenoh's shared-memory pools (16 MB per publishing process, mapped by the router and
+    every receiver) are off unless a config file turns them on."""
+    from common.bus import zenoh_config
+    from common.config import ZenohSettings
+
+    config = zenoh_config(ZenohSettings(mode="client", connect=("tcp/127.0.0.1:7447",)))
+    assert config.get_json("transport/shared_memory/enabled") == "false"
