@@ -16,8 +16,10 @@ from typing import Any, Final
 
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys.base import Nodetype
 from rosbags.typesys.store import Typestore
 
+from common import ros2interfaces
 from common.contract import rmw_zenoh
 
 DISTRO: Final = Stores.ROS2_JAZZY
@@ -44,7 +46,11 @@ NOMINAL_VOLTS: Final = 11.1
 
 @functools.cache
 def store() -> Typestore:
-    return get_typestore(DISTRO)
+    """Jazzy's messages, and the services and actions the link serves (ros2interfaces)."""
+    typestore = get_typestore(DISTRO)
+    ros2interfaces.register(typestore, ros2interfaces.CANCEL_GOAL_TYPES)
+    ros2interfaces.register(typestore, ros2interfaces.NAV2_TYPES)
+    return typestore
 
 
 @dataclass(frozen=True)
@@ -62,7 +68,7 @@ def ros_type(name: str) -> RosType:
     """The type named ``name`` (KeyError if the distribution has none of that name)."""
     if name not in store().types:
         raise KeyError(f"no ROS 2 type {name!r} in {DISTRO.value}")
-    return RosType(name, store().hash_rihs01(name))
+    return RosType(name, ros2interfaces.rihs01(store(), name))
 
 
 def message(name: str, **fields: Any) -> Any:
@@ -143,3 +149,40 @@ def battery_state(
         location="",
         serial_number="",
     )
+
+
+_DTYPES: Final = {
+    "bool": np.bool_,
+    "int8": np.int8,
+    "uint8": np.uint8,
+    "char": np.uint8,
+    "byte": np.uint8,
+    "int16": np.int16,
+    "uint16": np.uint16,
+    "int32": np.int32,
+    "uint32": np.uint32,
+    "int64": np.int64,
+    "uint64": np.uint64,
+    "float32": np.float32,
+    "float64": np.float64,
+}
+
+
+def default(name: str) -> Any:
+    """A message of type ``name`` with every field at its zero value (as a ROS 2 client
+    library constructs one): numbers 0, strings empty, sequences empty, arrays of zeros."""
+    return message(name, **{field: _zero(desc) for field, desc in store().fielddefs[name][1]})
+
+
+def _zero(desc: Any) -> Any:
+    kind, rest = desc
+    if kind == Nodetype.NAME:
+        return default(rest)
+    if kind == Nodetype.BASE:
+        base = rest[0]
+        return "" if base == "string" else (False if base == "bool" else _DTYPES[base](0).item())
+    inner, size = rest
+    count = size if kind == Nodetype.ARRAY else 0
+    if inner[0] == Nodetype.BASE and inner[1][0] in _DTYPES:
+        return np.zeros(count, dtype=_DTYPES[inner[1][0]])
+    return [_zero(inner) for _ in range(count)]
