@@ -113,6 +113,10 @@ CANCEL_GOAL_TYPES: Final = service(
     (("return_code", "int8"), ("goals_canceling", f"{GOAL_INFO}[]")),
 )
 
+# lifecycle_msgs/srv/GetState: what Simple Commander's waitUntilNav2Active asks a node
+GET_STATE: Final = "lifecycle_msgs/srv/GetState"
+GET_STATE_TYPES: Final = service(GET_STATE, (), (("current_state", "lifecycle_msgs/msg/State"),))
+
 # nav2_msgs' actions as Jazzy's nav2_msgs defines their fields (the constants, error codes
 # included, are not part of a type's hash; the codes used are in pnav/ros2/nav2actions.py)
 _NAV_FEEDBACK: Final[Fields] = (

@@ -49,6 +49,7 @@ def store() -> Typestore:
     """Jazzy's messages, and the services and actions the link serves (ros2interfaces)."""
     typestore = get_typestore(DISTRO)
     ros2interfaces.register(typestore, ros2interfaces.CANCEL_GOAL_TYPES)
+    ros2interfaces.register(typestore, ros2interfaces.GET_STATE_TYPES)
     ros2interfaces.register(typestore, ros2interfaces.NAV2_TYPES)
     return typestore
 
@@ -91,6 +92,21 @@ def time_msg(seconds: float) -> Any:
     sec = math.floor(seconds)
     nanosec = min(round((seconds - sec) * 1e9), 999_999_999)
     return message("builtin_interfaces/msg/Time", sec=int(sec), nanosec=int(nanosec))
+
+
+def duration_msg(seconds: float) -> Any:
+    """``builtin_interfaces/msg/Duration`` of ``seconds``, clamped to [0, 2**31 - 1]."""
+    seconds = min(max(seconds, 0.0), 2.0**31 - 1)
+    sec = math.floor(seconds)
+    nanosec = min(round((seconds - sec) * 1e9), 999_999_999)
+    return message("builtin_interfaces/msg/Duration", sec=int(sec), nanosec=int(nanosec))
+
+
+def pose_stamped(stamp: float, frame_id: str, x: float, y: float, yaw: float) -> Any:
+    """A PoseStamped on the ground plane: (x, y), heading ``yaw``."""
+    point = message("geometry_msgs/msg/Point", x=float(x), y=float(y), z=0.0)
+    pose = message("geometry_msgs/msg/Pose", position=point, orientation=quaternion(yaw))
+    return message(POSE_STAMPED, header=header(max(float(stamp), 0.0), frame_id), pose=pose)
 
 
 def seconds_of(stamp: Any) -> float:

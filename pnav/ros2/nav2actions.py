@@ -39,13 +39,15 @@ from common.contract import keys, people
 from common.contract import rmw_zenoh as rz
 from common.errors import ContractError
 from common.ros2action import ABORTED, CANCELED, SUCCEEDED, ActionServer
-from common.ros2interfaces import NAVIGATE_THROUGH_POSES, NAVIGATE_TO_POSE
-from common.ros2node import Ros2Node
+from common.ros2interfaces import GET_STATE, NAVIGATE_THROUGH_POSES, NAVIGATE_TO_POSE
+from common.ros2node import Ros2Node, ServiceCall
 from common.runtime import Runtime
 
 logger = logging.getLogger("pnav.ros2.nav2")
 
 TO_POSE: Final = "navigate_to_pose"
+NAVIGATOR_STATE: Final = "bt_navigator/get_state"  # lifecycle_msgs' GetState, Nav2's navigator
+ACTIVE: Final = 3  # lifecycle_msgs/msg/State PRIMARY_STATE_ACTIVE
 THROUGH_POSES: Final = "navigate_through_poses"
 MAP_FRAME: Final = "map"
 FEEDBACK_S: Final = 0.5
@@ -117,6 +119,7 @@ class Nav2Actions:
                 (THROUGH_POSES, NAVIGATE_THROUGH_POSES, True),
             )
         ]
+        self.node.service(rz.fully_qualified(namespace, NAVIGATOR_STATE), GET_STATE, _active)
         if self._ticker is None:
             self._ticker = asyncio.create_task(self._tick_loop(), name="nav2-feedback")
 
@@ -233,9 +236,13 @@ class Nav2Actions:
         distance = distance_remaining((odom["x"], odom["y"]), points, target, poses)
         speed = abs(odom["linear_mps"])
         fields: dict[str, Any] = {
-            "current_pose": pose_stamped(odom["stamp"], odom["x"], odom["y"], odom["yaw"]),
-            "navigation_time": duration(time.monotonic() - tracked.started),
-            "estimated_time_remaining": duration(distance / speed if speed > MOVING_MPS else 0),
+            "current_pose": ros2types.pose_stamped(
+                odom["stamp"], MAP_FRAME, odom["x"], odom["y"], odom["yaw"]
+            ),
+            "navigation_time": ros2types.duration_msg(time.monotonic() - tracked.started),
+            "estimated_time_remaining": ros2types.duration_msg(
+                distance / speed if speed > MOVING_MPS else 0.0
+            ),
             "number_of_recoveries": 0,
             "distance_remaining": distance,
         }
@@ -282,17 +289,9 @@ def distance_remaining(
     return total
 
 
-def pose_stamped(stamp: float, x: float, y: float, yaw: float) -> Any:
-    point = ros2types.message("geometry_msgs/msg/Point", x=float(x), y=float(y), z=0.0)
-    pose = ros2types.message(
-        "geometry_msgs/msg/Pose", position=point, orientation=ros2types.quaternion(yaw)
-    )
-    header = ros2types.header(max(float(stamp), 0.0), MAP_FRAME)
-    return ros2types.message(ros2types.POSE_STAMPED, header=header, pose=pose)
-
-
-def duration(seconds: float) -> Any:
-    seconds = min(max(seconds, 0.0), 2.0**31 - 1)
-    sec = math.floor(seconds)
-    nanosec = min(round((seconds - sec) * 1e9), 999_999_999)
-    return ros2types.message("builtin_interfaces/msg/Duration", sec=int(sec), nanosec=nanosec)
+def _active(call: ServiceCall) -> None:
+    """Simple Commander's waitUntilNav2Active asks the navigator's lifecycle state: the
+    actions are served as long as this process runs, so it is active."""
+    state = ros2types.message("lifecycle_msgs/msg/State", id=ACTIVE, label="active")
+    name = f"{GET_STATE}_Response"
+    call.reply(ros2types.encode(name, ros2types.message(name, current_state=state)))

@@ -42,6 +42,7 @@ HASHES = {
     ),
     "CancelGoal": "573d8b0a534451d7bc2ac8c5ffde8ac14b8593b7001175d0cd6516dcbeb8689a",
     "GoalStatusArray": "6c1684b00f177d37438febe6e709fc4e2b0d4248dca4854946f9ed8b30cda83e",
+    "GetState": "800a0a5aae599782b02932de0caf563f6dc4e7e94b794eadde075ba2cbef9795",
 }
 FEEDBACK = """geometry_msgs/PoseStamped current_pose
 builtin_interfaces/Duration navigation_time
@@ -68,7 +69,10 @@ LAYOUTS = {
     ),
     "wire/msg/CancelRequest": "action_msgs/GoalInfo goal_info",
     "wire/msg/CancelReply": "int8 return_code\naction_msgs/GoalInfo[] goals_canceling",
+    "wire/msg/GetStateReply": "lifecycle_msgs/State current_state",
 }
+# an empty request is one uint8 (rosidl's structure_needs_at_least_one_member), after CDR's header
+EMPTY_REQUEST = b"\x00\x01\x00\x00\x00"
 STORE = get_typestore(Stores.ROS2_JAZZY)
 for _name, _text in LAYOUTS.items():
     STORE.register(get_types_from_msg(_text, _name))
@@ -142,11 +146,24 @@ class NavClient:
         return found
 
     def call(self, entity: str, type_suffix: str, payload: bytes, timeout: float = 30.0) -> bytes:
+        """One request to the action's service; the reply's payload."""
+        return self.call_key(self.key(entity, type_suffix), payload, timeout)
+
+    def navigator_state(self) -> str:
+        """The label Simple Commander's waitUntilNav2Active reads (``bt_navigator/get_state``)."""
+        digest = HASHES["GetState"]
+        key = (
+            f"{DOMAIN}/bt_navigator/get_state/lifecycle_msgs::srv::dds_::GetState_/RIHS01_{digest}"
+        )
+        reply = uncdr("wire/msg/GetStateReply", self.call_key(key, EMPTY_REQUEST))
+        return str(reply.current_state.label)
+
+    def call_key(self, key: str, payload: bytes, timeout: float = 30.0) -> bytes:
         """One request; the reply's payload (AssertionError if none, or not ours)."""
         seq = next(self._seq)
         attachment = struct.pack("<qqB", seq, time.time_ns(), 16) + self.gid
         replies = self.session.get(
-            self.key(entity, type_suffix),
+            key,
             payload=payload,
             attachment=attachment,
             target=zenoh.QueryTarget.ALL_COMPLETE,
@@ -159,11 +176,13 @@ class NavClient:
             back_seq, _stamp, length = struct.unpack_from("<qqB", got.to_bytes())
             assert (back_seq, length, got.to_bytes()[17:]) == (seq, 16, self.gid)
             return reply.ok.payload.to_bytes()
-        raise AssertionError(f"no reply to {entity}")
+        raise AssertionError(f"no reply on {key}")
 
     def send_goal(self, goal_id: bytes, goal: Any) -> Any:
         layout = "ThroughSendGoal" if self.through else "ToPoseSendGoal"
-        request = cdr(f"wire/msg/{layout}", msg(f"wire/msg/{layout}", goal_id=uuid(goal_id), goal=goal))
+        request = cdr(
+            f"wire/msg/{layout}", msg(f"wire/msg/{layout}", goal_id=uuid(goal_id), goal=goal)
+        )
         return uncdr("wire/msg/SendGoalReply", self.call("send_goal", "SendGoal", request))
 
     def get_result(self, goal_id: bytes, timeout: float = 30.0) -> Any:

@@ -37,7 +37,9 @@ async def rviz(db_url: str, zenoh_settings: ZenohSettings) -> AsyncIterator[Rviz
     finally:
         await conn.close()
     url = await as_service_role(db_url, "user")  # people's grants, exactly
-    runtime = await Runtime.open(ServiceConfig(service="rviz", database_url=url, zenoh=zenoh_settings))
+    runtime = await Runtime.open(
+        ServiceConfig(service="rviz", database_url=url, zenoh=zenoh_settings)
+    )
     ros = await asyncio.to_thread(bus.open_session, zenoh_settings)
     link = RobotLinkSettings(
         link="ros2", robots={"r1": RobotTopics(namespace="", explicit_namespace=True)}
@@ -82,6 +84,8 @@ async def test_a_goal_gets_feedback_and_succeeds(
 ) -> None:
     client = NavClient(client_session, "/navigate_to_pose")
     await _ready(client)
+    # Simple Commander's waitUntilNav2Active(localizer=...) asks the navigator's state
+    assert await asyncio.to_thread(client.navigator_state) == "active"
     goal_id = os.urandom(16)
     reply = await asyncio.to_thread(client.send_goal, goal_id, client.to_pose_goal(3.0, 4.0, 1.0))
     assert reply.accepted
@@ -161,7 +165,9 @@ async def test_a_route_through_poses_reports_the_poses_left_and_fails_with_the_r
     [goal] = await _sql(db_url, "SELECT id, x, y, yaw FROM goal")
     assert (goal["x"], goal["y"]) == (2.0, 2.0) and goal["yaw"] == pytest.approx(math.pi / 2)
     waypoints = await _sql(
-        db_url, "SELECT seq, x, y, yaw FROM goal_waypoint WHERE goal_id = $1 ORDER BY seq", goal["id"]
+        db_url,
+        "SELECT seq, x, y, yaw FROM goal_waypoint WHERE goal_id = $1 ORDER BY seq",
+        goal["id"],
     )
     # driven through: a waypoint's heading would halt the robot there
     assert [tuple(w) for w in waypoints] == [(1, 1.0, 0.0, None), (2, 2.0, 0.0, None)]

@@ -42,6 +42,9 @@ PUBLISHED = {
     "service_msgs/msg/ServiceEventInfo": _hash(
         "41bcbbe07a75c9b52bc96bfd5c24d7f0fc0a08c0cb7921b3373c5732345a6f45"
     ),
+    "lifecycle_msgs/srv/GetState": _hash(
+        "800a0a5aae599782b02932de0caf563f6dc4e7e94b794eadde075ba2cbef9795"
+    ),
     "action_msgs/msg/GoalInfo": _hash(
         "6398fe763154554353930716b225947f93b672f0fb2e49fdd01bb7a7e37933e9"
     ),
@@ -88,6 +91,7 @@ def store() -> object:
     """A Jazzy store of its own with the examples' interfaces registered as the link does."""
     typestore = get_typestore(Stores.ROS2_JAZZY)
     ri.register(typestore, ri.CANCEL_GOAL_TYPES)
+    ri.register(typestore, ri.GET_STATE_TYPES)
     ri.register(
         typestore,
         ri.service(
