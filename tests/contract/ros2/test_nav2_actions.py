@@ -10,6 +10,8 @@ import asyncio
 import math
 import os
 from collections.abc import AsyncIterator
+from dataclasses import replace
+from pathlib import Path
 
 import asyncpg
 import pytest
@@ -17,9 +19,11 @@ import zenoh
 
 from common import bus
 from common.config import ServiceConfig, ZenohSettings
+from common.contract.grants import USER
 from common.robotlink import RobotLinkSettings, RobotTopics
 from common.runtime import Runtime
-from common.testing import as_service_role, eventually
+from common.stack import BusCredentials
+from common.testing import as_service_role, eventually, free_port
 from pnav.ros2.rviz import RvizLink
 from tests.contract.ros2.nav2_client import NavClient, pose
 
@@ -31,6 +35,11 @@ UNKNOWN, EXECUTING, SUCCEEDED, CANCELED, ABORTED = 0, 2, 4, 5, 6
 
 @pytest.fixture
 async def rviz(db_url: str, zenoh_settings: ZenohSettings) -> AsyncIterator[RvizLink]:
+    async for link in _serve(db_url, zenoh_settings):
+        yield link
+
+
+async def _serve(db_url: str, zenoh_settings: ZenohSettings) -> AsyncIterator[RvizLink]:
     conn = await asyncpg.connect(db_url)
     try:
         await conn.execute("INSERT INTO robot (robot_id) VALUES ('r1')")
@@ -230,3 +239,41 @@ async def test_bad_goals_are_refused_with_a_reason(
     assert await _sql(db_url, "SELECT id FROM goal") == []
     to_pose.close()
     through.close()
+
+
+async def test_through_the_local_stacks_router_with_its_access_control(
+    db_url: str, tmp_path: Path
+) -> None:
+    """As ``pnav up --robot-link ros2`` runs it: the router checks every session's user and
+    lets the ROS 2 identities (``user`` among them) serve and call services in the domain;
+    an identity that may not speak ROS 2 gets no answer."""
+    creds = BusCredentials.create(tmp_path)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = bus.start_router((endpoint,), str(creds.users_file), ros_domains=(0,))
+    base = ZenohSettings(mode="client", connect=(endpoint,))
+    person = replace(base, user=USER, password=creds.passwords[USER])
+    stranger = replace(base, user="strategy", password=creds.passwords["strategy"])
+    try:
+        async for _link in _serve(db_url, person):
+            session = await asyncio.to_thread(bus.open_session, person)
+            other = await asyncio.to_thread(bus.open_session, stranger)
+            try:
+                client = NavClient(session, "/navigate_to_pose")
+                await _ready(client)
+                goal_id = os.urandom(16)
+                goal = client.to_pose_goal(1.0, 2.0)
+                assert (await asyncio.to_thread(client.send_goal, goal_id, goal)).accepted
+                assert (await asyncio.to_thread(client.cancel, goal_id)).return_code == 0
+                assert (await asyncio.to_thread(client.get_result, goal_id)).status == CANCELED
+                denied = NavClient(other, "/navigate_to_pose")
+                with pytest.raises(AssertionError, match="no reply"):
+                    await asyncio.to_thread(
+                        denied.call_key, client.key("send_goal", "SendGoal"), b"", 2.0
+                    )
+                client.close()
+                denied.close()
+            finally:
+                session.close()
+                other.close()
+    finally:
+        router.close()
