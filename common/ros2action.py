@@ -199,6 +199,9 @@ class ActionServer:
             goal = self.goals[goal_id] = GoalHandle(goal_id, time.time())
             try:
                 accepted = await self.on_goal(goal_id, request.goal)
+            except Exception as exc:  # the owner failed (its database away): not accepted
+                self.refused["goal_failed"] += 1
+                logger.warning("%s: goal %s not taken: %r", self.name, goal_id.hex(), exc)
             finally:
                 if not accepted:
                     self.goals.pop(goal_id, None)

@@ -27,7 +27,7 @@ import re
 from hashlib import sha256
 from typing import Any, Final
 
-from rosbags.typesys.base import Nodetype
+from rosbags.interfaces import Nodetype
 from rosbags.typesys.store import Typestore
 
 # one field: (name, type as a .msg writes it: "int8", "string", "pkg/msg/T", "T[]",
@@ -168,13 +168,13 @@ def field_desc(typ: str) -> Any:
 def register(store: Typestore, types: dict[str, Fields]) -> None:
     """Register ``types`` (name -> fields) in ``store`` (names already there, with the same
     fields, are left as they are)."""
-    new = {
+    new: dict[str, Any] = {
         name: ([], [(field, field_desc(typ)) for field, typ in fields])
         for name, fields in types.items()
         if name not in store.fielddefs
     }
     if new:
-        store.register(new)  # type: ignore[arg-type]
+        store.register(new)
 
 
 def _field_type(desc: Any) -> tuple[int, int, int, str]:
@@ -202,9 +202,12 @@ def rihs01(store: Typestore, name: str) -> str:
         if typ in described:
             return
         fields = store.fielddefs[typ][1] or [(_EMPTY_MEMBER, (Nodetype.BASE, ("uint8", 0)))]
-        entries = []
+        entries: list[dict[str, Any]] = []
+        nested_types: list[str] = []
         for field, desc in fields:
             type_id, capacity, string_capacity, nested = _field_type(desc)
+            if nested:
+                nested_types.append(nested)
             entries.append(
                 {
                     "name": field,
@@ -217,9 +220,8 @@ def rihs01(store: Typestore, name: str) -> str:
                 }
             )
         described[typ] = {"type_name": typ, "fields": entries}
-        for entry in entries:
-            if entry["type"]["nested_type_name"]:
-                describe(entry["type"]["nested_type_name"])
+        for nested in nested_types:
+            describe(nested)
 
     describe(name)
     document = {

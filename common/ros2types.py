@@ -15,8 +15,8 @@ from dataclasses import dataclass
 from typing import Any, Final
 
 import numpy as np
+from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_typestore
-from rosbags.typesys.base import Nodetype
 from rosbags.typesys.store import Typestore
 
 from common import ros2interfaces

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import logging
 import math
 import time
@@ -109,10 +110,8 @@ class Nav2Actions:
                 self.node,
                 rz.fully_qualified(namespace, name),
                 kind,
-                on_goal=lambda goal_id, goal, through=through: self._on_goal(
-                    robot, through, goal_id, goal
-                ),
-                on_cancel=lambda goal_id: self._on_cancel(robot, goal_id),
+                on_goal=functools.partial(self._on_goal, robot, through),
+                on_cancel=functools.partial(self._on_cancel, robot),
             )
             for name, kind, through in (
                 (TO_POSE, NAVIGATE_TO_POSE, False),
