@@ -7,10 +7,9 @@ write it did not have. It reads the robot-link file the bridge reads (namespaces
 
 - ``/goal_pose`` and each robot's ``<ns>/goal_pose`` (geometry_msgs/msg/PoseStamped, in the
   ``map`` frame; RViz publishes its tool's pose there) -> the robot's goal: its active goal
-  superseded, the new one at (x, y) with the default tolerance. ``/goal_pose`` is the goal of
-  the robot with the empty namespace, or of the only robot; with several robots and none
-  un-namespaced it is refused (publish on ``<ns>/goal_pose``). The heading is ignored: goals
-  carry no heading yet.
+  superseded, the new one at (x, y) with the default tolerance and the arrow's heading.
+  ``/goal_pose`` is the goal of the robot with the empty namespace, or of the only robot;
+  with several robots and none un-namespaced it is refused (publish on ``<ns>/goal_pose``).
 - each ``planned_path`` row (its notification's image, or the row read back) -> a
   nav_msgs/msg/Path on ``<ns>/plan`` in the ``map`` frame, stamped with the row's stamp; each
   pose heads towards the next waypoint. An empty row is an empty Path (no path in force), as

@@ -156,6 +156,18 @@ async def test_cancel_and_preemption(
     assert cancelled.status == CANCELED
     rows = await _sql(db_url, "SELECT x, status FROM goal ORDER BY id")
     assert [tuple(r) for r in rows] == [(1.0, "superseded"), (2.0, "cancelled")]
+    # a goal someone else sets (pnav goal, the dashboard, RViz) supersedes an action's goal
+    third = os.urandom(16)
+    assert (await asyncio.to_thread(client.send_goal, third, client.to_pose_goal(3, 3))).accepted
+    await _sql(
+        db_url,
+        "UPDATE goal SET status = 'superseded', reason = 'replaced by a new goal' "
+        "WHERE robot_id = 'r1' AND status = 'active'",
+    )
+    await _sql(db_url, "INSERT INTO goal (robot_id, x, y) VALUES ('r1', 4, 4)")
+    superseded = await asyncio.to_thread(client.get_result, third)
+    assert (superseded.status, superseded.result.error_code) == (ABORTED, 9000)
+    assert superseded.result.error_msg == "superseded: replaced by a new goal"
     # cancelling an ended goal, and one never sent: the codes rcl_action answers
     assert (await asyncio.to_thread(client.cancel, second)).return_code == 3
     assert (await asyncio.to_thread(client.cancel, os.urandom(16))).return_code == 2
