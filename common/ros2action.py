@@ -64,6 +64,7 @@ class GoalHandle:
     id: bytes  # the client's 16-byte UUID
     stamp: float  # accepted at, system clock (s)
     status: int = ACCEPTED
+    decided: bool = False  # the owner accepted it (until then it is the owner's to learn of)
     result: Any = None
     ended_at: float | None = None
     waiting: list[ServiceCall] = field(default_factory=list)  # get_result calls to answer
@@ -124,9 +125,6 @@ class ActionServer:
         self._forget_old()
         self.publish_status()
         return True
-
-    def active(self) -> list[bytes]:
-        return [g.id for g in self.goals.values() if g.status not in ENDED]
 
     def publish_status(self) -> None:
         statuses = [
@@ -191,12 +189,13 @@ class ActionServer:
         if request is None:
             return
         goal_id = uuid_bytes(request.goal_id)
+        # the handle first: the owner may end the goal, or a cancel come, before the answer
+        goal = None if goal_id in self.goals else GoalHandle(goal_id, time.time())
         accepted = False
-        if goal_id in self.goals:
+        if goal is None:
             self.refused["duplicate_goal_id"] += 1
         else:
-            # the handle first: the owner may end the goal before this answer is sent
-            goal = self.goals[goal_id] = GoalHandle(goal_id, time.time())
+            self.goals[goal_id] = goal
             try:
                 accepted = await self.on_goal(goal_id, request.goal)
             except Exception as exc:  # the owner failed (its database away): not accepted
@@ -205,15 +204,17 @@ class ActionServer:
             finally:
                 if not accepted:
                     self.goals.pop(goal_id, None)
-            if accepted:
-                if goal.status == ACCEPTED:
-                    goal.status = EXECUTING
-                self.publish_status()
-        stamp = self.goals[goal_id].stamp if accepted else time.time()
-        response = ros2types.message(
-            f"{kind}_Response", accepted=accepted, stamp=ros2types.time_msg(stamp)
-        )
-        call.reply(ros2types.encode(f"{kind}_Response", response))
+        if goal is not None and accepted:
+            goal.decided = True
+            if goal.status == ACCEPTED:
+                goal.status = EXECUTING
+            self.publish_status()
+        stamp = goal.stamp if goal is not None else time.time()
+        name = f"{kind}_Response"
+        response = ros2types.message(name, accepted=accepted, stamp=ros2types.time_msg(stamp))
+        call.reply(ros2types.encode(name, response))
+        if goal is not None and accepted and goal.status == CANCELING:
+            await self.on_cancel(goal_id)  # cancelled while the owner decided: tell it now
 
     async def _get(self, call: ServiceCall) -> None:
         request = self._decode(call, f"{self.type}_GetResult")
@@ -271,7 +272,8 @@ class ActionServer:
         )
         call.reply(ros2types.encode(name, response))
         for goal in targets:
-            await self.on_cancel(goal.id)
+            if goal.decided:  # one still being decided is told of once accepted (_goal)
+                await self.on_cancel(goal.id)
 
     def _forget_old(self) -> None:
         now = time.time()
