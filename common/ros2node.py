@@ -54,14 +54,8 @@ class ServiceCall:
             query, self._query = self._query, None
         if query is None:
             return False
-        seq, gid = (
-            (0, bytes(rz.GID_BYTES))
-            if self.attachment is None
-            else (
-                self.attachment.sequence_number,
-                self.attachment.gid,
-            )
-        )
+        att = self.attachment
+        seq, gid = (0, bytes(rz.GID_BYTES)) if att is None else (att.sequence_number, att.gid)
         try:
             query.reply(
                 query.key_expr, payload, attachment=rz.Attachment(seq, time.time_ns(), gid).encode()
