@@ -3,8 +3,10 @@
 No ROS installation: a plain Zenoh session whose node, publishers and subscriptions announce
 themselves with rmw_zenoh's liveliness tokens (so ``ros2 node list`` and ``ros2 topic list``
 on an rmw_zenoh machine list them), whose samples are CDR with rmw_zenoh's 33-byte
-attachment. The names come from :mod:`common.contract.rmw_zenoh`, the types from
-:mod:`common.ros2types`. Used by the bridge's ROS 2 link and by the sim as a ROS 2 robot.
+attachment; a service server is a complete queryable whose replies carry the request's
+sequence number and client GID. The names come from :mod:`common.contract.rmw_zenoh`, the
+types from :mod:`common.ros2types`. Used by the bridge's ROS 2 link, by the sim as a ROS 2
+robot and by the action servers (:mod:`common.ros2action`).
 
 A subscription here takes any type on its topic (``<domain>/<topic>/*/*``) and reports what
 the key names, so a publisher of the wrong type or type hash is counted, not silently unmatched.
@@ -12,6 +14,7 @@ the key names, so a publisher of the wrong type or type hash is counted, not sil
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import threading
 import time
@@ -29,6 +32,51 @@ from common.contract import rmw_zenoh as rz
 HEARTBEAT_S = 1.0
 # (key, payload, attachment or None), on Zenoh's thread
 SampleHandler = Callable[[str, bytes, bytes | None], None]
+
+
+@dataclass
+class ServiceCall:
+    """One request to a service server: its CDR payload and rmw_zenoh attachment (None when
+    the client sent none, or not 33 bytes of one). :meth:`reply` answers it, once, at any
+    time and from any thread; :meth:`drop` lets it go unanswered."""
+
+    key: str
+    payload: bytes
+    attachment: rz.Attachment | None
+    _query: Any
+    _lock: threading.Lock
+
+    def reply(self, payload: bytes) -> bool:
+        """Send the response (CDR). Its attachment carries the request's sequence number and
+        the client's GID, as rmw_zenoh's server's, by which the client matches it to the
+        request. False if the call was answered or dropped already."""
+        with self._lock:
+            query, self._query = self._query, None
+        if query is None:
+            return False
+        att = self.attachment
+        seq, gid = (0, bytes(rz.GID_BYTES)) if att is None else (att.sequence_number, att.gid)
+        try:
+            query.reply(
+                query.key_expr, payload, attachment=rz.Attachment(seq, time.time_ns(), gid).encode()
+            )
+        except Exception:  # the querier is gone or the session closed: nothing to answer
+            return False
+        finally:
+            with contextlib.suppress(Exception):
+                query.drop()
+        return True
+
+    def drop(self) -> None:
+        with self._lock:
+            query, self._query = self._query, None
+        if query is not None:
+            with contextlib.suppress(Exception):
+                query.drop()
+
+
+# a service request, on Zenoh's thread
+ServiceHandler = Callable[[ServiceCall], None]
 
 
 @dataclass
@@ -158,6 +206,27 @@ class Ros2Node:
             subscriber = self.session.declare_subscriber(key_expr, on_sample)
         self._entities.append(subscriber)
         return self.key(topic, type_name)
+
+    def service(
+        self, name: str, type_name: str, handler: ServiceHandler, qos: rz.QoS = rz.RELIABLE
+    ) -> str:
+        """A service server (``type_name``: the service type, ``pkg/srv/Name`` or an action's
+        ``pkg/action/Name_SendGoal``): a complete queryable on the service's key, announced
+        with an ``SS`` token, as rmw_zenoh declares one. Returns the key."""
+        self._token(rz.SERVICE_SERVER, name, type_name, qos)
+        key = self.key(name, type_name)
+
+        def on_query(query: zenoh.Query) -> None:
+            payload = b"" if query.payload is None else query.payload.to_bytes()
+            raw = query.attachment
+            try:
+                attachment = None if raw is None else rz.Attachment.decode(raw.to_bytes())
+            except ValueError:
+                attachment = None
+            handler(ServiceCall(str(query.key_expr), payload, attachment, query, threading.Lock()))
+
+        self._entities.append(self.session.declare_queryable(key, on_query, complete=True))
+        return key
 
     def close(self) -> None:
         for entity in reversed(self._entities):

@@ -15,9 +15,11 @@ from dataclasses import dataclass
 from typing import Any, Final
 
 import numpy as np
+from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
+from common import ros2interfaces
 from common.contract import rmw_zenoh
 
 DISTRO: Final = Stores.ROS2_JAZZY
@@ -44,7 +46,12 @@ NOMINAL_VOLTS: Final = 11.1
 
 @functools.cache
 def store() -> Typestore:
-    return get_typestore(DISTRO)
+    """Jazzy's messages, and the services and actions the link serves (ros2interfaces)."""
+    typestore = get_typestore(DISTRO)
+    ros2interfaces.register(typestore, ros2interfaces.CANCEL_GOAL_TYPES)
+    ros2interfaces.register(typestore, ros2interfaces.GET_STATE_TYPES)
+    ros2interfaces.register(typestore, ros2interfaces.NAV2_TYPES)
+    return typestore
 
 
 @dataclass(frozen=True)
@@ -62,7 +69,7 @@ def ros_type(name: str) -> RosType:
     """The type named ``name`` (KeyError if the distribution has none of that name)."""
     if name not in store().types:
         raise KeyError(f"no ROS 2 type {name!r} in {DISTRO.value}")
-    return RosType(name, store().hash_rihs01(name))
+    return RosType(name, ros2interfaces.rihs01(store(), name))
 
 
 def message(name: str, **fields: Any) -> Any:
@@ -85,6 +92,21 @@ def time_msg(seconds: float) -> Any:
     sec = math.floor(seconds)
     nanosec = min(round((seconds - sec) * 1e9), 999_999_999)
     return message("builtin_interfaces/msg/Time", sec=int(sec), nanosec=int(nanosec))
+
+
+def duration_msg(seconds: float) -> Any:
+    """``builtin_interfaces/msg/Duration`` of ``seconds``, clamped to [0, 2**31 - 1]."""
+    seconds = min(max(seconds, 0.0), 2.0**31 - 1)
+    sec = math.floor(seconds)
+    nanosec = min(round((seconds - sec) * 1e9), 999_999_999)
+    return message("builtin_interfaces/msg/Duration", sec=int(sec), nanosec=int(nanosec))
+
+
+def pose_stamped(stamp: float, frame_id: str, x: float, y: float, yaw: float) -> Any:
+    """A PoseStamped on the ground plane: (x, y), heading ``yaw``."""
+    point = message("geometry_msgs/msg/Point", x=float(x), y=float(y), z=0.0)
+    pose = message("geometry_msgs/msg/Pose", position=point, orientation=quaternion(yaw))
+    return message(POSE_STAMPED, header=header(max(float(stamp), 0.0), frame_id), pose=pose)
 
 
 def seconds_of(stamp: Any) -> float:
@@ -143,3 +165,40 @@ def battery_state(
         location="",
         serial_number="",
     )
+
+
+_DTYPES: Final = {
+    "bool": np.bool_,
+    "int8": np.int8,
+    "uint8": np.uint8,
+    "char": np.uint8,
+    "byte": np.uint8,
+    "int16": np.int16,
+    "uint16": np.uint16,
+    "int32": np.int32,
+    "uint32": np.uint32,
+    "int64": np.int64,
+    "uint64": np.uint64,
+    "float32": np.float32,
+    "float64": np.float64,
+}
+
+
+def default(name: str) -> Any:
+    """A message of type ``name`` with every field at its zero value (as a ROS 2 client
+    library constructs one): numbers 0, strings empty, sequences empty, arrays of zeros."""
+    return message(name, **{field: _zero(desc) for field, desc in store().fielddefs[name][1]})
+
+
+def _zero(desc: Any) -> Any:
+    kind, rest = desc
+    if kind == Nodetype.NAME:
+        return default(rest)
+    if kind == Nodetype.BASE:
+        base = rest[0]
+        return "" if base == "string" else (False if base == "bool" else _DTYPES[base](0).item())
+    inner, size = rest
+    count = size if kind == Nodetype.ARRAY else 0
+    if inner[0] == Nodetype.BASE and inner[1][0] in _DTYPES:
+        return np.zeros(count, dtype=_DTYPES[inner[1][0]])
+    return [_zero(inner) for _ in range(count)]

@@ -41,8 +41,9 @@ ATTACHMENT_BYTES: Final = 8 + 8 + 1 + GID_BYTES
 _TOKEN = r"[A-Za-z_][A-Za-z0-9_]*"
 _NAME = re.compile(rf"^/?{_TOKEN}(/{_TOKEN})*$")
 _NAMESPACE = re.compile(rf"^(/|(/{_TOKEN})+)$")
-_TYPE = re.compile(rf"^({_TOKEN})/(msg|srv)/({_TOKEN})$")
-_DDS_TYPE = re.compile(rf"^({_TOKEN})::(msg|srv)::dds_::({_TOKEN})_$")
+# an action's services and feedback are named under its package's ``action`` kind
+_TYPE = re.compile(rf"^({_TOKEN})/(msg|srv|action)/({_TOKEN})$")
+_DDS_TYPE = re.compile(rf"^({_TOKEN})::(msg|srv|action)::dds_::({_TOKEN})_$")
 _HASH = re.compile(r"^RIHS01_[0-9a-f]{64}$")
 
 

@@ -1,4 +1,5 @@
-"""``python -m pnav.ros2``: RViz's 2D Goal Pose in and each robot's plan out (rviz.py).
+"""``python -m pnav.ros2``: RViz's 2D Goal Pose in and each robot's plan out (rviz.py), and
+Nav2's NavigateToPose and NavigateThroughPoses actions served per robot (nav2actions.py).
 
 Started by ``pnav up --robot-link ros2`` (and ``pnav demo``) as a supervised process acting
 for people (``pnav_user``, the Zenoh user ``user``), with the robot link's variables

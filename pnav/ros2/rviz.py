@@ -7,14 +7,14 @@ write it did not have. It reads the robot-link file the bridge reads (namespaces
 
 - ``/goal_pose`` and each robot's ``<ns>/goal_pose`` (geometry_msgs/msg/PoseStamped, in the
   ``map`` frame; RViz publishes its tool's pose there) -> the robot's goal: its active goal
-  superseded, the new one at (x, y) with the default tolerance. ``/goal_pose`` is the goal of
-  the robot with the empty namespace, or of the only robot; with several robots and none
-  un-namespaced it is refused (publish on ``<ns>/goal_pose``). The heading is ignored: goals
-  carry no heading yet.
+  superseded, the new one at (x, y) with the default tolerance and the arrow's heading.
+  ``/goal_pose`` is the goal of the robot with the empty namespace, or of the only robot;
+  with several robots and none un-namespaced it is refused (publish on ``<ns>/goal_pose``).
 - each ``planned_path`` row (its notification's image, or the row read back) -> a
   nav_msgs/msg/Path on ``<ns>/plan`` in the ``map`` frame, stamped with the row's stamp; each
   pose heads towards the next waypoint. An empty row is an empty Path (no path in force), as
   Nav2's planner clears RViz's display.
+- Nav2's NavigateToPose and NavigateThroughPoses actions, per robot (nav2actions.py).
 
 A goal that cannot be a goal row is refused and counted (``refused[reason]``), logged.
 """
@@ -39,6 +39,7 @@ from common.errors import ContractError
 from common.robotlink import RobotLinkSettings
 from common.ros2node import Publisher, Ros2Node, type_of_key
 from common.runtime import Runtime
+from pnav.ros2.nav2actions import Nav2Actions
 
 logger = logging.getLogger("pnav.ros2.rviz")
 
@@ -68,6 +69,7 @@ class RvizLink:
         self.runtime = runtime
         self.settings = settings
         self.node = Ros2Node(ros_session, settings.domain_id, NODE_NAME)
+        self.nav = Nav2Actions(runtime, self.node)  # Nav2's actions, per robot
         self.robots: dict[str, str] = {}  # robot -> resolved namespace
         self.plans: dict[str, Publisher] = {}
         self.goals_set = 0
@@ -109,6 +111,7 @@ class RvizLink:
         if self._subscriber is not None:
             with contextlib.suppress(Exception):
                 self._subscriber.undeclare()
+        await self.nav.close()
         self.node.close()
 
     async def run(self, stop: asyncio.Event) -> None:
@@ -143,6 +146,7 @@ class RvizLink:
         self.plans[robot] = self.node.publisher(
             rz.fully_qualified(ns, topics.plan), ros2types.PATH, rz.RELIABLE
         )
+        self.nav.declare(robot, ns)
 
     # -- goals -------------------------------------------------------------------------------
     def _from_zenoh(self, robot: str | None, key: str, payload: bytes, att: bytes | None) -> None:

@@ -56,10 +56,14 @@ class TurtleBot3:
             ROS2Subscriber,
             get_message_class,
             get_registry,
+            message_registry,
         )
 
         self._folder = tempfile.TemporaryDirectory(prefix="tb3-msgs-")
         write_definitions(Path(self._folder.name))
+        # the SDK keeps one registry per process, on the first robot's folder (removed when
+        # that robot closes): each robot starts its own
+        message_registry._registry = None
         get_registry(self._folder.name)
         self.x, self.y, self.yaw = x, y, yaw
         self.v = self.w = 0.0
@@ -99,6 +103,12 @@ class TurtleBot3:
                 entity.close()
             except Exception:
                 pass
+        # the SDK's one session per process is on this robot's router: the next robot, in
+        # another test, opens its own on its own router
+        from zenoh_ros2_sdk.session import ZenohSession
+
+        if ZenohSession._instance is not None:
+            ZenohSession._instance.close()
         self._folder.cleanup()
 
     def _on_cmd(self, msg: Any) -> None:
