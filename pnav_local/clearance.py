@@ -138,41 +138,69 @@ def gaps(
     Index (built once for the decision's several calls)."""
     shape = xs.shape
     px, py = xs.ravel().astype(np.float64), ys.ravel().astype(np.float64)
-    out = np.full(len(px), np.inf)
     reach = footprint.reach_m + max(needed_m, 0.0)
     index = hits if isinstance(hits, Index) else Index(hits, reach)
-    if index.empty or len(px) == 0:
-        return out.reshape(shape)
     polygon = footprint.polygon
+    if polygon is None:
+        out = np.sqrt(squared(px, py, index, reach)) - footprint.radius_m
+        return out.reshape(shape)
+    headings = np.zeros(len(px)) if yaws is None else yaws.ravel().astype(np.float64)
+    return _nearest(px, py, headings, index, reach, polygon).reshape(shape)
+
+
+def squared(px: FloatArray, py: FloatArray, index: Index, reach: float) -> FloatArray:
+    """Per point (flat, float64), the squared distance to its nearest hit: exact within
+    ``reach``, at least ``reach**2`` otherwise (``inf`` with none in its box). What
+    ``gaps`` of a disc takes the root of; dwa asks it once for several kinds of point."""
+    return _nearest(px, py, None, index, reach, None)
+
+
+def _nearest(
+    px: FloatArray,
+    py: FloatArray,
+    headings: FloatArray | None,
+    index: Index,
+    reach: float,
+    polygon: FloatArray | None,
+) -> FloatArray:
+    """Per point, the smallest over the hits of its box: the squared distance (no polygon)
+    or the polygon's signed gap (the hit in the frame of the robot at the pose)."""
+    out = np.full(len(px), np.inf)
+    if index.empty or len(px) == 0:
+        return out
     counts, starts = index.pairs(px, py, reach)
     boxes = len(counts) // len(px)
     per_pose = counts.reshape(len(px), boxes).sum(axis=1)
-    if polygon is not None:
-        headings = np.zeros(len(px)) if yaws is None else yaws.ravel().astype(np.float64)
+    if polygon is not None and headings is not None:
         cos, sin = np.cos(headings), np.sin(headings)
-    # poses in runs of at most PAIRS_PER_PRODUCT pairs (a single pose's box may exceed it)
-    done = np.concatenate([[0], np.cumsum(per_pose)])
+    # poses in runs of at most PAIRS_PER_PRODUCT pairs (a single pose's box may exceed it);
+    # mostly one run, found without a search
+    done = np.cumsum(per_pose)
     begin = 0
     while begin < len(px):
-        end = int(np.searchsorted(done, done[begin] + PAIRS_PER_PRODUCT, "right")) - 1
-        end = min(len(px), max(end, begin + 1))
+        if done[-1] - (done[begin - 1] if begin else 0) <= PAIRS_PER_PRODUCT:
+            end = len(px)
+        else:
+            before = done[begin - 1] if begin else 0
+            end = int(np.searchsorted(done, before + PAIRS_PER_PRODUCT, "right"))
+            end = min(len(px), max(end, begin + 1))
         c, s = counts[begin * boxes : end * boxes], starts[begin * boxes : end * boxes]
         found = _gather(c, s)
         n = per_pose[begin:end]
         owner = np.repeat(np.arange(begin, end), n)
         dx = index.x[found] - px[owner]
         dy = index.y[found] - py[owner]
-        if polygon is None:
-            d = dx * dx + dy * dy  # squared: one root per pose below, not one per pair
+        if polygon is None or headings is None:
+            d = dx * dx + dy * dy  # squared: one root per pose (the caller's), not per pair
         else:
-            # the hit in the frame of the robot at the pose
             co, so = cos[owner], sin[owner]
             d = _polygon_gap(co * dx + so * dy, -so * dx + co * dy, polygon)
-        some = n > 0
-        if some.any():
-            at = (np.cumsum(n) - n)[some]
-            out[begin:end][some] = np.minimum.reduceat(d, at)
+        if len(d):
+            at = done[begin:end] - done[begin] + n[0] - n  # each pose's first pair
+            some = n > 0
+            if some.all():
+                out[begin:end] = np.minimum.reduceat(d, at)
+            else:
+                out[begin:end][some] = np.minimum.reduceat(d, at[some])
         begin = end
-    if polygon is None:
-        out = np.sqrt(out) - footprint.radius_m
-    return out.reshape(shape)
+    return out

@@ -151,8 +151,24 @@ def choose(
     xs, ys, yaws = (
         np.concatenate([poses[k].ravel(), [start[k]], on[k][: len(slow)].ravel()]) for k in range(3)
     )
-    every = clearance.gaps(xs, ys, yaws, hits, foot, needed)
-    n = poses[0].size
+    n, m = poses[0].size, len(xs)
+    near_path = radius + p.margin_m
+    if foot.polygon is None:
+        # a disc's gaps and the path's distances are both roots of squared distances: one
+        # query for all (the path's reach is within the roll-outs'; beyond it, only "not
+        # nearer than" is read, as tr.path_blocked reads it)
+        dense = tr.densify(local.points)
+        d2 = clearance.squared(
+            np.concatenate([xs, dense[:, 0]]),
+            np.concatenate([ys, dense[:, 1]]),
+            hits,
+            foot.reach_m + needed,
+        )
+        every = np.sqrt(d2[:m]) - radius
+        blocked = len(dense) > 0 and bool(np.sqrt(d2[m:]).min() < near_path)
+    else:
+        every = clearance.gaps(xs, ys, yaws, hits, foot, needed)
+        blocked = tr.path_blocked(local, hits, near_path)
     gaps = every[:n].reshape(poses[0].shape)
     start_gap = float(every[n])
     beyond = every[n + 1 :].reshape(len(slow), p.steps)
@@ -174,7 +190,6 @@ def choose(
     if not ok.any():
         return Choice(win, ok, None, None, local, v_cap)
     weights = p.weights
-    blocked = tr.path_blocked(local, hits, radius + p.margin_m)
     if blocked:
         # the path runs into what the lidar shows (the planner has not re-planned yet):
         # keeping to it is worth little, getting round toward the carrot is what counts
@@ -190,14 +205,13 @@ def choose(
     # early rejection: the clearance term lies between 0 and its weight x the speed share,
     # so an arc whose total with full clearance is below another's with none cannot win;
     # only the others are measured out to the clearance cap (the winner is the same)
-    bound = scored(np.full_like(gaps, np.inf))
+    bound = scored(np.full((len(gaps), 1), np.inf))
     floor = bound.total - weights.clearance * bound.clearance
     contenders = np.flatnonzero(ok & (bound.total >= floor[ok].max() - 1e-9))
     if p.clearance_cap_m > needed:
         at_cap = (poses[0][contenders], poses[1][contenders], poses[2][contenders])
-        # an index of strips as wide as this longer reach asks
-        wide = clearance.Index(points, foot.reach_m + p.clearance_cap_m)
-        gaps[contenders] = clearance.gaps(*at_cap, wide, foot, p.clearance_cap_m)
+        # the same index: a longer reach only looks in more of its strips
+        gaps[contenders] = clearance.gaps(*at_cap, hits, foot, p.clearance_cap_m)
     scores = scored(gaps, bound)
     best = int(np.argmax(np.where(ok, scores.total, -np.inf)))
     return Choice(win, ok, scores, best, local, v_cap, blocked)
