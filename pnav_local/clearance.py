@@ -26,10 +26,11 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from pnav_local.bounds import PAIRS_PER_PRODUCT, FloatArray
+from pnav_local.bounds import PAIRS_PER_PRODUCT, BoolArray, FloatArray
 
 IntArray = npt.NDArray[np.int64]
 _STRIPS_PER_REACH = 1  # strip width: the search reach (3 strips a query)
+MAX_CELLS = 1 << 16  # the most cells Index counts hits in (a table of 512 KB)
 
 
 @dataclass(frozen=True)
@@ -73,6 +74,40 @@ class Index:
         order = np.argsort(key, kind="stable")
         self.key = key[order]
         self.x, self.y = pts[order, 0], pts[order, 1]
+        self.table: IntArray | None = None
+        if not self.empty and math.isfinite(self.width):
+            self._count_cells(pts)
+
+    def _count_cells(self, pts: FloatArray) -> None:
+        """How many hits lie in each square cell ``width`` wide, as a summed-area table:
+        most poses have no hit near, and a few lookups tell so without the strips' search."""
+        cx = np.floor(pts[:, 0] / self.width).astype(np.int64)
+        cy = np.floor(pts[:, 1] / self.width).astype(np.int64)
+        self.x0, self.y0 = int(cx.min()), int(cy.min())
+        nx, ny = int(cx.max()) - self.x0 + 1, int(cy.max()) - self.y0 + 1
+        if nx * ny > MAX_CELLS:
+            return  # a reach too short for the scan's extent: the strips alone
+        cells = (cx - self.x0 + 1) * (ny + 1) + (cy - self.y0 + 1)
+        table = np.bincount(cells, minlength=(nx + 1) * (ny + 1)).reshape(nx + 1, ny + 1)
+        self.table = table.cumsum(axis=0).cumsum(axis=1)
+
+    def near(self, px: FloatArray, py: FloatArray, reach: float) -> BoolArray | None:
+        """Per query point, whether any hit lies in the cells within ``reach`` of its cell
+        (every hit within ``reach`` of it does); None: no table, every point may have one."""
+        table = self.table
+        if table is None:
+            return None
+        k = math.ceil(reach / self.width)
+        nx, ny = table.shape[0] - 1, table.shape[1] - 1
+        qx = np.floor(px / self.width) - self.x0
+        qy = np.floor(py / self.width) - self.y0
+        lo_x = np.clip(qx - k, 0, nx).astype(np.int64)
+        hi_x = np.clip(qx + k + 1, 0, nx).astype(np.int64)
+        lo_y = np.clip(qy - k, 0, ny).astype(np.int64)
+        hi_y = np.clip(qy + k + 1, 0, ny).astype(np.int64)
+        inside = table[hi_x, hi_y] - table[lo_x, hi_y] - table[hi_x, lo_y] + table[lo_x, lo_y]
+        out: BoolArray = inside > 0
+        return out
 
     def pairs(self, px: FloatArray, py: FloatArray, reach: float) -> tuple[IntArray, IntArray]:
         """Per query point (flat) and strip, how many hits its box (``reach`` either side)
@@ -162,11 +197,23 @@ def _nearest(
     index: Index,
     reach: float,
     polygon: FloatArray | None,
+    sifted: bool = False,
 ) -> FloatArray:
     """Per point, the smallest over the hits of its box: the squared distance (no polygon)
-    or the polygon's signed gap (the hit in the frame of the robot at the pose)."""
+    or the polygon's signed gap (the hit in the frame of the robot at the pose). ``sifted``:
+    every point has a hit in the cells near it (Index.near said so)."""
     out = np.full(len(px), np.inf)
     if index.empty or len(px) == 0:
+        return out
+    near = None if sifted else index.near(px, py, reach)
+    if near is not None and not near.all():
+        # only the points with a hit near are searched; the others have none within reach
+        some = np.flatnonzero(near)
+        if len(some):
+            out[some] = _nearest(
+                px[some], py[some], None if headings is None else headings[some],
+                index, reach, polygon, sifted=True,
+            )  # fmt: skip
         return out
     counts, starts = index.pairs(px, py, reach)
     boxes = len(counts) // len(px)
