@@ -66,6 +66,9 @@ class Window:
 
     v: FloatArray
     w: FloatArray
+    # a grid's angular samples per speed (w the faster index, the same w's for every
+    # speed): the roll-out then takes one sine and cosine per w, not per trajectory; 0: any
+    turns: int = 0
 
 
 def window(
@@ -100,7 +103,7 @@ def window(
             bisect.insort(ws, extra)
     # v over w, w fastest: what a meshgrid ("ij") of the unique speeds raveled gives
     vs = np.unique(vs) if vs[-1] != vs[0] else vs[:1]
-    return Window(np.repeat(vs, len(ws)), np.tile(np.array(ws), len(vs)))
+    return Window(np.repeat(vs, len(ws)), np.tile(np.array(ws), len(vs)), len(ws))
 
 
 def start_pose(v0: float, w0: float, delay_s: float) -> tuple[float, float, float]:
@@ -113,16 +116,24 @@ def start_pose(v0: float, w0: float, delay_s: float) -> tuple[float, float, floa
 
 
 def arcs(
-    v: FloatArray, w: FloatArray, times: FloatArray
+    v: FloatArray, w: FloatArray, times: FloatArray, turns: int = 0
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Poses (x, y, yaw), each trajectories x times, of constant-velocity arcs from the
-    origin facing +x."""
+    origin facing +x. ``turns``: ``w`` repeats every ``turns`` trajectories (Window.turns)."""
     t = times[None, :]
-    yaw = w[:, None] * t
     straight = np.abs(w) < 1e-6
     radius = v[:, None] / np.where(straight, 1.0, w)[:, None]
-    x = radius * np.sin(yaw)
-    y = radius * (1.0 - np.cos(yaw))
+    if turns > 0 and len(w) % turns == 0 and len(w) > turns:
+        # the same products, sines and cosines as below, taken once per w and broadcast
+        yaw_w = w[:turns, None] * t
+        shape = (len(w) // turns, turns, len(times))
+        yaw = np.broadcast_to(yaw_w, shape).reshape(len(w), len(times))
+        x = (radius.reshape(shape[0], turns, 1) * np.sin(yaw_w)).reshape(yaw.shape)
+        y = (radius.reshape(shape[0], turns, 1) * (1.0 - np.cos(yaw_w))).reshape(yaw.shape)
+    else:
+        yaw = w[:, None] * t
+        x = radius * np.sin(yaw)
+        y = radius * (1.0 - np.cos(yaw))
     if straight.any():
         x[straight] = (v[:, None] * t)[straight]
         y[straight] = 0.0
@@ -133,7 +144,7 @@ def rollout(
     win: Window, start: tuple[float, float, float], horizon_s: float, steps: int
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Every sampled trajectory's poses at ``steps`` instants over the horizon, from ``start``."""
-    x, y, yaw = arcs(win.v, win.w, _times(horizon_s, steps))
+    x, y, yaw = arcs(win.v, win.w, _times(horizon_s, steps), win.turns)
     sx, sy, syaw = start
     c, s = math.cos(syaw), math.sin(syaw)
     return sx + c * x - s * y, sy + s * x + c * y, syaw + yaw
