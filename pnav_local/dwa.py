@@ -75,10 +75,27 @@ def obstacles(scan: LaserScan, reach_m: float) -> tr.FloatArray:
     return tr.merge_obstacles(np.column_stack([r * cos[valid], r * sin[valid]]))
 
 
+# the last path's points as arrays, by identity: a row is followed for many decisions, and
+# turning its tuples into arrays each time cost more than moving them (hashing the row too)
+_last_path: list[tuple[PlannedPath, tr.FloatArray, tr.FloatArray]] = []
+
+
+def _path_arrays(path: PlannedPath) -> tuple[tr.FloatArray, tr.FloatArray]:
+    """The path's points as arrays (read only), made once per row object."""
+    last = _last_path[0] if _last_path else None
+    if last is not None and last[0] is path:
+        return last[1], last[2]
+    xs, ys = np.asarray(path.xs, dtype=np.float64), np.asarray(path.ys, dtype=np.float64)
+    xs.flags.writeable = ys.flags.writeable = False
+    _last_path[:] = [(path, xs, ys)]
+    return xs, ys
+
+
 def path_in_robot_frame(path: PlannedPath, odom: Odometry) -> tr.FloatArray:
     """The path's points in the frame of the robot at ``odom``."""
-    dx = np.asarray(path.xs, dtype=np.float64) - odom.x
-    dy = np.asarray(path.ys, dtype=np.float64) - odom.y
+    xs, ys = _path_arrays(path)
+    dx = xs - odom.x
+    dy = ys - odom.y
     c, s = math.cos(odom.yaw), math.sin(odom.yaw)
     return np.column_stack([c * dx + s * dy, -s * dx + c * dy])
 

@@ -403,6 +403,9 @@ def further(
     ``clear_for`` tests."""
     v = np.abs(win.v)
     slow = np.flatnonzero((v * horizon_s < travel_m) & (v > 1e-6))
+    if len(slow) == 0:  # the usual case at speed: a dozen numpy calls on nothing spared
+        none = np.zeros((0, steps))
+        return slow, (none, none, none)
     vs, ws = win.v[slow], win.w[slow]
     turn_s = np.where(np.abs(ws) > 1e-6, math.pi / np.maximum(np.abs(ws), 1e-6), np.inf)
     end_s = np.maximum(np.minimum(travel_m / v[slow], turn_s), horizon_s)
