@@ -7,8 +7,10 @@ nearest hit of a pose is searched only among hits within ``needed`` of its footp
 with a sorted-strips index instead of every pose against every hit (a 720-beam scan of
 clutter is some 600 hits; a pose has a few dozen within reach): hits sorted by
 ``(x strip, y)``, per pose and strip one ``searchsorted`` for the y range, the pairs
-gathered and measured in float64, the smallest per pose. A pose with no hit that near gets
-a value of at least ``needed`` (``inf`` with none in its box), which every caller caps or
+gathered and measured in float64, the smallest per pose. The hits are also counted per
+square cell a strip wide (a summed-area table), so a pose with no hit in the cells around it
+is not searched at all (most poses of a long horizon). A pose with no hit that near gets a
+value of at least ``needed`` (``inf`` with none in its box), which every caller caps or
 compares below ``needed``.
 
 The footprint is the disc of ``radius_m`` (gap: centre distance minus the radius) or a
