@@ -33,6 +33,7 @@ from pnav_local.bounds import PAIRS_PER_PRODUCT, BoolArray, FloatArray
 IntArray = npt.NDArray[np.int64]
 _STRIPS_PER_REACH = 1  # strip width: the search reach (3 strips a query)
 MAX_CELLS = 1 << 16  # the most cells Index counts hits in (a table of 512 KB)
+SIFT_FROM = 256  # poses in a query from which the table sifts out those with no hit near
 
 
 @dataclass(frozen=True)
@@ -207,7 +208,8 @@ def _nearest(
     out = np.full(len(px), np.inf)
     if index.empty or len(px) == 0:
         return out
-    near = None if sifted else index.near(px, py, reach)
+    # a few poses are searched for less than the table's lookups cost
+    near = None if sifted or len(px) < SIFT_FROM else index.near(px, py, reach)
     if near is not None and not near.all():
         # only the points with a hit near are searched; the others have none within reach
         some = np.flatnonzero(near)
