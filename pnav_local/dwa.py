@@ -227,8 +227,12 @@ def choose(
     contenders = np.flatnonzero(ok & (bound.total >= floor[ok].max() - 1e-9))
     if p.clearance_cap_m > needed:
         at_cap = (poses[0][contenders], poses[1][contenders], poses[2][contenders])
-        # the same index: a longer reach only looks in more of its strips
-        gaps[contenders] = clearance.gaps(*at_cap, hits, foot, p.clearance_cap_m)
+        # the same index while the longer reach looks in a few more of its strips (7 at
+        # most); past that, one of strips as wide as it asks (a pose's boxes stay bounded)
+        wide, cap_reach = hits, foot.reach_m + p.clearance_cap_m
+        if cap_reach > 3.0 * (foot.reach_m + needed):
+            wide = clearance.Index(points, cap_reach)
+        gaps[contenders] = clearance.gaps(*at_cap, wide, foot, p.clearance_cap_m)
     scores = scored(gaps, bound)
     best = int(np.argmax(np.where(ok, scores.total, -np.inf)))
     return Choice(win, ok, scores, best, local, v_cap, blocked)
