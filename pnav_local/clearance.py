@@ -7,8 +7,10 @@ nearest hit of a pose is searched only among hits within ``needed`` of its footp
 with a sorted-strips index instead of every pose against every hit (a 720-beam scan of
 clutter is some 600 hits; a pose has a few dozen within reach): hits sorted by
 ``(x strip, y)``, per pose and strip one ``searchsorted`` for the y range, the pairs
-gathered and measured in float64, the smallest per pose. A pose with no hit that near gets
-a value of at least ``needed`` (``inf`` with none in its box), which every caller caps or
+gathered and measured in float64, the smallest per pose. The hits are also counted per
+square cell a strip wide (a summed-area table), so a pose with no hit in the cells around it
+is not searched at all (most poses of a long horizon). A pose with no hit that near gets a
+value of at least ``needed`` (``inf`` with none in its box), which every caller caps or
 compares below ``needed``.
 
 The footprint is the disc of ``radius_m`` (gap: centre distance minus the radius) or a
@@ -26,10 +28,12 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from pnav_local.bounds import PAIRS_PER_PRODUCT, FloatArray
+from pnav_local.bounds import PAIRS_PER_PRODUCT, BoolArray, FloatArray
 
 IntArray = npt.NDArray[np.int64]
 _STRIPS_PER_REACH = 1  # strip width: the search reach (3 strips a query)
+MAX_CELLS = 1 << 16  # the most cells Index counts hits in (a table of 512 KB)
+SIFT_FROM = 256  # poses in a query from which the table sifts out those with no hit near
 
 
 @dataclass(frozen=True)
@@ -73,6 +77,40 @@ class Index:
         order = np.argsort(key, kind="stable")
         self.key = key[order]
         self.x, self.y = pts[order, 0], pts[order, 1]
+        self.table: IntArray | None = None
+        if not self.empty and math.isfinite(self.width):
+            self._count_cells(pts)
+
+    def _count_cells(self, pts: FloatArray) -> None:
+        """How many hits lie in each square cell ``width`` wide, as a summed-area table:
+        most poses have no hit near, and a few lookups tell so without the strips' search."""
+        cx = np.floor(pts[:, 0] / self.width).astype(np.int64)
+        cy = np.floor(pts[:, 1] / self.width).astype(np.int64)
+        self.x0, self.y0 = int(cx.min()), int(cy.min())
+        nx, ny = int(cx.max()) - self.x0 + 1, int(cy.max()) - self.y0 + 1
+        if nx * ny > MAX_CELLS:
+            return  # a reach too short for the scan's extent: the strips alone
+        cells = (cx - self.x0 + 1) * (ny + 1) + (cy - self.y0 + 1)
+        table = np.bincount(cells, minlength=(nx + 1) * (ny + 1)).reshape(nx + 1, ny + 1)
+        self.table = table.cumsum(axis=0).cumsum(axis=1)
+
+    def near(self, px: FloatArray, py: FloatArray, reach: float) -> BoolArray | None:
+        """Per query point, whether any hit lies in the cells within ``reach`` of its cell
+        (every hit within ``reach`` of it does); None: no table, every point may have one."""
+        table = self.table
+        if table is None:
+            return None
+        k = math.ceil(reach / self.width)
+        nx, ny = table.shape[0] - 1, table.shape[1] - 1
+        qx = np.floor(px / self.width) - self.x0
+        qy = np.floor(py / self.width) - self.y0
+        lo_x = np.clip(qx - k, 0, nx).astype(np.int64)
+        hi_x = np.clip(qx + k + 1, 0, nx).astype(np.int64)
+        lo_y = np.clip(qy - k, 0, ny).astype(np.int64)
+        hi_y = np.clip(qy + k + 1, 0, ny).astype(np.int64)
+        inside = table[hi_x, hi_y] - table[lo_x, hi_y] - table[hi_x, lo_y] + table[lo_x, lo_y]
+        out: BoolArray = inside > 0
+        return out
 
     def pairs(self, px: FloatArray, py: FloatArray, reach: float) -> tuple[IntArray, IntArray]:
         """Per query point (flat) and strip, how many hits its box (``reach`` either side)
@@ -138,41 +176,82 @@ def gaps(
     Index (built once for the decision's several calls)."""
     shape = xs.shape
     px, py = xs.ravel().astype(np.float64), ys.ravel().astype(np.float64)
-    out = np.full(len(px), np.inf)
     reach = footprint.reach_m + max(needed_m, 0.0)
     index = hits if isinstance(hits, Index) else Index(hits, reach)
-    if index.empty or len(px) == 0:
-        return out.reshape(shape)
     polygon = footprint.polygon
+    if polygon is None:
+        out = np.sqrt(squared(px, py, index, reach)) - footprint.radius_m
+        return out.reshape(shape)
+    headings = np.zeros(len(px)) if yaws is None else yaws.ravel().astype(np.float64)
+    return _nearest(px, py, headings, index, reach, polygon).reshape(shape)
+
+
+def squared(px: FloatArray, py: FloatArray, index: Index, reach: float) -> FloatArray:
+    """Per point (flat, float64), the squared distance to its nearest hit: exact within
+    ``reach``, at least ``reach**2`` otherwise (``inf`` with none in its box). What
+    ``gaps`` of a disc takes the root of; dwa asks it once for several kinds of point."""
+    return _nearest(px, py, None, index, reach, None)
+
+
+def _nearest(
+    px: FloatArray,
+    py: FloatArray,
+    headings: FloatArray | None,
+    index: Index,
+    reach: float,
+    polygon: FloatArray | None,
+    sifted: bool = False,
+) -> FloatArray:
+    """Per point, the smallest over the hits of its box: the squared distance (no polygon)
+    or the polygon's signed gap (the hit in the frame of the robot at the pose). ``sifted``:
+    every point has a hit in the cells near it (Index.near said so)."""
+    out = np.full(len(px), np.inf)
+    if index.empty or len(px) == 0:
+        return out
+    # a few poses are searched for less than the table's lookups cost
+    near = None if sifted or len(px) < SIFT_FROM else index.near(px, py, reach)
+    if near is not None and not near.all():
+        # only the points with a hit near are searched; the others have none within reach
+        some = np.flatnonzero(near)
+        if len(some):
+            out[some] = _nearest(
+                px[some], py[some], None if headings is None else headings[some],
+                index, reach, polygon, sifted=True,
+            )  # fmt: skip
+        return out
     counts, starts = index.pairs(px, py, reach)
     boxes = len(counts) // len(px)
     per_pose = counts.reshape(len(px), boxes).sum(axis=1)
-    if polygon is not None:
-        headings = np.zeros(len(px)) if yaws is None else yaws.ravel().astype(np.float64)
+    if polygon is not None and headings is not None:
         cos, sin = np.cos(headings), np.sin(headings)
-    # poses in runs of at most PAIRS_PER_PRODUCT pairs (a single pose's box may exceed it)
-    done = np.concatenate([[0], np.cumsum(per_pose)])
+    # poses in runs of at most PAIRS_PER_PRODUCT pairs (a single pose's box may exceed it);
+    # mostly one run, found without a search
+    done = np.cumsum(per_pose)
     begin = 0
     while begin < len(px):
-        end = int(np.searchsorted(done, done[begin] + PAIRS_PER_PRODUCT, "right")) - 1
-        end = min(len(px), max(end, begin + 1))
+        if done[-1] - (done[begin - 1] if begin else 0) <= PAIRS_PER_PRODUCT:
+            end = len(px)
+        else:
+            before = done[begin - 1] if begin else 0
+            end = int(np.searchsorted(done, before + PAIRS_PER_PRODUCT, "right"))
+            end = min(len(px), max(end, begin + 1))
         c, s = counts[begin * boxes : end * boxes], starts[begin * boxes : end * boxes]
         found = _gather(c, s)
         n = per_pose[begin:end]
         owner = np.repeat(np.arange(begin, end), n)
         dx = index.x[found] - px[owner]
         dy = index.y[found] - py[owner]
-        if polygon is None:
-            d = dx * dx + dy * dy  # squared: one root per pose below, not one per pair
+        if polygon is None or headings is None:
+            d = dx * dx + dy * dy  # squared: one root per pose (the caller's), not per pair
         else:
-            # the hit in the frame of the robot at the pose
             co, so = cos[owner], sin[owner]
             d = _polygon_gap(co * dx + so * dy, -so * dx + co * dy, polygon)
-        some = n > 0
-        if some.any():
-            at = (np.cumsum(n) - n)[some]
-            out[begin:end][some] = np.minimum.reduceat(d, at)
+        if len(d):
+            at = done[begin:end] - done[begin] + n[0] - n  # each pose's first pair
+            some = n > 0
+            if some.all():
+                out[begin:end] = np.minimum.reduceat(d, at)
+            else:
+                out[begin:end][some] = np.minimum.reduceat(d, at[some])
         begin = end
-    if polygon is None:
-        out = np.sqrt(out) - footprint.radius_m
-    return out.reshape(shape)
+    return out

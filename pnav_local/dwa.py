@@ -78,10 +78,27 @@ def obstacles(scan: LaserScan, reach_m: float) -> tr.FloatArray:
     return tr.merge_obstacles(np.column_stack([r * cos[valid], r * sin[valid]]))
 
 
+# the last path's points as arrays, by identity: a row is followed for many decisions, and
+# turning its tuples into arrays each time cost more than moving them (hashing the row too)
+_last_path: list[tuple[PlannedPath, tr.FloatArray, tr.FloatArray]] = []
+
+
+def _path_arrays(path: PlannedPath) -> tuple[tr.FloatArray, tr.FloatArray]:
+    """The path's points as arrays (read only), made once per row object."""
+    last = _last_path[0] if _last_path else None
+    if last is not None and last[0] is path:
+        return last[1], last[2]
+    xs, ys = np.asarray(path.xs, dtype=np.float64), np.asarray(path.ys, dtype=np.float64)
+    xs.flags.writeable = ys.flags.writeable = False
+    _last_path[:] = [(path, xs, ys)]
+    return xs, ys
+
+
 def path_in_robot_frame(path: PlannedPath, odom: Odometry) -> tr.FloatArray:
     """The path's points in the frame of the robot at ``odom``."""
-    dx = np.asarray(path.xs, dtype=np.float64) - odom.x
-    dy = np.asarray(path.ys, dtype=np.float64) - odom.y
+    xs, ys = _path_arrays(path)
+    dx = xs - odom.x
+    dy = ys - odom.y
     c, s = math.cos(odom.yaw), math.sin(odom.yaw)
     return np.column_stack([c * dx + s * dy, -s * dx + c * dy])
 
@@ -154,8 +171,24 @@ def choose(
     xs, ys, yaws = (
         np.concatenate([poses[k].ravel(), [start[k]], on[k][: len(slow)].ravel()]) for k in range(3)
     )
-    every = clearance.gaps(xs, ys, yaws, hits, foot, needed)
-    n = poses[0].size
+    n, m = poses[0].size, len(xs)
+    near_path = radius + p.margin_m
+    if foot.polygon is None:
+        # a disc's gaps and the path's distances are both roots of squared distances: one
+        # query for all (the path's reach is within the roll-outs'; beyond it, only "not
+        # nearer than" is read, as tr.path_blocked reads it)
+        dense = tr.densify(local.points)
+        d2 = clearance.squared(
+            np.concatenate([xs, dense[:, 0]]),
+            np.concatenate([ys, dense[:, 1]]),
+            hits,
+            foot.reach_m + needed,
+        )
+        every = np.sqrt(d2[:m]) - radius
+        blocked = len(dense) > 0 and bool(np.sqrt(d2[m:]).min() < near_path)
+    else:
+        every = clearance.gaps(xs, ys, yaws, hits, foot, needed)
+        blocked = tr.path_blocked(local, hits, near_path)
     gaps = every[:n].reshape(poses[0].shape)
     start_gap = float(every[n])
     beyond = every[n + 1 :].reshape(len(slow), p.steps)
@@ -177,7 +210,6 @@ def choose(
     if not ok.any():
         return Choice(win, ok, None, None, local, v_cap)
     weights = p.weights
-    blocked = tr.path_blocked(local, hits, radius + p.margin_m)
     if blocked:
         # the path runs into what the lidar shows (the planner has not re-planned yet):
         # keeping to it is worth little, getting round toward the carrot is what counts
@@ -193,13 +225,16 @@ def choose(
     # early rejection: the clearance term lies between 0 and its weight x the speed share,
     # so an arc whose total with full clearance is below another's with none cannot win;
     # only the others are measured out to the clearance cap (the winner is the same)
-    bound = scored(np.full_like(gaps, np.inf))
+    bound = scored(np.full((len(gaps), 1), np.inf))
     floor = bound.total - weights.clearance * bound.clearance
     contenders = np.flatnonzero(ok & (bound.total >= floor[ok].max() - 1e-9))
     if p.clearance_cap_m > needed:
         at_cap = (poses[0][contenders], poses[1][contenders], poses[2][contenders])
-        # an index of strips as wide as this longer reach asks
-        wide = clearance.Index(points, foot.reach_m + p.clearance_cap_m)
+        # the same index while the longer reach looks in a few more of its strips (7 at
+        # most); past that, one of strips as wide as it asks (a pose's boxes stay bounded)
+        wide, cap_reach = hits, foot.reach_m + p.clearance_cap_m
+        if cap_reach > 3.0 * (foot.reach_m + needed):
+            wide = clearance.Index(points, cap_reach)
         gaps[contenders] = clearance.gaps(*at_cap, wide, foot, p.clearance_cap_m)
     scores = scored(gaps, bound)
     top_arc = int(np.argmax(np.where(ok, scores.total, -np.inf)))

@@ -32,6 +32,8 @@ clearance + speed_w * speed``; the best admissible one wins.
 
 from __future__ import annotations
 
+import bisect
+import functools
 import math
 from dataclasses import dataclass
 
@@ -64,6 +66,9 @@ class Window:
 
     v: FloatArray
     w: FloatArray
+    # a grid's angular samples per speed (w the faster index, the same w's for every
+    # speed): the roll-out then takes one sine and cosine per w, not per trajectory; 0: any
+    turns: int = 0
 
 
 def window(
@@ -91,32 +96,47 @@ def window(
     w_low = max(-max_w, w0 - accel_w * dt)
     w_high = min(max_w, w0 + accel_w * dt)
     vs = np.linspace(v_low, max(v_low, v_high), max(1, v_samples))
-    ws = np.linspace(min(w_low, w_high), max(w_low, w_high), max(1, w_samples))
-    if w_low <= 0.0 <= w_high and not np.any(ws == 0.0):
-        ws = np.sort(np.append(ws, 0.0))
-    if extra_w is not None and w_low <= extra_w <= w_high and not np.any(ws == extra_w):
-        ws = np.sort(np.append(ws, extra_w))
-    grid_v, grid_w = np.meshgrid(np.unique(vs), ws, indexing="ij")
-    return Window(grid_v.ravel(), grid_w.ravel())
+    # a few dozen samples: the two insertions are list work, not four numpy calls each
+    ws = np.linspace(min(w_low, w_high), max(w_low, w_high), max(1, w_samples)).tolist()
+    for extra in (0.0, extra_w):
+        if extra is not None and w_low <= extra <= w_high and extra not in ws:
+            bisect.insort(ws, extra)
+    # v over w, w fastest: what a meshgrid ("ij") of the unique speeds raveled gives
+    vs = np.unique(vs) if vs[-1] != vs[0] else vs[:1]
+    return Window(np.repeat(vs, len(ws)), np.tile(np.array(ws), len(vs)), len(ws))
 
 
 def start_pose(v0: float, w0: float, delay_s: float) -> tuple[float, float, float]:
     """Where the robot is when a command sent now takes effect: ``delay_s`` at (v0, w0)."""
-    x, y, yaw = arcs(np.array([v0]), np.array([w0]), np.array([delay_s]))
-    return float(x[0, 0]), float(y[0, 0]), float(yaw[0, 0])
+    # arcs' arithmetic on scalars (a numpy call costs more than the sums)
+    yaw = w0 * delay_s
+    if abs(w0) < 1e-6:
+        return v0 * delay_s, 0.0, yaw
+    return v0 / w0 * math.sin(yaw), v0 / w0 * (1.0 - math.cos(yaw)), yaw
 
 
 def arcs(
-    v: FloatArray, w: FloatArray, times: FloatArray
+    v: FloatArray, w: FloatArray, times: FloatArray, turns: int = 0
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Poses (x, y, yaw), each trajectories x times, of constant-velocity arcs from the
-    origin facing +x."""
+    origin facing +x. ``turns``: ``w`` repeats every ``turns`` trajectories (Window.turns)."""
     t = times[None, :]
-    yaw = w[:, None] * t
     straight = np.abs(w) < 1e-6
-    safe_w = np.where(straight, 1.0, w)[:, None]
-    x = np.where(straight[:, None], v[:, None] * t, v[:, None] / safe_w * np.sin(yaw))
-    y = np.where(straight[:, None], 0.0, v[:, None] / safe_w * (1.0 - np.cos(yaw)))
+    radius = v[:, None] / np.where(straight, 1.0, w)[:, None]
+    if turns > 0 and len(w) % turns == 0 and len(w) > turns:
+        # the same products, sines and cosines as below, taken once per w and broadcast
+        yaw_w = w[:turns, None] * t
+        shape = (len(w) // turns, turns, len(times))
+        yaw = np.broadcast_to(yaw_w, shape).reshape(len(w), len(times))
+        x = (radius.reshape(shape[0], turns, 1) * np.sin(yaw_w)).reshape(yaw.shape)
+        y = (radius.reshape(shape[0], turns, 1) * (1.0 - np.cos(yaw_w))).reshape(yaw.shape)
+    else:
+        yaw = w[:, None] * t
+        x = radius * np.sin(yaw)
+        y = radius * (1.0 - np.cos(yaw))
+    if straight.any():
+        x[straight] = (v[:, None] * t)[straight]
+        y[straight] = 0.0
     return x, y, yaw
 
 
@@ -124,11 +144,18 @@ def rollout(
     win: Window, start: tuple[float, float, float], horizon_s: float, steps: int
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Every sampled trajectory's poses at ``steps`` instants over the horizon, from ``start``."""
-    times = np.linspace(horizon_s / steps, horizon_s, steps)
-    x, y, yaw = arcs(win.v, win.w, times)
+    x, y, yaw = arcs(win.v, win.w, _times(horizon_s, steps), win.turns)
     sx, sy, syaw = start
     c, s = math.cos(syaw), math.sin(syaw)
     return sx + c * x - s * y, sy + s * x + c * y, syaw + yaw
+
+
+@functools.lru_cache(maxsize=8)
+def _times(horizon_s: float, steps: int) -> FloatArray:
+    """The roll-out's instants: the same for every decision of one params row (read only)."""
+    times = np.linspace(horizon_s / steps, horizon_s, steps)
+    times.flags.writeable = False
+    return times
 
 
 def merge_obstacles(points: FloatArray, cell_m: float = MERGE_M) -> FloatArray:
@@ -251,13 +278,22 @@ def to_path(xs: FloatArray, ys: FloatArray, points: FloatArray) -> FloatArray:
     length2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12)
     rows = max(1, PAIRS_PER_PRODUCT // len(a))  # memory bounded, however long the path
     out: FloatArray = np.empty(len(xs), dtype=np.float64)
+    abx, aby = ab[None, :, 0], ab[None, :, 1]
     for i in range(0, len(xs), rows):
+        # the same arithmetic as rx - t ab etc., in place: a few arrays, not a dozen
         rx = xs[i : i + rows, None] - a[None, :, 0]
         ry = ys[i : i + rows, None] - a[None, :, 1]
-        t = np.clip((rx * ab[None, :, 0] + ry * ab[None, :, 1]) / length2[None, :], 0.0, 1.0)
-        dx = rx - t * ab[None, :, 0]
-        dy = ry - t * ab[None, :, 1]
-        out[i : i + rows] = np.sqrt((dx * dx + dy * dy).min(axis=1))  # np.hypot: slower
+        t = rx * abx
+        tmp = ry * aby
+        t += tmp
+        t /= length2[None, :]
+        np.clip(t, 0.0, 1.0, out=t)
+        rx -= np.multiply(t, abx, out=tmp)  # dx
+        ry -= np.multiply(t, aby, out=tmp)  # dy
+        rx *= rx
+        ry *= ry
+        rx += ry
+        out[i : i + rows] = np.sqrt(rx.min(axis=1))  # np.hypot: slower
     return out
 
 
@@ -325,10 +361,12 @@ def _terms(
     # the heading along the whole arc, not at its end only: a loop that swings far off
     # and comes back facing the carrot is no better than it is; a turn in place toward the
     # carrot is better than standing still, even if it overshoots a little
-    bearing = np.arctan2(cy - ys, cx - xs) - yaws
-    along = np.abs(np.arctan2(np.sin(bearing), np.cos(bearing))) / math.pi
-    # close to the carrot the bearing means little (the carrot is the path's end)
     ox, oy = cx - xs, cy - ys
+    # wrapped to [-pi, pi) by a remainder: one transcendental per pose instead of three
+    # (atan2 of its sine and cosine), the same to a few ulps
+    bearing = np.arctan2(oy, ox) - yaws
+    along = np.abs(np.remainder(bearing + math.pi, 2.0 * math.pi) - math.pi) / math.pi
+    # close to the carrot the bearing means little (the carrot is the path's end)
     along = np.where(ox * ox + oy * oy < (0.1 * reach) ** 2, 0.0, along)
     heading = along.mean(axis=1)
     none = np.zeros(0)
@@ -365,6 +403,9 @@ def further(
     ``clear_for`` tests."""
     v = np.abs(win.v)
     slow = np.flatnonzero((v * horizon_s < travel_m) & (v > 1e-6))
+    if len(slow) == 0:  # the usual case at speed: a dozen numpy calls on nothing spared
+        none = np.zeros((0, steps))
+        return slow, (none, none, none)
     vs, ws = win.v[slow], win.w[slow]
     turn_s = np.where(np.abs(ws) > 1e-6, math.pi / np.maximum(np.abs(ws), 1e-6), np.inf)
     end_s = np.maximum(np.minimum(travel_m / v[slow], turn_s), horizon_s)
