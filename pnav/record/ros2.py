@@ -232,10 +232,9 @@ class Ros2Recorder(Recorder):
         pass  # events: no ROS 2 message
 
     async def _world(self) -> None:
-        row = await self.source.newest_map()
-        if row is None or row["loaded_at"] == self._map_loaded:
+        row = await self._new_map()
+        if row is None:
             return
-        self._map_loaded = row["loaded_at"]
         stamp = self._stamp(None)
         grid = occupancy_grid(dict(row.items()), stamp)
         self.write("/map", ros2types.OCCUPANCY_GRID, grid, stamp)
