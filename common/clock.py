@@ -79,6 +79,11 @@ class SimClock:
         elapsed = min(time.monotonic() - self._received, _MAX_EXTRAPOLATION_WALL_S)
         return stamp + max(elapsed, 0.0) * self._rate
 
+    def now_if_started(self) -> float | None:
+        """Sim time now, or None before the sim's clock was ever heard (a stamp left NULL
+        rather than a made-up 0.0)."""
+        return self.now() if self.started else None
+
     def close(self) -> None:
         if self._subscriber is not None:
             self._subscriber.undeclare()

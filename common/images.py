@@ -128,3 +128,20 @@ class ImageGuard:
             total=self.refused[table],
             last_why=why[:200],
         )
+
+
+class GuardedStore:
+    """What a store that reads images through an :class:`ImageGuard` says of them (tests,
+    logs, the service's health): the notifications known lost, the images refused."""
+
+    images: ImageGuard
+
+    @property
+    def notifications_lost(self) -> int:
+        """Notifications known lost on the way here (seq gaps: common.images.ImageGuard.gap)."""
+        return self.images.lost
+
+    @property
+    def images_refused(self) -> dict[str, int]:
+        """Row images refused per table (broke the table's rules): the table was read."""
+        return dict(self.images.refused)

@@ -15,7 +15,7 @@ from typing import Any, Final, TypeAlias, TypeVar
 import asyncpg
 import numpy as np
 
-from common.contract import tables
+from common.contract import keys, tables
 from common.contract.columns import BOOL, FLOAT, FLOATS, ID, INT, Column, Table
 from common.footprint import Footprint, Polygon
 from common.robotmodel import DEFAULT_MODEL, load_model
@@ -172,12 +172,16 @@ def polygon_of(value: Any) -> Polygon | None:
     return tuple((float(x), float(y)) for x, y in value)
 
 
-async def newest_odometry(db: Executor, robot_id: str) -> Odometry | None:
-    row = await db.fetchrow(
-        "SELECT id, robot_id, stamp, x, y, yaw, linear_mps, angular_rps FROM odometry "
-        "WHERE robot_id = $1 ORDER BY id DESC LIMIT 1",
-        robot_id,
+async def _newest(db: Executor, table: str, record: type, robot_id: str) -> asyncpg.Record | None:
+    """A robot's newest row of a sensor ``table`` (the columns of its ``record``), or None."""
+    columns = ", ".join(f.name for f in fields(record))
+    return await db.fetchrow(
+        f"SELECT {columns} FROM {table} WHERE robot_id = $1 ORDER BY id DESC LIMIT 1", robot_id
     )
+
+
+async def newest_odometry(db: Executor, robot_id: str) -> Odometry | None:
+    row = await _newest(db, keys.ODOMETRY, Odometry, robot_id)
     return Odometry(**dict(row)) if row else None
 
 
@@ -202,11 +206,7 @@ async def newest_odometries(db: Executor, robot_ids: Sequence[str]) -> dict[str,
 
 
 async def newest_scan(db: Executor, robot_id: str) -> LaserScan | None:
-    row = await db.fetchrow(
-        "SELECT id, robot_id, stamp, angle_min, angle_increment, range_min, range_max, ranges "
-        "FROM laser_scan WHERE robot_id = $1 ORDER BY id DESC LIMIT 1",
-        robot_id,
-    )
+    row = await _newest(db, keys.LASER_SCAN, LaserScan, robot_id)
     return None if row is None else _laser_scan(row)
 
 
@@ -298,11 +298,7 @@ battery_of.__doc__ = "The :class:`Battery` of a battery row's image (as the quer
 
 
 async def newest_battery(db: Executor, robot_id: str) -> Battery | None:
-    row = await db.fetchrow(
-        "SELECT id, robot_id, stamp, energy_wh, capacity_wh, percentage, charging FROM battery "
-        "WHERE robot_id = $1 ORDER BY id DESC LIMIT 1",
-        robot_id,
-    )
+    row = await _newest(db, keys.BATTERY, Battery, robot_id)
     return Battery(**dict(row)) if row else None
 
 

@@ -19,12 +19,13 @@ import os
 import sys
 import textwrap
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import uvloop
 
 from common import bus
-from common.config import EngineSettings
+from common.config import EngineSettings, ZenohSettings
 from common.contract import keys
 from common.engine import Engine, Rule
 from common.service import wake_on_notifications
@@ -142,21 +143,37 @@ async def wake_latency(count: int, gap_s: float) -> list[float]:
             inbox[body["id"]] = body["sent_ns"]  # dict writes are atomic under the GIL
 
         subscribers = wake_on_notifications(session, engine, engine.watched_tables, record)
-        task = asyncio.create_task(engine.run())
-        env = {**os.environ, **settings.to_env()}
-        publisher = await asyncio.create_subprocess_exec(
-            sys.executable, "-c", PUBLISHER, str(count), str(gap_s), BENCH_TABLE, env=env
-        )
-        await publisher.wait()
-        await asyncio.sleep(0.1)
-        engine.stop()
-        await task
-        for sub in subscribers:
-            sub.undeclare()
+        code = await drive(engine, settings, count, gap_s, BENCH_TABLE, 0.1, subscribers)
         session.close()
-    if publisher.returncode != 0:
-        raise RuntimeError(f"the publisher process failed with code {publisher.returncode}")
+    if code != 0:
+        raise RuntimeError(f"the publisher process failed with code {code}")
     return latencies
+
+
+async def drive(
+    engine: Engine,
+    sender: ZenohSettings,
+    count: int,
+    gap_s: float,
+    table: str,
+    settle_s: float,
+    subscribers: Sequence[Any],
+) -> int | None:
+    """Run ``engine`` while a publisher process (on ``sender``) sends ``count`` notifications
+    of ``table`` ``gap_s`` apart; give the last ``settle_s`` to arrive, stop the engine and
+    undeclare its ``subscribers``; the publisher's exit code."""
+    task = asyncio.create_task(engine.run())
+    env = {**os.environ, **sender.to_env()}
+    publisher = await asyncio.create_subprocess_exec(
+        sys.executable, "-c", PUBLISHER, str(count), str(gap_s), table, env=env
+    )
+    await publisher.wait()
+    await asyncio.sleep(settle_s)
+    engine.stop()
+    await task
+    for sub in subscribers:
+        sub.undeclare()
+    return publisher.returncode
 
 
 def run(json_path: str | None = None, seconds: float = 3.0, notifications: int = 1000) -> int:

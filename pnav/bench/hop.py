@@ -24,9 +24,7 @@ process of its own, as the launcher is).
 from __future__ import annotations
 
 import argparse
-import asyncio
 import contextlib
-import os
 import statistics
 import subprocess
 import sys
@@ -43,7 +41,7 @@ from common.contract import keys
 from common.db import create_pool
 from common.engine import Engine, Rule
 from common.testing import EmbeddedPostgres, free_port
-from pnav.bench.engine import PUBLISHER
+from pnav.bench.engine import drive
 
 TABLE = "hop_probe"
 STAGES = ("thread", "loop", "rule", "insert", "notified")
@@ -127,17 +125,7 @@ async def hop(
         bus.subscribe_threaded(session, watch, on_thread),
         bus.subscribe(session, watch, on_loop),
     ]
-    task = asyncio.create_task(engine.run())
-    env = {**os.environ, **sender.to_env()}
-    publisher = await asyncio.create_subprocess_exec(
-        sys.executable, "-c", PUBLISHER, str(count), str(gap_s), TABLE, env=env
-    )
-    await publisher.wait()
-    await asyncio.sleep(0.2)
-    engine.stop()
-    await task
-    for sub in subs:
-        sub.undeclare()
+    await drive(engine, sender, count, gap_s, TABLE, 0.2, subs)
     ctx["notifier"].close()
     session.close()
     if pool is not None:

@@ -38,11 +38,18 @@ import numpy as np
 
 from common.collision import collides_on_grid, path_poses
 from common.errors import UsageError
-from pnav.navbench.automaton import AutomatonRule, BoolGrid, grow_field
-from pnav.navbench.difficulty import Difficulty, measure
-from pnav.navbench.generator import ORIGIN, SEEDS_PER_SUITE, suite_seed
+from pnav.navbench.automaton import AutomatonRule, BoolGrid
+from pnav.navbench.difficulty import Difficulty
+from pnav.navbench.generator import (
+    ORIGIN,
+    FieldCells,
+    OnLayout,
+    draw_suite,
+    first_passable,
+    known_level,
+)
 from pnav.navbench.robots import RobotFit
-from pnav.navbench.search import Point, ReferencePath, reference_path
+from pnav.navbench.search import Point, ReferencePath
 
 PROTOCOL = "barn"
 # what a footprint polygon keeps from the obstacles along the reference path (as the
@@ -66,7 +73,7 @@ LEVELS: dict[str, AutomatonRule] = {
 
 
 @dataclass(frozen=True)
-class BarnLayout:
+class BarnLayout(FieldCells):
     cell_m: float = 0.15
     resolution_m: float = 0.05
     field_cols: int = 30
@@ -78,26 +85,15 @@ class BarnLayout:
     margin_m: float = 0.05  # the planner's inflation margin, as in the default protocol
 
     def __post_init__(self) -> None:
-        if abs(self.scale * self.resolution_m - self.cell_m) > 1e-9:
-            raise UsageError("cell_m must be a whole number of map pixels (resolution_m)")
-        if self.margin_m < self.resolution_m * math.sqrt(0.5):
-            raise UsageError("margin_m must be at least half a map pixel's diagonal")
+        self.check_pixels(UsageError)
         if self.start[1] <= self.cell_m or self.goal[1] <= self.field_y[1]:
             raise UsageError("the start must lie on the map and the goal beyond the field")
-
-    @property
-    def scale(self) -> int:
-        return round(self.cell_m / self.resolution_m)
 
     @property
     def rows_above(self) -> int:
         """Free rows between the field and the top wall: to the goal and past it."""
         room = self.goal[1] + self.beyond_goal_m - self.field_y[1]
         return math.ceil(room / self.cell_m - 1e-9)
-
-    @property
-    def width_m(self) -> float:
-        return (self.field_cols + 2) * self.cell_m
 
     @property
     def height_m(self) -> float:
@@ -132,8 +128,19 @@ class Box:
     size_y: float
 
 
+class InCorridor(OnLayout):
+    """A world of BARN's corridor made for a robot: what its path was checked for."""
+
+    layout: BarnLayout
+    robot: RobotFit
+
+    @property
+    def inflation_m(self) -> float:
+        return self.robot.footprint_radius_m + self.layout.margin_m
+
+
 @dataclass(frozen=True, eq=False)  # eq would compare the numpy grids: ambiguous
-class BarnWorld:
+class BarnWorld(InCorridor):
     name: str
     level: str
     seed: int
@@ -148,24 +155,9 @@ class BarnWorld:
     reference: ReferencePath
     difficulty: Difficulty
 
-    @property
-    def start(self) -> tuple[float, float, float]:
-        return self.layout.start
-
-    @property
-    def goal(self) -> Point:
-        return self.layout.goal
-
-    @property
-    def inflation_m(self) -> float:
-        return self.robot.footprint_radius_m + self.layout.margin_m
-
 
 def level_rule(level: str) -> AutomatonRule:
-    try:
-        return LEVELS[level]
-    except KeyError:
-        raise UsageError(f"unknown level {level!r}; known: {', '.join(LEVELS)}") from None
+    return known_level(LEVELS, level, UsageError)
 
 
 def time_limit(top_speed_mps: float) -> float:
@@ -247,31 +239,31 @@ def generate_barn_world(
     # the protocol and the level are mixed into the stream: unrelated to the default suite
     rng = np.random.default_rng([seed, zlib.crc32(f"{PROTOCOL}/{level}".encode())])
     inflation = robot.footprint_radius_m + layout.margin_m
-    x0, y0, _ = layout.start
-    for attempt in range(1, max_attempts + 1):
-        cells = grow_field(rng, layout.field_rows, layout.field_cols, rule)
-        occupied = field_pixels(cells, layout)
-        ref = reference_path(
-            occupied, layout.resolution_m, ORIGIN, (x0, y0), layout.goal, inflation
+    found = first_passable(
+        rng,
+        rule,
+        layout,
+        lambda cells: field_pixels(cells, layout),
+        inflation,
+        max_attempts,
+        lambda occupied, ref: fits(robot, occupied, layout, ref.points),
+    )
+    if found is not None:
+        return BarnWorld(
+            name=name or f"barn_{level}_s{seed}",
+            level=level,
+            seed=seed,
+            attempts=found.attempt,
+            rule=rule,
+            layout=layout,
+            robot=robot,
+            walls=wall_pixels(layout),
+            occupied=found.occupied,
+            boxes=field_boxes(found.cells, layout),
+            fill_ratio=found.fill_ratio,
+            reference=found.reference,
+            difficulty=found.difficulty,
         )
-        if ref is not None and fits(robot, occupied, layout, ref.points):
-            return BarnWorld(
-                name=name or f"barn_{level}_s{seed}",
-                level=level,
-                seed=seed,
-                attempts=attempt,
-                rule=rule,
-                layout=layout,
-                robot=robot,
-                walls=wall_pixels(layout),
-                occupied=occupied,
-                boxes=field_boxes(cells, layout),
-                fill_ratio=float(cells.mean()),
-                reference=ref,
-                difficulty=measure(
-                    occupied, layout.resolution_m, ORIGIN, ref.points, layout.field_y
-                ),
-            )
     raise UsageError(
         f"no {level} world passable for {robot.name} "
         f"(footprint {robot.footprint_radius_m} m) in {max_attempts} fields (seed {seed})"
@@ -297,12 +289,8 @@ def generate_barn_suite(
     levels: Sequence[str], count: int, base_seed: int, robot: RobotFit
 ) -> list[BarnWorld]:
     """``count`` worlds per level, named ``barn_<level>_<index>`` as the default suite's."""
-    if not 0 < count <= SEEDS_PER_SUITE:
-        raise UsageError(f"count must be within 1..{SEEDS_PER_SUITE}, got {count}")
-    for level in levels:
-        level_rule(level)  # fail before any work on a typo
-    return [
-        generate_barn_world(level, suite_seed(base_seed, i), robot, name=f"barn_{level}_{i:03d}")
-        for level in levels
-        for i in range(count)
-    ]
+
+    def draw(level: str, seed: int, name: str) -> BarnWorld:
+        return generate_barn_world(level, seed, robot, name=name)
+
+    return draw_suite(levels, count, base_seed, draw, level_rule, UsageError, "barn")

@@ -24,9 +24,9 @@ import numpy as np
 
 from common.errors import UsageError
 from pnav.navbench.automaton import BoolGrid
-from pnav.navbench.barn import DEFAULT_LAYOUT, BarnLayout, wall_pixels
+from pnav.navbench.barn import DEFAULT_LAYOUT, BarnLayout, InCorridor, wall_pixels
 from pnav.navbench.difficulty import Difficulty, measure
-from pnav.navbench.generator import ORIGIN, SEEDS_PER_SUITE, suite_seed
+from pnav.navbench.generator import ORIGIN, draw_suite, known_level
 from pnav.navbench.robots import RobotFit
 from pnav.navbench.search import ReferencePath, reference_path
 
@@ -66,7 +66,7 @@ class Crossing:
 
 
 @dataclass(frozen=True, eq=False)  # eq would compare the numpy grid: ambiguous
-class DynaBarnWorld:
+class DynaBarnWorld(InCorridor):
     name: str
     level: str
     seed: int
@@ -80,24 +80,9 @@ class DynaBarnWorld:
     attempts: int = 1
     fill_ratio: float = 0.0  # no standing obstacle in the field
 
-    @property
-    def start(self) -> tuple[float, float, float]:
-        return self.layout.start
-
-    @property
-    def goal(self) -> tuple[float, float]:
-        return self.layout.goal
-
-    @property
-    def inflation_m(self) -> float:
-        return self.robot.footprint_radius_m + self.layout.margin_m
-
 
 def level_rule(level: str) -> DynaLevel:
-    try:
-        return LEVELS[level]
-    except KeyError:
-        raise UsageError(f"unknown level {level!r}; known: {', '.join(LEVELS)}") from None
+    return known_level(LEVELS, level, UsageError)
 
 
 def _crossings(rng: np.random.Generator, rule: DynaLevel, layout: BarnLayout) -> list[Crossing]:
@@ -169,14 +154,8 @@ def generate_dynabarn_suite(
     levels: Sequence[str], count: int, base_seed: int, robot: RobotFit
 ) -> list[DynaBarnWorld]:
     """``count`` worlds per level, named ``dynabarn_<level>_<index>``."""
-    if not 0 < count <= SEEDS_PER_SUITE:
-        raise UsageError(f"count must be within 1..{SEEDS_PER_SUITE}, got {count}")
-    for level in levels:
-        level_rule(level)  # fail before any work on a typo
-    return [
-        generate_dynabarn_world(
-            level, suite_seed(base_seed, i), robot, name=f"dynabarn_{level}_{i:03d}"
-        )
-        for level in levels
-        for i in range(count)
-    ]
+
+    def draw(level: str, seed: int, name: str) -> DynaBarnWorld:
+        return generate_dynabarn_world(level, seed, robot, name=name)
+
+    return draw_suite(levels, count, base_seed, draw, level_rule, UsageError, "dynabarn")

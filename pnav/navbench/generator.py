@@ -22,8 +22,9 @@ from __future__ import annotations
 
 import math
 import zlib
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Protocol, TypeVar
 
 import numpy as np
 
@@ -41,26 +42,77 @@ LEVELS: dict[str, AutomatonRule] = {
 }
 SEEDS_PER_SUITE = 1000  # world i of a suite drawn with --seed S uses seed S * 1000 + i
 
+T = TypeVar("T")
+W = TypeVar("W")
 
-@dataclass(frozen=True)
-class Layout:
-    cell_m: float = 0.15
-    resolution_m: float = 0.05
-    field_cols: int = 30
-    field_rows: int = 30
-    zone_rows: int = 6
-    footprint_radius_m: float = BURGER.footprint_radius_m
-    margin_m: float = 0.05
 
-    def __post_init__(self) -> None:
+def known_level(levels: Mapping[str, T], level: str, error: type[Exception]) -> T:
+    """A protocol's rule for ``level``; ``error`` (the protocol's) names the known ones."""
+    try:
+        return levels[level]
+    except KeyError:
+        raise error(f"unknown level {level!r}; known: {', '.join(levels)}") from None
+
+
+def draw_suite(
+    levels: Sequence[str],
+    count: int,
+    base_seed: int,
+    draw: Callable[[str, int, str], W],
+    check: Callable[[str], object],
+    error: type[Exception],
+    prefix: str,
+) -> list[W]:
+    """``count`` worlds per level, world i drawn (``draw(level, seed, name)``) with seed
+    ``suite_seed(base_seed, i)`` and named ``<prefix>_<level>_<i>`` (i from 000)."""
+    if not 0 < count <= SEEDS_PER_SUITE:
+        raise error(f"count must be within 1..{SEEDS_PER_SUITE}, got {count}")
+    for level in levels:
+        check(level)  # fail before any work on a typo
+    return [
+        draw(level, suite_seed(base_seed, i), f"{prefix}_{level}_{i:03d}")
+        for level in levels
+        for i in range(count)
+    ]
+
+
+class _Placed(Protocol):
+    @property
+    def start(self) -> tuple[float, float, float]: ...
+    @property
+    def goal(self) -> Point: ...
+
+
+class OnLayout:
+    """A generated world's start and goal: its layout's."""
+
+    layout: _Placed
+
+    @property
+    def start(self) -> tuple[float, float, float]:
+        return self.layout.start
+
+    @property
+    def goal(self) -> Point:
+        return self.layout.goal
+
+
+class FieldCells:
+    """A layout whose field of square cells is drawn in map pixels, a wall cell each side."""
+
+    cell_m: float
+    resolution_m: float
+    field_cols: int
+    margin_m: float
+
+    def check_pixels(self, error: type[Exception]) -> None:
+        """``error`` (the protocol's) unless a cell is whole pixels and the margin enough."""
         if abs(self.scale * self.resolution_m - self.cell_m) > 1e-9:
-            raise ValueError("cell_m must be a whole number of map pixels (resolution_m)")
+            raise error("cell_m must be a whole number of map pixels (resolution_m)")
         if self.margin_m < self.resolution_m * math.sqrt(0.5):
             # below half a pixel's diagonal, a traversable pixel no longer proves that the
             # robot fits everywhere inside it (see search.py)
-            raise ValueError("margin_m must be at least half a map pixel's diagonal")
-        if self.zone_rows < 3 or self.field_rows < 1 or self.field_cols < 3:
-            raise ValueError("the zones need 3 rows, the field at least 1 x 3 cells")
+            raise error("margin_m must be at least half a map pixel's diagonal")
 
     @property
     def scale(self) -> int:
@@ -70,6 +122,22 @@ class Layout:
     @property
     def width_m(self) -> float:
         return (self.field_cols + 2) * self.cell_m
+
+
+@dataclass(frozen=True)
+class Layout(FieldCells):
+    cell_m: float = 0.15
+    resolution_m: float = 0.05
+    field_cols: int = 30
+    field_rows: int = 30
+    zone_rows: int = 6
+    footprint_radius_m: float = BURGER.footprint_radius_m
+    margin_m: float = 0.05
+
+    def __post_init__(self) -> None:
+        self.check_pixels(ValueError)
+        if self.zone_rows < 3 or self.field_rows < 1 or self.field_cols < 3:
+            raise ValueError("the zones need 3 rows, the field at least 1 x 3 cells")
 
     @property
     def height_m(self) -> float:
@@ -99,7 +167,7 @@ ORIGIN: Point = (0.0, 0.0)  # the map's lower-left corner is the world's (0, 0)
 
 
 @dataclass(frozen=True, eq=False)  # eq would compare the numpy grid: ambiguous
-class GeneratedWorld:
+class GeneratedWorld(OnLayout):
     name: str
     level: str
     seed: int
@@ -110,14 +178,6 @@ class GeneratedWorld:
     fill_ratio: float  # occupied share of the field's cells
     reference: ReferencePath
     difficulty: Difficulty
-
-    @property
-    def start(self) -> tuple[float, float, float]:
-        return self.layout.start
-
-    @property
-    def goal(self) -> Point:
-        return self.layout.goal
 
 
 def rasterize(cells: BoolGrid, layout: Layout) -> BoolGrid:
@@ -134,10 +194,7 @@ def rasterize(cells: BoolGrid, layout: Layout) -> BoolGrid:
 
 
 def level_rule(level: str) -> AutomatonRule:
-    try:
-        return LEVELS[level]
-    except KeyError:
-        raise ValueError(f"unknown level {level!r}; known: {', '.join(LEVELS)}") from None
+    return known_level(LEVELS, level, ValueError)
 
 
 def generate_world(
@@ -155,29 +212,79 @@ def generate_world(
         raise ValueError(f"seed must not be negative, got {seed}")
     # the level is mixed into the stream: seed 7 of two levels are unrelated worlds
     rng = np.random.default_rng([seed, zlib.crc32(level.encode())])
+    found = first_passable(
+        rng, rule, layout, lambda cells: rasterize(cells, layout), layout.inflation_m, max_attempts
+    )
+    if found is not None:
+        return GeneratedWorld(
+            name=name or f"barn_{level}_s{seed}",
+            level=level,
+            seed=seed,
+            attempts=found.attempt,
+            rule=rule,
+            layout=layout,
+            occupied=found.occupied,
+            fill_ratio=found.fill_ratio,
+            reference=found.reference,
+            difficulty=found.difficulty,
+        )
+    raise RuntimeError(f"no passable {level} world in {max_attempts} attempts (seed {seed})")
+
+
+class _FieldPlace(Protocol):
+    @property
+    def field_rows(self) -> int: ...
+    @property
+    def field_cols(self) -> int: ...
+    @property
+    def resolution_m(self) -> float: ...
+    @property
+    def start(self) -> tuple[float, float, float]: ...
+    @property
+    def goal(self) -> Point: ...
+    @property
+    def field_y(self) -> tuple[float, float]: ...
+
+
+@dataclass(frozen=True, eq=False)  # eq would compare the numpy grids: ambiguous
+class Passable:
+    """A field drawn with a path through it: which draw it was, its cells, the map pixels
+    the robot meets, the reference path and its difficulty."""
+
+    attempt: int
+    cells: BoolGrid = field(repr=False)
+    occupied: BoolGrid = field(repr=False)
+    reference: ReferencePath
+    difficulty: Difficulty
+
+    @property
+    def fill_ratio(self) -> float:
+        return float(self.cells.mean())
+
+
+def first_passable(
+    rng: np.random.Generator,
+    rule: AutomatonRule,
+    layout: _FieldPlace,
+    pixels: Callable[[BoolGrid], BoolGrid],
+    inflation_m: float,
+    max_attempts: int,
+    fits: Callable[[BoolGrid, ReferencePath], bool] = lambda occupied, ref: True,
+) -> Passable | None:
+    """The first field of ``rng`` (``pixels``: its map pixels) through which a disc inflated
+    by ``inflation_m`` finds a path that ``fits`` also accepts; None after ``max_attempts``."""
     x0, y0, _ = layout.start
     for attempt in range(1, max_attempts + 1):
         cells = grow_field(rng, layout.field_rows, layout.field_cols, rule)
-        occupied = rasterize(cells, layout)
+        occupied = pixels(cells)
         ref = reference_path(
-            occupied, layout.resolution_m, ORIGIN, (x0, y0), layout.goal, layout.inflation_m
+            occupied, layout.resolution_m, ORIGIN, (x0, y0), layout.goal, inflation_m
         )
-        if ref is not None:
-            return GeneratedWorld(
-                name=name or f"barn_{level}_s{seed}",
-                level=level,
-                seed=seed,
-                attempts=attempt,
-                rule=rule,
-                layout=layout,
-                occupied=occupied,
-                fill_ratio=float(cells.mean()),
-                reference=ref,
-                difficulty=measure(
-                    occupied, layout.resolution_m, ORIGIN, ref.points, layout.field_y
-                ),
-            )
-    raise RuntimeError(f"no passable {level} world in {max_attempts} attempts (seed {seed})")
+        if ref is not None and fits(occupied, ref):
+            res = layout.resolution_m
+            difficulty = measure(occupied, res, ORIGIN, ref.points, layout.field_y)
+            return Passable(attempt, cells, occupied, ref, difficulty)
+    return None
 
 
 def suite_seed(base_seed: int, index: int) -> int:
@@ -188,12 +295,8 @@ def generate_suite(
     levels: Sequence[str], count: int, base_seed: int, *, layout: Layout = DEFAULT_LAYOUT
 ) -> list[GeneratedWorld]:
     """``count`` worlds per level, named ``barn_<level>_<index>`` (index from 000)."""
-    if not 0 < count <= SEEDS_PER_SUITE:
-        raise ValueError(f"count must be within 1..{SEEDS_PER_SUITE}, got {count}")
-    for level in levels:
-        level_rule(level)  # fail before any work on a typo
-    return [
-        generate_world(level, suite_seed(base_seed, i), name=f"barn_{level}_{i:03d}", layout=layout)
-        for level in levels
-        for i in range(count)
-    ]
+
+    def draw(level: str, seed: int, name: str) -> GeneratedWorld:
+        return generate_world(level, seed, name=name, layout=layout)
+
+    return draw_suite(levels, count, base_seed, draw, level_rule, ValueError, "barn")

@@ -14,67 +14,50 @@ The sim's world loader reads ``name``, ``map`` and ``robots`` and ignores ``benc
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import yaml
 
 from common import yamldoc
 from common.errors import WorldError
+from pnav.navbench import suitefile
 from pnav.navbench.difficulty import Difficulty
-from pnav.navbench.generator import LEVELS, ORIGIN, GeneratedWorld
+from pnav.navbench.generator import LEVELS, GeneratedWorld
 from pnav.navbench.metrics import GOAL_TOLERANCE_M, TOP_SPEED_MPS, default_time_limit, optimal_time
 from pnav.navbench.search import BoolGrid, Point
-from services.sim.mapserver import OCCUPIED, OccupancyGrid, encode_pgm, load_map, map_yaml
+from pnav.navbench.suitefile import FORMAT
+from services.sim.mapserver import OCCUPIED, OccupancyGrid, load_map
 from services.sim.mover import MoverSpec
 from services.sim.world import ObstacleSpec, load_world, read_world_yaml
-
-FORMAT = 1
-FREE_PX, OCCUPIED_PX = 254, 0  # as map_saver writes them
-
-
-def _r(value: float, digits: int = 4) -> float:
-    return round(float(value), digits)
 
 
 def world_document(world: GeneratedWorld) -> dict[str, Any]:
     """The world file's content (plain YAML types, rounded for a stable text)."""
-    x, y, yaw = world.start
     length = world.reference.length_m
     rule, layout = world.rule, world.layout
     return {
         "name": world.name,
         "map": f"maps/{world.name}.yaml",
-        "robots": [{"id": "r1", "x": _r(x), "y": _r(y), "yaw": _r(yaw, 6)}],
+        "robots": [suitefile.robot_entry(world)],
         "benchmark": {
             "format": FORMAT,
-            "level": world.level,
-            "seed": world.seed,
-            "start": [_r(x), _r(y), _r(yaw, 6)],
-            "goal": [_r(world.goal[0]), _r(world.goal[1])],
-            "goal_tolerance_m": GOAL_TOLERANCE_M,
-            "reference_path_length_m": _r(length),
-            "optimal_time_s": _r(optimal_time(length)),
+            **suitefile.route_fields(world, GOAL_TOLERANCE_M),
+            "optimal_time_s": suitefile.rounded(optimal_time(length)),
             "time_limit_s": default_time_limit(length),
             "top_speed_mps": TOP_SPEED_MPS,
             "footprint_radius_m": layout.footprint_radius_m,
-            "fill_ratio": _r(world.fill_ratio),
+            "fill_ratio": suitefile.rounded(world.fill_ratio),
             "attempts": world.attempts,
             "generator": {
-                "method": "cellular_automaton",
-                "fill_probability": rule.fill_probability,
-                "smoothing_iterations": rule.smoothing_iterations,
-                "fill_threshold": rule.fill_threshold,
-                "clear_threshold": rule.clear_threshold,
-                "cell_m": layout.cell_m,
-                "field_cells": [layout.field_cols, layout.field_rows],
+                **suitefile.automaton_fields(rule),
+                **suitefile.field_fields(layout),
                 "zone_rows": layout.zone_rows,
                 "margin_m": layout.margin_m,
             },
-            "difficulty": world.difficulty.to_json(),
-            "reference_path": [[_r(px), _r(py)] for px, py in world.reference.points],
+            **suitefile.reference_fields(world),
         },
     }
 
@@ -82,18 +65,7 @@ def world_document(world: GeneratedWorld) -> dict[str, Any]:
 def write_world(world: GeneratedWorld, folder: Path, *, header: str = "") -> Path:
     """Write the world file, its map YAML and its PGM under ``folder``; the world file's path.
     ``header`` becomes comment lines on top of the world file."""
-    maps = folder / "maps"
-    maps.mkdir(parents=True, exist_ok=True)
-    pixels = np.where(world.occupied, OCCUPIED_PX, FREE_PX).astype(np.uint8)
-    (maps / f"{world.name}.pgm").write_bytes(encode_pgm(np.flipud(pixels)))
-    (maps / f"{world.name}.yaml").write_text(
-        map_yaml(f"{world.name}.pgm", world.layout.resolution_m, ORIGIN[0], ORIGIN[1])
-    )
-    comment = "".join(f"# {line}\n".replace("# \n", "#\n") for line in header.splitlines())
-    body = yaml.safe_dump(world_document(world), sort_keys=False, default_flow_style=None)
-    path = folder / f"{world.name}.yaml"
-    path.write_text(comment + body)
-    return path
+    return suitefile.write_world_files(world, folder, world.occupied, world_document(world), header)
 
 
 @dataclass(frozen=True)
@@ -228,3 +200,63 @@ def load_suite(folder: str | Path) -> list[BenchmarkWorld]:
         raise WorldError(f"{folder}: no benchmark world files (*.yaml with 'benchmark:')")
     order = {level: i for i, level in enumerate(LEVELS)}
     return sorted(worlds, key=lambda w: (order.get(w.level, len(order)), w.name))
+
+
+COLUMNS = ("world", "level", "seed", "tries", "fill", "L_ref m", "OT s", "limit s")
+
+
+def table_rows(worlds: Sequence[GeneratedWorld]) -> list[list[str]]:
+    rows = []
+    for w in worlds:
+        length = w.reference.length_m
+        timing = [f"{optimal_time(length):.1f}", f"{default_time_limit(length):.0f}"]
+        rows.append(suitefile.field_row(w, f"{length:.2f}", *timing))
+    return rows
+
+
+def suite_tables(worlds: Sequence[GeneratedWorld]) -> str:
+    return suitefile.field_tables(COLUMNS, table_rows(worlds), worlds)
+
+
+def write_preview(path: Path, world: GeneratedWorld) -> None:
+    """A picture of the freshly generated world: map, reference path, start and goal."""
+    # render reads benchmark worlds (this module): imported here, not at load time
+    from pnav.navbench.render import draw_generated, write_world_png
+
+    write_world_png(path, draw_generated(world))
+
+
+def suite_markdown(worlds: Sequence[GeneratedWorld], command: str) -> str:
+    used = dict.fromkeys(w.level for w in worlds)
+    level_rows = [
+        [
+            level,
+            f"{LEVELS[level].fill_probability}",
+            str(LEVELS[level].smoothing_iterations),
+            str(LEVELS[level].fill_threshold),
+            str(LEVELS[level].clear_threshold),
+        ]
+        for level in used
+    ]
+    return suitefile.suite_page(
+        "BARN-style",
+        "The method, the levels, the metrics and the world file fields are in `docs/NAVBENCH.md`.",
+        command,
+        "`python -m pnav.navbench.worlds_cli generate ...` takes the same options. The "
+        "output does not depend on the machine: the same command writes the same bytes.",
+        "## Levels",
+        suitefile.markdown_table(
+            ("level", "fill probability", "smoothing steps", "fill if >=", "clear if <="),
+            level_rows,
+        ),
+        "## Means per level",
+        suitefile.markdown_table(suitefile.MEAN_COLUMNS, suitefile.level_means(worlds)),
+        "## Worlds",
+        "`fill`: occupied share of the field; `tries`: fields drawn until one had a path; "
+        "`L_ref`: reference path length; `OT`: optimal time at 0.22 m/s; `limit`: the "
+        "suggested time limit (8 OT, rounded up to 10 s); then the difficulty metrics.",
+        suitefile.markdown_table((*COLUMNS, *suitefile.METRIC_COLUMNS), table_rows(worlds)),
+    )
+
+
+SUITE_FILES = suitefile.SuiteFiles(write_world, write_preview, suite_markdown, suite_tables)

@@ -18,34 +18,16 @@ import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any
 
 from common.errors import UsageError
 
 if TYPE_CHECKING:
-    from pnav.navbench.difficulty import Difficulty
-    from pnav.navbench.generator import GeneratedWorld
-    from pnav.navbench.search import ReferencePath
-
-
-class SuiteWorld(Protocol):
-    """What the per-level means need of a generated world, of either protocol."""
-
-    @property
-    def level(self) -> str: ...
-    @property
-    def fill_ratio(self) -> float: ...
-    @property
-    def reference(self) -> ReferencePath: ...
-    @property
-    def difficulty(self) -> Difficulty: ...
-
+    from pnav.navbench.suitefile import SuiteFiles
 
 DEFAULT_LEVELS = "easy,medium,hard"
 PROTOCOLS = ("default", "barn", "dynabarn")
 BARN_DEFAULT_MODEL = "jackal"  # the BARN Challenge's robot
-COLUMNS = ("world", "level", "seed", "tries", "fill", "L_ref m", "OT s", "limit s")
-METRIC_COLUMNS = ("closest m", "visib m", "dispers", "char m", "tortuos")
 
 
 def add_worlds_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -87,123 +69,28 @@ def command_line(args: argparse.Namespace) -> str:
     return line + (" --png" if args.png else "")
 
 
-def table_rows(worlds: Sequence[GeneratedWorld]) -> list[list[str]]:
-    from pnav.navbench.metrics import default_time_limit, optimal_time
-
-    rows = []
-    for w in worlds:
-        length = w.reference.length_m
-        d = w.difficulty
-        rows.append(
-            [
-                w.name,
-                w.level,
-                str(w.seed),
-                str(w.attempts),
-                f"{w.fill_ratio:.3f}",
-                f"{length:.2f}",
-                f"{optimal_time(length):.1f}",
-                f"{default_time_limit(length):.0f}",
-                f"{d.closest_obstacle_m:.3f}",
-                f"{d.avg_visibility_m:.2f}",
-                f"{d.dispersion:.2f}",
-                f"{d.characteristic_dimension_m:.2f}",
-                f"{d.tortuosity:.3f}",
-            ]
-        )
-    return rows
-
-
-def level_means(worlds: Sequence[SuiteWorld]) -> list[list[str]]:
-    """Per level: the mean fill, reference length and difficulty metrics."""
-    rows = []
-    for level in dict.fromkeys(w.level for w in worlds):
-        group = [w for w in worlds if w.level == level]
-
-        def mean(values: Sequence[float]) -> float:
-            return sum(values) / len(values)
-
-        d = [w.difficulty for w in group]
-        rows.append(
-            [
-                f"{level} ({len(group)})",
-                f"{mean([w.fill_ratio for w in group]):.3f}",
-                f"{mean([w.reference.length_m for w in group]):.2f}",
-                f"{mean([x.closest_obstacle_m for x in d]):.3f}",
-                f"{mean([x.avg_visibility_m for x in d]):.2f}",
-                f"{mean([x.dispersion for x in d]):.2f}",
-                f"{mean([x.characteristic_dimension_m for x in d]):.2f}",
-                f"{mean([x.tortuosity for x in d]):.3f}",
-            ]
-        )
-    return rows
-
-
-MEAN_COLUMNS = ("level (worlds)", "fill", "L_ref m", *METRIC_COLUMNS)
-
-
-def text_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
-    lines = ["  ".join(h.ljust(w) for h, w in zip(header, widths, strict=True))]
-    lines += ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
-    return "\n".join(line.rstrip() for line in lines)
-
-
-def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(lines)
-
-
-def suite_markdown(worlds: Sequence[GeneratedWorld], command: str) -> str:
-    from pnav.navbench.generator import LEVELS
-
-    used = dict.fromkeys(w.level for w in worlds)
-    level_rows = [
-        [
-            level,
-            f"{LEVELS[level].fill_probability}",
-            str(LEVELS[level].smoothing_iterations),
-            str(LEVELS[level].fill_threshold),
-            str(LEVELS[level].clear_threshold),
-        ]
-        for level in used
-    ]
-    return (
-        "\n\n".join(
-            [
-                "# Benchmark worlds (BARN-style)",
-                "Generated, not drawn by hand: do not edit these files; generate them again. The "
-                "method, the levels, the metrics and the world file fields are in "
-                "`docs/NAVBENCH.md`. Written by:",
-                f"```sh\n{command}\n```",
-                "`python -m pnav.navbench.worlds_cli generate ...` takes the same options. The "
-                "output does not depend on the machine: the same command writes the same bytes.",
-                "## Levels",
-                markdown_table(
-                    ("level", "fill probability", "smoothing steps", "fill if >=", "clear if <="),
-                    level_rows,
-                ),
-                "## Means per level",
-                markdown_table(MEAN_COLUMNS, level_means(worlds)),
-                "## Worlds",
-                "`fill`: occupied share of the field; `tries`: fields drawn until one had a path; "
-                "`L_ref`: reference path length; `OT`: optimal time at 0.22 m/s; `limit`: the "
-                "suggested time limit (8 OT, rounded up to 10 s); then the difficulty metrics.",
-                markdown_table((*COLUMNS, *METRIC_COLUMNS), table_rows(worlds)),
-            ]
-        )
-        + "\n"
-    )
-
-
-def world_header(command: str) -> str:
-    """The comment on top of every world file of a suite written by ``command``."""
-    return (
-        f"BARN-style benchmark world, written by `{command}`.\n"
+# the comment on top of every world file of a suite, per protocol
+HEADERS = {
+    "default": (
+        "BARN-style benchmark world, written by `{command}`.\n"
         "Generated: do not edit (the reference path is computed for this map). "
         "Fields: docs/NAVBENCH.md."
-    )
+    ),
+    "barn": (
+        "BARN-protocol benchmark world, written by `{command}`.\n"
+        "Generated: do not edit (the reference path is computed for this map and these "
+        "obstacles). Fields: docs/NAVBENCH.md."
+    ),
+    "dynabarn": (
+        "Dynamic BARN-protocol benchmark world, written by `{command}`.\n"
+        "Generated: do not edit (the movers are drawn from the seed). Fields: docs/NAVBENCH.md."
+    ),
+}
+
+
+def world_header(command: str, protocol: str = "default") -> str:
+    """The comment on top of every world file of a suite written by ``command``."""
+    return HEADERS[protocol].replace("{command}", command)
 
 
 def checked_levels(args: argparse.Namespace, known: Sequence[str]) -> list[str]:
@@ -222,84 +109,44 @@ def checked_levels(args: argparse.Namespace, known: Sequence[str]) -> list[str]:
 
 
 def generate(args: argparse.Namespace) -> int:
-    from pnav.navbench.generator import LEVELS, generate_suite
-    from pnav.navbench.render import draw_generated, write_world_png
-    from pnav.navbench.worldfile import write_world
-
-    if getattr(args, "protocol", "default") == "barn":
-        return generate_barn(args)
-    if getattr(args, "protocol", "default") == "dynabarn":
-        return generate_dynabarn(args)
-    if getattr(args, "model", None):
+    protocol = getattr(args, "protocol", "default")
+    if protocol == "default" and getattr(args, "model", None):
         raise UsageError(
             "--model needs --protocol barn or dynabarn (the default protocol's worlds are for "
             "the Burger)"
         )
-    levels = checked_levels(args, list(LEVELS))
+    worlds, files = generated_suite(args, protocol)
     command = command_line(args)
-    worlds = generate_suite(levels, args.count, args.seed)
-    out: Path = args.out
-    header = world_header(command)
-    for world in worlds:
-        write_world(world, out, header=header)
-        if args.png:
-            write_world_png(out / "preview" / f"{world.name}.png", draw_generated(world))
-    (out / "SUITE.md").write_text(suite_markdown(worlds, command))
-    print(text_table((*COLUMNS, *METRIC_COLUMNS), table_rows(worlds)))
-    print()
-    print(text_table(MEAN_COLUMNS, level_means(worlds)))
-    return finish(out, [w.name for w in worlds])
+    header = world_header(command, protocol)
+    files.write_suite(worlds, args.out, command=command, header=header, png=args.png)
+    return finish(args.out, [w.name for w in worlds])
 
 
-def generate_barn(args: argparse.Namespace) -> int:
-    """``--protocol barn``: the same files, the obstacles as world obstacles (barnfile.py)."""
-    from pnav.navbench import barnfile
-    from pnav.navbench.barn import LEVELS, generate_barn_suite
+def generated_suite(
+    args: argparse.Namespace, protocol: str
+) -> tuple[Sequence[Any], SuiteFiles[Any]]:
+    """The worlds ``args`` ask for, and how their protocol writes them: ``barn``, the same
+    files with the obstacles as world obstacles (barnfile.py); ``dynabarn``, BARN's corridor
+    crossed by movers (dynabarnfile.py); else the default protocol (worldfile.py)."""
     from pnav.navbench.robots import resolve_model
 
-    levels = checked_levels(args, list(LEVELS))
-    robot = resolve_model(args.model or BARN_DEFAULT_MODEL)
-    command = command_line(args)
-    worlds = generate_barn_suite(levels, args.count, args.seed, robot)
-    out: Path = args.out
-    header = (
-        f"BARN-protocol benchmark world, written by `{command}`.\n"
-        "Generated: do not edit (the reference path is computed for this map and these "
-        "obstacles). Fields: docs/NAVBENCH.md."
-    )
-    for world in worlds:
-        barnfile.write_barn_world(world, out, header=header)
-        if args.png:
-            barnfile.write_preview(out / "preview" / f"{world.name}.png", world)
-    (out / "SUITE.md").write_text(barnfile.barn_suite_markdown(worlds, command))
-    print(text_table((*barnfile.COLUMNS, *METRIC_COLUMNS), barnfile.table_rows(worlds)))
-    print()
-    print(text_table(MEAN_COLUMNS, level_means(worlds)))
-    return finish(out, [w.name for w in worlds])
+    if protocol == "barn":
+        from pnav.navbench import barn, barnfile
 
+        levels = checked_levels(args, list(barn.LEVELS))
+        robot = resolve_model(args.model or BARN_DEFAULT_MODEL)
+        return barn.generate_barn_suite(levels, args.count, args.seed, robot), barnfile.SUITE_FILES
+    if protocol == "dynabarn":
+        from pnav.navbench import dynabarn, dynabarnfile
 
-def generate_dynabarn(args: argparse.Namespace) -> int:
-    """``--protocol dynabarn``: BARN's corridor crossed by movers (dynabarnfile.py)."""
-    from pnav.navbench import dynabarnfile
-    from pnav.navbench.dynabarn import LEVELS, generate_dynabarn_suite
-    from pnav.navbench.robots import resolve_model
+        levels = checked_levels(args, list(dynabarn.LEVELS))
+        robot = resolve_model(args.model or BARN_DEFAULT_MODEL)
+        suite = dynabarn.generate_dynabarn_suite(levels, args.count, args.seed, robot)
+        return suite, dynabarnfile.SUITE_FILES
+    from pnav.navbench import generator, worldfile
 
-    levels = checked_levels(args, list(LEVELS))
-    robot = resolve_model(args.model or BARN_DEFAULT_MODEL)
-    command = command_line(args)
-    worlds = generate_dynabarn_suite(levels, args.count, args.seed, robot)
-    out: Path = args.out
-    header = (
-        f"Dynamic BARN-protocol benchmark world, written by `{command}`.\n"
-        "Generated: do not edit (the movers are drawn from the seed). Fields: docs/NAVBENCH.md."
-    )
-    for world in worlds:
-        dynabarnfile.write_dynabarn_world(world, out, header=header)
-        if args.png:
-            dynabarnfile.write_preview(out / "preview" / f"{world.name}.png", world)
-    (out / "SUITE.md").write_text(dynabarnfile.dynabarn_suite_markdown(worlds, command))
-    print(text_table(dynabarnfile.COLUMNS, dynabarnfile.table_rows(worlds)))
-    return finish(out, [w.name for w in worlds])
+    levels = checked_levels(args, list(generator.LEVELS))
+    return generator.generate_suite(levels, args.count, args.seed), worldfile.SUITE_FILES
 
 
 def finish(out: Path, written_names: Sequence[str]) -> int:

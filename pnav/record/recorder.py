@@ -192,11 +192,18 @@ class Recorder:
             text = f"strategy {code} (set by {record['source']})"
             self.event(robot, self._stamp(record["stamp"]), text, "strategy")
 
-    async def _world(self) -> None:
+    async def _new_map(self) -> Any:
+        """The newest map row when it was loaded since the last one written, else None."""
         row = await self.source.newest_map()
         if row is None or row["loaded_at"] == self._map_loaded:
-            return
+            return None
         self._map_loaded = row["loaded_at"]
+        return row
+
+    async def _world(self) -> None:
+        row = await self._new_map()
+        if row is None:
+            return
         stamp = self._stamp(None)
         self.emit("/map", fc.GridChannel, topics.map_grid(as_dict(row), stamp), stamp)
         stations = [as_dict(r) for r in await self.source.stations()]

@@ -25,6 +25,7 @@ from common.contract import keys
 from pnav.record import topics
 from pnav.record.recorder import Recorder
 from pnav.ros2.rviz import path_msg
+from services.sim.ros2wire import laser_scan
 
 SEPARATOR = "=" * 80
 UNKNOWN_CELL = 255  # the contract's unknown; OccupancyGrid's is -1
@@ -143,18 +144,12 @@ def tf(row: topics.Row) -> Any:
 def scan(row: topics.Row) -> Any:
     ranges = np.asarray([float(r) for r in row["ranges"]], dtype=np.float32)
     start, increment = float(row["angle_min"]), float(row["angle_increment"])
-    return ros2types.message(
-        ros2types.LASER_SCAN,
-        header=ros2types.header(float(row["stamp"]), frame(str(row["robot_id"]), "base_link")),
-        angle_min=start,
-        angle_max=start + increment * max(0, len(ranges) - 1),
-        angle_increment=increment,
-        time_increment=0.0,
-        scan_time=0.0,
-        range_min=float(row["range_min"]),
-        range_max=float(row["range_max"]),
-        ranges=ranges,
-        intensities=np.zeros(0, dtype=np.float32),
+    return laser_scan(
+        float(row["stamp"]),
+        frame(str(row["robot_id"]), "base_link"),
+        (start, start + increment * max(0, len(ranges) - 1), increment),
+        (float(row["range_min"]), float(row["range_max"])),
+        ranges,
     )
 
 
@@ -232,10 +227,9 @@ class Ros2Recorder(Recorder):
         pass  # events: no ROS 2 message
 
     async def _world(self) -> None:
-        row = await self.source.newest_map()
-        if row is None or row["loaded_at"] == self._map_loaded:
+        row = await self._new_map()
+        if row is None:
             return
-        self._map_loaded = row["loaded_at"]
         stamp = self._stamp(None)
         grid = occupancy_grid(dict(row.items()), stamp)
         self.write("/map", ros2types.OCCUPANCY_GRID, grid, stamp)

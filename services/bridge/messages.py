@@ -225,13 +225,15 @@ def _stamp_seq(body: dict[str, Any]) -> tuple[float, int]:
     return number(body, "stamp", 0.0), integer(body, "seq", 0, MAX_SEQ)
 
 
+def _head(robot_id: str, body: dict[str, Any]) -> tuple[str, float, int]:
+    """What a sensor record begins with: the robot, the stamp and the sequence number."""
+    return (robot_id, *_stamp_seq(body))
+
+
 def parse_odom(robot_id: str, body: dict[str, Any]) -> Odometry:
-    stamp, seq = _stamp_seq(body)
     p = MAX_ABS_POSITION_M
     return Odometry(
-        robot_id,
-        stamp,
-        seq,
+        *_head(robot_id, body),
         number(body, "x", -p, p),
         number(body, "y", -p, p),
         wrap_angle(number(body, "yaw", -1e6, 1e6)),
@@ -309,12 +311,9 @@ def parse_battery(robot_id: str, body: dict[str, Any]) -> BatteryState:
 
 
 def parse_collision(robot_id: str, body: dict[str, Any]) -> Collision:
-    stamp, seq = _stamp_seq(body)
     p = MAX_ABS_POSITION_M
     return Collision(
-        robot_id,
-        stamp,
-        seq,
+        *_head(robot_id, body),
         text(body, "other"),
         number(body, "x", -p, p),
         number(body, "y", -p, p),

@@ -13,15 +13,9 @@ import time
 
 import services.decision.meta as meta
 from common.bus import Notification
-from common.clock import SimClock
 from common.runtime import Runtime
 from common.service import ScenarioService
 from services.decision.store import DecisionStore, PgDecisionSource
-
-
-def sim_reader(clock: SimClock) -> float | None:
-    """Sim time now, or None before the sim's clock was ever heard."""
-    return clock.now() if clock.started else None
 
 
 class DecisionService(ScenarioService):
@@ -35,7 +29,7 @@ class DecisionService(ScenarioService):
         period_clock = clock.now if runtime.ledger is not None else time.monotonic
         self.store = DecisionStore(
             PgDecisionSource(runtime.database),
-            lambda: sim_reader(clock),
+            clock.now_if_started,
             self.owns,
             clock=period_clock,
         )

@@ -30,7 +30,7 @@ from common.bus import Notification
 from common.contract import keys
 from common.contract.recommendations import Recommendation
 from common.freshness import Sequences
-from common.images import ImageGuard
+from common.images import GuardedStore, ImageGuard
 from services.decision.arbitration import (
     Issued,
     RobotDecision,
@@ -53,7 +53,7 @@ def _everyone(_robot_id: str) -> bool:
     return True
 
 
-class DecisionStore:
+class DecisionStore(GuardedStore):
     """The decision service's store: a :class:`DecisionSource` and what the service keeps.
 
     ``sim_now`` reads the sim clock (None until it is heard); ``owns`` says which robots this
@@ -101,16 +101,6 @@ class DecisionStore:
     def sequences(self) -> Sequences:
         """The numbering seen per publisher and robot (tests)."""
         return self.images.sequences
-
-    @property
-    def notifications_lost(self) -> int:
-        """Notifications known lost on the way here (seq gaps: common.images.ImageGuard.gap)."""
-        return self.images.lost
-
-    @property
-    def images_refused(self) -> dict[str, int]:
-        """Row images refused per table (broke the table's rules): the table was read."""
-        return dict(self.images.refused)
 
     # -- DecisionView ----------------------------------------------------------------------
     def sim_now(self) -> float | None:

@@ -23,6 +23,7 @@ from collections.abc import Callable, Iterable
 from typing import Any, Final
 
 import numpy as np
+import numpy.typing as npt
 import zenoh
 
 from common import ros2types
@@ -48,16 +49,36 @@ def frame(namespace: str, name: str) -> str:
 def scan_msg(message: dict[str, Any], frame_id: str) -> Any:
     ranges = np.asarray(message["ranges"], dtype=np.float32)
     increment = float(message["angle_increment"])
+    start = float(message["angle_min"])
+    return laser_scan(
+        message["stamp"],
+        frame_id,
+        (start, start + increment * (len(ranges) - 1), increment),
+        (float(message["range_min"]), float(message["range_max"])),
+        ranges,
+    )
+
+
+def laser_scan(
+    stamp: float,
+    frame_id: str,
+    angles: tuple[float, float, float],
+    limits: tuple[float, float],
+    ranges: npt.NDArray[np.float32],
+) -> Any:
+    """A sensor_msgs/LaserScan of one sweep: ``angles`` (min, max, increment), ``limits``
+    (range min, max); no timing, no intensities (the sim's lidar has none)."""
+    (angle_min, angle_max, increment), (range_min, range_max) = angles, limits
     return ros2types.message(
         ros2types.LASER_SCAN,
-        header=ros2types.header(message["stamp"], frame_id),
-        angle_min=float(message["angle_min"]),
-        angle_max=float(message["angle_min"]) + increment * (len(ranges) - 1),
+        header=ros2types.header(stamp, frame_id),
+        angle_min=angle_min,
+        angle_max=angle_max,
         angle_increment=increment,
         time_increment=0.0,
         scan_time=0.0,
-        range_min=float(message["range_min"]),
-        range_max=float(message["range_max"]),
+        range_min=range_min,
+        range_max=range_max,
         ranges=ranges,
         intensities=np.zeros(0, dtype=np.float32),
     )

@@ -12,15 +12,9 @@ import sys
 
 import services.strategy.meta as meta
 from common.bus import Notification
-from common.clock import SimClock
 from common.runtime import Runtime
 from common.service import ScenarioService
 from services.strategy.store import PgStrategySource, StrategyStore
-
-
-def sim_reader(clock: SimClock) -> float | None:
-    """Sim time now, or None before the sim's clock was ever heard (stamps stay NULL)."""
-    return clock.now() if clock.started else None
 
 
 class StrategyService(ScenarioService):
@@ -30,7 +24,7 @@ class StrategyService(ScenarioService):
         super().__init__(runtime)
         clock = runtime.clock
         self.store = StrategyStore(
-            PgStrategySource(runtime.database), lambda: sim_reader(clock), self.owns
+            PgStrategySource(runtime.database), clock.now_if_started, self.owns
         )
 
     def seed(self) -> None:
