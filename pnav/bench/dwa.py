@@ -6,11 +6,12 @@ each set: ``default`` and ``worst`` (the params of issue 28) on the Jackal's 720
 270-degree lidar in clutter 0.5 to 6 m away, a path 10 m ahead, driving at 1 m/s; ``barn``
 with the default params in BARN-like clutter (up to 160 posts and crates ray-cast into the
 lidar, most hits within reach), a bending path of a point every 5 cm, at speeds from a
-standstill to the top. Per set it prints the milliseconds per decision (the mean of the best
-pass, and the median and 99th percentile of every decision, wall and CPU), the trajectories
-and poses rolled out, the peak memory of one decision (tracemalloc: numpy reports its arrays
-to it) and a digest of every command decided, so two trees can be compared for speed *and*
-for giving the same decisions.
+standstill to the top; ``barn_box`` the same scenes with the Jackal's true box, so the
+winner is put to the safety layer's test too (pnav_local/veto.py). Per set it prints the
+milliseconds per decision (the mean of the best pass, and the median and 99th percentile of
+every decision, wall and CPU), the trajectories and poses rolled out, the peak memory of one
+decision (tracemalloc: numpy reports its arrays to it) and a digest of every command
+decided, so two trees can be compared for speed *and* for giving the same decisions.
 """
 
 from __future__ import annotations
@@ -43,7 +44,16 @@ WORST: dict[str, Any] = {
     "dwa_angular_samples": 100,
     "dwa_horizon_s": 10,
 }
-PARAMS: dict[str, Mapping[str, Any]] = {"default": {}, "worst": WORST, "barn": {}}
+PARAMS: dict[str, Mapping[str, Any]] = {
+    "default": {},
+    "worst": WORST,
+    "barn": {},
+    "barn_box": {},
+}
+# the Jackal's true outline (robot frame, m, counter-clockwise): ``barn_box`` decides the
+# barn scenes with it, the safety layer's test put to each winner (pnav_local/veto.py)
+BOX = ((-0.254, -0.215), (0.254, -0.215), (0.254, 0.215), (-0.254, 0.215))
+POLYGONS: dict[str, Any] = {"barn_box": BOX}
 Scene = tuple[LaserScan, Odometry, PlannedPath]
 
 
@@ -97,8 +107,9 @@ def barn(n: int, seed: int) -> list[Scene]:
 
 
 def run(name: str, raw: Mapping[str, Any], n: int, seed: int, repeat: int) -> dict[str, Any]:
-    data = barn(n, seed) if name == "barn" else scenes(n, seed)
+    data = barn(n, seed) if name.startswith("barn") else scenes(n, seed)
     params = DwaParams.read(raw)
+    polygon = POLYGONS.get(name)
     digest = hashlib.sha256()
     best = best_cpu = math.inf
     trajectories = poses = 0
@@ -109,7 +120,7 @@ def run(name: str, raw: Mapping[str, Any], n: int, seed: int, repeat: int) -> di
         choices = []
         for s, o, path in data:
             one, one_cpu = time.perf_counter(), time.process_time()
-            choices.append(choose(s, o, JACKAL, path, params))
+            choices.append(choose(s, o, JACKAL, path, params, polygon))
             walls.append(time.perf_counter() - one)
             cpus.append(time.process_time() - one_cpu)
         best = min(best, time.perf_counter() - started)
@@ -122,7 +133,7 @@ def run(name: str, raw: Mapping[str, Any], n: int, seed: int, repeat: int) -> di
                 digest.update(repr((cmd.linear, cmd.angular, cmd.reason)).encode())
     poses = trajectories * params.steps
     tracemalloc.start()
-    choose(data[0][0], data[0][1], JACKAL, data[0][2], params)
+    choose(data[0][0], data[0][1], JACKAL, data[0][2], params, polygon)
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     return {
