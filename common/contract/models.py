@@ -62,8 +62,9 @@ def pick(
 
 
 async def register_model(db: Any, model: RegisteredModel, description: str = "") -> None:
-    """Insert ``model`` and notify ``pnav/db/model/_`` (``db``: a common.db.Database). The
-    database refuses a (name, version) already registered (UniqueViolationError)."""
+    """Insert ``model`` and notify ``pnav/db/model/_`` (``db``: a common.db.Database, whose
+    connections encode jsonb from Python values). The database refuses a (name, version)
+    already registered (UniqueViolationError)."""
     await db.write(
         keys.MODEL,
         None,
@@ -71,6 +72,6 @@ async def register_model(db: Any, model: RegisteredModel, description: str = "")
         model.name,
         model.version,
         model.path,
-        json.dumps(dict(model.metrics)),
+        dict(model.metrics),
         description,
     )

@@ -65,9 +65,7 @@ logger = logging.getLogger("pnav.controller")
 # Notifications are hints: a row is read again after this long (store clock) even if none
 # came, in case one was lost.
 RECHECK_S = 0.25
-# The model register (people's rows, a few a day) is read again this often (store clock), or
-# at once when a notification says it changed: what learned scenarios load follows it.
-MODELS_RECHECK_S = 2.0
+MODELS_RECHECK_S = 2.0  # the model register, read whole for the learned scenarios (or notified)
 ODOMETRY_LISTENS = frozenset((keys.ODOMETRY,))  # see ControllerStore.listens
 
 Tables = tuple[list[Robot], dict[str, ActiveStrategy]]
@@ -100,13 +98,9 @@ class ControllerStore:
     # 10 points of a core more than the query it saves, with no latency gain to see: each
     # notification crosses from Zenoh's thread to the loop (and takes the GIL) for a row
     # that only matters at the next scan. ODOMETRY_LISTENS is the set to hear it.
-    #
     # planned_path is heard (a row per plan: a few a minute per robot), for the local
     # controllers that score against the path (docs/CONTROLLER.md, dwa); read only by the
-    # scenarios that ask for it (Host.planned_path).
-    #
-    # model is heard too (people register a model a few times a day): a new row is seen at
-    # once rather than at the next MODELS_RECHECK_S.
+    # scenarios that ask for it (Host.planned_path). model: a new row is seen at once.
     listens: frozenset[str] = frozenset((keys.PLANNED_PATH, keys.MODEL))
 
     def __init__(
@@ -133,7 +127,6 @@ class ControllerStore:
         self.scans: FreshCache[str, ScanAndOdometry] = FreshCache(clock, recheck_s, _scan_id)
         # per robot: the path in force (planned_path), for the scenarios that ask for it
         self.paths: FreshCache[str, PlannedPath | None] = FreshCache(clock, recheck_s, _path_id)
-        # the model register, read whole (a handful of rows), for the learned scenarios
         self.models: FreshCache[str, list[RegisteredModel]] = FreshCache(clock, MODELS_RECHECK_S)
         # per robot: (scan id, odometry) for a scan whose odometry the pair above does not
         # hold (an image's scan, or one the pair no longer holds)
