@@ -79,7 +79,8 @@ def test_a_model_is_registered_notified_and_refused_twice(
             "strategy_model_params",
         ),
         (
-            "INSERT INTO strategy (code, params) VALUES ('B', '{\"foresight_model_version\": \"\"}')",
+            "INSERT INTO strategy (code, params)"
+            " VALUES ('B', '{\"foresight_model_version\": \"\"}')",
             "strategy_model_params",
         ),
         (
