@@ -141,3 +141,35 @@ async def test_foresight_refuses_a_model_made_for_another_scenario(tmp_path: Pat
     # learned_drive's model named in foresight's params is refused, not run
     found = await resolve(host, {"foresight_model": str(drive_model)}, "foresight", FORESIGHT)
     assert isinstance(found, str) and "than foresight computes" in found
+
+
+def test_learned_drive_remembers_its_stop_per_robot(tmp_path: Path) -> None:
+    """The one stop on an empty path is remembered by each robot's rule: a stop for one
+    robot never silences, or repeats, another's."""
+    from common.contract.planned_path import PlannedPath
+    from common.contract.records import Odometry, Robot
+    from common.controller_core.scenario import ScenarioSpec
+    from common.engine.supervisor import Ticket
+    from pnav_learned.drive import LearnedDrive
+    from pnav_learned.registry import Found
+    from tests.unit.learn.test_foresight import LaserScan
+
+    model = Found(load(write(tmp_path / "m.json", model_doc()), "v1"), registered=False)
+    rules = {}
+    for robot in ("r1", "r2"):
+        spec = ScenarioSpec(Robot(robot, 0.22, 2.84, 0.1, 20.0), "GOTO_LEARNED", {})
+        rules[robot] = LearnedDrive(cast(Host, None), Ticket((robot, "learned_drive"), spec))
+        rules[robot].found = model
+    scan = LaserScan(1, "r1", 0.0, 0.0, 0.1, 0.1, 3.5, np.full(8, 3.0, dtype=np.float32))
+    odom = Odometry(1, "r1", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+    def empty(path_id: int, robot: str) -> PlannedPath:
+        return PlannedPath(path_id, robot, 0.0, None, "none", None, None, (), (), 0.0)
+
+    said = []
+    for robot, path_id in (("r1", 5), ("r2", 6), ("r1", 5), ("r2", 6), ("r1", 7)):
+        rule = rules[robot] = rules[robot].keep_alive()[0]  # type: ignore[assignment]
+        rule.path = empty(path_id, robot)
+        command = rule.judge(scan, odom)
+        said.append(None if command is None else (robot, path_id))
+    assert said == [("r1", 5), ("r2", 6), None, None, ("r1", 7)]
