@@ -36,6 +36,7 @@ HELD_OUT = 0.2
 MIN_EXAMPLES = 20
 TARGET_KINDS = ("drive", "foresight")
 FORESIGHT_THRESHOLDS = (0.4, 0.5, 0.6, 0.7)  # precision and recall reported at each
+HORIZON_S = 3.0  # foresight's label: no progress within the next 3 s
 
 Split = tuple[np.ndarray, np.ndarray]  # (train rows, held-out rows)
 
@@ -50,8 +51,11 @@ def sha256(paths: Path | list[Path]) -> str:
     return digest.hexdigest()
 
 
-def read_columns(paths: list[Path], needed: tuple[str, ...]) -> dict[str, list[Any]]:
-    """The columns of every file, concatenated in order."""
+def read_columns(
+    paths: list[Path], needed: tuple[str, ...], horizon_s: float | None = None
+) -> dict[str, list[Any]]:
+    """The columns of every file, concatenated in order; ``horizon_s``: the outcome horizon
+    the files must have been exported with (``pnav.horizon_s``, when they say)."""
     import pyarrow.parquet as pq
 
     out: dict[str, list[Any]] = {}
@@ -63,6 +67,12 @@ def read_columns(paths: list[Path], needed: tuple[str, ...]) -> dict[str, list[A
         missing = [n for n in needed if n not in table.column_names]
         if missing:
             raise UsageError(f"{path}: no column {', '.join(missing)} (pnav learn dataset)")
+        said = (table.schema.metadata or {}).get(b"pnav.horizon_s")
+        if horizon_s is not None and said is not None and float(said) != horizon_s:
+            raise UsageError(
+                f"{path}: outcomes over {float(said):g} s (pnav learn dataset --horizon);"
+                f" this target's label is over {horizon_s:g} s"
+            )
         columns = table.to_pydict()
         columns.setdefault("source", [""] * table.num_rows)
         for name, values in columns.items():
@@ -88,7 +98,7 @@ def read_foresight(paths: list[Path]) -> tuple[np.ndarray, np.ndarray]:
     robot made no progress in the next 3 s. Examples whose run ended sooner (no outcome) or
     nearer the target than NEAR_TARGET_M (arriving, not stuck) are left out, as the
     scenario stays silent there."""
-    columns = read_columns(paths, (*FORESIGHT_FEATURES, "progress_m"))
+    columns = read_columns(paths, (*FORESIGHT_FEATURES, "progress_m"), HORIZON_S)
     x = matrix(columns, FORESIGHT_FEATURES)
     progress = np.asarray(columns["progress_m"], dtype=np.float64)
     keep = np.all(np.isfinite(x), axis=1) & np.isfinite(progress)

@@ -108,3 +108,16 @@ def test_foresight_held_out_on_other_files(tmp_path: Path) -> None:
     doc = train([one], out, name="f", target="foresight", hidden=(16,), test=[two])
     assert doc["metrics"]["train_examples"] == 1000 and doc["metrics"]["held_out"] == 300
     assert doc["test_sha256"] == hashlib.sha256(two.read_bytes()).hexdigest()
+
+
+def test_foresight_refuses_a_dataset_of_another_horizon(tmp_path: Path) -> None:
+    import pyarrow.parquet as pq
+
+    from common.errors import UsageError
+
+    data, out = tmp_path / "data.parquet", tmp_path / "f.json"
+    synthetic.write_foresight(data, n=200)
+    table = pq.read_table(data)
+    pq.write_table(table.replace_schema_metadata({"pnav.horizon_s": "5.0"}), data)
+    with pytest.raises(UsageError, match="outcomes over 5 s"):
+        train(data, out, name="f", target="foresight", hidden=(4,))
