@@ -8,77 +8,42 @@ limits, at priority 30 (dwa's: a local controller; avoid, recovery and the safet
 the last word, and the bridge's safety layer judges the command as any other). Its reason
 names the model, its version and its confidence.
 
-Params: ``learned_model`` (the model file; a relative path is taken from the directory
-``PNAV_MODEL_DIR`` names, else the controller's working directory) and, optionally,
-``learned_model_version`` (the version the file must have). A model file that is missing,
-corrupt, made for other features or of another version is refused when loaded, logged once
-with the reason, and the scenario stands down (recommends nothing) until the params or the
-file change: the other scenarios of the strategy go on.
+Params: ``learned_model`` (a model registered in the ``model`` table, or a model file) and,
+optionally, ``learned_model_version`` (the registered version, or the version the file must
+have): pnav_learned.registry. A model file that is missing, corrupt, made for other features
+or of another version is refused when loaded, logged once with the reason, and the scenario
+stands down (recommends nothing) until the params, the register or the file change: the
+other scenarios of the strategy go on.
+
+What it remembers per robot (the one stop on an empty path) is an attribute of its rule,
+which is one per (robot, scenario): never shared between robots.
 """
 
 from __future__ import annotations
 
-import logging
-import os
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from common import log
 from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
 from common.controller_core.scenario import Command, ControllerScenario
-from pnav_learned.errors import ModelRefused
 from pnav_learned.features import features, sector_minima
-from pnav_learned.model import Model, load
+from pnav_learned.model import DRIVE, Model
+from pnav_learned.registry import Found, resolve
 
 PRIORITY = 30
-MODEL_PARAM = "learned_model"
-VERSION_PARAM = "learned_model_version"
-
-logger = logging.getLogger("pnav.controller")
-
-# (path, version, file's mtime) -> the model or why it was refused; shared by the robots
-_cache: dict[tuple[str, str | None, float], Model | str] = {}
-
-
-def model_path(name: str) -> Path:
-    p = Path(name)
-    return p if p.is_absolute() else Path(os.environ.get("PNAV_MODEL_DIR", ".")) / p
-
-
-def model_for(params: Mapping[str, Any]) -> Model | str:
-    """The model the params name, or why there is none (cached until the file changes)."""
-    name, version = params.get(MODEL_PARAM), params.get(VERSION_PARAM)
-    if not isinstance(name, str) or not name:
-        return f"no model: the strategy's params name none ({MODEL_PARAM})"
-    wanted = version if isinstance(version, str) else None
-    path = model_path(name)
-    try:
-        mtime = path.stat().st_mtime
-    except OSError:
-        mtime = -1.0
-    key = (str(path), wanted, mtime)
-    if key not in _cache:
-        try:
-            _cache[key] = load(path, wanted)
-        except ModelRefused as exc:
-            _cache[key] = f"model refused: {exc}"
-        found = _cache[key]
-        log.event(
-            logger,
-            logging.WARNING if isinstance(found, str) else logging.INFO,
-            "learned_drive model",
-            path=str(path),
-            outcome=found if isinstance(found, str) else f"loaded version {found.version}",
-        )
-    return _cache[key]
+PARAMS = "learned"  # learned_model, learned_model_version
 
 
 def recommend(
-    model: Model, scan: LaserScan, odom: Odometry, robot: Robot, path: PlannedPath
+    model: Model,
+    scan: LaserScan,
+    odom: Odometry,
+    robot: Robot,
+    path: PlannedPath,
+    label: str | None = None,
 ) -> Command:
     sectors = sector_minima(scan.ranges, scan.angle_min, scan.angle_increment)
     x = features(
@@ -91,10 +56,11 @@ def recommend(
     linear, angular, confidence = model.predict(x)
     linear = float(np.clip(linear, -robot.max_linear_mps, robot.max_linear_mps))
     angular = float(np.clip(angular, -robot.max_angular_rps, robot.max_angular_rps))
+    label = label or f"model {model.name} version {model.version}"
     return Command(
         linear,
         angular,
-        f"learned_drive: model {model.name} version {model.version}, confidence"
+        f"learned_drive: {label}, confidence"
         f" {confidence:.2f} (share of features within the training data's range)",
         {"planned_path": path.id, "model": model.name, "model_version": model.version},
     )
@@ -108,11 +74,16 @@ class LearnedDrive(ControllerScenario):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.path: PlannedPath | None = None
+        self.found: Found | str = "not read yet"
+        # this robot's memory: the empty path it already recommended its one stop on
         self.stopped_for: int | None = None
         self.refusal: str | None = None  # why this scenario stands down, for tests and people
 
     async def data_acquisition(self) -> None:
-        self.path = await self.host.planned_path(self.spec.robot.robot_id) if self.live else None
+        live = self.live
+        self.path = await self.host.planned_path(self.spec.robot.robot_id) if live else None
+        if live:
+            self.found = await resolve(self.host, self.spec.params, PARAMS, DRIVE)
         await super().data_acquisition()
 
     @classmethod
@@ -122,7 +93,7 @@ class LearnedDrive(ControllerScenario):
         return None  # the path is read in acquisition: ``judge`` decides
 
     def judge(self, scan: LaserScan, odom: Odometry | None) -> Command | None:
-        found = model_for(self.spec.params)
+        found = self.found
         if isinstance(found, str):
             self.refusal = found
             return None  # stand down: the strategy's other scenarios drive
@@ -135,4 +106,4 @@ class LearnedDrive(ControllerScenario):
                 return None
             self.stopped_for = path.id
             return Command(0.0, 0.0, f"learned_drive: no path ({path.target}): stop")
-        return recommend(found, scan, odom, self.spec.robot, path)
+        return recommend(found.model, scan, odom, self.spec.robot, path, found.label)

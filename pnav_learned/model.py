@@ -22,7 +22,10 @@ from pnav_learned.errors import ModelRefused
 from pnav_learned.features import FEATURES
 
 FORMAT = "pnav-mlp/1"
-TARGETS = ("linear_mps", "angular_rps")
+TARGETS = ("linear_mps", "angular_rps")  # learned_drive's; foresight names its own
+# what the last layer's output goes through: a regression (learned_drive) or a probability
+# (foresight: a classifier's logit)
+OUTPUTS = ("identity", "logistic")
 # bounds on one decision's work and on what a file may make us read, whatever it says
 MAX_FILE_BYTES = 4 * 1024 * 1024
 MAX_LAYERS = 6
@@ -45,11 +48,12 @@ class Model:
     weights: tuple[FloatArray, ...]
     biases: tuple[FloatArray, ...]
     metrics: dict[str, Any]
+    output: str = "identity"
 
-    def predict(self, x: FloatArray) -> tuple[float, float, float]:
-        """(linear, angular, confidence) for one feature vector. Confidence is the share of
-        features within the range the training data covered: a policy is only known to do
-        what it was shown."""
+    def outputs(self, x: FloatArray) -> tuple[FloatArray, float]:
+        """The model's outputs for one feature vector (in the order of its targets), and the
+        share of features within the range the training data covered: a model is only known
+        to do what it was shown."""
         h = (x - self.x_mean) / self.x_scale
         last = len(self.weights) - 1
         for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
@@ -57,7 +61,14 @@ class Model:
             if i < last:
                 h = np.maximum(h, 0.0)
         y = h * self.y_scale + self.y_mean
+        if self.output == "logistic":
+            y = 1.0 / (1.0 + np.exp(-np.clip(y, -60.0, 60.0)))
         inside = float(np.mean((x >= self.x_min) & (x <= self.x_max)))
+        return y, inside
+
+    def predict(self, x: FloatArray) -> tuple[float, float, float]:
+        """(linear, angular, confidence) for one feature vector: learned_drive's model."""
+        y, inside = self.outputs(x)
         return float(y[0]), float(y[1]), inside
 
 
@@ -73,17 +84,19 @@ def _array(doc: dict[str, Any], key: str, shape: tuple[int, ...]) -> FloatArray:
     return a
 
 
-def _layers(doc: dict[str, Any]) -> tuple[tuple[FloatArray, ...], tuple[FloatArray, ...]]:
+def _layers(
+    doc: dict[str, Any], inputs: int, outputs: int
+) -> tuple[tuple[FloatArray, ...], tuple[FloatArray, ...]]:
     layers = doc.get("layers")
     if not isinstance(layers, list) or not 1 <= len(layers) <= MAX_LAYERS:
         raise ModelRefused(f"layers: a list of 1 to {MAX_LAYERS} layers expected")
-    weights, biases, width = [], [], len(FEATURES)
+    weights, biases, width = [], [], inputs
     for i, layer in enumerate(layers):
         if not isinstance(layer, dict) or not isinstance(layer.get("b"), list):
             raise ModelRefused(f"layers[{i}]: an object with w and b expected")
         out = len(layer["b"])
-        if i == len(layers) - 1 and out != len(TARGETS):
-            raise ModelRefused(f"layers[{i}]: {out} outputs, expected {len(TARGETS)}")
+        if i == len(layers) - 1 and out != outputs:
+            raise ModelRefused(f"layers[{i}]: {out} outputs, expected {outputs}")
         if not 1 <= out <= MAX_WIDTH:
             raise ModelRefused(f"layers[{i}]: width {out}, at most {MAX_WIDTH}")
         weights.append(_array(layer, "w", (width, out)))
@@ -92,26 +105,42 @@ def _layers(doc: dict[str, Any]) -> tuple[tuple[FloatArray, ...], tuple[FloatArr
     return tuple(weights), tuple(biases)
 
 
-def parse(doc: Any, path: str, version: str | None = None) -> Model:
+@dataclass(frozen=True)
+class Kind:
+    """What a scenario runs: the features it computes, the targets, the output."""
+
+    scenario: str
+    features: tuple[str, ...]
+    targets: tuple[str, ...]
+    output: str = "identity"
+
+
+DRIVE = Kind("learned_drive", FEATURES, TARGETS)
+
+
+def parse(doc: Any, path: str, version: str | None = None, kind: Kind = DRIVE) -> Model:
     """The model in ``doc`` (a decoded model file), or :class:`ModelRefused`."""
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise ModelRefused(f"not a {FORMAT} model file")
-    if doc.get("features") != list(FEATURES):
+    features, targets = kind.features, kind.targets
+    if doc.get("features") != list(features):
         raise ModelRefused(
             f"made for other features ({len(doc.get('features') or [])} named) than"
-            f" learned_drive computes ({len(FEATURES)}: {', '.join(FEATURES[:3])}...)"
+            f" {kind.scenario} computes ({len(features)}: {', '.join(features[:3])}...)"
         )
-    if doc.get("targets") != list(TARGETS):
-        raise ModelRefused(f"targets {doc.get('targets')}, expected {list(TARGETS)}")
+    if doc.get("targets") != list(targets):
+        raise ModelRefused(f"targets {doc.get('targets')}, expected {list(targets)}")
+    if doc.get("output", "identity") != kind.output:
+        raise ModelRefused(f"output {doc.get('output')!r}, {kind.scenario} needs {kind.output!r}")
     found = str(doc.get("version", ""))
     if version is not None and found != version:
         raise ModelRefused(f"version {found!r}, the strategy asks for {version!r}")
-    n = len(FEATURES)
+    n = len(features)
     x_scale = _array(doc, "x_scale", (n,))
-    y_scale = _array(doc, "y_scale", (len(TARGETS),))
+    y_scale = _array(doc, "y_scale", (len(targets),))
     if np.any(x_scale <= 0) or np.any(y_scale <= 0):
         raise ModelRefused("x_scale, y_scale: must be positive")
-    weights, biases = _layers(doc)
+    weights, biases = _layers(doc, n, len(targets))
     metrics = doc.get("metrics") if isinstance(doc.get("metrics"), dict) else {}
     return Model(
         name=str(doc.get("name", "")),
@@ -121,16 +150,18 @@ def parse(doc: Any, path: str, version: str | None = None) -> Model:
         x_scale=x_scale,
         x_min=_array(doc, "x_min", (n,)),
         x_max=_array(doc, "x_max", (n,)),
-        y_mean=_array(doc, "y_mean", (len(TARGETS),)),
+        y_mean=_array(doc, "y_mean", (len(targets),)),
         y_scale=y_scale,
         weights=weights,
         biases=biases,
         metrics=metrics or {},
+        output=kind.output,
     )
 
 
-def load(path: str | Path, version: str | None = None) -> Model:
-    """Read and check the model file at ``path``; ``version``: the one required."""
+def load(path: str | Path, version: str | None = None, kind: Kind = DRIVE) -> Model:
+    """Read and check the model file at ``path`` for ``kind``'s scenario; ``version``: the
+    one required."""
     p = Path(path)
     try:
         size = p.stat().st_size
@@ -146,6 +177,6 @@ def load(path: str | Path, version: str | None = None) -> Model:
     except ValueError as exc:
         raise ModelRefused(f"{p}: not JSON ({exc})") from None
     try:
-        return parse(doc, str(p), version)
+        return parse(doc, str(p), version, kind)
     except ModelRefused as exc:
         raise ModelRefused(f"{p}: {exc}") from None

@@ -1114,3 +1114,46 @@ ALTER TABLE robot
         CHECK (footprint_polygon_surrounds_centre(footprint_polygon)),
     ADD CONSTRAINT robot_footprint_polygon_simple
         CHECK (footprint_polygon_simple(footprint_polygon));
+
+-- migration 18: GOTO_FORESIGHT, and the params that name a model held to the register's rules
+--
+-- GOTO_FAST (migration 8) with foresight (pnav_learned/foresight.py, docs/LEARNING.md): a
+-- controller scenario that predicts, from the last seconds of the robot's rows, that it will
+-- make no progress in the next 3 s, and then backs up and turns early, at priority 60 (below
+-- the planner's recovery, which still acts if the robot does get stuck). Its model is named
+-- like learned_drive's: `foresight_model` (a name registered in the model table, or a file
+-- relative to PNAV_MODEL_DIR: `foresight.json` here) and, optionally,
+-- `foresight_model_version`. With no such model foresight stands down and GOTO_FORESIGHT
+-- drives as GOTO_FAST.
+--
+-- strategy_model_params: the params naming a model are refused at the door unless they are
+-- what the model table can hold (`*_model` a string of 1-1000 characters, as model.path;
+-- `*_model_version` a string of 1-64, as model.version), and foresight_threshold, a
+-- probability, within [0, 1]. NOT VALID: strategy rows are referenced (migration 3).
+-- model_name_plain, model_version_plain: a model's name and version end up in every
+-- learned recommendation's reason and in params people type: letters, digits, `_ . -` only.
+INSERT INTO strategy (code, planner_scenario, controller_scenarios, params, description) VALUES
+    ('GOTO_FORESIGHT', 'turn_then_move', '{dwa,foresight,safety_stop}',
+     '{"target": "goal", "planner_drives": false, "recovery": true, "battery_wh_per_m": 0.006, "battery_reserve_wh": 0.05, "foresight_model": "foresight.json"}',
+     'go to the goal at the robot''s speed: dwa along the planned path, foresight recovering early when a model predicts no progress, recovery when stuck, safety_stop');
+
+CREATE FUNCTION model_param_ok(p jsonb, k text, longest integer) RETURNS boolean
+LANGUAGE sql IMMUTABLE PARALLEL SAFE AS $$
+    SELECT NOT (p ? k) OR (jsonb_typeof(p -> k) = 'string'
+                           AND char_length(p ->> k) BETWEEN 1 AND longest)
+$$;
+
+ALTER TABLE strategy ADD CONSTRAINT strategy_model_params CHECK (
+    jsonb_typeof(params) <> 'object' OR (
+        model_param_ok(params, 'learned_model', 1000)
+        AND model_param_ok(params, 'learned_model_version', 64)
+        AND model_param_ok(params, 'foresight_model', 1000)
+        AND model_param_ok(params, 'foresight_model_version', 64)
+        AND (NOT params ? 'foresight_threshold'
+             OR (jsonb_typeof(params -> 'foresight_threshold') = 'number'
+                 AND (params ->> 'foresight_threshold')::double precision BETWEEN 0 AND 1)))
+) NOT VALID;
+
+ALTER TABLE model
+    ADD CONSTRAINT model_name_plain CHECK (name ~ '^[A-Za-z0-9_.-]+$') NOT VALID,
+    ADD CONSTRAINT model_version_plain CHECK (version ~ '^[A-Za-z0-9_.-]+$') NOT VALID;

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
 
 from common import log
+from common.contract.models import RegisteredModel
 from common.contract.planned_path import PlannedPath
 from common.contract.recommendations import Recommendation
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
@@ -93,6 +94,12 @@ class Host(Protocol):
     async def planned_path(self, robot_id: str) -> PlannedPath | None:
         """The path in force for the robot (the planner's newest planned_path row), for the
         local controllers that score against it."""
+
+    async def registered_model(self, name: str, version: str | None) -> RegisteredModel | None:
+        """The ``model`` table's row (name, version), or with no version the newest
+        registered under ``name``; None: not registered (common.contract.models). Read again
+        every few seconds, or at once when notified: a learned scenario's model is switched
+        by an UPDATE of the strategy (or a new row), with no restart."""
 
     def last_recommended_scan(self, robot_id: str, source: str) -> int | None:
         """The newest scan ``source`` recommended on for the robot (this tenure), if any."""

@@ -1,5 +1,6 @@
-"""``pnav learn dataset`` and ``pnav learn train`` (docs/LEARNING.md). Heavy imports
-(pyarrow, scikit-learn) wait until a command runs: pnav's parser is built on every command."""
+"""``pnav learn dataset``, ``pnav learn train`` and ``pnav learn register`` (docs/LEARNING.md).
+Heavy imports (pyarrow, scikit-learn) wait until a command runs: pnav's parser is built on
+every command."""
 
 from __future__ import annotations
 
@@ -27,10 +28,27 @@ def add_learn_parser(commands: argparse._SubParsersAction[argparse.ArgumentParse
     data.add_argument(
         "--horizon", type=float, default=3.0, metavar="S", help="outcome horizon, sim s (3)"
     )
-    train = steps.add_parser("train", help="train learned_drive's model on a dataset")
-    train.add_argument("--data", type=Path, required=True, metavar="FILE.parquet")
+    train = steps.add_parser("train", help="train a learned scenario's model on datasets")
+    train.add_argument(
+        "--data", type=Path, required=True, nargs="+", metavar="FILE.parquet", help="one or more"
+    )
     train.add_argument("--out", type=Path, required=True, metavar="MODEL.json")
-    train.add_argument("--name", default="learned_drive", help="the model's name")
+    train.add_argument(
+        "--target",
+        choices=("drive", "foresight"),
+        default="drive",
+        help="drive: learned_drive's velocity (default); foresight: no progress within 3 s",
+    )
+    train.add_argument(
+        "--test",
+        type=Path,
+        nargs="+",
+        metavar="FILE.parquet",
+        help="held-out examples from these files (other worlds) instead of a seeded fifth",
+    )
+    train.add_argument(
+        "--name", help="the model's name (default: learned_drive, or foresight with its target)"
+    )
     train.add_argument(
         "--sources", default="", help="only decisions won by these scenarios, e.g. dwa"
     )
@@ -38,6 +56,13 @@ def add_learn_parser(commands: argparse._SubParsersAction[argparse.ArgumentParse
         "--hidden", default="32,32", help="hidden layer widths, comma-separated (32,32)"
     )
     train.add_argument("--seed", type=int, default=0)
+    register = steps.add_parser(
+        "register", help="register a model file in the model table (people's row)"
+    )
+    register.add_argument("file", type=Path, metavar="MODEL.json")
+    register.add_argument("--name", help="the name to register under (default: the file's)")
+    register.add_argument("--version", help="the version; must be the file's (default: the file's)")
+    register.add_argument("--description", default="", help="for people, one line")
 
 
 def _hidden(text: str) -> tuple[int, ...]:
@@ -90,17 +115,27 @@ def run_learn(args: argparse.Namespace) -> int:
         import uvloop
 
         return uvloop.run(_dataset(args))
+    if args.learn == "register":
+        import uvloop
+
+        from pnav.learn.register import register, row_for
+
+        row = row_for(args.file, args.name, args.version)
+        return uvloop.run(register(row, args.description))
     if args.learn == "train":
         from pnav.learn.train import train
 
         sources = tuple(s for s in args.sources.split(",") if s)
+        default_name = "foresight" if args.target == "foresight" else "learned_drive"
         doc = train(
             args.data,
             args.out,
-            name=args.name,
+            name=args.name or default_name,
             hidden=_hidden(args.hidden),
             sources=sources,
             seed=args.seed,
+            target=args.target,
+            test=args.test,
         )
         summary = {k: doc[k] for k in ("name", "version", "data_sha256", "metrics")}
         json.dump(summary, sys.stdout, indent=1)

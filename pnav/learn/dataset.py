@@ -11,6 +11,10 @@ What happened, ``horizon_s`` of sim time on: ``progress_m`` (distance to the pat
 now minus then, from the first odometry at or after stamp + horizon; NaN when the run ended
 sooner), ``collision`` (a collision_event in [stamp, stamp + horizon]) and ``goal_status``
 (the status of the goal the path led to, as the database has it now).
+
+Each example also carries foresight's features of the last seconds (pnav_learned.history,
+``HISTORY_FEATURES``), from the robot's earlier examples in stamp order: the scenario
+computes them the same way from its scans.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from pnav_learned.features import FEATURES, features, sector_minima
+from pnav_learned.history import HISTORY_FEATURES, History, sample
 
 DEFAULT_HORIZON_S = 3.0
 
@@ -111,7 +116,9 @@ async def read(conn: Any, horizon_s: float = DEFAULT_HORIZON_S) -> Dataset:
         " FROM command2robot c LEFT JOIN command_recommendation r ON r.id = c.recommendation_id"
         " ORDER BY c.robot_id, c.stamp, c.id"
     )
-    columns: dict[str, list[Any]] = {n: [] for n in (*META, *FEATURES, *TARGETS, *OUTCOMES)}
+    names = (*META, *FEATURES, *HISTORY_FEATURES, *TARGETS, *OUTCOMES)
+    columns: dict[str, list[Any]] = {n: [] for n in names}
+    histories: dict[str, History] = defaultdict(History)
     skipped = 0
     for d in decisions:
         robot, stamp = d["robot_id"], d["stamp"]
@@ -127,6 +134,8 @@ async def read(conn: Any, horizon_s: float = DEFAULT_HORIZON_S) -> Dataset:
         sectors = sector_minima(scan["ranges"], scan["angle_min"], scan["angle_increment"])
         row = features(sectors, (o["linear_mps"], o["angular_rps"]), pose, path["xs"], path["ys"])
         end = (path["xs"][-1], path["ys"][-1])
+        history = histories[robot]
+        history.add(sample(o["stamp"], pose, o["linear_mps"], end, row))
         later = odom[robot].at_or_after(stamp + horizon_s)
         progress = (
             math.dist(pose[:2], end) - math.dist((later["x"], later["y"]), end)
@@ -149,6 +158,7 @@ async def read(conn: Any, horizon_s: float = DEFAULT_HORIZON_S) -> Dataset:
             "collision": crash is not None and crash["stamp"] <= stamp + horizon_s,
             "goal_status": goals.get(path["goal_id"], ""),
             **dict(zip(FEATURES, row.tolist(), strict=True)),
+            **dict(zip(HISTORY_FEATURES, history.features().tolist(), strict=True)),
         }
         for name, value in values.items():
             columns[name].append(value)

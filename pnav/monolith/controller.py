@@ -15,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from common.contract import keys, offers, records
+from common.contract import keys, models, offers, records
+from common.contract.models import RegisteredModel
 from common.contract.planned_path import PlannedPath, planned_path_of
 from common.contract.recommendations import Recommendation
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot, Strategy
@@ -98,6 +99,10 @@ class MemoryControllerSource:
 
     async def newest_odometries(self, robot_ids: Sequence[str]) -> dict[str, Odometry | None]:
         return {robot_id: await self.newest_odometry(robot_id) for robot_id in robot_ids}
+
+    async def models(self) -> list[RegisteredModel]:
+        table = self.contract.tables.get(keys.MODEL)
+        return [] if table is None else [models.of_row(r) for r in table.all_rows()]
 
     async def recommend(self, recommendation: Recommendation) -> int:
         return self.contract.insert_recommendation(recommendation)

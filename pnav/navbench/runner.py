@@ -43,20 +43,24 @@ if TYPE_CHECKING:
 
 STACK, MONOLITH = "stack", "monolith"  # the records' modes (pnav.navbench.report)
 # a row of the contract's INSERT INTO strategy: code, planner, controllers, params, ...
+# the params that name a learned scenario's model (docs/LEARNING.md)
+LEARNED_PARAMS = ("learned_model", "foresight_model")
 _ROW = re.compile(r"\(\s*'([A-Z0-9_]+)'\s*,\s*(?:NULL|'[^']*')\s*,\s*'[^']*'\s*,\s*'([^']*)'")
 
 
 def navigation_strategies(sql: str, learned: bool = False) -> list[str]:
     """Codes of the strategy rows ``sql`` inserts whose params target the goal, in order:
     those drive to a goal a benchmark can give (CHARGE drives to a charger, IDLE nowhere).
-    A strategy that runs a learned model (``learned_model``) is left out: the model file is
+    A strategy that runs a learned model (``learned_model``, ``foresight_model``) is left
+    out: the model file is
     trained from runs like these, so it is no shipped combo (docs/LEARNING.md); ``learned``:
     only those."""
     codes = []
     for insert in re.finditer(r"INSERT INTO strategy\b(.*?);", sql, re.S | re.I):
         for code, params in _ROW.findall(insert[1]):
             doc = json.loads(params)
-            if doc.get("target") == "goal" and ("learned_model" in doc) == learned:
+            runs_model = any(key in doc for key in LEARNED_PARAMS)
+            if doc.get("target") == "goal" and runs_model == learned:
                 codes.append(code)
     return codes
 

@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from typing import Protocol
 
 from common.contract import records
+from common.contract.models import RegisteredModel, read_models
 from common.contract.planned_path import PlannedPath, newest_planned_path
 from common.contract.recommendations import (
     Recommendation,
@@ -43,6 +44,9 @@ class ControllerSource(Protocol):
 
     async def newest_planned_path(self, robot_id: str) -> PlannedPath | None:
         """The path in force for the robot (the planner's newest planned_path row)."""
+
+    async def models(self) -> list[RegisteredModel]:
+        """The register of learned models (the model table), oldest first per name."""
 
     async def recommend(self, recommendation: Recommendation) -> int:
         """Write a command_recommendation row (notified after commit); its id."""
@@ -81,6 +85,9 @@ class PgControllerSource:
 
     async def newest_planned_path(self, robot_id: str) -> PlannedPath | None:
         return await newest_planned_path(self.db, robot_id)
+
+    async def models(self) -> list[RegisteredModel]:
+        return await read_models(self.db)
 
     async def recommend(self, recommendation: Recommendation) -> int:
         return await write_recommendation(self.db, recommendation)

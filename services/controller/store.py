@@ -44,6 +44,7 @@ import asyncpg
 from common import log
 from common.bus import Notification
 from common.contract import keys, records
+from common.contract.models import RegisteredModel, pick
 from common.contract.planned_path import PlannedPath, planned_path_of
 from common.contract.recommendations import (
     Recommendation,
@@ -64,6 +65,7 @@ logger = logging.getLogger("pnav.controller")
 # Notifications are hints: a row is read again after this long (store clock) even if none
 # came, in case one was lost.
 RECHECK_S = 0.25
+MODELS_RECHECK_S = 2.0  # the model register, read whole for the learned scenarios (or notified)
 ODOMETRY_LISTENS = frozenset((keys.ODOMETRY,))  # see ControllerStore.listens
 
 Tables = tuple[list[Robot], dict[str, ActiveStrategy]]
@@ -96,11 +98,10 @@ class ControllerStore:
     # 10 points of a core more than the query it saves, with no latency gain to see: each
     # notification crosses from Zenoh's thread to the loop (and takes the GIL) for a row
     # that only matters at the next scan. ODOMETRY_LISTENS is the set to hear it.
-    #
     # planned_path is heard (a row per plan: a few a minute per robot), for the local
     # controllers that score against the path (docs/CONTROLLER.md, dwa); read only by the
-    # scenarios that ask for it (Host.planned_path).
-    listens: frozenset[str] = frozenset((keys.PLANNED_PATH,))
+    # scenarios that ask for it (Host.planned_path). model: a new row is seen at once.
+    listens: frozenset[str] = frozenset((keys.PLANNED_PATH, keys.MODEL))
 
     def __init__(
         self,
@@ -126,6 +127,7 @@ class ControllerStore:
         self.scans: FreshCache[str, ScanAndOdometry] = FreshCache(clock, recheck_s, _scan_id)
         # per robot: the path in force (planned_path), for the scenarios that ask for it
         self.paths: FreshCache[str, PlannedPath | None] = FreshCache(clock, recheck_s, _path_id)
+        self.models: FreshCache[str, list[RegisteredModel]] = FreshCache(clock, MODELS_RECHECK_S)
         # per robot: (scan id, odometry) for a scan whose odometry the pair above does not
         # hold (an image's scan, or one the pair no longer holds)
         self._odometry: dict[str, tuple[int, Odometry | None]] = {}
@@ -176,6 +178,8 @@ class ControllerStore:
                 self.paths.announce_all()
             elif not self._path_image(note.robot, note):
                 self.paths.announce(note.robot, note.id)
+        elif note.table == keys.MODEL:
+            self.models.announce(keys.MODEL)
         elif note.table in _META_TABLES or not note.table:
             self.tables.announce(_META)  # which row changed does not matter: read both again
 
@@ -352,6 +356,9 @@ class ControllerStore:
 
     async def planned_path(self, robot_id: str) -> PlannedPath | None:
         return await self.paths.get(robot_id, lambda: self.source.newest_planned_path(robot_id))
+
+    async def registered_model(self, name: str, version: str | None) -> RegisteredModel | None:
+        return pick(await self.models.get(keys.MODEL, self.source.models), name, version)
 
     def last_recommended_scan(self, robot_id: str, source: str) -> int | None:
         return self._recommended.get((robot_id, source))

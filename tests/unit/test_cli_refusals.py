@@ -150,7 +150,8 @@ def test_an_unknown_strategy_is_refused_with_the_known_ones(
         code,
         err,
         "unknown strategy 'NO_SUCH_THING'",
-        "CHARGE, GOTO_AVOID, GOTO_DIRECT, GOTO_DODGE, GOTO_FAST, GOTO_LEARNED, IDLE",
+        "CHARGE, GOTO_AVOID, GOTO_DIRECT, GOTO_DODGE, GOTO_FAST, GOTO_FORESIGHT, GOTO_LEARNED,"
+        " IDLE",
     )
 
 

@@ -10,6 +10,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pnav_learned.features import FEATURES, RANGE_CAP_M, SECTORS
+from pnav_learned.history import FORESIGHT_FEATURES
 
 
 def rule(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -39,4 +40,41 @@ def write(path: Path, n: int = 3000, seed: int = 1, shuffle: bool = False) -> No
         linear, angular = linear[order], angular[order]
     columns = {name: x[:, i] for i, name in enumerate(FEATURES)}
     columns |= {"linear_mps_cmd": linear, "angular_rps_cmd": angular, "source": ["dwa"] * n}
+    pq.write_table(pa.table(columns), path)
+
+
+def foresight_rule(x: np.ndarray) -> np.ndarray:
+    """What made the foresight data: no progress ahead when the robot moved little in the
+    last second, the less so the nearer something was ahead in the last seconds."""
+    moved = x[:, FORESIGHT_FEATURES.index("moved_1s")]
+    ahead = x[:, FORESIGHT_FEATURES.index("ahead_min_3s")]
+    return np.asarray(moved + 0.1 * ahead < 0.2)
+
+
+def foresight_features(n: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    base = features(n, seed)
+    base[:, FEATURES.index("target_dist")] = rng.uniform(1.0, 8.0, n)
+    history = np.column_stack(
+        [
+            rng.uniform(1.0, 3.0, n),  # history_s
+            rng.uniform(0.0, 0.3, n),  # moved_1s
+            rng.uniform(0.0, 0.8, n),  # moved_3s
+            rng.uniform(-0.3, 0.8, n),  # progress_3s
+            rng.uniform(0.0, 3.0, n),  # turned_3s
+            rng.uniform(0.0, 0.25, n),  # speed_mean_3s
+            rng.uniform(0.2, 3.5, n),  # ahead_min_3s
+        ]
+    )
+    return np.column_stack([base, history])
+
+
+def write_foresight(path: Path, n: int = 4000, seed: int = 1, shuffle: bool = False) -> None:
+    """A dataset as ``pnav learn dataset`` writes one, with progress_m made by the rule."""
+    x = foresight_features(n, seed)
+    stuck = foresight_rule(x)
+    if shuffle:  # the same labels, cut loose from the features
+        stuck = stuck[np.random.default_rng(seed + 1).permutation(n)]
+    columns = {name: x[:, i] for i, name in enumerate(FORESIGHT_FEATURES)}
+    columns["progress_m"] = np.where(stuck, 0.05, 0.9)
     pq.write_table(pa.table(columns), path)

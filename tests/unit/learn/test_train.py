@@ -75,3 +75,49 @@ def test_a_target_that_never_varies_is_predicted_exactly(tmp_path: Path) -> None
     assert doc["metrics"]["linear_mps_mae"] < 1e-12
     model = load(out)
     assert model.predict(synthetic.features(1, seed=3)[0])[0] == pytest.approx(0.22, abs=1e-12)
+
+
+def test_foresight_learns_the_rule_that_made_its_labels(tmp_path: Path) -> None:
+    from pnav_learned.foresight import KIND
+
+    data, out = tmp_path / "data.parquet", tmp_path / "foresight.json"
+    synthetic.write_foresight(data)
+    doc = train(data, out, name="foresight", target="foresight", hidden=(16,))
+    m = doc["metrics"]
+    assert m["held_out"] == 800 and 0.1 < m["held_out_positive"] / 800 < 0.3
+    assert m["precision_0.6"] > 0.9 and m["recall_0.6"] > 0.85
+    # the file as foresight reads it, on examples it never saw
+    model = load(out, doc["version"], KIND)
+    fresh = synthetic.foresight_features(500, seed=9)
+    truth = synthetic.foresight_rule(fresh)
+    p = np.array([model.outputs(x)[0][0] for x in fresh])
+    assert np.mean((p >= 0.6) == truth) > 0.9
+
+
+def test_foresight_learns_nothing_from_labels_unrelated_to_the_features(tmp_path: Path) -> None:
+    data, out = tmp_path / "data.parquet", tmp_path / "foresight.json"
+    synthetic.write_foresight(data, shuffle=True)
+    m = train(data, out, name="noise", target="foresight", hidden=(16,))["metrics"]
+    assert (m["recall_0.6"] or 0.0) < 0.3 or (m["precision_0.6"] or 0.0) < 0.5
+
+
+def test_foresight_held_out_on_other_files(tmp_path: Path) -> None:
+    one, two, out = tmp_path / "a.parquet", tmp_path / "b.parquet", tmp_path / "f.json"
+    synthetic.write_foresight(one, n=1000, seed=1)
+    synthetic.write_foresight(two, n=300, seed=2)
+    doc = train([one], out, name="f", target="foresight", hidden=(16,), test=[two])
+    assert doc["metrics"]["train_examples"] == 1000 and doc["metrics"]["held_out"] == 300
+    assert doc["test_sha256"] == hashlib.sha256(two.read_bytes()).hexdigest()
+
+
+def test_foresight_refuses_a_dataset_of_another_horizon(tmp_path: Path) -> None:
+    import pyarrow.parquet as pq
+
+    from common.errors import UsageError
+
+    data, out = tmp_path / "data.parquet", tmp_path / "f.json"
+    synthetic.write_foresight(data, n=200)
+    table = pq.read_table(data)
+    pq.write_table(table.replace_schema_metadata({"pnav.horizon_s": "5.0"}), data)
+    with pytest.raises(UsageError, match="outcomes over 5 s"):
+        train(data, out, name="f", target="foresight", hidden=(4,))

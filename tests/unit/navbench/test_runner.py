@@ -438,14 +438,19 @@ def test_a_strategy_running_a_learned_model_is_no_shipped_combo() -> None:
     INSERT INTO strategy (code, planner_scenario, controller_scenarios, params) VALUES
         ('PLAIN', 'turn_then_move', '{dwa}', '{"target": "goal"}'),
         ('LEARNED', 'turn_then_move', '{learned_drive}',
-         '{"target": "goal", "learned_model": "m.json"}');
+         '{"target": "goal", "learned_model": "m.json"}'),
+        ('FORESEEN', 'turn_then_move', '{dwa,foresight}',
+         '{"target": "goal", "foresight_model": "f.json"}');
     """
     assert runner.navigation_strategies(sql) == ["PLAIN"]
+    assert runner.navigation_strategies(sql, learned=True) == ["LEARNED", "FORESEEN"]
 
 
 def test_a_learned_strategy_is_picked_only_by_its_name() -> None:
     shipped, learned = runner.shipped_combos(), runner.shipped_combos(learned=True)
-    assert [c.label for c in learned] == [f"GOTO_LEARNED/{p}" for p in SCENARIOS]
+    assert [c.label for c in learned] == [
+        f"{s}/{p}" for s in ("GOTO_LEARNED", "GOTO_FORESIGHT") for p in SCENARIOS
+    ]
     picked = runner.pick_combos("GOTO_LEARNED/turn_then_move", shipped, learned)
     assert [c.label for c in picked] == ["GOTO_LEARNED/turn_then_move"]
     by_planner = runner.pick_combos("turn_then_move", shipped, learned)
