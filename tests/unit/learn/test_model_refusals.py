@@ -149,7 +149,6 @@ def test_learned_drive_remembers_its_stop_per_robot(tmp_path: Path) -> None:
     from common.contract.planned_path import PlannedPath
     from common.contract.records import Odometry, Robot
     from common.controller_core.scenario import ScenarioSpec
-    from common.engine.supervisor import Ticket
     from pnav_learned.drive import LearnedDrive
     from pnav_learned.registry import Found
     from tests.unit.learn.test_foresight import LaserScan
@@ -158,8 +157,9 @@ def test_learned_drive_remembers_its_stop_per_robot(tmp_path: Path) -> None:
     rules = {}
     for robot in ("r1", "r2"):
         spec = ScenarioSpec(Robot(robot, 0.22, 2.84, 0.1, 20.0), "GOTO_LEARNED", {})
-        rules[robot] = LearnedDrive(cast(Host, None), Ticket((robot, "learned_drive"), spec))
+        rules[robot] = LearnedDrive(cast(Host, None), (robot, "learned_drive"), spec)
         rules[robot].found = model
+        rules[robot].live = True
     scan = LaserScan(1, "r1", 0.0, 0.0, 0.1, 0.1, 3.5, np.full(8, 3.0, dtype=np.float32))
     odom = Odometry(1, "r1", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
@@ -168,7 +168,7 @@ def test_learned_drive_remembers_its_stop_per_robot(tmp_path: Path) -> None:
 
     said = []
     for robot, path_id in (("r1", 5), ("r2", 6), ("r1", 5), ("r2", 6), ("r1", 7)):
-        rule = rules[robot] = rules[robot].keep_alive()[0]  # type: ignore[assignment]
+        rule = rules[robot] = rules[robot].rule_generation()[0]  # type: ignore[assignment]
         rule.path = empty(path_id, robot)
         command = rule.judge(scan, odom)
         said.append(None if command is None else (robot, path_id))
