@@ -54,12 +54,29 @@ def test_each_role_holds_its_process_and_every_descendant(parent: psutil.Process
     assert "gone" not in found  # a process that ended is no one's
 
 
+def _agrees(procs: list[psutil.Process], alive: list[psutil.Process]) -> bool:
+    """Whether pss_mb of ``procs`` read what psutil's full reading of those ``alive`` gives,
+    read just before and after it.
+
+    The processes are asleep, but their PSS moves whenever any other process mapping the
+    same pages (the interpreter, its libraries) starts or ends: on a busy machine, between
+    two readings. So the reading is held to the two around it, and tried again a few times
+    (one quiet moment is enough; a wrong reading is wrong in every one)."""
+    for _ in range(20):
+        before = sum(p.memory_full_info().pss for p in alive) / 2**20
+        read = pss_mb(procs)
+        after = sum(p.memory_full_info().pss for p in alive) / 2**20
+        # pss_mb rounds to 0.1 MB
+        if min(before, after) - 0.06 <= read <= max(before, after) + 0.06:
+            return True
+    return False
+
+
 def test_pss_is_the_kernel_figure_the_full_memory_reading_gives(parent: psutil.Process) -> None:
     [child] = parent.children()
     procs = [parent, child]
-    expected = sum(p.memory_full_info().pss for p in procs) / 2**20
-    assert pss_mb(procs) == pytest.approx(expected, abs=0.5)  # asleep: only sharing moves it
+    assert _agrees(procs, procs)
     parent.kill()
     parent.wait(5)
     # an ended process counts for nothing, and the reading goes on with the others
-    assert pss_mb(procs) == pytest.approx(child.memory_full_info().pss / 2**20, abs=0.5)
+    assert _agrees(procs, [child])
