@@ -21,17 +21,16 @@ which is one per (robot, scenario): never shared between robots.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
 from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
-from common.controller_core.scenario import Command, ControllerScenario
+from common.controller_core.scenario import Command
 from pnav_learned.features import features, sector_minima
 from pnav_learned.model import DRIVE, Model
-from pnav_learned.registry import Found, resolve
+from pnav_learned.scenario import LearnedScenario
 
 PRIORITY = 30
 PARAMS = "learned"  # learned_model, learned_model_version
@@ -66,40 +65,21 @@ def recommend(
     )
 
 
-class LearnedDrive(ControllerScenario):
+class LearnedDrive(LearnedScenario):
     scenario = "learned_drive"
     priority = PRIORITY
-    needs_odometry = True
+    params = PARAMS
+    kind = DRIVE
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        self.path: PlannedPath | None = None
-        self.found: Found | str = "not read yet"
         # this robot's memory: the empty path it already recommended its one stop on
         self.stopped_for: int | None = None
-        self.refusal: str | None = None  # why this scenario stands down, for tests and people
-
-    async def data_acquisition(self) -> None:
-        live = self.live
-        self.path = await self.host.planned_path(self.spec.robot.robot_id) if live else None
-        if live:
-            self.found = await resolve(self.host, self.spec.params, PARAMS, DRIVE)
-        await super().data_acquisition()
-
-    @classmethod
-    def decide(
-        cls, scan: LaserScan, odom: Odometry | None, robot: Robot, params: Mapping[str, Any]
-    ) -> Command | None:
-        return None  # the path is read in acquisition: ``judge`` decides
 
     def judge(self, scan: LaserScan, odom: Odometry | None) -> Command | None:
-        found = self.found
-        if isinstance(found, str):
-            self.refusal = found
-            return None  # stand down: the strategy's other scenarios drive
-        self.refusal = None
+        found = self.model()
         path = self.path
-        if path is None or odom is None:
+        if found is None or path is None or odom is None:
             return None
         if path.empty:
             if self.stopped_for == path.id:

@@ -20,7 +20,7 @@ there would need a change to the planner service. The planner's recovery stays a
 foresight only acts before it would.
 
 What it remembers of a robot (its history and the manoeuvre under way) is one
-:class:`Foresee` in its rule (one rule per robot and scenario; its clones share it).
+:class:`Foresee` in its rule (one rule per robot and scenario, living as long as it).
 """
 
 from __future__ import annotations
@@ -32,14 +32,14 @@ from typing import Any
 
 import numpy as np
 
-from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
 from common.controller_core.params import number
-from common.controller_core.scenario import Command, ControllerScenario
+from common.controller_core.scenario import Command
 from pnav_learned.features import FloatArray, features, sector_minima
 from pnav_learned.history import FORESIGHT_FEATURES, NEAR_TARGET_M, History, Sample, sample
 from pnav_learned.model import Kind
-from pnav_learned.registry import Found, resolve
+from pnav_learned.registry import Found
+from pnav_learned.scenario import LearnedScenario
 
 PRIORITY = 60
 PARAMS = "foresight"  # foresight_model, foresight_model_version
@@ -156,40 +156,21 @@ class Foresee:
         return None
 
 
-class Foresight(ControllerScenario):
+class Foresight(LearnedScenario):
     scenario = "foresight"
     priority = PRIORITY
-    needs_odometry = True
+    params = PARAMS
+    kind = KIND
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        self.path: PlannedPath | None = None
-        self.found: Found | str = "not read yet"
-        self.refusal: str | None = None  # why this scenario stands down, for tests and people
         # this robot's foresight: the one place its state lives between scans
         self.memory = Foresee()
 
-    async def data_acquisition(self) -> None:
-        live = self.live
-        self.path = await self.host.planned_path(self.spec.robot.robot_id) if live else None
-        if live:
-            self.found = await resolve(self.host, self.spec.params, PARAMS, KIND)
-        await super().data_acquisition()
-
-    @classmethod
-    def decide(
-        cls, scan: LaserScan, odom: Odometry | None, robot: Robot, params: Mapping[str, Any]
-    ) -> Command | None:
-        return None  # the path and the model are read in acquisition: ``judge`` decides
-
     def judge(self, scan: LaserScan, odom: Odometry | None) -> Command | None:
-        found = self.found
-        if isinstance(found, str):
-            self.refusal = found
-            return None  # stand down: the strategy's other scenarios drive
-        self.refusal = None
+        found = self.model()
         path = self.path
-        if path is None or path.empty or odom is None:
+        if found is None or path is None or path.empty or odom is None:
             return None
         robot, pose = self.spec.robot, (odom.x, odom.y, odom.yaw)
         sectors = sector_minima(scan.ranges, scan.angle_min, scan.angle_increment)
