@@ -53,7 +53,7 @@ from common.contract.recommendations import (
 from common.contract.records import ActiveStrategy, LaserScan, Odometry, Robot
 from common.controller_core.scenario import Key
 from common.freshness import FreshCache
-from common.images import ImageGuard
+from common.images import GuardedStore, ImageGuard
 from common.writebehind import WriteBehind
 from services.controller.source import (
     ControllerSource,
@@ -83,7 +83,7 @@ def _path_id(path: PlannedPath | None) -> int | None:
     return path.id if path is not None else None
 
 
-class ControllerStore:
+class ControllerStore(GuardedStore):
     """The rules' :class:`~common.controller_core.scenario.Host` over a source, with caches.
 
     ``clock`` is what the caches count ``recheck_s`` in (wall time in a service, sim time in
@@ -151,16 +151,6 @@ class ControllerStore:
         self.meta_lock_refusals = 0  # reads a lock refused (tests, logs)
         self._refresh: asyncio.Task[None] | None = None
         self._lock_logged_at = -LOCKED_LOG_S
-
-    @property
-    def notifications_lost(self) -> int:
-        """Notifications known lost on the way here (seq gaps: common.images.ImageGuard.gap)."""
-        return self.images.lost
-
-    @property
-    def images_refused(self) -> dict[str, int]:
-        """Row images refused per table (broke the table's rules): the table was read."""
-        return dict(self.images.refused)
 
     # -- what the service tells it ---------------------------------------------------------
     def note(self, note: Notification) -> None:

@@ -38,7 +38,7 @@ from common.contract import keys, records
 from common.contract.offers import Offers
 from common.contract.recommendations import Recommendation, recommendation_key
 from common.freshness import FreshCache
-from common.images import ImageGuard
+from common.images import GuardedStore, ImageGuard
 from common.planner_core.scenario import RobotInfo
 from common.writebehind import WriteBehind
 from services.planner.paths import PathRow
@@ -60,7 +60,7 @@ _STRATEGY_TABLES = (keys.ACTIVE_STRATEGY, keys.STRATEGY)
 _WORLD, _ACTIVE, _OFFERS, _ZONES = "world", "active", "offers", "zones"
 
 
-class PlannerStore:
+class PlannerStore(GuardedStore):
     """The planner's one view of the contract: caches, notifications, the world, routes."""
 
     def __init__(
@@ -103,16 +103,6 @@ class PlannerStore:
         self.outbox: WriteBehind[Recommendation] | None = None
         self.odometry_reads = 0  # odometry read from the table (tests, benchmarks)
         self.battery_reads = 0  # battery rows read from the table (tests, benchmarks)
-
-    @property
-    def notifications_lost(self) -> int:
-        """Notifications known lost on the way here (seq gaps: common.images.ImageGuard.gap)."""
-        return self.images.lost
-
-    @property
-    def images_refused(self) -> dict[str, int]:
-        """Row images refused per table (broke the table's rules): the table was read."""
-        return dict(self.images.refused)
 
     # -- clocks ------------------------------------------------------------------------------
     def now(self) -> float:
