@@ -1,8 +1,11 @@
 """Benchmark: one learned_drive decision against one dwa decision, on the same scenes.
 
-``python -m pnav.bench.learned [--model FILE] [--scenes N] [--json FILE]`` decides the made-up
-scenes of ``pnav.bench.dwa`` (the Jackal in clutter, a path 10 m ahead) with dwa's default
-params and with learned_drive (features, then the model), and prints the milliseconds per
+``python -m pnav.bench.learned [--model FILE] [--scenes N] [--set NAME] [--json FILE]`` decides
+the made-up scenes of ``pnav.bench.dwa`` (``default``: the Jackal in clutter, a path 10 m ahead;
+``barn``: BARN-like clutter and a bending path; ``barn_box``: those with the Jackal's true box,
+which dwa then checks too) with dwa's default params and with learned_drive (features, then
+the model: it never looks at the footprint, so its cost is one for every set), and prints the
+milliseconds per
 decision of each (best of the passes, wall and CPU) and their ratio. Without ``--model`` the
 model is a (32, 32) network with random weights: its cost is the cost of any model of that
 shape, which is all a timing needs.
@@ -19,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from pnav.bench.dwa import JACKAL, PATH, scenes
+from pnav.bench.dwa import JACKAL, POLYGONS, barn, scenes
 from pnav.bench.report import emit, machine
 from pnav_learned.drive import recommend
 from pnav_learned.features import FEATURES
@@ -52,13 +55,13 @@ def random_model(hidden: tuple[int, ...] = (32, 32)) -> Model:
 
 
 def timed(
-    decide: Callable[[Any, Any], object], data: list[Any], repeat: int
+    decide: Callable[[Any, Any, Any], object], data: list[Any], repeat: int
 ) -> tuple[float, float]:
     best = best_cpu = math.inf
     for _ in range(repeat):
         started, cpu = time.perf_counter(), time.process_time()
-        for scan, odom in data:
-            decide(scan, odom)
+        for scan, odom, path in data:
+            decide(scan, odom, path)
         best = min(best, time.perf_counter() - started)
         best_cpu = min(best_cpu, time.process_time() - cpu)
     return best / len(data) * 1e3, best_cpu / len(data) * 1e3
@@ -69,16 +72,23 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--model", help="a model file (default: random weights, 32x32)")
     parser.add_argument("--scenes", type=int, default=200)
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument(
+        "--set", default="default", choices=("default", "barn", "barn_box"), help="the scenes"
+    )
     parser.add_argument("--repeat", type=int, default=3, help="best of this many passes")
     parser.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
     args = parser.parse_args(argv)
     model = load(args.model) if args.model else random_model()
-    data = scenes(args.scenes, args.seed)
+    data = (barn if args.set.startswith("barn") else scenes)(args.scenes, args.seed)
     params = DwaParams.read({})
-    dwa_ms, dwa_cpu = timed(lambda s, o: choose(s, o, JACKAL, PATH, params), data, args.repeat)
-    ml_ms, ml_cpu = timed(lambda s, o: recommend(model, s, o, JACKAL, PATH), data, args.repeat)
+    polygon = POLYGONS.get(args.set)
+    dwa_ms, dwa_cpu = timed(
+        lambda s, o, p: choose(s, o, JACKAL, p, params, polygon), data, args.repeat
+    )
+    ml_ms, ml_cpu = timed(lambda s, o, p: recommend(model, s, o, JACKAL, p), data, args.repeat)
     results = {
         "model": model.path,
+        "set": args.set,
         "dwa_ms_per_decision": round(dwa_ms, 3),
         "dwa_cpu_ms_per_decision": round(dwa_cpu, 3),
         "learned_ms_per_decision": round(ml_ms, 3),
