@@ -97,7 +97,9 @@ class Demo:
         await self.until(f"{seconds} s of sim time", lambda log: log.now.stamp >= start + seconds)
 
     async def strategy(self, code: str) -> None:
-        verdict, reason = await stack_commands.send_user_command(self.rt, ROBOT, "SET_STRATEGY", code)
+        verdict, reason = await stack_commands.send_user_command(
+            self.rt, ROBOT, "SET_STRATEGY", code
+        )
         if verdict != "accepted":
             raise MissionFailed(f"SET_STRATEGY {code} was {verdict}: {reason}")
         self.event(f"user: strategy {code} ({reason})")

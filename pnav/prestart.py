@@ -2,8 +2,8 @@
 environment exists.
 
 The launcher starts each service this way while it is still making Postgres ready
-(:class:`Prestart`, taken by pnav.process_supervisor): the process imports the service's code (a third
-of a second to a second of a 2-core machine's time, per process) in parallel with the
+(:class:`Prestart`, taken by pnav.process_supervisor): the process imports the service's code
+(a third of a second to a second of a 2-core machine's time, per process) in parallel with the
 launcher's own work, then waits. When the stack is ready the launcher writes the service's
 whole environment (its role's DSN, its Zenoh password...) as JSON on a pipe (the descriptor
 in ``PNAV_PRESTART_FD``) and closes it; the process takes that environment as its own and

@@ -242,7 +242,9 @@ async def test_the_cli_drives_a_robot_as_pnav_user_and_a_service_role_cannot(
         first = await stack_commands.set_goal(people, "r1", 1.0, 2.0)
         second = await stack_commands.set_goal(people, "r1", 3.0, 4.0)  # supersedes the first
         assert await stack_commands.cancel_goal(people, "r1") == second
-        status, reason = await stack_commands.send_user_command(people, "r1", "SET_STRATEGY", "IDLE", 0.1)
+        status, reason = await stack_commands.send_user_command(
+            people, "r1", "SET_STRATEGY", "IDLE", 0.1
+        )
         assert (status, reason) == ("pending", "no answer from the strategy service within 0 s")
         goals = await admin.fetch("SELECT id, status FROM goal ORDER BY id")
         assert [tuple(r) for r in goals] == [(first, "superseded"), (second, "cancelled")]

@@ -14,7 +14,7 @@ import pytest
 from common.config import ServiceConfig
 from common.runtime import Runtime
 from common.testing import eventually
-from pnav import stack_commands, demo
+from pnav import demo, stack_commands
 from pnav.launcher import RunningStack, StackOptions, launched
 from pnav.mission import MissionLog, MissionMonitor
 

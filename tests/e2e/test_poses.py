@@ -42,7 +42,9 @@ async def test_a_robot_reaches_a_goal_pose_facing_its_heading(
         rt, monitor = await stack_monitor(stack)
         try:
             (robot,) = await stack_commands.pick_robots(rt, None, one=True)
-            status, reason = await stack_commands.send_user_command(rt, robot, "SET_STRATEGY", strategy)
+            status, reason = await stack_commands.send_user_command(
+                rt, robot, "SET_STRATEGY", strategy
+            )
             assert status == "accepted", reason
             x, y, yaw = goal
             goal_id = await stack_commands.set_goal(rt, robot, x, y, yaw=yaw, waypoints=route)
