@@ -3,7 +3,8 @@
 A checkout of asyncpg's pool (``pool.acquire()`` and its release: a task for the shielded
 release, a timeout, the idle timer re-armed) costs about as much client CPU as the statement
 it serves: on the embedded Postgres a pooled one-row read or INSERT takes 76-82 us of the
-service's CPU, the same on a connection already in hand 44 us (``python -m pnav.bench.lane``).
+service's CPU, the same on a connection already in hand 44 us
+(``python -m pnav.bench.statement_cost``).
 A scenario service sends its statements one after another (its engine runs one rule at a
 time), so :class:`Lane` keeps one connection checked out and runs them on it:
 

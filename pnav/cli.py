@@ -299,20 +299,20 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def dispatch(args: argparse.Namespace) -> int:
-    from pnav import commands
+    from pnav import stack_commands
 
     if args.command == "up":
         return _up(args)
     if args.command == "down":
-        return commands.down()
+        return stack_commands.down()
     if args.command == "env":
-        return commands.env(args.role)
+        return stack_commands.env(args.role)
     if args.command == "migrate":
-        return uvloop.run(commands.migrate(args.wait, roles=args.roles))
+        return uvloop.run(stack_commands.migrate(args.wait, roles=args.roles))
     if args.command == "secrets":
         return _secrets(args)
     if args.command == "status":
-        return uvloop.run(commands.status(args.once or not sys.stdout.isatty()))
+        return uvloop.run(stack_commands.status(args.once or not sys.stdout.isatty()))
     if args.command in ("goal", "strategy", "cancel"):
         return uvloop.run(_drive(args))
 
@@ -465,11 +465,11 @@ def _goal_poses(args: argparse.Namespace) -> tuple[Pose, list[Pose]]:
 
 
 async def _set_goal(rt: Runtime, args: argparse.Namespace) -> int:
-    from pnav import commands
+    from pnav import stack_commands
 
     goal, waypoints = _goal_poses(args)
-    (robot,) = await commands.pick_robots(rt, args.robot, one=True)
-    goal_id = await commands.set_goal(
+    (robot,) = await stack_commands.pick_robots(rt, args.robot, one=True)
+    goal_id = await stack_commands.set_goal(
         rt,
         robot,
         goal.x,
@@ -486,17 +486,17 @@ async def _set_goal(rt: Runtime, args: argparse.Namespace) -> int:
 
 
 async def _drive(args: argparse.Namespace) -> int:
-    from pnav import commands
+    from pnav import stack_commands
 
-    rt = await commands.open_runtime()
+    rt = await stack_commands.open_runtime()
     try:
         # a row the database refuses (a CHECK, say) is the user's input: one line, exit 2
-        with commands.refusal_as_contract_error():
+        with stack_commands.refusal_as_contract_error():
             if args.command == "goal":
                 return await _set_goal(rt, args)
             if args.command == "cancel":
-                for robot in await commands.pick_robots(rt, args.robot, one=False):
-                    cancelled = await commands.cancel_goal(rt, robot)
+                for robot in await stack_commands.pick_robots(rt, args.robot, one=False):
+                    cancelled = await stack_commands.cancel_goal(rt, robot)
                     print(
                         f"{robot}: " + (f"goal {cancelled} cancelled" if cancelled else "no goal")
                     )
@@ -507,12 +507,12 @@ async def _drive(args: argparse.Namespace) -> int:
 
 
 async def _set_strategy(rt: Runtime, code: str, robot_arg: str | None) -> int:
-    from pnav import commands
+    from pnav import stack_commands
 
-    await commands.check_strategy(rt, code)
+    await stack_commands.check_strategy(rt, code)
     failed = 0
-    for robot in await commands.pick_robots(rt, robot_arg, one=False):
-        verdict, reason = await commands.send_user_command(rt, robot, "SET_STRATEGY", code)
+    for robot in await stack_commands.pick_robots(rt, robot_arg, one=False):
+        verdict, reason = await stack_commands.send_user_command(rt, robot, "SET_STRATEGY", code)
         print(f"{robot}: {verdict}: {reason}")
         failed += verdict != "accepted"
     return 1 if failed else 0

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 from common.contract import acl
 from common.errors import UsageError
-from pnav.supervisor import ProcessSpec
+from pnav.process_supervisor import ProcessSpec
 
 if TYPE_CHECKING:
     from common.stack import LocalStack

@@ -28,7 +28,7 @@ import uvloop
 from common.config import ServiceConfig
 from common.robotmodel import DEFAULT_MODEL, load_model
 from common.runtime import Runtime
-from pnav import commands
+from pnav import stack_commands
 from pnav.launcher import DashboardOptions, StackOptions, launched
 from pnav.mission import GoalEnded, MissionLog, MissionMonitor
 
@@ -97,7 +97,9 @@ class Demo:
         await self.until(f"{seconds} s of sim time", lambda log: log.now.stamp >= start + seconds)
 
     async def strategy(self, code: str) -> None:
-        verdict, reason = await commands.send_user_command(self.rt, ROBOT, "SET_STRATEGY", code)
+        verdict, reason = await stack_commands.send_user_command(
+            self.rt, ROBOT, "SET_STRATEGY", code
+        )
         if verdict != "accepted":
             raise MissionFailed(f"SET_STRATEGY {code} was {verdict}: {reason}")
         self.event(f"user: strategy {code} ({reason})")
@@ -105,7 +107,7 @@ class Demo:
     async def run(self) -> int:
         await self.until("the robot's first odometry", lambda log: log.now.stamp > 0)
         await self.until("the default strategy", lambda log: log.now.strategy == "GOTO_AVOID")
-        near = self.goal = await commands.set_goal(self.rt, ROBOT, *GOAL_NEAR)
+        near = self.goal = await stack_commands.set_goal(self.rt, ROBOT, *GOAL_NEAR)
         self.event(f"user: goal {near} at {GOAL_NEAR} (GOTO_AVOID)")
         await self.after_sim(3.0)
         await self.strategy("GOTO_DIRECT")
@@ -114,7 +116,7 @@ class Demo:
         await self.after_sim(1.0)
         if self.monitor.log.goals.get(near) != "active":
             raise MissionFailed("the first goal ended before the goal change")
-        far = self.goal = await commands.set_goal(self.rt, ROBOT, *GOAL_FAR)
+        far = self.goal = await stack_commands.set_goal(self.rt, ROBOT, *GOAL_FAR)
         self.event(f"user: goal changed in motion to {far} at {GOAL_FAR}; hands off from now")
         await self.until("the battery detour (CHARGE)", lambda log: log.now.strategy == "CHARGE")
         self.event(f"system: CMD_BATTSAVE -> CHARGE at {self.monitor.log.now.battery_pct:.2f}%")

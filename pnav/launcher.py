@@ -1,7 +1,7 @@
 """Start the whole stack on one machine: Postgres, a Zenoh router, and every service.
 
 Used by ``pnav up`` (until Ctrl-C), ``pnav demo`` (for one mission) and the benchmarks.
-Services run under a :class:`~pnav.supervisor.Supervisor`, each in a process of its own
+Services run under a :class:`~pnav.process_supervisor.Supervisor`, each in a process of its own
 (``processes="separate"``) or, composed, the scenario services together in one host process
 (pnav.host; ``"composed"``, and ``"auto"`` on a machine of at most
 :data:`COMPOSE_AT_MOST_CORES` cores). A replicated or replaced service always runs apart.
@@ -32,7 +32,7 @@ from common.testing import free_port
 from pnav import stackfile
 from pnav.composition import HOST_PROCESS, host_spec, hosted, resolve_processes
 from pnav.prestart import Prestart
-from pnav.supervisor import ProcessSpec, Supervisor
+from pnav.process_supervisor import ProcessSpec, Supervisor
 from pnav.supervisor_report import SupervisorReport
 
 ROOT = Path(__file__).resolve().parents[1]

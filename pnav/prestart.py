@@ -2,8 +2,8 @@
 environment exists.
 
 The launcher starts each service this way while it is still making Postgres ready
-(:class:`Prestart`, taken by pnav.supervisor): the process imports the service's code (a third
-of a second to a second of a 2-core machine's time, per process) in parallel with the
+(:class:`Prestart`, taken by pnav.process_supervisor): the process imports the service's code
+(a third of a second to a second of a 2-core machine's time, per process) in parallel with the
 launcher's own work, then waits. When the stack is ready the launcher writes the service's
 whole environment (its role's DSN, its Zenoh password...) as JSON on a pipe (the descriptor
 in ``PNAV_PRESTART_FD``) and closes it; the process takes that environment as its own and
@@ -14,7 +14,7 @@ A module may define ``prestart(args)`` to import what it would otherwise import 
 (pnav.host: the services it hosts; the sim: its node). Nothing reads the environment at
 import time: every setting is read by the service's entry, after the environment arrived.
 
-The launcher's side is :class:`Prestart` (pnav.launcher starts them, pnav.supervisor takes
+The launcher's side is :class:`Prestart` (pnav.launcher starts them, pnav.process_supervisor takes
 them); the process's side is :func:`main`.
 """
 

@@ -100,13 +100,13 @@ def show(rows: list[Zone], as_json: bool) -> None:
 
 
 async def run_zone(args: argparse.Namespace) -> int:
-    from pnav import commands
+    from pnav import stack_commands
 
     zone = zone_of(args) if args.zone_command == "add" else None
-    rt = await commands.open_runtime()
+    rt = await stack_commands.open_runtime()
     try:
         db = rt.database
-        with commands.refusal_as_contract_error():
+        with stack_commands.refusal_as_contract_error():
             if zone is not None:
                 try:
                     await zones.add_zone(db, zone)

@@ -31,7 +31,7 @@ from typing import Any
 from common.config import ServiceConfig
 from common.runtime import Runtime
 from common.trace import CMD_VEL, TraceEvent, read_trace
-from pnav import commands
+from pnav import stack_commands
 from pnav.bench import provenance as prov
 from pnav.bench.hall import Hall, write_hall
 from pnav.bench.processes import Usage
@@ -121,7 +121,7 @@ class Shuttle:
     async def send(self, robot: str) -> None:
         lane = self.lanes[robot]
         x, y = lane.b if self.leg[robot] % 2 == 0 else lane.a
-        await commands.set_goal(self.rt, robot, x, y)
+        await stack_commands.set_goal(self.rt, robot, x, y)
 
     async def start(self) -> None:
         for robot in self.lanes:

@@ -32,7 +32,7 @@ from common import bus
 from common.config import ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime
-from pnav import commands
+from pnav import stack_commands
 from pnav.bench.processes import memory_mb, pss_mb, roles, stack_processes
 from pnav.bench.report import emit, machine
 from pnav.launcher import StackOptions, launched
@@ -90,7 +90,7 @@ async def one_startup() -> dict[str, Any]:
         try:
             robot = await registered_robot(rt)
             marks["robot_registered_s"] = time.monotonic() - t0
-            await commands.set_goal(rt, robot, 3.7, 2.5)
+            await stack_commands.set_goal(rt, robot, 3.7, 2.5)
             if not await asyncio.to_thread(first_command.wait, 60):
                 raise RuntimeError("no decided command reached the sim within 60 s")
             procs = stack_processes(stack)

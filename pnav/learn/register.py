@@ -45,11 +45,11 @@ def row_for(file: Path, name: str | None, version: str | None) -> RegisteredMode
 
 async def register(row: RegisteredModel, description: str = "") -> int:
     """Write ``row`` (notified); a (name, version) registered already is refused."""
-    from pnav import commands
+    from pnav import stack_commands
 
-    rt = await commands.open_runtime()
+    rt = await stack_commands.open_runtime()
     try:
-        with commands.refusal_as_contract_error():
+        with stack_commands.refusal_as_contract_error():
             try:
                 await register_model(rt.database, row, description)
             except asyncpg.UniqueViolationError:

@@ -23,7 +23,7 @@ from common.engine import Engine
 from common.planner_core.scenario import RobotInfo
 from pnav.monolith.contract import MemoryContract, Row
 from services.planner import meta
-from services.planner.paths import PathRow
+from services.planner.published_path import PathRow
 from services.planner.store import PlannerStore
 from services.planner.world import MapRow, Station
 

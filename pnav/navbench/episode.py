@@ -44,7 +44,7 @@ from common.config import ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime
 from common.trace import CMD_VEL, read_trace
-from pnav import commands
+from pnav import stack_commands
 from pnav.bench import provenance as prov
 from pnav.bench.latency import Collected, collect
 from pnav.bench.processes import Usage
@@ -292,17 +292,17 @@ async def run_episode(episode: Episode, log_dir: Path | None = None) -> Outcome:
             ):
                 key = keys.robot_key(episode.robot, topic)
                 subs.append(bus.subscribe_threaded(rt.zenoh, key, handler, ledger=ledger))
-            if episode.robot not in await commands.robot_ids(rt, wait_s=30.0):
+            if episode.robot not in await stack_commands.robot_ids(rt, wait_s=30.0):
                 raise RuntimeError(f"robot {episode.robot} never registered from {episode.world}")
             await ensure_combo(rt, episode.combo)
             if episode.keep_db:
                 await keep_history(rt)
-            verdict, reason = await commands.send_user_command(
+            verdict, reason = await stack_commands.send_user_command(
                 rt, episode.robot, "SET_STRATEGY", episode.combo.code, wait_s=15.0
             )
             if verdict != "accepted":
                 raise RuntimeError(f"strategy {episode.combo.code} {verdict}: {reason}")
-            await commands.set_goal(rt, episode.robot, *episode.goal)
+            await stack_commands.set_goal(rt, episode.robot, *episode.goal)
             if ledger is not None:
                 ledger.report_if_settled(ledger.mark())  # the mission is sent: the sim may go
             wall_cap = started + 30.0 + WALL_FACTOR * episode.time_limit_s

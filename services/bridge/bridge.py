@@ -37,7 +37,7 @@ from common.runtime import Runtime, run_service
 from common.tasks import cancel_and_wait
 from common.trace import Tracer
 from services.bridge.acks import CollisionAcks
-from services.bridge.commands import CommandRelay
+from services.bridge.command_relay import CommandRelay
 from services.bridge.counters import Counters, RateLimitedLog
 from services.bridge.messages import (
     UNKNOWN_ROBOT,

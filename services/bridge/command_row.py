@@ -1,4 +1,4 @@
-"""A command2robot row as the relay reads it (commands.py): the newest row per robot joined
+"""A command2robot row as the relay reads it (command_relay.py): the newest row per robot joined
 with the robot's limits, from the table (:data:`NEWEST`) or from the row's image
 (:meth:`Command.from_image`)."""
 

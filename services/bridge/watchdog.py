@@ -5,7 +5,7 @@ diff_drive_controller both stop a robot whose command stream went quiet for 0.5 
 same in *sim* time, so a mission run at ``--rate 10`` times out after 0.05 s of wall time and
 a paused sim never trips it.
 
-Pure bookkeeping, no I/O: :class:`~services.bridge.commands.CommandRelay` feeds it and sends
+Pure bookkeeping, no I/O: :class:`~services.bridge.command_relay.CommandRelay` feeds it and sends
 the stops it returns.
 """
 

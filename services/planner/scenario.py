@@ -7,7 +7,7 @@ nothing of this service's. :func:`move_rule` makes it into a :class:`MoveRule`: 
 robot, started by the meta-planner's supervisor: one object that runs while it is still
 the robot's planner scenario (a ``common.engine.Behaviour``). The rule stays here, not in
 common/, because everything it does is the planner's own: the target (routes.Target), the
-route and its progress (tracking.py), the planned_path rows (paths.py), the robot's state
+route and its progress (tracking.py), the planned_path rows (published_path.py), the robot's state
 (world.py) and the store's view (view.py). Per activation:
 
 1. acquisition: the newest odometry (at most every EVAL_PERIOD_S of sim time, unless a
@@ -39,7 +39,7 @@ from common import log
 from common.contract import records
 from common.planner_core.scenario import Movement, MoveScenario
 from services.planner.cadence import RECOMMEND_PERIOD_S, Said, due
-from services.planner.paths import PathKey, PathRow, empty_key, empty_row, route_row
+from services.planner.published_path import PathKey, PathRow, empty_key, empty_row, route_row
 from services.planner.routes import Target
 from services.planner.target import RuleKey, Spec, TargetRule
 from services.planner.tracking import Progress, Route, heading_error
@@ -111,7 +111,7 @@ class MoveRule(TargetRule, MoveScenario):
         self.failed: str | None = None  # why the map proves the goal unreachable
         self.move: Movement | None = None
         self.why = ""
-        # The planned_path row (paths.py): what was published last, and what is due now.
+        # The planned_path row (published_path.py): what was published last, and what is due now.
         self.published: PathKey | None = None
         self.path_due: tuple[PathKey, PathRow] | None = None
 

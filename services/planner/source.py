@@ -18,7 +18,7 @@ from common.contract.recommendations import (
 from common.contract.zones import Zone
 from common.db import Database
 from common.planner_core.scenario import RobotInfo
-from services.planner.paths import PathRow
+from services.planner.published_path import PathRow
 from services.planner.world import MapRow, Station
 
 ROBOTS_SQL = (

@@ -41,7 +41,7 @@ from common.freshness import FreshCache
 from common.images import GuardedStore, ImageGuard
 from common.planner_core.scenario import RobotInfo
 from common.writebehind import WriteBehind
-from services.planner.paths import PathRow
+from services.planner.published_path import PathRow
 from services.planner.routes import Router, Target
 from services.planner.source import PlannerSource
 from services.planner.tracking import Progress

@@ -19,7 +19,7 @@ from typing import ClassVar
 
 from common import log
 from common.contract import records
-from services.planner.paths import empty_row
+from services.planner.published_path import empty_row
 from services.planner.target import RuleKey, Spec, TargetRule
 from services.planner.view import PlannerView
 from services.planner.world import RobotState

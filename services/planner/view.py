@@ -14,7 +14,7 @@ from typing import Any, Protocol
 from common.contract import records
 from common.contract.offers import Offers
 from common.planner_core.scenario import RobotInfo
-from services.planner.paths import PathRow
+from services.planner.published_path import PathRow
 from services.planner.routes import Target
 from services.planner.tracking import Progress
 from services.planner.world import MapData, RobotState, Station

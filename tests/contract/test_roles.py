@@ -227,7 +227,7 @@ async def test_a_service_writes_leases_and_statistics_only_under_its_own_name(
 async def test_the_cli_drives_a_robot_as_pnav_user_and_a_service_role_cannot(
     admin: asyncpg.Connection, empty_db_url: str, zenoh_settings: ZenohSettings
 ) -> None:
-    from pnav import commands
+    from pnav import stack_commands
 
     await admin.execute("INSERT INTO robot (robot_id) VALUES ('r1')")
 
@@ -239,10 +239,12 @@ async def test_the_cli_drives_a_robot_as_pnav_user_and_a_service_role_cannot(
 
     people = await cli(g.USER)
     try:
-        first = await commands.set_goal(people, "r1", 1.0, 2.0)
-        second = await commands.set_goal(people, "r1", 3.0, 4.0)  # supersedes the first
-        assert await commands.cancel_goal(people, "r1") == second
-        status, reason = await commands.send_user_command(people, "r1", "SET_STRATEGY", "IDLE", 0.1)
+        first = await stack_commands.set_goal(people, "r1", 1.0, 2.0)
+        second = await stack_commands.set_goal(people, "r1", 3.0, 4.0)  # supersedes the first
+        assert await stack_commands.cancel_goal(people, "r1") == second
+        status, reason = await stack_commands.send_user_command(
+            people, "r1", "SET_STRATEGY", "IDLE", 0.1
+        )
         assert (status, reason) == ("pending", "no answer from the strategy service within 0 s")
         goals = await admin.fetch("SELECT id, status FROM goal ORDER BY id")
         assert [tuple(r) for r in goals] == [(first, "superseded"), (second, "cancelled")]
@@ -251,7 +253,7 @@ async def test_the_cli_drives_a_robot_as_pnav_user_and_a_service_role_cannot(
     planner = await cli("planner")
     try:
         with pytest.raises(asyncpg.InsufficientPrivilegeError):
-            await commands.set_goal(planner, "r1", 1.0, 2.0)  # the planner never sets goals
+            await stack_commands.set_goal(planner, "r1", 1.0, 2.0)  # the planner never sets goals
     finally:
         await planner.close()
 

@@ -14,7 +14,7 @@ import pytest
 from common.config import ServiceConfig
 from common.runtime import Runtime
 from common.testing import eventually
-from pnav import commands, demo
+from pnav import demo, stack_commands
 from pnav.launcher import RunningStack, StackOptions, launched
 from pnav.mission import MissionLog, MissionMonitor
 
@@ -63,8 +63,8 @@ async def test_a_mission_succeeds_in_every_shipped_world_without_collision(
     async with launched(options) as stack:
         rt, monitor = await stack_monitor(stack)
         try:
-            (robot,) = await commands.pick_robots(rt, None, one=True)
-            goal = await commands.set_goal(rt, robot, *MISSIONS[world])
+            (robot,) = await stack_commands.pick_robots(rt, None, one=True)
+            goal = await stack_commands.set_goal(rt, robot, *MISSIONS[world])
             ok = await monitor.wait_for(reached(goal), limit_s=150)
             log = await monitor.poll()
             assert ok, f"goal not reached in {world}:\n{describe(log, stack)}"
@@ -89,8 +89,8 @@ async def test_the_mission_completes_when_each_scenario_service_is_killed_in_tur
     async with launched(options) as stack:
         rt, monitor = await stack_monitor(stack)
         try:
-            (robot,) = await commands.pick_robots(rt, None, one=True)
-            goal = await commands.set_goal(rt, robot, *MISSIONS["warehouse"])
+            (robot,) = await stack_commands.pick_robots(rt, None, one=True)
+            goal = await stack_commands.set_goal(rt, robot, *MISSIONS["warehouse"])
             for name in ("strategy", "planner", "controller", "decision"):
                 start = (await monitor.poll()).now.stamp
                 assert await monitor.wait_for(lambda log, s=start: log.now.stamp > s + 3, 60)

@@ -16,7 +16,7 @@ from common.config import ServiceConfig
 from common.postmaster import kill_postmaster
 from common.runtime import Runtime
 from common.testing import EmbeddedPostgres, eventually
-from pnav import commands
+from pnav import stack_commands
 from pnav.launcher import StackOptions, launched
 
 pytestmark = pytest.mark.timeout(240)
@@ -70,8 +70,8 @@ async def test_a_ten_second_postgres_outage_costs_each_service_a_handful_of_line
             ServiceConfig(service="e2e", database_url=url, zenoh=stack.local.zenoh)
         )
         try:
-            assert await commands.robot_ids(rt, wait_s=60) == ["r1"]
-            await commands.set_goal(rt, "r1", 4.0, 4.0)
+            assert await stack_commands.robot_ids(rt, wait_s=60) == ["r1"]
+            await stack_commands.set_goal(rt, "r1", 4.0, 4.0)
         finally:
             await rt.close()
         await eventually(lambda: _grew(url, 0), 60, what="a first command2robot row")

@@ -9,7 +9,7 @@ import math
 import pytest
 
 from common.contract import people
-from pnav import commands
+from pnav import stack_commands
 from pnav.launcher import StackOptions, launched
 from tests.e2e.test_missions import RATE, describe, reached, stack_monitor
 
@@ -41,11 +41,13 @@ async def test_a_robot_reaches_a_goal_pose_facing_its_heading(
     async with launched(options) as stack:
         rt, monitor = await stack_monitor(stack)
         try:
-            (robot,) = await commands.pick_robots(rt, None, one=True)
-            status, reason = await commands.send_user_command(rt, robot, "SET_STRATEGY", strategy)
+            (robot,) = await stack_commands.pick_robots(rt, None, one=True)
+            status, reason = await stack_commands.send_user_command(
+                rt, robot, "SET_STRATEGY", strategy
+            )
             assert status == "accepted", reason
             x, y, yaw = goal
-            goal_id = await commands.set_goal(rt, robot, x, y, yaw=yaw, waypoints=route)
+            goal_id = await stack_commands.set_goal(rt, robot, x, y, yaw=yaw, waypoints=route)
             ok = await monitor.wait_for(reached(goal_id), limit_s=150)
             log = await monitor.poll()
             assert ok, f"pose not reached under {strategy}:\n{describe(log, stack)}"

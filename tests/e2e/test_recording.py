@@ -14,7 +14,7 @@ from mcap.reader import make_reader
 
 from common.config import ServiceConfig
 from common.runtime import Runtime
-from pnav import commands
+from pnav import stack_commands
 from pnav.launcher import StackOptions, launched
 from pnav.mission import MissionMonitor
 from pnav.record import topics
@@ -41,8 +41,8 @@ async def test_a_mission_of_the_whole_stack_is_recorded_in_sim_time(tmp_path: Pa
         )
         try:
             monitor = MissionMonitor(rt.database.pool, ROBOT)
-            (robot,) = await commands.pick_robots(rt, None, one=True)  # once the sim is up
-            goal = await commands.set_goal(rt, robot, 3.0, 2.0)
+            (robot,) = await stack_commands.pick_robots(rt, None, one=True)  # once the sim is up
+            goal = await stack_commands.set_goal(rt, robot, 3.0, 2.0)
             ok = await monitor.wait_for(lambda log: log.goals.get(goal) == "reached", 150)
             final = (await monitor.poll()).now.stamp
             assert ok, f"goal not reached: {monitor.log.as_dict()}"

@@ -17,7 +17,7 @@ from common.config import ZenohSettings
 from common.contract import limits
 from common.errors import ContractError
 from common.robotmodel import MODELS
-from pnav import cli, commands
+from pnav import cli, stack_commands
 
 
 def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
@@ -207,7 +207,7 @@ def test_a_goal_pose_and_a_route_are_written_with_headings_in_radians(
 async def test_set_goal_refuses_before_writing(db_url: str) -> None:
     # set_goal is what every tool calls (pnav goal, the demo); it checks before it writes
     with pytest.raises(ContractError, match="goal x must be"):
-        await commands.set_goal(None, "r1", math.nan, 0.0)  # type: ignore[arg-type]
+        await stack_commands.set_goal(None, "r1", math.nan, 0.0)  # type: ignore[arg-type]
     assert await goals(db_url) == []
 
 

@@ -17,7 +17,7 @@ from common.stack import BusCredentials, LocalStack
 from pnav.cli import build_parser
 from pnav.composition import COMPOSE_AT_MOST_CORES, hosted, parse_processes, resolve_processes
 from pnav.launcher import StackOptions, parse_replace, service_specs
-from pnav.supervisor import line_writer
+from pnav.process_supervisor import line_writer
 
 WORLD = Path("worlds/open_room.yaml")
 SCENARIO = ("strategy", "planner", "controller", "decision")

@@ -1,4 +1,4 @@
-"""A process started ahead of its environment (pnav.prestart, pnav.supervisor.Prestart)
+"""A process started ahead of its environment (pnav.prestart, pnav.process_supervisor.Prestart)
 runs its module with the environment sent to it, as ``python -m`` would have; closed
 empty, or not taken, it ends without running it."""
 

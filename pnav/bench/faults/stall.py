@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 from common.contract import keys
 from common.runtime import Runtime
-from pnav import commands
+from pnav import stack_commands
 from pnav.bench.faults.context import ROBOT, Context, Injection
 
 if TYPE_CHECKING:
@@ -40,7 +40,7 @@ async def stall(fault: Fault, ctx: Context) -> Injection:
     rt = ctx.rt
     await rt.database.write(keys.STRATEGY, None, _STALL_STRATEGY, STALL_CODE, DWA_STALL)
     before = await _controller_rules(rt)
-    verdict, reason = await commands.send_user_command(rt, ROBOT, "SET_STRATEGY", STALL_CODE)
+    verdict, reason = await stack_commands.send_user_command(rt, ROBOT, "SET_STRATEGY", STALL_CODE)
     out = Injection(notes=[f"SET_STRATEGY {STALL_CODE}: {verdict} {reason}".strip()])
     # the mission drives on under it; engine_stats are written every 2 s (PNAV_STATS_PERIOD_S)
     await asyncio.sleep(fault.seconds)

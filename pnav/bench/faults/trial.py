@@ -29,7 +29,7 @@ from common.runtime import Runtime
 from common.stack import BusCredentials
 from common.testing import router_process
 from common.trace import CMD_VEL, read_trace
-from pnav import commands
+from pnav import stack_commands
 from pnav.bench.faults import rows
 from pnav.bench.faults.catalogue import Fault
 from pnav.bench.faults.context import FORGED_COMMAND_ID, ROBOT, SPOOF_SEQ, Context
@@ -206,7 +206,7 @@ async def _mission(fault: Fault, ctx: Context, result: Result) -> None:
     if not await monitor.wait_for(lambda log: log.now.stamp > 0, START_LIMIT_S):
         result.outcome = "error: no odometry from the stack"
         return
-    ctx.goal_id = await commands.set_goal(rt, ROBOT, *ctx.goal)
+    ctx.goal_id = await stack_commands.set_goal(rt, ROBOT, *ctx.goal)
     under_way = await monitor.wait_for(
         lambda log: log.distance_m >= INJECT_AFTER_M, START_LIMIT_S, goal=ctx.goal_id
     )

@@ -23,7 +23,7 @@ from common import bus
 from common.contract import keys
 from common.runtime import Runtime
 from common.testing import eventually
-from pnav.supervisor import ProcessSpec, Supervisor
+from pnav.process_supervisor import ProcessSpec, Supervisor
 from pnav.supervisor_report import SupervisorReport
 from services.dashboard.metrics import Metrics, MetricsConfig
 

@@ -23,7 +23,7 @@ from common.config import ServiceConfig, ZenohSettings
 from common.contract import acl, keys
 from common.runtime import Runtime
 from common.testing import eventually
-from pnav import commands
+from pnav import stack_commands
 from pnav.launcher import StackOptions, launched
 from pnav.mission import MissionMonitor
 
@@ -55,9 +55,9 @@ async def test_a_goal_is_reached_through_the_host_each_service_as_itself(tmp_pat
         try:
             monitor = MissionMonitor(rt.database.pool, "r1")
             # the bridge registers the robot (slow on a loaded machine: not the host's part)
-            assert await commands.robot_ids(rt, wait_s=90) == ["r1"]
-            (robot,) = await commands.pick_robots(rt, None, one=True)
-            goal = await commands.set_goal(rt, robot, 3.0, 3.0)
+            assert await stack_commands.robot_ids(rt, wait_s=90) == ["r1"]
+            (robot,) = await stack_commands.pick_robots(rt, None, one=True)
+            goal = await stack_commands.set_goal(rt, robot, 3.0, 3.0)
             assert await monitor.wait_for(lambda log: log.goals.get(goal) == "reached", 120), (
                 tmp_path / "host.log"
             ).read_text()[-3000:]

@@ -7,7 +7,7 @@ import numpy as np
 
 from common.contract import keys
 from common.testing import eventually
-from pnav import commands
+from pnav import stack_commands
 from services.planner.service import PlannerService
 from tests.contract.planner.conftest import ROBOT, World
 
@@ -56,8 +56,8 @@ async def test_a_goal_outside_the_map_fails_within_two_sim_seconds_and_status_sh
     assert stop["linear_mps"] == 0.0 and stop["angular_rps"] == 0.0
     assert stop["reason"] == f"goal {goal_id} failed: {reason}: stop"
 
-    rows = await world.db.pool.fetch(commands.STATUS_SQL)
-    text = "\n".join(commands.status_lines(rows, width=300))
+    rows = await world.db.pool.fetch(stack_commands.STATUS_SQL)
+    text = "\n".join(stack_commands.status_lines(rows, width=300))
     assert f"goal {goal_id} failed: {reason}" in text, text
     assert " failed " in text.splitlines()[1], text  # in the goal column
 
@@ -74,5 +74,5 @@ async def test_a_goal_outside_the_map_fails_within_two_sim_seconds_and_status_sh
     rec = await world.next_recommendation(lambda r: r["inputs"].get("goal") == again)
     assert "failed" not in rec["reason"]
     assert await world.db.pool.fetchval("SELECT status FROM goal WHERE id = $1", again) == "active"
-    rows = await world.db.pool.fetch(commands.STATUS_SQL)
-    assert "failed" not in "\n".join(commands.status_lines(rows, width=300))
+    rows = await world.db.pool.fetch(stack_commands.STATUS_SQL)
+    assert "failed" not in "\n".join(stack_commands.status_lines(rows, width=300))

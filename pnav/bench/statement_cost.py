@@ -1,4 +1,4 @@
-"""What a statement costs the service that sends it: ``python -m pnav.bench.lane``.
+"""What a statement costs the service that sends it: ``python -m pnav.bench.statement_cost``.
 
 The client's CPU (``time.process_time`` of this process: the service's side, not the
 backend's) per statement on the embedded Postgres, in a uvloop process like a service's,
@@ -106,7 +106,7 @@ async def measure(n: int, rounds: int) -> dict[str, dict[str, float]]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m pnav.bench.lane", description=__doc__)
+    ap = argparse.ArgumentParser(prog="python -m pnav.bench.statement_cost", description=__doc__)
     ap.add_argument("--n", type=int, default=3000, help="statements per round (default 3000)")
     ap.add_argument("--rounds", type=int, default=3, help="rounds, best kept (default 3)")
     ap.add_argument("--json", help="write the figures as JSON to FILE")
