@@ -12,9 +12,7 @@ A track's velocity is the least-squares slope of its centres over the last ``WIN
 of sim time; a track is *moving* once it spans ``MIN_SPAN_S`` with ``MIN_SEEN`` sightings
 and its speed is at least ``MOVING_MPS``. A cluster cut by the edge of the lidar's field
 or by something nearer in front of it changes shape as the robot moves, so it is matched
-but never adds to its track's velocity. Whether a track has moved at all is judged by the
-centre of the circle its arc fits when it fits one (a cylinder), else by whether its points
-left the surface an older scan showed (see ``LAG_S``).
+but never adds to its track's velocity.
 
 Deterministic (no randomness, ties broken by index) and bounded: at most ``MAX_CLUSTERS``
 clusters (the nearest) and ``MAX_TRACKS`` tracks per robot, whatever the scan holds.
@@ -115,13 +113,16 @@ class Track:
         self.beams = (c.first, c.last)
         self.radius = 0.7 * self.radius + 0.3 * c.radius
         self.sightings += 1
-        if c.circle is not None:
-            self.circles.append((t, c.circle[0], c.circle[1]))
-        # kept through sightings without a circle (cut by something nearer, too few points):
-        # a crossing mover must not fall back to the surface test, which it passes
-        self.circles = [s for s in self.circles if s[0] >= t - HISTORY_S]
         if not c.whole:
-            return  # its centre drifts with the view: it tells where, not how fast
+            self.circles = []  # a cut arc's circle is not the object's
+            return
+        if c.circle is None:
+            self.circles = []
+        else:
+            self.circles.append((t, c.circle[0], c.circle[1]))
+            self.circles = [
+                s for s in self.circles if s[0] >= t - HISTORY_S
+            ]  # its centre drifts with the view: it tells where, not how fast
         self.seen.append((t, c.x, c.y))
         self.seen = [s for s in self.seen if s[0] >= t - WINDOW_S]
         self._fit()
@@ -315,9 +316,8 @@ class Tracker:
         for k in self.tracks:
             if k.last_t != t or k.speed < MOVING_MPS:
                 continue
-            newest = k.circles[-1][0] if k.circles else -math.inf
-            older = [c for c in k.circles if c[0] <= newest - LAG_S]
-            if newest >= t - LAG_S / 2 and older:
+            older = [c for c in k.circles if c[0] <= t - LAG_S]
+            if k.circles and k.circles[-1][0] == t and older:
                 # a circle all along: its centre moved, or it stands
                 _, x0, y0 = older[-1]
                 _, x1, y1 = k.circles[-1]
