@@ -45,16 +45,10 @@ FORGET_S = 0.5  # a track unseen this long is dropped
 # A static object seen from a new place changes shape (a box's faces turn into view), and its
 # centre seems to move by up to half a metre a second as the robot passes: so a track also
 # has to have left the surface it showed LAG_S ago: the median of its points' distances to
-# that scan's points beyond DISPLACED_M. A round object moving along its own surface (a
-# cylinder crossing the line of sight) stays on that surface, so where a cluster's points fit
-# a circle, the circle's centre is followed instead: a standing cylinder's centre stays put
-# from every view, a box's faces fit no circle.
+# that scan's points beyond DISPLACED_M
 LAG_S = 0.3
 DISPLACED_M = 0.04
 HISTORY_S = 0.6
-CIRCLE_MIN_POINTS = 5
-CIRCLE_RMS_M = 0.006  # the lidar's noise is 1 mm; a box's corner misses a circle by cm
-CIRCLE_RADIUS_M = (0.05, 0.5)
 GATE_M = 0.25  # the match gate, plus GATE_MPS x the time since the track was seen
 GATE_MPS = 1.5
 _RANGE_TOLERANCE_M = 1e-4
@@ -72,7 +66,6 @@ class Cluster:
     first: int
     last: int
     whole: bool
-    circle: tuple[float, float] | None = None  # the centre of the circle its arc fits
 
 
 @dataclass
@@ -90,7 +83,6 @@ class Track:
     sightings: int = 0
     beams: tuple[int, int] = (0, -1)  # the newest cluster's first and last beam
     displaced: bool = False  # its points left the surface an older scan showed
-    circles: list[tuple[float, float, float]] = field(default_factory=list)  # (t, cx, cy)
 
     @property
     def speed(self) -> float:
@@ -114,15 +106,7 @@ class Track:
         self.radius = 0.7 * self.radius + 0.3 * c.radius
         self.sightings += 1
         if not c.whole:
-            self.circles = []  # a cut arc's circle is not the object's
-            return
-        if c.circle is None:
-            self.circles = []
-        else:
-            self.circles.append((t, c.circle[0], c.circle[1]))
-            self.circles = [
-                s for s in self.circles if s[0] >= t - HISTORY_S
-            ]  # its centre drifts with the view: it tells where, not how fast
+            return  # its centre drifts with the view: it tells where, not how fast
         self.seen.append((t, c.x, c.y))
         self.seen = [s for s in self.seen if s[0] >= t - WINDOW_S]
         self._fit()
@@ -185,42 +169,11 @@ def clusters(scan: LaserScan, pose: tuple[float, float, float]) -> list[Cluster]
         cx, cy = mx + half * mx / dist, my + half * my / dist
         first, last = int(idx[lo]), int(idx[hi - 1])
         whole = _whole(ranges, valid, first, last, n, full_turn)
-        circle = _circle(px[lo:hi], py[lo:hi]) if whole else None
-        if circle is not None:
-            circle = (ox + c * circle[0] - s * circle[1], oy + s * circle[0] + c * circle[1])
         found.append(
-            (
-                dist,
-                Cluster(
-                    ox + c * cx - s * cy, oy + s * cx + c * cy, half, first, last, whole, circle
-                ),
-            )
+            (dist, Cluster(ox + c * cx - s * cy, oy + s * cx + c * cy, half, first, last, whole))
         )
     found.sort(key=lambda dc: dc[0])
     return [cl for _, cl in found[:MAX_CLUSTERS]]
-
-
-def _circle(xs: FloatArray, ys: FloatArray) -> tuple[float, float] | None:
-    """The centre of the circle the points lie on (an algebraic least-squares fit), or None
-    when they fit no circle of a movable object's size (a box's faces, a straight face)."""
-    if len(xs) < CIRCLE_MIN_POINTS:
-        return None
-    mx, my = float(xs.mean()), float(ys.mean())
-    u, v = xs - mx, ys - my  # centred: the fit is better conditioned
-    a = np.column_stack([u, v, np.ones_like(u)])
-    b = u * u + v * v
-    sol, *_ = np.linalg.lstsq(a, b, rcond=None)
-    cu, cv = float(sol[0]) / 2.0, float(sol[1]) / 2.0
-    r2 = float(sol[2]) + cu * cu + cv * cv
-    if r2 <= 0.0:
-        return None
-    r = math.sqrt(r2)
-    if not CIRCLE_RADIUS_M[0] <= r <= CIRCLE_RADIUS_M[1]:
-        return None
-    rms = float(np.sqrt(np.mean((np.hypot(u - cu, v - cv) - r) ** 2)))
-    if rms > CIRCLE_RMS_M:
-        return None
-    return cu + mx, cv + my
 
 
 def world_points(scan: LaserScan, pose: tuple[float, float, float]) -> FloatArray:
@@ -315,13 +268,6 @@ class Tracker:
         ref = old[-1][1]
         for k in self.tracks:
             if k.last_t != t or k.speed < MOVING_MPS:
-                continue
-            older = [c for c in k.circles if c[0] <= t - LAG_S]
-            if k.circles and k.circles[-1][0] == t and older:
-                # a circle all along: its centre moved, or it stands
-                _, x0, y0 = older[-1]
-                _, x1, y1 = k.circles[-1]
-                k.displaced = math.hypot(x1 - x0, y1 - y0) > DISPLACED_M
                 continue
             pts = world[k.beams[0] : k.beams[1] + 1]
             pts = pts[np.isfinite(pts[:, 0])]
