@@ -152,9 +152,14 @@ class MemoryPlannerSource:
         self.contract.changed(keys.GOAL, robot_id, goal_id if updated else None)
         return updated
 
-    async def mark_failed(self, goal_id: int, robot_id: str, reason: str, stamp: float) -> bool:
+    async def mark_failed(
+        self, goal_id: int, robot_id: str, reason: str, stamp: float, strategy: str | None = None
+    ) -> bool:
         goal = self.contract[keys.GOAL].by_id.get(goal_id)
         updated = goal is not None and goal["status"] == "active"
+        if updated and strategy is not None:
+            active = self.contract[keys.ACTIVE_STRATEGY].newest(robot_id)
+            updated = active is not None and active["strategy_code"] == strategy
         if goal is not None and updated:
             goal.update(status="failed", reason=reason, finished_stamp=stamp)
         self.contract.changed(keys.GOAL, robot_id, goal_id if updated else None)

@@ -37,7 +37,9 @@ MARK_REACHED_SQL = (
 )
 MARK_FAILED_SQL = (
     "UPDATE goal SET status = 'failed', reason = $3, finished_stamp = $2 "
-    "WHERE id = $1 AND status = 'active' RETURNING id"
+    "WHERE id = $1 AND status = 'active' AND ($4::text IS NULL OR EXISTS ("
+    "SELECT 1 FROM active_strategy a WHERE a.robot_id = goal.robot_id "
+    "AND a.strategy_code = $4)) RETURNING id"
 )
 MARK_WAYPOINT_SQL = (
     "UPDATE goal_waypoint w SET status = $3, reason = $4, reached_stamp = $5 FROM goal g "
@@ -83,8 +85,11 @@ class PlannerSource(Protocol):
     async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
         """Set the goal 'reached' if it is still active, and notify; whether it was."""
 
-    async def mark_failed(self, goal_id: int, robot_id: str, reason: str, stamp: float) -> bool:
-        """Set the goal 'failed' with ``reason`` if it is still active, and notify."""
+    async def mark_failed(
+        self, goal_id: int, robot_id: str, reason: str, stamp: float, strategy: str | None = None
+    ) -> bool:
+        """Set the goal 'failed' with ``reason`` if it is still active (and, with ``strategy``,
+        the robot's active strategy is that one), and notify."""
 
     async def mark_waypoint(
         self, goal_id: int, seq: int, robot_id: str, status: str, reason: str | None, stamp: float
@@ -159,8 +164,10 @@ class PgPlannerSource:
         updated = await self.db.write(keys.GOAL, robot_id, MARK_REACHED_SQL, goal_id, stamp)
         return updated is not None
 
-    async def mark_failed(self, goal_id: int, robot_id: str, reason: str, stamp: float) -> bool:
-        sql, args = MARK_FAILED_SQL, (goal_id, stamp, reason)
+    async def mark_failed(
+        self, goal_id: int, robot_id: str, reason: str, stamp: float, strategy: str | None = None
+    ) -> bool:
+        sql, args = MARK_FAILED_SQL, (goal_id, stamp, reason, strategy)
         return await self.db.write(keys.GOAL, robot_id, sql, *args) is not None
 
     async def mark_waypoint(

@@ -250,8 +250,10 @@ class PlannerStore(GuardedStore):
     async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
         return await self.source.mark_reached(goal_id, robot_id, stamp)
 
-    async def mark_failed(self, goal_id: int, robot_id: str, reason: str, stamp: float) -> bool:
-        return await self.source.mark_failed(goal_id, robot_id, reason, stamp)
+    async def mark_failed(
+        self, goal_id: int, robot_id: str, reason: str, stamp: float, strategy: str | None = None
+    ) -> bool:
+        return await self.source.mark_failed(goal_id, robot_id, reason, stamp, strategy)
 
     async def mark_waypoint(
         self, goal_id: int, seq: int, robot_id: str, status: str, reason: str | None, stamp: float

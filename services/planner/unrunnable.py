@@ -62,7 +62,9 @@ class Unrunnable(TargetRule):
         if goal is None or goal.id in self.failed:
             return
         self.failed.add(goal.id)
-        if await self.view.mark_failed(goal.id, self.robot_id, self.why, now):
+        # only while the robot's strategy is still the one it cannot run: a goal given just
+        # after a switch this rule has not yet been ended for is the new strategy's
+        if await self.view.mark_failed(goal.id, self.robot_id, self.why, now, self.spec.strategy):
             log.event(
                 logger,
                 logging.WARNING,

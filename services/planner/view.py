@@ -53,8 +53,13 @@ class Contract(Clocks, Protocol):
     async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
         """Set the goal 'reached' and notify; False if it was no longer active."""
 
-    async def mark_failed(self, goal_id: int, robot_id: str, reason: str, stamp: float) -> bool:
-        """Set the goal 'failed' with ``reason`` and notify; False if it was no longer active."""
+    async def mark_failed(
+        self, goal_id: int, robot_id: str, reason: str, stamp: float, strategy: str | None = None
+    ) -> bool:
+        """Set the goal 'failed' with ``reason`` and notify; False if it was no longer active
+        (or, with ``strategy``, if the robot's active strategy is no longer that one: a rule
+        failing goals for its strategy never fails one given after a switch it has not seen
+        yet)."""
 
     async def mark_waypoint(
         self, goal_id: int, seq: int, robot_id: str, status: str, reason: str | None, stamp: float

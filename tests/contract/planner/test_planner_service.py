@@ -213,6 +213,26 @@ async def test_idle_recommends_nothing_and_an_unknown_scenario_fails_the_goal_wi
     await world.next_recommendation(lambda r: r["source"] == "turn_then_move")
 
 
+async def test_a_goal_is_failed_for_a_strategy_only_while_that_strategy_is_active(
+    world: World, planner: PlannerService
+) -> None:
+    """The unrunnable rule fails goals for its strategy; a goal given just after a switch it
+    has not yet been ended for belongs to the new strategy, and the write refuses it."""
+    await world.strategy("IDLE")
+    goal_id = await world.goal(2.0, 0.0)
+    store = planner.store
+    # the robot is on IDLE now: a rule failing goals for TELEPORT fails none
+    assert not await store.mark_failed(goal_id, "r1", "stale", 0.0, "TELEPORT")
+    assert await world.db.pool.fetchval("SELECT status FROM goal WHERE id = $1", goal_id) == (
+        "active"
+    )
+    # for the strategy in force, it does
+    assert await store.mark_failed(goal_id, "r1", "for IDLE", 0.0, "IDLE")
+    assert await world.db.pool.fetchval("SELECT status FROM goal WHERE id = $1", goal_id) == (
+        "failed"
+    )
+
+
 async def test_steady_driving_is_recommended_at_a_cadence_not_on_every_odometry_row(
     world: World, planner: PlannerService
 ) -> None:
