@@ -13,9 +13,9 @@ import asyncpg
 import pytest
 
 from common.testing import eventually
-from pnav.launcher import StackOptions, launched, resolve_world
+from pnav.launcher import launched, resolve_world
 from services.sim.world import load_world
-from tests.contract.ros2.turtlebot3_peer import TurtleBot3
+from tests.contract.ros2.turtlebot3_peer import TurtleBot3, peer_stack_options
 
 pytestmark = [pytest.mark.timeout(240), pytest.mark.slow]
 
@@ -26,17 +26,7 @@ GOAL_SQL = "SELECT status, reason FROM goal WHERE robot_id = 'r1' ORDER BY id DE
 async def test_the_stack_drives_an_independent_ros2_turtlebot3_to_an_rviz_goal(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    link = tmp_path / "link.yaml"
-    link.write_text("clock: ros\nuse_sim_time: false\n")
-    options = StackOptions(
-        world="open_room",
-        zenoh_port=None,
-        extra_env={
-            "PNAV_ROBOT_LINK": "ros2",
-            "PNAV_ROS2_LINK_FILE": str(link),
-            "PNAV_SIM_WORLD_ONLY": "1",  # what `pnav up --no-sim` sets
-        },
-    )
+    options = peer_stack_options(tmp_path)
     world = load_world(resolve_world("open_room"))
     start = world.message()["robots"][0]
     async with launched(options) as stack:

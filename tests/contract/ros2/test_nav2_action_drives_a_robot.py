@@ -16,10 +16,10 @@ import pytest
 
 from common import bus
 from common.testing import eventually
-from pnav.launcher import StackOptions, launched, resolve_world
+from pnav.launcher import launched, resolve_world
 from services.sim.world import load_world
 from tests.contract.ros2.nav2_client import NavClient
-from tests.contract.ros2.turtlebot3_peer import TurtleBot3
+from tests.contract.ros2.turtlebot3_peer import TurtleBot3, peer_stack_options
 
 pytestmark = [pytest.mark.timeout(240), pytest.mark.slow]
 
@@ -30,17 +30,7 @@ SUCCEEDED = 4
 async def test_a_navigate_to_pose_goal_drives_the_robot_there(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    link = tmp_path / "link.yaml"
-    link.write_text("clock: ros\nuse_sim_time: false\n")
-    options = StackOptions(
-        world="open_room",
-        zenoh_port=None,
-        extra_env={
-            "PNAV_ROBOT_LINK": "ros2",
-            "PNAV_ROS2_LINK_FILE": str(link),
-            "PNAV_SIM_WORLD_ONLY": "1",
-        },
-    )
+    options = peer_stack_options(tmp_path)
     start = load_world(resolve_world("open_room")).message()["robots"][0]
     async with launched(options) as stack:
         local = stack.local

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from common import ros2types
+from pnav.launcher import StackOptions
 
 TYPES = (
     ros2types.LASER_SCAN,
@@ -229,3 +230,19 @@ _CLASSES = (
     "geometry_msgs/msg/Transform",
     "geometry_msgs/msg/TransformStamped",
 )
+
+
+def peer_stack_options(folder: Path) -> StackOptions:
+    """A local stack on the open room that drives its robots over the ROS 2 link, with no sim
+    of its own (what `pnav up --no-sim --robot-link ros2` sets): the peer is the robot."""
+    link = folder / "link.yaml"
+    link.write_text("clock: ros\nuse_sim_time: false\n")
+    return StackOptions(
+        world="open_room",
+        zenoh_port=None,
+        extra_env={
+            "PNAV_ROBOT_LINK": "ros2",
+            "PNAV_ROS2_LINK_FILE": str(link),
+            "PNAV_SIM_WORLD_ONLY": "1",
+        },
+    )
