@@ -62,7 +62,7 @@ from common.contract.grants import BUS_IDENTITIES, LOGIN_ROLES, USER, role_name
 from common.contract.migrate import apply_migrations, contract_migrations
 from common.contract.roles import bootstrap, is_superuser, role_url
 from common.errors import ConfigError
-from common.pgtemplate import seed_from_template
+from common.pgtemplate import Seeded, leave_spare, seed_from_template
 from common.postmaster import Keeper, Lifeline, start_lifeline
 from common.testing import EmbeddedPostgres, free_port
 
@@ -162,10 +162,10 @@ class LocalStack:
     # how long each step of setting it up took, seconds (pnav bench startup): postgres_dir
     # (the data directory made: copied, or by initdb), postgres_start (the server started,
     # pgserver's pg_ctl), router, roles (roles, passwords, migrations, grants); and whether
-    # the data directory was copied from the template cluster
-    # (common.postmaster.seed_from_template) rather than made by initdb
+    # the data directory came from the template cluster (common.pgtemplate: "spare", a copy
+    # made when an earlier stack stopped, or "copy") rather than from initdb (None)
     phases: dict[str, float] = field(default_factory=dict)
-    seeded: bool = False
+    seeded: Seeded | None = None
 
     def env(self) -> dict[str, str]:
         """The variables a process needs to join this stack (as the setup account: tests and
@@ -231,6 +231,14 @@ def _require_passwords(data_dir: Path) -> None:
     (data_dir / "pg_hba.conf").write_text(_PASSWORD_HBA)
 
 
+def _stop_postgres(postgres: EmbeddedPostgres, seeded: Seeded | None) -> None:
+    """Stop the server; a cluster from the template then leaves the next stack's cluster
+    ready (common.pgtemplate's spare), copied now that this one's server is down."""
+    postgres.stop()
+    if seeded is not None:
+        leave_spare(_contract_version())
+
+
 @contextlib.asynccontextmanager
 async def local_stack(
     data_dir: Path | None = None,
@@ -253,7 +261,7 @@ async def local_stack(
     keeper: Keeper | None = None
     url = os.environ.get("PNAV_DATABASE_URL", "").strip()
     phases: dict[str, float] = {}
-    seeded = False
+    seeded: Seeded | None = None
     started = time.monotonic()
     if not url:
         # pgserver narrates every pg_ctl run at INFO; a restart would repeat all of it
@@ -324,6 +332,6 @@ async def local_stack(
         if secret_dir is not None:
             shutil.rmtree(secret_dir, ignore_errors=True)
         if postgres is not None:
-            postgres.stop()
+            _stop_postgres(postgres, seeded)
         if lifeline is not None:
             lifeline.close()
