@@ -156,8 +156,10 @@ class Cycle:
                     robot=robot,
                     waited_s=round(now - h.since, 1),
                 )
-            del self.handing[robot]
+            # still handing over until the lock is given back: a robot out of ``handing``
+            # must not be locked any more (it was, for the release's round trip)
             await self.release(session, [robot], h.reason)
+            self.handing.pop(robot, None)
 
     def _masked(self, view: Snapshot) -> Snapshot:
         """``view`` with the robots being handed over shown as someone else's."""

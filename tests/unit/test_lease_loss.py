@@ -118,7 +118,9 @@ async def test_a_robot_handed_on_during_a_takeover_wait_still_waits_for_the_vani
         assert a._task is not None
         a._task.cancel()  # a's process is gone: it will not reconnect
         ended = time.monotonic()
-        await conn.execute("SELECT pg_terminate_backend($1)", a.backend_pid)
+        # with a timeout, pg_terminate_backend returns once the backend has exited and its
+        # locks are free; without, b's first cycle could still find them held by a
+        assert await conn.fetchval("SELECT pg_terminate_backend($1, 10000)", a.backend_pid)
         await b.start()
         assert b.owned == frozenset()  # its locks are taken, its wait is running
         assert await conn.fetchval(
