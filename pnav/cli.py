@@ -12,6 +12,7 @@ import uvloop
 
 from common.errors import PnavError, UsageError
 from pnav.bench.faults_cli import add_faults_parser
+from pnav.bench.nav.worlds_cli import add_worlds_parser
 from pnav.cli_args import (
     GOAL_M,
     MAX_TOL_M,
@@ -38,7 +39,6 @@ from pnav.cli_args import (
 )
 from pnav.dashboard_cli import add_dashboard_options, dashboard_options
 from pnav.learn.cli import add_learn_parser
-from pnav.navbench.worlds_cli import add_worlds_parser
 from pnav.zone_cli import add_zone_parser
 
 if TYPE_CHECKING:
@@ -346,7 +346,7 @@ def _verbs(args: argparse.Namespace) -> int:
         from pnav.learn.cli import run_learn
 
         return run_learn(args)
-    from pnav.navbench.worlds_cli import run_worlds
+    from pnav.bench.nav.worlds_cli import run_worlds
 
     return run_worlds(args)
 
@@ -433,7 +433,7 @@ def _bench(args: argparse.Namespace) -> int:
             with_floor=not args.no_floor,
         )
     if args.bench == "nav":
-        from pnav.navbench import runner
+        from pnav.bench.nav import runner
 
         return runner.run(args)
     if args.bench == "faults":

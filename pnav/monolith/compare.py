@@ -4,7 +4,7 @@
         worlds/barn/barn_easy_000.yaml worlds/barn/barn_hard_000.yaml
 
 For each world (goal and time limit from its benchmark section): the episode in one process
-(``run_monolith_episode``), then in the full stack (``pnav.navbench.episode.run_episode``:
+(``run_monolith_episode``), then in the full stack (``pnav.bench.nav.episode.run_episode``:
 embedded Postgres, Zenoh, one process per service, sim at rate max). Printed side by side:
 outcome, sim time, path length, and CPU seconds per sim second over the run proper (first
 decision to the end; the stack's over every process, Postgres included), with the ratio.
@@ -21,11 +21,11 @@ from typing import Any
 
 import uvloop
 
+from pnav.bench.nav.episode import Combo, Episode, run_episode
+from pnav.bench.nav.worldfile import read_benchmark
 from pnav.monolith.__main__ import parse_combo
 from pnav.monolith.episode import run_monolith_episode
 from pnav.monolith.summary import summary
-from pnav.navbench.episode import Combo, Episode, run_episode
-from pnav.navbench.worldfile import read_benchmark
 
 
 def compare(episode: Episode) -> dict[str, Any]:

@@ -196,7 +196,7 @@ KNOWN_COLLISIONS: dict[str, frozenset[str]] = {
     # place under issue 33; rename there, not twice)
     "dwa": frozenset({"pnav/bench/dwa.py", "pnav_local/dwa.py"}),
     "engine": frozenset({"common/engine/engine.py", "pnav/bench/engine.py"}),
-    "latency": frozenset({"pnav/bench/latency.py", "services/bridge/bench/latency.py"}),
+    "latency": frozenset({"pnav/bench/latency.py", "pnav/bench/bridge/latency.py"}),
     "nav2actions": frozenset({"pnav/bench/nav2actions.py", "pnav/ros2/nav2actions.py"}),
     "provenance": frozenset({"pnav/bench/provenance.py", "services/dashboard/provenance.py"}),
     "zones": frozenset(
@@ -206,8 +206,8 @@ KNOWN_COLLISIONS: dict[str, frozenset[str]] = {
         {
             "pnav/bench/faults/report.py",
             "pnav/bench/report.py",
-            "pnav/navbench/report.py",
-            "services/bridge/bench/report.py",
+            "pnav/bench/nav/report.py",
+            "pnav/bench/bridge/report.py",
         }
     ),
     "rows": frozenset({"pnav/bench/faults/rows.py", "services/bridge/rows.py"}),
@@ -219,19 +219,16 @@ KNOWN_COLLISIONS: dict[str, frozenset[str]] = {
             "services/sim/world.py",
         }
     ),
-    "bench": frozenset({"services/controller/bench.py", "services/sim/bench.py"}),
-    "compare": frozenset({"pnav/monolith/compare.py", "pnav/navbench/compare.py"}),
-    "episode": frozenset({"pnav/monolith/episode.py", "pnav/navbench/episode.py"}),
-    "metrics": frozenset({"pnav/navbench/metrics.py", "services/dashboard/metrics.py"}),
+    "compare": frozenset({"pnav/monolith/compare.py", "pnav/bench/nav/compare.py"}),
+    "episode": frozenset({"pnav/monolith/episode.py", "pnav/bench/nav/episode.py"}),
+    "metrics": frozenset({"pnav/bench/nav/metrics.py", "services/dashboard/metrics.py"}),
     # the in-process reference's stand-ins, named after the service they stand in for
     "bridge": frozenset({"pnav/monolith/bridge.py", "services/bridge/bridge.py"}),
     "controller": frozenset(
         {"examples/sql_controller/controller.py", "pnav/monolith/controller.py"}
     ),
     # test infrastructure, to become a private module (issue 33)
-    "stack": frozenset(
-        {"common/stack.py", "pnav/monolith/stack.py", "services/bridge/bench/stack.py"}
-    ),
+    "stack": frozenset({"common/stack.py", "pnav/monolith/stack.py", "pnav/bench/bridge/stack.py"}),
     # a common/ module and a service's (or plug-in's) own narrower one of the same noun
     "battery": frozenset({"services/planner/battery.py", "services/sim/battery.py"}),
     "cli": frozenset({"pnav/cli.py", "pnav/learn/cli.py"}),

@@ -12,6 +12,7 @@ from common.contract import keys
 from common.contract.recommendations import Recommendation
 from common.engine import Rule
 from common.planner_core.scenario import RobotInfo
+from pnav.bench.nav.episode import Combo
 from pnav.monolith.bridge import Applied, Bridge
 from pnav.monolith.contract import AdapterError, MemoryContract
 from pnav.monolith.controller import MemoryControllerSource
@@ -20,7 +21,6 @@ from pnav.monolith.engines import SteppedEngine
 from pnav.monolith.planner import planner_engine
 from pnav.monolith.stack import MonolithStack
 from pnav.monolith.strategies import combo_strategy, shipped_strategies
-from pnav.navbench.episode import Combo
 from services.decision.arbitration import RobotDecision
 from services.planner.routes import Target
 from services.planner.world import RobotState

@@ -20,10 +20,10 @@ from common import bus
 from common.contract.migrate import schema_text
 from common.errors import UsageError
 from pnav import cli
-from pnav.navbench import compare, progress, report, runner
-from pnav.navbench import episode as episode_module
-from pnav.navbench.episode import Combo, Episode, Outcome
-from pnav.navbench.worldfile import BenchmarkWorld, load_suite
+from pnav.bench.nav import compare, progress, report, runner
+from pnav.bench.nav import episode as episode_module
+from pnav.bench.nav.episode import Combo, Episode, Outcome
+from pnav.bench.nav.worldfile import BenchmarkWorld, load_suite
 from services.planner.meta import move_scenarios
 
 pytestmark = pytest.mark.timeout(60)

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from pnav.navbench.search import BoolGrid, Point, polyline_length
+from pnav.bench.nav.search import BoolGrid, Point, polyline_length
 
 FloatArray = npt.NDArray[np.float64]
 

@@ -1,9 +1,11 @@
 """Benchmark: how many sim seconds per wall second the sim runs, flat out.
 
-``python -m services.sim --bench --robots N --seconds S [--world W]`` runs N robots for S sim
+``python -m pnav.bench.sim_rate --robots N --seconds S [--world W]`` runs N robots for S sim
 seconds with every sensor on (lidar included) and every message msgpack-encoded as it would
 be for Zenoh; no Zenoh router is needed, so the figure is the simulator's own ceiling. The
 robots drive circles of different radii so motion, contacts and ray casts all do real work.
+It takes the sim's own options (``python -m services.sim --help``: --physics-hz, --scan-hz,
+--model, ...), the world warehouse.yaml unless --world names one.
 """
 
 from __future__ import annotations
@@ -11,13 +13,20 @@ from __future__ import annotations
 import json
 import os
 import platform
+import sys
 import time
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 from common.bus import pack
+from common.errors import UsageError
+from services.sim.__main__ import build, sim_parser
 from services.sim.sim import SimConfig, Simulation
 from services.sim.world import World
+
+BENCH_WORLD = Path(__file__).resolve().parents[2] / "worlds" / "warehouse.yaml"
 
 # sim seconds between two commands to a robot: the decision service's re-issue period
 REISSUE_S = 0.1
@@ -98,3 +107,24 @@ def report(result: BenchResult) -> str:
         f"(physics {result.physics_hz:g} Hz, lidar on)"
     )
     return line + "\n" + json.dumps(result.as_dict())
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = sim_parser(prog="python -m pnav.bench.sim_rate")
+    parser.description = "how many sim seconds per wall second the sim runs, flat out"
+    parser.add_argument(
+        "--seconds", type=float, default=60.0, help="sim seconds to run (default 60)"
+    )
+    args = parser.parse_args(argv)
+    args.world = args.world or str(BENCH_WORLD)
+    try:
+        world, config, _rate = build(args)
+    except UsageError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(report(run_bench(world, replace(config, gui=False), args.seconds)), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,6 +1,6 @@
 """Benchmark: the controller's own decisions per scan, without I/O.
 
-``python -m services.controller.bench [--scans N] [--seed S]`` runs the shipped reactive
+``python -m pnav.bench.controller_decision [--scans N] [--seed S]`` runs the shipped reactive
 scenarios' ``decide`` (safety_stop, avoid_left, avoid_right: what GOTO_AVOID runs on every
 fresh scan) on N scans made up of walls, near obstacles in random sectors and empty beams,
 each scan a new object as the store hands them over, and prints the microseconds per scan and
@@ -73,7 +73,7 @@ def run(n: int, seed: int, repeat: int) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m services.controller.bench")
+    parser = argparse.ArgumentParser(prog="python -m pnav.bench.controller_decision")
     parser.add_argument("--scans", type=int, default=5000)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--repeat", type=int, default=5, help="best of this many passes")

@@ -1,6 +1,6 @@
-"""Dynamic BARN-protocol worlds on disk (``pnav.navbench.dynabarn``), and their SUITE.md.
+"""Dynamic BARN-protocol worlds on disk (``pnav.bench.nav.dynabarn``), and their SUITE.md.
 
-The files are the BARN protocol's (``pnav.navbench.barnfile``): ``D/N.yaml``,
+The files are the BARN protocol's (``pnav.bench.nav.barnfile``): ``D/N.yaml``,
 ``D/maps/N.{yaml,pgm}`` (the walls only), the robot naming its ``model``. The world file's
 ``movers`` are the sim's moving obstacles (docs/SIM.md); it has no ``obstacles``. The
 ``benchmark`` section says ``protocol: dynabarn``, with BARN's goal tolerance and time limit
@@ -13,17 +13,17 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from pnav.navbench import suitefile
-from pnav.navbench.barn import GOAL_TOLERANCE_M, time_limit
-from pnav.navbench.barnfile import corridor_document, draw_corridor
-from pnav.navbench.dynabarn import (
+from pnav.bench.nav import suitefile
+from pnav.bench.nav.barn import GOAL_TOLERANCE_M, time_limit
+from pnav.bench.nav.barnfile import corridor_document, draw_corridor
+from pnav.bench.nav.dynabarn import (
     LEVELS,
     MIN_SPEED_MPS,
     MOVER_HEIGHT_M,
     PROTOCOL,
     DynaBarnWorld,
 )
-from pnav.navbench.metrics import optimal_time
+from pnav.bench.nav.metrics import optimal_time
 from services.sim.mover import MoverSpec
 
 
@@ -88,7 +88,7 @@ def write_dynabarn_world(world: DynaBarnWorld, folder: Path, *, header: str = ""
 def write_preview(path: Path, world: DynaBarnWorld) -> None:
     """A picture of the world: the walls, the movers' tracks, the reference path, the start
     and the goal."""
-    from pnav.navbench.render import write_world_png
+    from pnav.bench.nav.render import write_world_png
 
     write_world_png(path, draw_corridor(world, world.walls, mover_specs(world)))
 

@@ -1,6 +1,6 @@
 """What every protocol's world files share: the rounding that keeps their text stable, the
 one-line mappings, the fields every ``benchmark`` section has, and writing a world's three
-files (``D/N.yaml``, ``D/maps/N.{yaml,pgm}``; the layout is in ``pnav.navbench.worldfile``).
+files (``D/N.yaml``, ``D/maps/N.{yaml,pgm}``; the layout is in ``pnav.bench.nav.worldfile``).
 
 The protocol modules (``worldfile``, ``barnfile``, ``dynabarnfile``) say what differs: the
 generator's fields, the world's obstacles or movers, the time limit and the robot.
@@ -16,16 +16,16 @@ from typing import TYPE_CHECKING, Any, Generic, TypeAlias, TypeVar
 import numpy as np
 import yaml
 
-from pnav.navbench.generator import ORIGIN
+from pnav.bench.nav.generator import ORIGIN
 from services.sim.mapserver import encode_pgm, map_yaml
 
 if TYPE_CHECKING:
-    from pnav.navbench.automaton import AutomatonRule
-    from pnav.navbench.barn import BarnLayout, BarnWorld
-    from pnav.navbench.difficulty import Difficulty
-    from pnav.navbench.dynabarn import DynaBarnWorld
-    from pnav.navbench.generator import GeneratedWorld, Layout
-    from pnav.navbench.search import BoolGrid
+    from pnav.bench.nav.automaton import AutomatonRule
+    from pnav.bench.nav.barn import BarnLayout, BarnWorld
+    from pnav.bench.nav.difficulty import Difficulty
+    from pnav.bench.nav.dynabarn import DynaBarnWorld
+    from pnav.bench.nav.generator import GeneratedWorld, Layout
+    from pnav.bench.nav.search import BoolGrid
 
     # a generated world of any protocol
     SuiteWorld: TypeAlias = GeneratedWorld | BarnWorld | DynaBarnWorld

@@ -1,6 +1,6 @@
 """Benchmark of the bridge's two legs of the sense-to-act loop; prints figures and JSON.
 
-``python -m services.bridge.bench [--seconds 10] [--robots 1] [--burst 3000] [--json FILE]``
+``python -m pnav.bench.bridge [--seconds 10] [--robots 1] [--burst 3000] [--json FILE]``
 
 Starts its own embedded Postgres and loopback Zenoh router, runs ``python -m services.bridge``
 as a separate process (as deployed), and plays the sim from this process:

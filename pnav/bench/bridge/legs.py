@@ -13,14 +13,14 @@ import zenoh
 from common import bus
 from common.config import ZenohSettings
 from common.contract import keys
-from services.bridge.bench.latency import (
+from pnav.bench.bridge.latency import (
     Notifications,
     latencies,
     max_ids,
     read_rows,
     summary_ms,
 )
-from services.bridge.bench.player import Player
+from pnav.bench.bridge.player import Player
 
 # a burst is over when the last row is notified, or when no notification came for this long
 # (some messages were lost: what arrived is measured)

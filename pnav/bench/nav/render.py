@@ -8,7 +8,7 @@ cross in a red ring; the world's unmapped obstacles (in the world file, not on t
 lidar sees them) purple, their true shape; each moving obstacle's track (services/sim/mover.py)
 a light band as wide as its body along its path, the path itself dark pink, and its body where
 it is at sim time 0 dark pink too. North (+y) is up. A legend strip under the picture
-names every colour (pnav/navbench/legend.py).
+names every colour (pnav/bench/nav/legend.py).
 """
 
 from __future__ import annotations
@@ -20,11 +20,11 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from pnav.navbench.generator import ORIGIN, GeneratedWorld
-from pnav.navbench.legend import with_legend
-from pnav.navbench.png import encode_png
-from pnav.navbench.search import BoolGrid, Point, inflate
-from pnav.navbench.worldfile import BenchmarkWorld, occupied_cells
+from pnav.bench.nav.generator import ORIGIN, GeneratedWorld
+from pnav.bench.nav.legend import with_legend
+from pnav.bench.nav.png import encode_png
+from pnav.bench.nav.search import BoolGrid, Point, inflate
+from pnav.bench.nav.worldfile import BenchmarkWorld, occupied_cells
 from services.sim.mover import MoverSpec
 from services.sim.world import ObstacleSpec
 

@@ -28,9 +28,9 @@ from typing import Protocol, TypeVar
 
 import numpy as np
 
-from pnav.navbench.automaton import AutomatonRule, BoolGrid, grow_field
-from pnav.navbench.difficulty import Difficulty, measure
-from pnav.navbench.search import Point, ReferencePath, reference_path
+from pnav.bench.nav.automaton import AutomatonRule, BoolGrid, grow_field
+from pnav.bench.nav.difficulty import Difficulty, measure
+from pnav.bench.nav.search import Point, ReferencePath, reference_path
 from services.sim.robot import BURGER
 
 # Fill probability grows and smoothing shrinks with the level: more clutter, and clutter left

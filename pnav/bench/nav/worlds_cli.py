@@ -6,9 +6,9 @@
 writes N worlds per level (world i of a level drawn with seed S * 1000 + i) as DIR/NAME.yaml
 plus DIR/maps/NAME.{yaml,pgm}, with --png a preview DIR/preview/NAME.png of each, and
 DIR/SUITE.md (the command, the levels, a table of the worlds); prints the same table.
-``--protocol barn`` writes BARN-protocol worlds for ``--model`` (``pnav.navbench.barn``);
+``--protocol barn`` writes BARN-protocol worlds for ``--model`` (``pnav.bench.nav.barn``);
 ``--protocol dynabarn`` the same corridor crossed by moving obstacles
-(``pnav.navbench.dynabarn``). This module imports nothing heavy at load time: ``pnav``'s
+(``pnav.bench.nav.dynabarn``). This module imports nothing heavy at load time: ``pnav``'s
 parser is built on every command.
 """
 
@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 from common.errors import UsageError
 
 if TYPE_CHECKING:
-    from pnav.navbench.suitefile import SuiteFiles
+    from pnav.bench.nav.suitefile import SuiteFiles
 
 DEFAULT_LEVELS = "easy,medium,hard"
 PROTOCOLS = ("default", "barn", "dynabarn")
@@ -128,22 +128,22 @@ def generated_suite(
     """The worlds ``args`` ask for, and how their protocol writes them: ``barn``, the same
     files with the obstacles as world obstacles (barnfile.py); ``dynabarn``, BARN's corridor
     crossed by movers (dynabarnfile.py); else the default protocol (worldfile.py)."""
-    from pnav.navbench.robots import resolve_model
+    from pnav.bench.nav.robots import resolve_model
 
     if protocol == "barn":
-        from pnav.navbench import barn, barnfile
+        from pnav.bench.nav import barn, barnfile
 
         levels = checked_levels(args, list(barn.LEVELS))
         robot = resolve_model(args.model or BARN_DEFAULT_MODEL)
         return barn.generate_barn_suite(levels, args.count, args.seed, robot), barnfile.SUITE_FILES
     if protocol == "dynabarn":
-        from pnav.navbench import dynabarn, dynabarnfile
+        from pnav.bench.nav import dynabarn, dynabarnfile
 
         levels = checked_levels(args, list(dynabarn.LEVELS))
         robot = resolve_model(args.model or BARN_DEFAULT_MODEL)
         suite = dynabarn.generate_dynabarn_suite(levels, args.count, args.seed, robot)
         return suite, dynabarnfile.SUITE_FILES
-    from pnav.navbench import generator, worldfile
+    from pnav.bench.nav import generator, worldfile
 
     levels = checked_levels(args, list(generator.LEVELS))
     return generator.generate_suite(levels, args.count, args.seed), worldfile.SUITE_FILES
@@ -151,7 +151,7 @@ def generated_suite(
 
 def finish(out: Path, written_names: Sequence[str]) -> int:
     """Say what was written, and warn of other benchmark worlds in the folder."""
-    from pnav.navbench.worldfile import is_benchmark_world
+    from pnav.bench.nav.worldfile import is_benchmark_world
 
     count = len(written_names)
     print(f"\nwrote {count} world{'s' if count != 1 else ''} to {out}")
@@ -172,7 +172,7 @@ def run_worlds(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m pnav.navbench.worlds_cli generate ...``: the same, without ``pnav``."""
+    """``python -m pnav.bench.nav.worlds_cli generate ...``: the same, without ``pnav``."""
     parser = argparse.ArgumentParser(prog="pnav")
     add_worlds_parser(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(["worlds", *(sys.argv[1:] if argv is None else argv)])

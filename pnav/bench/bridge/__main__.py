@@ -1,4 +1,4 @@
-"""``python -m services.bridge.bench``: the command line, and the run of the legs in order."""
+"""``python -m pnav.bench.bridge``: the command line, and the run of the legs in order."""
 
 from __future__ import annotations
 
@@ -12,14 +12,14 @@ from typing import Any
 
 import psutil
 
-import services.bridge.bench as package
-from services.bridge.bench import legs
-from services.bridge.bench.latency import Notifications, summary_ms
-from services.bridge.bench.player import Player
-from services.bridge.bench.report import report
-from services.bridge.bench.stack import BenchStack
+import pnav.bench.bridge as package
+from pnav.bench.bridge import legs
+from pnav.bench.bridge.latency import Notifications, summary_ms
+from pnav.bench.bridge.player import Player
+from pnav.bench.bridge.report import report
+from pnav.bench.bridge.stack import BenchStack
 
-PROG = "python -m services.bridge.bench"
+PROG = "python -m pnav.bench.bridge"
 
 
 async def run(args: argparse.Namespace) -> dict[str, Any]:

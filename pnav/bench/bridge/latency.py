@@ -13,7 +13,7 @@ import zenoh
 
 from common import bus
 from common.contract import keys
-from services.bridge.bench.player import Player
+from pnav.bench.bridge.player import Player
 
 Arrivals = list[tuple[float, str, str, int]]  # (monotonic, table, robot, id)
 Rows = dict[tuple[str, int], tuple[str, int, float]]  # (table, id) -> (robot, seq, received_at)

@@ -2,7 +2,7 @@
 cost (the stack's, and the monolith's when asked), as text tables, JSON and a README.
 
 Everything here works on finished ``RunRecord``s, so it is tested with made-up runs; the
-runs themselves come from ``pnav.navbench.runner``.
+runs themselves come from ``pnav.bench.nav.runner``.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from pnav.bench.nav.metrics import RunResult, Summary, summarize, summarize_by
 from pnav.bench.report import percentiles
-from pnav.navbench.metrics import RunResult, Summary, summarize, summarize_by
 
 STACK, MONOLITH = "stack", "monolith"
 # the JSON keeps a trajectory point per this much sim time: enough to redraw or compare a

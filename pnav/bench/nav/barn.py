@@ -21,7 +21,7 @@ challenge's Jackal (top speed 2 m/s). The layout, in cells of ``cell_m``::
 
 The side walls run the whole length, so the only way to the goal is through the field. A
 world is kept only if the model's disc, grown by the planner's margin, finds a path (the
-same check as the default protocol, ``pnav.navbench.generator``) and, for a model with a
+same check as the default protocol, ``pnav.bench.nav.generator``) and, for a model with a
 footprint polygon (the Jackal's box), the polygon keeps 2 cm from every obstacle along that
 path heading along each leg (:func:`fits`), else the field is drawn again from the same
 random stream.
@@ -38,9 +38,9 @@ import numpy as np
 
 from common.collision import collides_on_grid, path_poses
 from common.errors import UsageError
-from pnav.navbench.automaton import AutomatonRule, BoolGrid
-from pnav.navbench.difficulty import Difficulty
-from pnav.navbench.generator import (
+from pnav.bench.nav.automaton import AutomatonRule, BoolGrid
+from pnav.bench.nav.difficulty import Difficulty
+from pnav.bench.nav.generator import (
     ORIGIN,
     FieldCells,
     OnLayout,
@@ -48,8 +48,8 @@ from pnav.navbench.generator import (
     first_passable,
     known_level,
 )
-from pnav.navbench.robots import RobotFit
-from pnav.navbench.search import Point, ReferencePath
+from pnav.bench.nav.robots import RobotFit
+from pnav.bench.nav.search import Point, ReferencePath
 
 PROTOCOL = "barn"
 # what a footprint polygon keeps from the obstacles along the reference path (as the

@@ -20,7 +20,7 @@ from common.contract import keys
 from common.contract.migrate import apply_migrations
 from common.errors import ConnectionFailure
 from common.testing import EmbeddedPostgres, free_port
-from services.bridge.bench.player import world
+from pnav.bench.bridge.player import world
 
 # the bridge must have written the world's robots within this long
 READY_TIMEOUT_S = 30.0

@@ -47,9 +47,9 @@ from common.trace import CMD_VEL, read_trace
 from pnav import stack_commands
 from pnav.bench import provenance as prov
 from pnav.bench.latency import Collected, collect
+from pnav.bench.nav.metrics import GOAL_TOLERANCE_M
 from pnav.bench.processes import Usage
 from pnav.launcher import StackOptions, launched
-from pnav.navbench.metrics import GOAL_TOLERANCE_M
 
 SUCCESS_RADIUS_M = GOAL_TOLERANCE_M  # BARN: the goal counts as reached within 0.3 m
 MAX_LAG_S = 0.1  # the decision service re-issues every 0.1 s sim: never staler than that

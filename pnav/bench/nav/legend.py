@@ -1,6 +1,6 @@
 """A colour key drawn under a picture: a swatch and a word or two per colour.
 
-Pictures are written with no imaging library (pnav/navbench/png.py), so the words are drawn
+Pictures are written with no imaging library (pnav/bench/nav/png.py), so the words are drawn
 with a 3 x 5 pixel font of lower-case letters, blown up ``scale`` times.
 """
 

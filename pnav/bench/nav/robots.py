@@ -19,7 +19,7 @@ from common.errors import UsageError
 from common.footprint import Footprint, Polygon
 
 if TYPE_CHECKING:
-    from pnav.navbench.worldfile import BenchmarkWorld
+    from pnav.bench.nav.worldfile import BenchmarkWorld
 
 
 @dataclass(frozen=True)
@@ -68,8 +68,8 @@ def for_model(world: BenchmarkWorld, robot: RobotFit, folder: Path) -> Benchmark
     limit for that speed (the default protocol keeps the world's), and, when the world was
     made for another model (or names none), a copy of its world file under ``folder`` whose
     robot is this model (the map and the obstacles unchanged)."""
-    from pnav.navbench import barn, dynabarn
-    from pnav.navbench.metrics import optimal_time
+    from pnav.bench.nav import barn, dynabarn
+    from pnav.bench.nav.metrics import optimal_time
 
     limit = world.time_limit_s
     if world.protocol in (barn.PROTOCOL, dynabarn.PROTOCOL):

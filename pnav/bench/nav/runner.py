@@ -1,11 +1,11 @@
 """``pnav bench nav``: every shipped strategy/planner combination in every world of a suite.
 
 For each world (suite order), combo and run k (seed k) it runs the whole stack once
-(``pnav.navbench.episode``) and scores the run (``pnav.navbench.metrics``); with
+(``pnav.bench.nav.episode``) and scores the run (``pnav.bench.nav.metrics``); with
 ``--monolith`` it runs the same episode in the monolith right after, so both ways share the
 machine's state of the moment. A progress bar on stderr meanwhile; then the summary tables
 on stdout, JSON with ``--json``, pictures and a README with ``--report``
-(``pnav.navbench.report``).
+(``pnav.bench.nav.report``).
 
 The combos are read from what ships, not listed here: the contract's strategies whose params
 target the goal (``schema.sql``) times the planner scenarios the planner registers.
@@ -30,18 +30,18 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from common.errors import UsageError
-from pnav.navbench.progress import Progress
+from pnav.bench.nav.progress import Progress
 
 if TYPE_CHECKING:
     # the stack (Zenoh, pybullet, numpy...) is imported when a bench runs, not with pnav's
     # parser: pnav imports this module lazily, and the tests import it without a stack
-    from pnav.navbench.episode import Combo, Episode, Outcome
-    from pnav.navbench.report import RunRecord
-    from pnav.navbench.robots import RobotFit
-    from pnav.navbench.workers import EpisodeWorkers
-    from pnav.navbench.worldfile import BenchmarkWorld
+    from pnav.bench.nav.episode import Combo, Episode, Outcome
+    from pnav.bench.nav.report import RunRecord
+    from pnav.bench.nav.robots import RobotFit
+    from pnav.bench.nav.workers import EpisodeWorkers
+    from pnav.bench.nav.worldfile import BenchmarkWorld
 
-STACK, MONOLITH = "stack", "monolith"  # the records' modes (pnav.navbench.report)
+STACK, MONOLITH = "stack", "monolith"  # the records' modes (pnav.bench.nav.report)
 # a row of the contract's INSERT INTO strategy: code, planner, controllers, params, ...
 # the params that name a learned scenario's model (docs/LEARNING.md)
 LEARNED_PARAMS = ("learned_model", "foresight_model")
@@ -67,7 +67,7 @@ def navigation_strategies(sql: str, learned: bool = False) -> list[str]:
 
 def shipped_combos(learned: bool = False) -> list[Combo]:
     from common.contract.migrate import schema_text
-    from pnav.navbench.episode import Combo
+    from pnav.bench.nav.episode import Combo
     from services.planner.meta import move_scenarios  # installed, the planner's own first
 
     planners = list(move_scenarios())
@@ -129,8 +129,8 @@ def to_record(
     """Score an episode against its world (goal, tolerance, limit, reference length, top
     speed). ``outcome`` is the stack's Outcome or the monolith's (same fields, fewer
     extras). One that never moved is scored from the start alone: a failure."""
-    from pnav.navbench.metrics import evaluate_run
-    from pnav.navbench.report import RunRecord
+    from pnav.bench.nav.metrics import evaluate_run
+    from pnav.bench.nav.report import RunRecord
 
     trajectory = list(outcome.trajectory) or [(0.0, world.start[0], world.start[1])]
     result = evaluate_run(
@@ -164,14 +164,14 @@ class Plan:
     report: Path | None = None
     monolith: Callable[[Episode], Any] | None = None
     workers: EpisodeWorkers | None = None  # None: stack episodes in this process
-    pacing: str = "lockstep"  # or "lag" (pnav.navbench.episode)
+    pacing: str = "lockstep"  # or "lag" (pnav.bench.nav.episode)
     keep_db: Path | None = None  # keep each stack episode's database in a folder here
 
 
 async def attempt(plan: Plan, mode: str, episode: Episode, log_dir: Path) -> Outcome | str:
     """The episode's outcome, or the error that kept it from running: the bench goes on,
     one broken run must not cost the other 239."""
-    from pnav.navbench.episode import run_episode
+    from pnav.bench.nav.episode import run_episode
 
     try:
         if plan.monolith is None or mode == STACK:
@@ -193,8 +193,8 @@ async def attempt(plan: Plan, mode: str, episode: Episode, log_dir: Path) -> Out
 
 async def run_one(plan: Plan, world: BenchmarkWorld, combo: Combo, k: int, mode: str) -> RunRecord:
     """One episode one way, scored, and its picture when there is a report folder."""
-    from pnav.navbench.episode import Episode, Outcome
-    from pnav.navbench.render import render_run
+    from pnav.bench.nav.episode import Episode, Outcome
+    from pnav.bench.nav.render import render_run
 
     tolerance = world.goal_tolerance_m
     episode = Episode(
@@ -257,10 +257,10 @@ def with_model(
     worlds: list[BenchmarkWorld], robot: RobotFit | None, folder: Path
 ) -> list[BenchmarkWorld]:
     """``--model NAME``: every world run and scored with that robot model
-    (``pnav.navbench.robots.for_model``); None: each world with its own."""
+    (``pnav.bench.nav.robots.for_model``); None: each world with its own."""
     if robot is None:
         return worlds
-    from pnav.navbench.robots import for_model, too_big
+    from pnav.bench.nav.robots import for_model, too_big
 
     tight = too_big(worlds, robot)
     if tight:
@@ -286,11 +286,11 @@ def run(args: argparse.Namespace) -> int:
     interrupted (after writing what was done)."""
     import uvloop
 
+    from pnav.bench.nav import compare, report
+    from pnav.bench.nav.episode import MAX_LAG_S
+    from pnav.bench.nav.robots import resolve_model
+    from pnav.bench.nav.worldfile import load_suite
     from pnav.bench.report import emit, machine
-    from pnav.navbench import compare, report
-    from pnav.navbench.episode import MAX_LAG_S
-    from pnav.navbench.robots import resolve_model
-    from pnav.navbench.worldfile import load_suite
 
     if args.runs < 1:
         raise UsageError("--runs must be 1 or more")
@@ -316,7 +316,7 @@ def run(args: argparse.Namespace) -> int:
     date = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
     records: list[RunRecord] = []
     interrupted = False
-    from pnav.navbench.workers import EpisodeWorkers
+    from pnav.bench.nav.workers import EpisodeWorkers
 
     plan.workers = None if args.in_process else EpisodeWorkers()
     try:

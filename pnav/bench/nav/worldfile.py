@@ -23,12 +23,12 @@ import yaml
 
 from common import yamldoc
 from common.errors import WorldError
-from pnav.navbench import suitefile
-from pnav.navbench.difficulty import Difficulty
-from pnav.navbench.generator import LEVELS, GeneratedWorld
-from pnav.navbench.metrics import GOAL_TOLERANCE_M, TOP_SPEED_MPS, default_time_limit, optimal_time
-from pnav.navbench.search import BoolGrid, Point
-from pnav.navbench.suitefile import FORMAT
+from pnav.bench.nav import suitefile
+from pnav.bench.nav.difficulty import Difficulty
+from pnav.bench.nav.generator import LEVELS, GeneratedWorld
+from pnav.bench.nav.metrics import GOAL_TOLERANCE_M, TOP_SPEED_MPS, default_time_limit, optimal_time
+from pnav.bench.nav.search import BoolGrid, Point
+from pnav.bench.nav.suitefile import FORMAT
 from services.sim.mapserver import OCCUPIED, OccupancyGrid, load_map
 from services.sim.mover import MoverSpec
 from services.sim.world import ObstacleSpec, load_world, read_world_yaml
@@ -221,7 +221,7 @@ def suite_tables(worlds: Sequence[GeneratedWorld]) -> str:
 def write_preview(path: Path, world: GeneratedWorld) -> None:
     """A picture of the freshly generated world: map, reference path, start and goal."""
     # render reads benchmark worlds (this module): imported here, not at load time
-    from pnav.navbench.render import draw_generated, write_world_png
+    from pnav.bench.nav.render import draw_generated, write_world_png
 
     write_world_png(path, draw_generated(world))
 
@@ -242,7 +242,7 @@ def suite_markdown(worlds: Sequence[GeneratedWorld], command: str) -> str:
         "BARN-style",
         "The method, the levels, the metrics and the world file fields are in `docs/NAVBENCH.md`.",
         command,
-        "`python -m pnav.navbench.worlds_cli generate ...` takes the same options. The "
+        "`python -m pnav.bench.nav.worlds_cli generate ...` takes the same options. The "
         "output does not depend on the machine: the same command writes the same bytes.",
         "## Levels",
         suitefile.markdown_table(

@@ -2,7 +2,7 @@
 
 DynaBARN (Nair et al., 2022) added worlds to the BARN Challenge in which obstacles move
 across the robot's way instead of standing in it. Here the layout is the BARN protocol's
-(``pnav.navbench.barn``: walls all round, start 2 m below the field, goal 10 m straight
+(``pnav.bench.nav.barn``: walls all round, start 2 m below the field, goal 10 m straight
 ahead, success within 1 m, BARN's time limit for the robot's top speed), the field holds no
 standing obstacle, and ``movers`` cylinders run back and forth on lines across the corridor
 (each end at a height of the field drawn on its own, so a line may slant), at 0.1 to 1.0 m/s,
@@ -23,12 +23,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from common.errors import UsageError
-from pnav.navbench.automaton import BoolGrid
-from pnav.navbench.barn import DEFAULT_LAYOUT, BarnLayout, InCorridor, wall_pixels
-from pnav.navbench.difficulty import Difficulty, measure
-from pnav.navbench.generator import ORIGIN, draw_suite, known_level
-from pnav.navbench.robots import RobotFit
-from pnav.navbench.search import ReferencePath, reference_path
+from pnav.bench.nav.automaton import BoolGrid
+from pnav.bench.nav.barn import DEFAULT_LAYOUT, BarnLayout, InCorridor, wall_pixels
+from pnav.bench.nav.difficulty import Difficulty, measure
+from pnav.bench.nav.generator import ORIGIN, draw_suite, known_level
+from pnav.bench.nav.robots import RobotFit
+from pnav.bench.nav.search import ReferencePath, reference_path
 
 PROTOCOL = "dynabarn"
 MOVER_HEIGHT_M = 1.0  # above any lidar's mount: every model sees them

@@ -1,6 +1,6 @@
 """BARN-protocol worlds on disk, and their suite's SUITE.md.
 
-The files are those of the default protocol (``pnav.navbench.worldfile``): ``D/N.yaml``,
+The files are those of the default protocol (``pnav.bench.nav.worldfile``): ``D/N.yaml``,
 ``D/maps/N.{yaml,pgm}``, with three differences. The map holds the walls only; the field's
 obstacles are the world file's ``obstacles`` (boxes covering the occupied cells exactly), so
 the sim has them and the planner, given the map, does not. The robot entry names its
@@ -14,8 +14,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeAlias
 
-from pnav.navbench import suitefile
-from pnav.navbench.barn import (
+from pnav.bench.nav import suitefile
+from pnav.bench.nav.barn import (
     GOAL_TOLERANCE_M,
     LEVELS,
     OBSTACLE_HEIGHT_M,
@@ -25,15 +25,15 @@ from pnav.navbench.barn import (
     BarnWorld,
     time_limit,
 )
-from pnav.navbench.generator import ORIGIN
-from pnav.navbench.metrics import optimal_time
-from pnav.navbench.robots import RobotFit
-from pnav.navbench.search import BoolGrid
+from pnav.bench.nav.generator import ORIGIN
+from pnav.bench.nav.metrics import optimal_time
+from pnav.bench.nav.robots import RobotFit
+from pnav.bench.nav.search import BoolGrid
 from services.sim.mover import MoverSpec
 
 if TYPE_CHECKING:
-    from pnav.navbench.dynabarn import DynaBarnWorld
-    from pnav.navbench.render import Image
+    from pnav.bench.nav.dynabarn import DynaBarnWorld
+    from pnav.bench.nav.render import Image
 
     # BARN's corridor, with standing obstacles or with movers
     CorridorWorld: TypeAlias = BarnWorld | DynaBarnWorld
@@ -118,7 +118,7 @@ def write_barn_world(world: BarnWorld, folder: Path, *, header: str = "") -> Pat
 def draw_corridor(world: CorridorWorld, cells: BoolGrid, movers: Sequence[MoverSpec] = ()) -> Image:
     """A picture of a corridor world: ``cells`` occupied, the movers' tracks, the reference
     path, the start and the goal."""
-    from pnav.navbench.render import draw_world
+    from pnav.bench.nav.render import draw_world
 
     return draw_world(
         cells,
@@ -137,7 +137,7 @@ def draw_corridor(world: CorridorWorld, cells: BoolGrid, movers: Sequence[MoverS
 def write_preview(path: Path, world: BarnWorld) -> None:
     """A picture of the world as the sim has it (the obstacles drawn as occupied cells), the
     reference path, the start and the goal."""
-    from pnav.navbench.render import write_world_png
+    from pnav.bench.nav.render import write_world_png
 
     write_world_png(path, draw_corridor(world, world.occupied))
 
