@@ -412,9 +412,9 @@ def launcher_record(path: Path | None, encoding: str = "foxglove") -> Path | Non
 
 def _bench(args: argparse.Namespace) -> int:
     if args.bench == "engine":
-        from pnav.bench import engine
+        from pnav.bench import engine_rate
 
-        return engine.run(args.json, args.seconds, args.notifications)
+        return engine_rate.run(args.json, args.seconds, args.notifications)
     if args.bench == "startup":
         from pnav.bench import startup
 

@@ -33,8 +33,8 @@ from common.config import ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime
 from pnav import stack_commands
+from pnav.bench.figures import emit, machine
 from pnav.bench.processes import memory_mb, pss_mb, roles, stack_processes
-from pnav.bench.report import emit, machine
 from pnav.launcher import StackOptions, launched
 
 TARGET_S, TARGET_MB = 1.0, 300.0  # issue 31

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from pnav.bench.nav.episode import LAG, Combo, Episode, Outcome, run_episode
+from pnav.bench.nav.stack_episode import LAG, Combo, Episode, Outcome, run_episode
 from pnav.bench.nav.worldfile import load_suite
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]

@@ -21,8 +21,8 @@ this process to another through the router, at 30 Hz. Every bridge leg above con
 such hops (sim -> bridge, bridge -> listener); on a shared machine their tail is the
 scheduler's, not the bridge's.
 
-Modules: ``stack`` (Postgres, router, the world and the bridge process), ``player`` (the
-sim's side: payloads and their publisher), ``latency`` (notifications received, rows read
-back, the latencies they give), ``legs`` (the measured legs), ``report`` (figures and the
+Modules: ``bridge_rig`` (Postgres, router, the world and the bridge process), ``player`` (the
+sim's side: payloads and their publisher), ``row_latency`` (notifications received, rows read
+back, the latencies they give), ``legs`` (the measured legs), ``leg_report`` (figures and the
 text report), ``__main__`` (the command line and the run).
 """

@@ -14,10 +14,10 @@ import psutil
 
 import pnav.bench.bridge as package
 from pnav.bench.bridge import legs
-from pnav.bench.bridge.latency import Notifications, summary_ms
+from pnav.bench.bridge.bridge_rig import BenchStack
+from pnav.bench.bridge.leg_report import report
 from pnav.bench.bridge.player import Player
-from pnav.bench.bridge.report import report
-from pnav.bench.bridge.stack import BenchStack
+from pnav.bench.bridge.row_latency import Notifications, summary_ms
 
 PROG = "python -m pnav.bench.bridge"
 

@@ -13,14 +13,14 @@ import zenoh
 from common import bus
 from common.config import ZenohSettings
 from common.contract import keys
-from pnav.bench.bridge.latency import (
+from pnav.bench.bridge.player import Player
+from pnav.bench.bridge.row_latency import (
     Notifications,
     latencies,
     max_ids,
     read_rows,
     summary_ms,
 )
-from pnav.bench.bridge.player import Player
 
 # a burst is over when the last row is notified, or when no notification came for this long
 # (some messages were lost: what arrived is measured)

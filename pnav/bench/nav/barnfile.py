@@ -26,8 +26,8 @@ from pnav.bench.nav.barn import (
     time_limit,
 )
 from pnav.bench.nav.generator import ORIGIN
-from pnav.bench.nav.metrics import optimal_time
 from pnav.bench.nav.robots import RobotFit
+from pnav.bench.nav.scores import optimal_time
 from pnav.bench.nav.search import BoolGrid
 from services.sim.mover import MoverSpec
 

@@ -23,7 +23,7 @@ from pnav.bench.nav.dynabarn import (
     PROTOCOL,
     DynaBarnWorld,
 )
-from pnav.bench.nav.metrics import optimal_time
+from pnav.bench.nav.scores import optimal_time
 from services.sim.mover import MoverSpec
 
 

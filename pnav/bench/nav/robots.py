@@ -69,7 +69,7 @@ def for_model(world: BenchmarkWorld, robot: RobotFit, folder: Path) -> Benchmark
     made for another model (or names none), a copy of its world file under ``folder`` whose
     robot is this model (the map and the obstacles unchanged)."""
     from pnav.bench.nav import barn, dynabarn
-    from pnav.bench.nav.metrics import optimal_time
+    from pnav.bench.nav.scores import optimal_time
 
     limit = world.time_limit_s
     if world.protocol in (barn.PROTOCOL, dynabarn.PROTOCOL):

@@ -1,11 +1,11 @@
 """``pnav bench nav``: every shipped strategy/planner combination in every world of a suite.
 
 For each world (suite order), combo and run k (seed k) it runs the whole stack once
-(``pnav.bench.nav.episode``) and scores the run (``pnav.bench.nav.metrics``); with
+(``pnav.bench.nav.stack_episode``) and scores the run (``pnav.bench.nav.scores``); with
 ``--monolith`` it runs the same episode in the monolith right after, so both ways share the
 machine's state of the moment. A progress bar on stderr meanwhile; then the summary tables
 on stdout, JSON with ``--json``, pictures and a README with ``--report``
-(``pnav.bench.nav.report``).
+(``pnav.bench.nav.nav_report``).
 
 The combos are read from what ships, not listed here: the contract's strategies whose params
 target the goal (``schema.sql``) times the planner scenarios the planner registers.
@@ -35,13 +35,13 @@ from pnav.bench.nav.progress import Progress
 if TYPE_CHECKING:
     # the stack (Zenoh, pybullet, numpy...) is imported when a bench runs, not with pnav's
     # parser: pnav imports this module lazily, and the tests import it without a stack
-    from pnav.bench.nav.episode import Combo, Episode, Outcome
-    from pnav.bench.nav.report import RunRecord
+    from pnav.bench.nav.nav_report import RunRecord
     from pnav.bench.nav.robots import RobotFit
+    from pnav.bench.nav.stack_episode import Combo, Episode, Outcome
     from pnav.bench.nav.workers import EpisodeWorkers
     from pnav.bench.nav.worldfile import BenchmarkWorld
 
-STACK, MONOLITH = "stack", "monolith"  # the records' modes (pnav.bench.nav.report)
+STACK, MONOLITH = "stack", "monolith"  # the records' modes (pnav.bench.nav.nav_report)
 # a row of the contract's INSERT INTO strategy: code, planner, controllers, params, ...
 # the params that name a learned scenario's model (docs/LEARNING.md)
 LEARNED_PARAMS = ("learned_model", "foresight_model")
@@ -67,7 +67,7 @@ def navigation_strategies(sql: str, learned: bool = False) -> list[str]:
 
 def shipped_combos(learned: bool = False) -> list[Combo]:
     from common.contract.migrate import schema_text
-    from pnav.bench.nav.episode import Combo
+    from pnav.bench.nav.stack_episode import Combo
     from services.planner.meta import move_scenarios  # installed, the planner's own first
 
     planners = list(move_scenarios())
@@ -129,8 +129,8 @@ def to_record(
     """Score an episode against its world (goal, tolerance, limit, reference length, top
     speed). ``outcome`` is the stack's Outcome or the monolith's (same fields, fewer
     extras). One that never moved is scored from the start alone: a failure."""
-    from pnav.bench.nav.metrics import evaluate_run
-    from pnav.bench.nav.report import RunRecord
+    from pnav.bench.nav.nav_report import RunRecord
+    from pnav.bench.nav.scores import evaluate_run
 
     trajectory = list(outcome.trajectory) or [(0.0, world.start[0], world.start[1])]
     result = evaluate_run(
@@ -164,14 +164,14 @@ class Plan:
     report: Path | None = None
     monolith: Callable[[Episode], Any] | None = None
     workers: EpisodeWorkers | None = None  # None: stack episodes in this process
-    pacing: str = "lockstep"  # or "lag" (pnav.bench.nav.episode)
+    pacing: str = "lockstep"  # or "lag" (pnav.bench.nav.stack_episode)
     keep_db: Path | None = None  # keep each stack episode's database in a folder here
 
 
 async def attempt(plan: Plan, mode: str, episode: Episode, log_dir: Path) -> Outcome | str:
     """The episode's outcome, or the error that kept it from running: the bench goes on,
     one broken run must not cost the other 239."""
-    from pnav.bench.nav.episode import run_episode
+    from pnav.bench.nav.stack_episode import run_episode
 
     try:
         if plan.monolith is None or mode == STACK:
@@ -193,8 +193,8 @@ async def attempt(plan: Plan, mode: str, episode: Episode, log_dir: Path) -> Out
 
 async def run_one(plan: Plan, world: BenchmarkWorld, combo: Combo, k: int, mode: str) -> RunRecord:
     """One episode one way, scored, and its picture when there is a report folder."""
-    from pnav.bench.nav.episode import Episode, Outcome
     from pnav.bench.nav.render import render_run
+    from pnav.bench.nav.stack_episode import Episode, Outcome
 
     tolerance = world.goal_tolerance_m
     episode = Episode(
@@ -286,11 +286,11 @@ def run(args: argparse.Namespace) -> int:
     interrupted (after writing what was done)."""
     import uvloop
 
-    from pnav.bench.nav import compare, report
-    from pnav.bench.nav.episode import MAX_LAG_S
+    from pnav.bench.figures import emit, machine
+    from pnav.bench.nav import nav_report, run_diff
     from pnav.bench.nav.robots import resolve_model
+    from pnav.bench.nav.stack_episode import MAX_LAG_S
     from pnav.bench.nav.worldfile import load_suite
-    from pnav.bench.report import emit, machine
 
     if args.runs < 1:
         raise UsageError("--runs must be 1 or more")
@@ -345,12 +345,12 @@ def run(args: argparse.Namespace) -> int:
         "max_lag_s": MAX_LAG_S,
         "interrupted": interrupted,
     }
-    for line in compare.summary_lines(records, before):
+    for line in run_diff.summary_lines(records, before):
         print(line, file=out)
-    emit(report.document(records, meta), args.json)
+    emit(nav_report.document(records, meta), args.json)
     if args.report is not None:
         args.report.mkdir(parents=True, exist_ok=True)
-        (args.report / "README.md").write_text(report.readme(records, meta))
+        (args.report / "README.md").write_text(nav_report.readme(records, meta))
         print(f"wrote {args.report / 'README.md'}", file=out)
     if interrupted:
         return 130

@@ -15,7 +15,7 @@ import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from pnav.bench.nav.episode import Episode, Outcome, run_episode
+from pnav.bench.nav.stack_episode import Episode, Outcome, run_episode
 
 EPISODES_PER_WORKER = 20
 

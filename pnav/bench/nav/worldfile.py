@@ -26,7 +26,7 @@ from common.errors import WorldError
 from pnav.bench.nav import suitefile
 from pnav.bench.nav.difficulty import Difficulty
 from pnav.bench.nav.generator import LEVELS, GeneratedWorld
-from pnav.bench.nav.metrics import GOAL_TOLERANCE_M, TOP_SPEED_MPS, default_time_limit, optimal_time
+from pnav.bench.nav.scores import GOAL_TOLERANCE_M, TOP_SPEED_MPS, default_time_limit, optimal_time
 from pnav.bench.nav.search import BoolGrid, Point
 from pnav.bench.nav.suitefile import FORMAT
 from services.sim.mapserver import OCCUPIED, OccupancyGrid, load_map

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from common.contract import records
-from pnav.bench.nav.episode import Combo, Episode, Outcome
+from pnav.bench.nav.stack_episode import Combo, Episode, Outcome
 from pnav.bench.nav.worldfile import read_benchmark
-from pnav.monolith.episode import MonolithOutcome, run_monolith_episode
-from pnav.monolith.stack import MonolithStack
+from pnav.monolith.monolith_episode import MonolithOutcome, run_monolith_episode
+from pnav.monolith.monolith_stack import MonolithStack
 from pnav.monolith.strategies import combo_strategy, shipped_strategies
 from services.controller.avoid_left import AvoidLeft
 from services.controller.avoid_right import AvoidRight

@@ -1,8 +1,8 @@
 """One navigation episode in one process: the monolith's ``run_episode``.
 
-The same :class:`~pnav.bench.nav.episode.Episode` in, an :class:`Outcome` with the same
+The same :class:`~pnav.bench.nav.stack_episode.Episode` in, an :class:`Outcome` with the same
 fields out (plus what only the monolith can measure), and the same judge: the episode's
-:class:`~pnav.bench.nav.episode.Watcher` is fed the odometry and collision messages and the
+:class:`~pnav.bench.nav.stack_episode.Watcher` is fed the odometry and collision messages and the
 commands reaching the sim, and says when the run is over exactly as it does for the stack
 (the goal within the tolerance, BARN's 0.3 m; a collision; the time limit), with times
 counted from the first decided command that moves the robot.
@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from common.contract import keys
-from pnav.bench.nav.episode import Episode, Outcome, Watcher
-from pnav.monolith.bridge import Applied
-from pnav.monolith.stack import MonolithStack
+from pnav.bench.nav.stack_episode import Episode, Outcome, Watcher
+from pnav.monolith.memory_bridge import Applied
+from pnav.monolith.monolith_stack import MonolithStack
 from pnav.monolith.strategies import combo_strategy, shipped_strategies
 from services.sim.sim import SimConfig
 from services.sim.world import load_world

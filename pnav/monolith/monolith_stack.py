@@ -2,15 +2,15 @@
 
 What each part is made of (docs/MONOLITH.md has the whole list): every scenario service's
 own store (caches, what notifications told it) and rules, seeded by the service's own seeding
-code, on the in-memory source of pnav/monolith/<svc>.py instead of the SQL one:
+code, on the in-memory source of pnav/monolith/memory_<svc>.py instead of the SQL one:
 
-- controller: ``pnav.monolith.controller.controller_engine``, the meta-controller and its
+- controller: ``pnav.monolith.memory_controller.controller_engine``, the meta-controller and its
   scenarios on a ``ControllerStore``;
-- planner: ``pnav.monolith.planner.planner_engine``, the meta-planner and its rules on a
+- planner: ``pnav.monolith.memory_planner.planner_engine``, the meta-planner and its rules on a
   ``PlannerStore`` whose gates count sim time;
-- decision: ``pnav.monolith.decision.decision_engine``, the meta-decision and issue rules on
+- decision: ``pnav.monolith.memory_decision.decision_engine``, the meta-decision and issue rules on
   a ``DecisionStore``;
-- bridge: pnav/monolith/bridge.py; the strategy service is not run: the episode's strategy is
+- bridge: pnav/monolith/memory_bridge.py; the strategy service is not run: the episode's strategy is
   written to ``active_strategy`` once, as ``SET_STRATEGY`` would, and no system command is
   acted on (none arises in a navigation episode: the battery starts full).
 
@@ -34,12 +34,12 @@ import uvloop
 from common import bus
 from common.bus import Notification
 from common.contract import keys, records
-from pnav.monolith.bridge import Applied, Bridge
 from pnav.monolith.contract import AdapterError, MemoryContract
-from pnav.monolith.controller import controller_engine
-from pnav.monolith.decision import decision_engine
 from pnav.monolith.engines import SteppedEngine
-from pnav.monolith.planner import planner_engine
+from pnav.monolith.memory_bridge import Applied, Bridge
+from pnav.monolith.memory_controller import controller_engine
+from pnav.monolith.memory_decision import decision_engine
+from pnav.monolith.memory_planner import planner_engine
 from services.bridge.world import parse_world
 from services.sim.sim import SimConfig, Simulation
 from services.sim.world import World

@@ -12,8 +12,8 @@ from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from pnav.bench.nav.metrics import RunResult, Summary, summarize, summarize_by
-from pnav.bench.report import percentiles
+from pnav.bench.figures import percentiles
+from pnav.bench.nav.scores import RunResult, Summary, summarize, summarize_by
 
 STACK, MONOLITH = "stack", "monolith"
 # the JSON keeps a trajectory point per this much sim time: enough to redraw or compare a

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from pnav.bench.nav.report import RunRecord, attention, tables, text
+from pnav.bench.nav.nav_report import RunRecord, attention, tables, text
 
 
 def _to_polyline(p: npt.NDArray[np.float64], q: npt.NDArray[np.float64]) -> float:

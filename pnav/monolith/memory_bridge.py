@@ -10,7 +10,7 @@ contract instead of a batched INSERT, and a command2robot row goes to ``Simulati
 set_command`` instead of a Zenoh ``cmd_vel``; the safety note is set on the in-memory row.
 
 It also takes the sense-to-act samples, with the rule ``pnav bench latency`` uses
-(pnav/bench/provenance.py): a command obeys a recommendation, whose ``inputs`` name the
+(pnav/bench/provenance_samples.py): a command obeys a recommendation, whose ``inputs`` name the
 sensor row it was decided from (the laser scan for a controller, the odometry for the
 planner); each recommendation counts once, at the first command that obeyed it (re-issues
 say nothing about how fast the system reacted); the sample is the wall time from the sim
@@ -29,7 +29,7 @@ import numpy as np
 from common.contract import keys, records
 from common.contract.limits import clamp
 from common.footprint import Footprint
-from pnav.bench.provenance import origin_of
+from pnav.bench.provenance_samples import origin_of
 from pnav.monolith.contract import MemoryContract, Row
 from services.bridge.messages import (
     PARSERS,

@@ -6,7 +6,7 @@ robot shuttling along its lane with its lidar and odometry at H Hz, at sim rate 
 warm-up the benchmark measures for S sim seconds:
 
 - latency: from the sim publishing a sensor message to the command decided from it reaching
-  the sim, joined through the provenance every command carries (pnav/bench/provenance.py);
+  the sim, joined through the provenance every command carries (pnav/bench/provenance_samples.py);
 - the stages: sensor -> row (bridge), row -> recommendation (planner or controller),
   recommendation -> decision (decision), decision -> robot (bridge, Zenoh);
 - CPU seconds and peak memory (PSS) per process, Postgres included (pnav/bench/processes.py);
@@ -32,7 +32,7 @@ from common.config import ServiceConfig
 from common.runtime import Runtime
 from common.trace import CMD_VEL, TraceEvent, read_trace
 from pnav import stack_commands
-from pnav.bench import provenance as prov
+from pnav.bench import provenance_samples as prov
 from pnav.bench.hall import Hall, write_hall
 from pnav.bench.processes import Usage
 from pnav.launcher import StackOptions, launched

@@ -1,10 +1,10 @@
-"""``python -m pnav.monolith.compare``: the same episodes in the monolith and in the stack.
+"""``python -m pnav.monolith.versus_stack``: the same episodes in the monolith and in the stack.
 
-    python -m pnav.monolith.compare --combo GOTO_AVOID/turn_then_move \\
+    python -m pnav.monolith.versus_stack --combo GOTO_AVOID/turn_then_move \\
         worlds/barn/barn_easy_000.yaml worlds/barn/barn_hard_000.yaml
 
 For each world (goal and time limit from its benchmark section): the episode in one process
-(``run_monolith_episode``), then in the full stack (``pnav.bench.nav.episode.run_episode``:
+(``run_monolith_episode``), then in the full stack (``pnav.bench.nav.stack_episode.run_episode``:
 embedded Postgres, Zenoh, one process per service, sim at rate max). Printed side by side:
 outcome, sim time, path length, and CPU seconds per sim second over the run proper (first
 decision to the end; the stack's over every process, Postgres included), with the ratio.
@@ -21,10 +21,10 @@ from typing import Any
 
 import uvloop
 
-from pnav.bench.nav.episode import Combo, Episode, run_episode
+from pnav.bench.nav.stack_episode import Combo, Episode, run_episode
 from pnav.bench.nav.worldfile import read_benchmark
 from pnav.monolith.__main__ import parse_combo
-from pnav.monolith.episode import run_monolith_episode
+from pnav.monolith.monolith_episode import run_monolith_episode
 from pnav.monolith.summary import summary
 
 
@@ -62,7 +62,7 @@ HEADER = (
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m pnav.monolith.compare")
+    p = argparse.ArgumentParser(prog="python -m pnav.monolith.versus_stack")
     p.add_argument("worlds", nargs="+", type=Path, help="benchmark world files")
     p.add_argument("--combo", type=parse_combo, action="append", help="repeatable")
     p.add_argument("--seed", type=int, default=0)

@@ -1,4 +1,4 @@
-"""What Nav2's actions cost a client: ``python -m pnav.bench.nav2actions``.
+"""What Nav2's actions cost a client: ``python -m pnav.bench.nav2_action_cost``.
 
 Runs the ``rviz`` process's link (pnav/ros2/rviz.py, serving NavigateToPose for one robot)
 on an embedded Postgres with the contract and a Zenoh router on loopback, and times, from a
@@ -41,7 +41,7 @@ from common.ros2action import CANCELED
 from common.ros2interfaces import CANCEL_GOAL, NAVIGATE_TO_POSE
 from common.runtime import Runtime
 from common.testing import EmbeddedPostgres, free_port
-from pnav.bench.report import emit, machine
+from pnav.bench.figures import emit, machine
 from pnav.ros2.rviz import RvizLink
 
 STEPS = ("send_goal", "cancel_goal", "get_result")

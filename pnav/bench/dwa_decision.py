@@ -1,7 +1,7 @@
 """Benchmark: one dwa decision, with the default params and with the heaviest a strategy row
 may ask for.
 
-``python -m pnav.bench.dwa [--scenes N] [--json FILE]`` decides ``N`` made-up scenes with
+``python -m pnav.bench.dwa_decision [--scenes N] [--json FILE]`` decides ``N`` made-up scenes with
 each set: ``default`` and ``worst`` (the params of issue 28) on the Jackal's 720-beam
 270-degree lidar in clutter 0.5 to 6 m away, a path 10 m ahead, driving at 1 m/s; ``barn``
 with the default params in BARN-like clutter (up to 160 posts and crates ray-cast into the
@@ -28,7 +28,7 @@ import numpy as np
 
 from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
-from pnav.bench.report import emit, machine
+from pnav.bench.figures import emit, machine
 from pnav_local.dwa import choose, command_for
 from pnav_local.params import DwaParams
 
@@ -158,7 +158,7 @@ def run(name: str, raw: Mapping[str, Any], n: int, seed: int, repeat: int) -> di
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m pnav.bench.dwa")
+    parser = argparse.ArgumentParser(prog="python -m pnav.bench.dwa_decision")
     parser.add_argument("--scenes", type=int, default=50)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--repeat", type=int, default=3, help="best of this many passes")

@@ -1,6 +1,6 @@
 """Benchmark: what keepout and speed zones cost the planner and the bridge's safety layer.
 
-``python -m pnav.bench.zones [--world warehouse] [--repeat N] [--json FILE]`` prints, on the
+``python -m pnav.bench.zone_cost [--world warehouse] [--repeat N] [--json FILE]`` prints, on the
 world's map and the Burger's footprint:
 
 - the planning grid built with 0, 1, 16 and 256 keepout zones (the table's bound), small
@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from common.contract.zones import KEEPOUT, SPEED_LIMIT, Zone
-from pnav.bench.report import emit, machine
+from pnav.bench.figures import emit, machine
 from pnav.launcher import resolve_world
 from services.bridge.messages import LaserScan
 from services.bridge.safety import SafetyLayer, SafetyParams
@@ -125,7 +125,7 @@ def bridge_figures(repeat: int) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m pnav.bench.zones")
+    parser = argparse.ArgumentParser(prog="python -m pnav.bench.zone_cost")
     parser.add_argument("--world", default="warehouse", help="a shipped world or a world file")
     parser.add_argument("--repeat", type=int, default=5, help="passes per figure (best kept)")
     parser.add_argument("--json", help="write the figures as JSON here ('-': stdout)")
