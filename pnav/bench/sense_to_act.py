@@ -31,11 +31,11 @@ from typing import Any
 from common.config import ServiceConfig
 from common.runtime import Runtime
 from common.trace import CMD_VEL, TraceEvent, read_trace
-from pnav import stack_commands
 from pnav.bench import provenance_samples as prov
 from pnav.bench.hall import Hall, write_hall
 from pnav.bench.processes import Usage
-from pnav.launcher import StackOptions, launched
+from pnav.cli import stack_commands
+from pnav.run.launcher import StackOptions, launched
 
 LINKS = ("native", "ros2")
 # the stack's own router carries the ROS 2 domain (docs/ROS2.md); nothing else is on it

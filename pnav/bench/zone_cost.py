@@ -25,7 +25,7 @@ import numpy as np
 
 from common.contract.zones import KEEPOUT, SPEED_LIMIT, Zone
 from pnav.bench.figures import emit, machine
-from pnav.launcher import resolve_world
+from pnav.run.launcher import resolve_world
 from services.bridge.messages import LaserScan
 from services.bridge.safety import SafetyLayer, SafetyParams
 from services.planner.keepout import Keepouts

@@ -146,7 +146,8 @@ class MemoryStrategySource:
 def user_command(
     contract: MemoryContract, robot_id: str, command: str, argument: str | None = None
 ) -> int:
-    """What ``pnav.stack_commands`` writes for a person's command (the table's defaults filled)."""
+    """What ``pnav.cli.stack_commands`` writes for a person's command (the table's defaults
+    filled)."""
     row: Row = {"robot_id": robot_id, "command": command, "argument": argument}
     row["status"] = "pending"
     row |= {"reason": None, "created_at": datetime.now(UTC), "treated_at": None}

@@ -44,7 +44,7 @@ from services.bridge.world import parse_world
 from services.sim.sim import SimConfig, Simulation
 from services.sim.world import World
 
-GOAL_TOLERANCE_M = 0.15  # pnav.stack_commands.set_goal's default, and the goal table's
+GOAL_TOLERANCE_M = 0.15  # pnav.cli.stack_commands.set_goal's default, and the goal table's
 MAX_PASSES = 50  # engine passes in one step before the loop is deemed to spin
 
 
@@ -133,7 +133,7 @@ class MonolithStack:
         self.contract.insert(keys.ACTIVE_STRATEGY, row)
 
     def set_goal(self, robot_id: str, x: float, y: float) -> int:
-        """What ``pnav.stack_commands.set_goal`` writes (no earlier goal to supersede here)."""
+        """What ``pnav.cli.stack_commands.set_goal`` writes (no earlier goal to supersede here)."""
         row = {"robot_id": robot_id, "x": x, "y": y, "tolerance_m": GOAL_TOLERANCE_M}
         row |= {"status": "active", "stamp": self.now, "finished_stamp": None}
         return self.contract.insert(keys.GOAL, row)

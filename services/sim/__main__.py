@@ -269,7 +269,7 @@ def announce_world(world: World) -> int:
 
 
 def prestart(args: list[str]) -> None:
-    """What the sim imports only once it runs (pnav.prestart imports it ahead, while the
+    """What the sim imports only once it runs (pnav.run.prestart imports it ahead, while the
     launcher makes Postgres ready): the node and its gate and tracer (:func:`serve`) and
     numpy's random module (the world's noise, numpy imports it on first use)."""
     for module in ("numpy.random", "common.trace", "services.sim.gate", "services.sim.node"):

@@ -199,8 +199,6 @@ KNOWN_COLLISIONS: dict[str, frozenset[str]] = {
     "zones": frozenset({"common/contract/zones.py", "services/bridge/zones.py"}),
     # a common/ module and a service's (or plug-in's) own narrower one of the same noun
     "battery": frozenset({"services/planner/battery.py", "services/sim/battery.py"}),
-    # the pnav command and its learn verbs (the CLI gets a package of its own, issue 33)
-    "cli": frozenset({"pnav/cli.py", "pnav/learn/cli.py"}),
     "clock": frozenset({"common/clock.py", "services/sim/clock.py"}),
     "config": frozenset({"common/config.py", "examples/sql_controller/config.py"}),
     "errors": frozenset({"common/errors.py", "pnav_learned/errors.py"}),

@@ -29,13 +29,13 @@ from common.runtime import Runtime
 from common.stack import BusCredentials
 from common.testing import router_process
 from common.trace import CMD_VEL, read_trace
-from pnav import stack_commands
 from pnav.bench.faults import committed_rows
 from pnav.bench.faults.catalogue import Fault
 from pnav.bench.faults.context import FORGED_COMMAND_ID, ROBOT, SPOOF_SEQ, Context
 from pnav.bench.faults.inject import inject
-from pnav.launcher import DashboardOptions, StackOptions, launched
-from pnav.mission import GoalEnded, MissionMonitor
+from pnav.cli import stack_commands
+from pnav.run.launcher import DashboardOptions, StackOptions, launched
+from pnav.run.mission import GoalEnded, MissionMonitor
 
 T = TypeVar("T")
 

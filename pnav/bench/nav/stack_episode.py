@@ -44,12 +44,12 @@ from common.config import ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime
 from common.trace import CMD_VEL, read_trace
-from pnav import stack_commands
 from pnav.bench import provenance_samples as prov
 from pnav.bench.nav.scores import GOAL_TOLERANCE_M
 from pnav.bench.processes import Usage
 from pnav.bench.sense_to_act import Collected, collect
-from pnav.launcher import StackOptions, launched
+from pnav.cli import stack_commands
+from pnav.run.launcher import StackOptions, launched
 
 SUCCESS_RADIUS_M = GOAL_TOLERANCE_M  # BARN: the goal counts as reached within 0.3 m
 MAX_LAG_S = 0.1  # the decision service re-issues every 0.1 s sim: never staler than that

@@ -11,7 +11,6 @@ from pathlib import Path
 import pytest
 import yaml
 
-from pnav import cli
 from pnav.bench.nav import barn, runner
 from pnav.bench.nav import stack_episode as episode_module
 from pnav.bench.nav.barn import generate_barn_world
@@ -20,6 +19,7 @@ from pnav.bench.nav.robots import RobotFit, for_model, resolve_model, too_big
 from pnav.bench.nav.scores import RunResult, barn_score, evaluate_run
 from pnav.bench.nav.stack_episode import Episode, Outcome
 from pnav.bench.nav.worldfile import load_suite, read_benchmark
+from pnav.cli import program as cli
 from services.sim.world import load_world
 
 pytestmark = pytest.mark.timeout(60)

@@ -19,11 +19,11 @@ import pytest
 from common import bus
 from common.contract.migrate import schema_text
 from common.errors import UsageError
-from pnav import cli
 from pnav.bench.nav import nav_report, progress, run_diff, runner
 from pnav.bench.nav import stack_episode as episode_module
 from pnav.bench.nav.stack_episode import Combo, Episode, Outcome
 from pnav.bench.nav.worldfile import BenchmarkWorld, load_suite
+from pnav.cli import program as cli
 from services.planner.meta import move_scenarios
 
 pytestmark = pytest.mark.timeout(60)

@@ -1,7 +1,7 @@
 """The launcher's supervisor, told to the stack: ``pnav/supervisor/{launcher}`` on Zenoh.
 
-The supervisor (pnav/process_supervisor.py) is the launcher's, not a service's, and knows what no
-table records: how often it restarted each process. :class:`SupervisorReport` publishes it
+The supervisor (pnav/run/process_supervisor.py) is the launcher's, not a service's, and knows
+what no table records: how often it restarted each process. :class:`SupervisorReport` publishes it
 (msgpack, CONTRACT.md "Supervisor reports") when the stack starts, after every exit and
 restart, and every ``period_s`` so a reader that joins late hears it within a period. The
 dashboard's ``/metrics`` turns it into ``pnav_supervisor_restarts_total``.
@@ -22,7 +22,7 @@ import zenoh
 
 from common import bus
 from common.contract import keys
-from pnav.process_supervisor import Supervisor
+from pnav.run.process_supervisor import Supervisor
 
 log = logging.getLogger("pnav.supervisor")
 

@@ -1,4 +1,4 @@
-"""``python -m pnav.host strategy planner controller decision``: several services, one process.
+"""``python -m pnav.run.host strategy planner controller decision``: several services, one process.
 
 A host runs the services it is given in one interpreter, on one uvloop event loop, over one
 Zenoh session (Nav2's component container is the model). Each service is what it is in a
@@ -86,7 +86,7 @@ def configs(services: list[str], env: Mapping[str, str]) -> dict[str, ServiceCon
 
 
 def prestart(services: list[str]) -> None:
-    """Import the services' code ahead of the environment (pnav.prestart): the entries a
+    """Import the services' code ahead of the environment (pnav.run.prestart): the entries a
     host started this way finds already loaded."""
     for name in services:
         entry(name)

@@ -1,8 +1,8 @@
-"""``python -m pnav.prestart MODULE [ARGS...]``: a service process started before its
+"""``python -m pnav.run.prestart MODULE [ARGS...]``: a service process started before its
 environment exists.
 
 The launcher starts each service this way while it is still making Postgres ready
-(:class:`Prestart`, taken by pnav.process_supervisor): the process imports the service's code
+(:class:`Prestart`, taken by pnav.run.process_supervisor): the process imports the service's code
 (a third of a second to a second of a 2-core machine's time, per process) in parallel with the
 launcher's own work, then waits. When the stack is ready the launcher writes the service's
 whole environment (its role's DSN, its Zenoh password...) as JSON on a pipe (the descriptor
@@ -11,11 +11,11 @@ runs ``MODULE`` as ``python -m MODULE ARGS...`` would. A pipe closed with nothin
 (the launcher gave up, or died) ends the process with code 0.
 
 A module may define ``prestart(args)`` to import what it would otherwise import later
-(pnav.host: the services it hosts; the sim: its node). Nothing reads the environment at
+(pnav.run.host: the services it hosts; the sim: its node). Nothing reads the environment at
 import time: every setting is read by the service's entry, after the environment arrived.
 
-The launcher's side is :class:`Prestart` (pnav.launcher starts them, pnav.process_supervisor takes
-them); the process's side is :func:`main`.
+The launcher's side is :class:`Prestart` (pnav.run.launcher starts them,
+pnav.run.process_supervisor takes them); the process's side is :func:`main`.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ GATE = "PNAV_PRESTART_FD"
 
 @dataclass
 class Warm:
-    """A process started before its environment (pnav.prestart), waiting on ``gate``."""
+    """A process started before its environment (pnav.run.prestart), waiting on ``gate``."""
 
     argv: list[str]
     process: asyncio.subprocess.Process
@@ -49,7 +49,7 @@ _AT_EXEC = ("PYTHON", "LD_", "MALLOC_")
 
 class Prestart:
     """The service processes started while the launcher makes the stack ready, each up to
-    the end of its imports (pnav.prestart): the supervisor takes them instead of starting
+    the end of its imports (pnav.run.prestart): the supervisor takes them instead of starting
     new ones. ``PNAV_PRESTART=0`` starts none."""
 
     def __init__(self) -> None:
@@ -73,7 +73,7 @@ class Prestart:
                 process = await asyncio.create_subprocess_exec(
                     sys.executable,
                     "-m",
-                    "pnav.prestart",
+                    "pnav.run.prestart",
                     *argv[2:],
                     env={**env, GATE: str(read)},
                     stdout=asyncio.subprocess.PIPE,
@@ -111,7 +111,7 @@ class Prestart:
         return warm
 
     def _let_go(self, warm: Warm) -> None:
-        """Close its pipe empty: the process ends on its own (pnav.prestart)."""
+        """Close its pipe empty: the process ends on its own (pnav.run.prestart)."""
         with contextlib.suppress(OSError):
             os.close(warm.gate)
         self._leaving.append(warm.process)
@@ -153,7 +153,7 @@ def wait_for_environment(fd: int) -> dict[str, str] | None:
 
 def main() -> int:
     if len(sys.argv) < 2:
-        print("usage: python -m pnav.prestart MODULE [ARGS...]", file=sys.stderr)
+        print("usage: python -m pnav.run.prestart MODULE [ARGS...]", file=sys.stderr)
         return 2
     module, args = sys.argv[1], sys.argv[2:]
     fd = int(os.environ.pop(GATE))

@@ -1,9 +1,9 @@
 """Start the whole stack on one machine: Postgres, a Zenoh router, and every service.
 
 Used by ``pnav up`` (until Ctrl-C), ``pnav demo`` (for one mission) and the benchmarks.
-Services run under a :class:`~pnav.process_supervisor.Supervisor`, each in a process of its own
+Services run under a :class:`~pnav.run.process_supervisor.Supervisor`, each in a process of its own
 (``processes="separate"``) or, composed, the scenario services together in one host process
-(pnav.host; ``"composed"``, and ``"auto"`` on a machine of at most
+(pnav.run.host; ``"composed"``, and ``"auto"`` on a machine of at most
 :data:`COMPOSE_AT_MOST_CORES` cores). A replicated or replaced service always runs apart.
 """
 
@@ -29,13 +29,13 @@ from common.contract import acl
 from common.errors import UsageError
 from common.stack import BusCredentials, LocalStack, local_stack
 from common.testing import free_port
-from pnav import stackfile
-from pnav.composition import HOST_PROCESS, host_spec, hosted, resolve_processes
-from pnav.prestart import Prestart
-from pnav.process_supervisor import ProcessSpec, Supervisor
-from pnav.supervisor_report import SupervisorReport
+from pnav.run import stackfile
+from pnav.run.composition import HOST_PROCESS, host_spec, hosted, resolve_processes
+from pnav.run.prestart import Prestart
+from pnav.run.process_supervisor import ProcessSpec, Supervisor
+from pnav.run.supervisor_report import SupervisorReport
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 WORLDS = ROOT / "worlds"
 SCENARIO_SERVICES = ("strategy", "planner", "controller", "decision")
 DEFAULT_ZENOH_PORT = 7447
@@ -345,7 +345,7 @@ async def launched(options: StackOptions) -> AsyncIterator[RunningStack]:
     options = resolve_dashboard(options)
     options = dataclasses.replace(options, processes=resolve_processes(options.processes))
     # the services import their code while the world is checked and Postgres gets ready
-    # (pnav.prestart)
+    # (pnav.run.prestart)
     prestart = Prestart()
     try:
         await prestart.start(planned(options, world))

@@ -10,8 +10,8 @@ from pathlib import Path
 from common import log
 from common.errors import UsageError
 from common.postmaster import clean_up
-from pnav import stackfile
-from pnav.launcher import StackOptions, launched
+from pnav.run import stackfile
+from pnav.run.launcher import StackOptions, launched
 
 logger = logging.getLogger("pnav.up")
 

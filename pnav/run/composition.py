@@ -1,7 +1,7 @@
 """How a local stack's services share processes: one each, or composed in a host process.
 
 ``--processes separate`` runs every service in a process of its own. ``composed`` runs
-strategy, planner, controller and decision in one host process (pnav.host: one interpreter,
+strategy, planner, controller and decision in one host process (pnav.run.host: one interpreter,
 one event loop, one Zenoh session; each service keeps its package, engine, store, Postgres
 role and pool, lease and logs). ``auto`` (the default) composes on a machine of at most
 :data:`COMPOSE_AT_MOST_CORES` cores. A replicated or replaced service always runs apart.
@@ -15,11 +15,11 @@ from typing import TYPE_CHECKING
 
 from common.contract import acl
 from common.errors import UsageError
-from pnav.process_supervisor import ProcessSpec
+from pnav.run.process_supervisor import ProcessSpec
 
 if TYPE_CHECKING:
     from common.stack import LocalStack
-    from pnav.launcher import StackOptions
+    from pnav.run.launcher import StackOptions
 
 # --processes: auto (composed on a machine of few cores), composed, separate
 PROCESSES = ("auto", "composed", "separate")
@@ -64,7 +64,7 @@ def hosted(options: StackOptions) -> tuple[str, ...]:
 
 
 def host_spec(local: LocalStack, options: StackOptions, services: tuple[str, ...]) -> ProcessSpec:
-    """The host process of ``services`` (pnav.host): its identity on the bus is theirs
+    """The host process of ``services`` (pnav.run.host): its identity on the bus is theirs
     together (acl.host_identity), each service keeps its own Postgres role."""
     identity = acl.host_identity(services)
     if local.bus is not None and identity not in local.bus.passwords:
@@ -73,6 +73,6 @@ def host_spec(local: LocalStack, options: StackOptions, services: tuple[str, ...
     for name in services:
         env[f"PNAV_DATABASE_URL_{name.upper()}"] = local.url_for(name)  # its own role
     env.update(options.extra_env)
-    argv = [sys.executable, "-m", "pnav.host", *services]
+    argv = [sys.executable, "-m", "pnav.run.host", *services]
     # each service's lines go to its own log file, as from a process of its own
     return ProcessSpec(HOST_PROCESS, argv, env, parts=services)

@@ -155,7 +155,7 @@ PROCESSES_HELP = (
 
 
 def processes_option(parser: argparse.ArgumentParser) -> None:
-    """``--processes``: how the stack's services share processes (pnav.launcher)."""
+    """``--processes``: how the stack's services share processes (pnav.run.launcher)."""
     parser.add_argument(
         "--processes", choices=("auto", "composed", "separate"), help=PROCESSES_HELP
     )
@@ -163,7 +163,7 @@ def processes_option(parser: argparse.ArgumentParser) -> None:
 
 def apply_processes(args: argparse.Namespace) -> None:
     """``--processes`` for every stack the command starts (a benchmark's workers' too):
-    PNAV_PROCESSES, which pnav.launcher.StackOptions reads."""
+    PNAV_PROCESSES, which pnav.run.launcher.StackOptions reads."""
     if getattr(args, "processes", None):
         os.environ["PNAV_PROCESSES"] = args.processes
 

@@ -4,7 +4,7 @@ Children run in their own session (so a Ctrl-C in the terminal reaches only the 
 which then stops them in order) and with ``PNAV_PARENT_PID`` set (so they die with the
 launcher even if it is killed). Their output goes, line by line, to a log file per service
 and, if asked, to our stderr prefixed with the service's name. A host process running several
-services (pnav.host, ``ProcessSpec.parts``) is one child, but its lines go to each service's
+services (pnav.run.host, ``ProcessSpec.parts``) is one child, but its lines go to each service's
 file by the service a line names (common.log), the host's own lines to the host's file.
 """
 
@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from pnav.prestart import Prestart
+    from pnav.run.prestart import Prestart
 
 log = logging.getLogger("pnav.supervisor")
 
@@ -37,7 +37,7 @@ class ProcessSpec:
     name: str
     argv: list[str]
     env: dict[str, str] = field(default_factory=dict)
-    # the services a host process runs (pnav.host): their lines go to their own log files
+    # the services a host process runs (pnav.run.host): their lines go to their own log files
     parts: tuple[str, ...] = ()
 
 
@@ -62,13 +62,13 @@ class Supervisor:
         prestarted: Prestart | None = None,
     ) -> None:
         self.children = {spec.name: Child(spec) for spec in specs}
-        # processes started ahead (pnav.prestart), taken by the first start of each child
+        # processes started ahead (pnav.run.prestart), taken by the first start of each child
         self.prestarted = prestarted
         self.log_dir = log_dir
         self.echo = echo
         self._stopping = False
         self._logs: dict[str, IO[str]] = {}
-        # called after a child exits and after it is started again (pnav/supervisor_report.py)
+        # called after a child exits and after it is started again (pnav/run/supervisor_report.py)
         self.on_change: list[Callable[[], None]] = []
 
     def status(self) -> dict[str, dict[str, int | bool | None]]:

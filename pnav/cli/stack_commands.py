@@ -23,7 +23,7 @@ from common.config import ServiceConfig
 from common.contract import people
 from common.errors import ContractError, UsageError
 from common.runtime import Runtime
-from pnav import stackfile
+from pnav.run import stackfile
 
 
 async def open_runtime() -> Runtime:
@@ -157,7 +157,7 @@ async def owners(rt: Runtime) -> tuple[dict[str, int], dict[str, list[str]]]:
     """Live replicas per scenario service, and robot -> the owning instance of each service
     that runs more than one replica (a lone replica owns every robot: nothing to show)."""
     from common import lease
-    from pnav.launcher import SCENARIO_SERVICES
+    from pnav.run.launcher import SCENARIO_SERVICES
 
     replicas: dict[str, int] = {}
     owned: dict[str, list[str]] = {}
@@ -270,7 +270,7 @@ async def migrate(wait_s: float, *, roles: bool = False) -> int:
     from common.contract.migrate import apply_migrations, current_version
     from common.contract.roles import bootstrap
     from common.db import create_pool
-    from pnav.credentials import db_passwords_from_env
+    from pnav.run.credentials import db_passwords_from_env
 
     url = os.environ.get("PNAV_DATABASE_URL", "").strip()
     if not url:

@@ -28,9 +28,9 @@ import uvloop
 from common.config import ServiceConfig
 from common.robotmodel import DEFAULT_MODEL, load_model
 from common.runtime import Runtime
-from pnav import stack_commands
-from pnav.launcher import DashboardOptions, StackOptions, launched
-from pnav.mission import GoalEnded, MissionLog, MissionMonitor
+from pnav.cli import stack_commands
+from pnav.run.launcher import DashboardOptions, StackOptions, launched
+from pnav.run.mission import GoalEnded, MissionLog, MissionMonitor
 
 ROBOT = "r1"
 WORLD = "warehouse"
@@ -168,7 +168,8 @@ async def demo(
     robot_link: dict[str, str] | None = None,
     record_encoding: str = "foxglove",
 ) -> dict[str, Any]:
-    """``robot_link``: the robot link's variables (pnav.cli_args.robot_link_env); none: native."""
+    """``robot_link``: the robot link's variables (pnav.cli.options.robot_link_env); none:
+    native."""
     wall_start = time.monotonic()
     what = f"robot {ROBOT}" if model is None else f"robot {ROBOT} ({model})"
     print(f"proactive-nav demo: {WORLD} world, sim rate {rate}, {what}")

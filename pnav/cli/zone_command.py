@@ -17,7 +17,7 @@ import asyncpg
 from common.contract import zones
 from common.contract.zones import Zone
 from common.errors import ContractError, UsageError
-from pnav.cli_args import number
+from pnav.cli.options import number
 
 speed = number(
     f"a finite speed in (0, {zones.MAX_SPEED_MPS:g}] m/s",
@@ -100,7 +100,7 @@ def show(rows: list[Zone], as_json: bool) -> None:
 
 
 async def run_zone(args: argparse.Namespace) -> int:
-    from pnav import stack_commands
+    from pnav.cli import stack_commands
 
     zone = zone_of(args) if args.zone_command == "add" else None
     rt = await stack_commands.open_runtime()

@@ -13,7 +13,9 @@ import uvloop
 from common.errors import PnavError, UsageError
 from pnav.bench.faults_cli import add_faults_parser
 from pnav.bench.nav.worlds_cli import add_worlds_parser
-from pnav.cli_args import (
+from pnav.cli.dashboard_options import add_dashboard_options, dashboard_options
+from pnav.cli.learn_command import add_learn_parser
+from pnav.cli.options import (
     GOAL_M,
     MAX_TOL_M,
     Parser,
@@ -37,9 +39,7 @@ from pnav.cli_args import (
     through,
     tolerance,
 )
-from pnav.dashboard_cli import add_dashboard_options, dashboard_options
-from pnav.learn.cli import add_learn_parser
-from pnav.zone_cli import add_zone_parser
+from pnav.cli.zone_command import add_zone_parser
 
 if TYPE_CHECKING:
     from common.contract.people import Pose
@@ -299,7 +299,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def dispatch(args: argparse.Namespace) -> int:
-    from pnav import stack_commands
+    from pnav.cli import stack_commands
 
     if args.command == "up":
         return _up(args)
@@ -317,7 +317,7 @@ def dispatch(args: argparse.Namespace) -> int:
         return uvloop.run(_drive(args))
 
     if args.command == "demo":
-        from pnav import demo
+        from pnav.run import demo
 
         record = launcher_record(args.record, args.encoding)
         link = robot_link_env(args)
@@ -339,11 +339,11 @@ def _verbs(args: argparse.Namespace) -> int:
     """The commands whose verbs live in their own module (``pnav worlds``, ``pnav zone``,
     ``pnav learn``)."""
     if args.command == "zone":
-        from pnav.zone_cli import run_zone
+        from pnav.cli.zone_command import run_zone
 
         return uvloop.run(run_zone(args))
     if args.command == "learn":
-        from pnav.learn.cli import run_learn
+        from pnav.cli.learn_command import run_learn
 
         return run_learn(args)
     from pnav.bench.nav.worlds_cli import run_worlds
@@ -362,7 +362,7 @@ def _secrets_parser(commands: argparse._SubParsersAction[Parser]) -> None:
 
 
 def _secrets(args: argparse.Namespace) -> int:
-    from pnav.credentials import generate
+    from pnav.run.credentials import generate
 
     env_file, users_file = generate(args.dir, force=args.force)
     print(f"wrote {env_file} and {users_file} (mode 600); docs/DEPLOY.md, Least privilege")
@@ -370,8 +370,8 @@ def _secrets(args: argparse.Namespace) -> int:
 
 
 def _up(args: argparse.Namespace) -> int:
-    from pnav.launcher import StackOptions, lockstep_env, parse_replace, parse_replicas
-    from pnav.up import up
+    from pnav.run.launcher import StackOptions, lockstep_env, parse_replace, parse_replicas
+    from pnav.run.up import up
 
     options = StackOptions(
         world=args.world,
@@ -403,7 +403,7 @@ def _up(args: argparse.Namespace) -> int:
 
 def launcher_record(path: Path | None, encoding: str = "foxglove") -> Path | None:
     """``--record FILE`` checked before the stack starts (None: not recording)."""
-    from pnav.launcher import record_target
+    from pnav.run.launcher import record_target
 
     if path is None and encoding != "foxglove":
         raise UsageError(f"--encoding {encoding}: the encoding of a recording; add --record FILE")
@@ -421,7 +421,7 @@ def _bench(args: argparse.Namespace) -> int:
         return startup.run(args.json, args.runs)
     if args.bench == "latency":
         from pnav.bench import latency_report
-        from pnav.launcher import parse_replicas
+        from pnav.run.launcher import parse_replicas
 
         return latency_report.run(
             parse_counts(args.robots, "--robots"),
@@ -465,7 +465,7 @@ def _goal_poses(args: argparse.Namespace) -> tuple[Pose, list[Pose]]:
 
 
 async def _set_goal(rt: Runtime, args: argparse.Namespace) -> int:
-    from pnav import stack_commands
+    from pnav.cli import stack_commands
 
     goal, waypoints = _goal_poses(args)
     (robot,) = await stack_commands.pick_robots(rt, args.robot, one=True)
@@ -486,7 +486,7 @@ async def _set_goal(rt: Runtime, args: argparse.Namespace) -> int:
 
 
 async def _drive(args: argparse.Namespace) -> int:
-    from pnav import stack_commands
+    from pnav.cli import stack_commands
 
     rt = await stack_commands.open_runtime()
     try:
@@ -507,7 +507,7 @@ async def _drive(args: argparse.Namespace) -> int:
 
 
 async def _set_strategy(rt: Runtime, code: str, robot_arg: str | None) -> int:
-    from pnav import stack_commands
+    from pnav.cli import stack_commands
 
     await stack_commands.check_strategy(rt, code)
     failed = 0
