@@ -15,7 +15,7 @@ import time
 from typing import Any
 
 _RESERVED = set(vars(logging.makeLogRecord({})).keys()) | {"message", "asctime"}
-# The service a line is written for, when one process hosts several (pnav.host): each
+# The service a line is written for, when one process hosts several (pnav.run.host): each
 # service's task sets it (:func:`speak_as`) and the tasks it starts inherit it, so every line
 # names its own service; unset, the process's service (:func:`setup`) is named.
 _SERVICE: contextvars.ContextVar[str | None] = contextvars.ContextVar("pnav_service", default=None)

@@ -43,7 +43,7 @@ class Runtime:
         # taking part in a lockstep run: hand it to every subscription (bus.subscribe)
         self.ledger: lockstep.Ledger | None = None
         self._closers: list[Callable[[], Any]] = []
-        # a host's session (pnav.host) is the host's to close, not this service's
+        # a host's session (pnav.run.host) is the host's to close, not this service's
         self._owns_session = True
 
     @classmethod
@@ -60,7 +60,7 @@ class Runtime:
         the notifier; whoever subscribes or reports passes it on. ``receipts=False``: a
         sender-only participant (a benchmark runner), whose subscriptions are not counted.
         ``session``: a Zenoh session shared with the other services of a host process
-        (pnav.host), used instead of one of its own and left open by :meth:`close`."""
+        (pnav.run.host), used instead of one of its own and left open by :meth:`close`."""
         runtime = cls(config)
         try:
             if session is not None:
@@ -147,7 +147,7 @@ class Runtime:
 
 
 ServiceMain = Callable[[ServiceConfig, asyncio.Event], Awaitable[None]]
-# A service's entry as a host process starts it (pnav.host, entry point group
+# A service's entry as a host process starts it (pnav.run.host, entry point group
 # ``pnav.services``): ``serve(config, stop, session)``, the session being the host's.
 HostedMain = Callable[[ServiceConfig, asyncio.Event, "zenoh.Session | None"], Awaitable[None]]
 

@@ -380,7 +380,7 @@ class ScenarioService(ABC):
     async def serve(
         cls, config: ServiceConfig, stop: asyncio.Event, session: zenoh.Session | None = None
     ) -> None:
-        """Run until ``stop`` is set; ``session``: a host's shared Zenoh session (pnav.host,
+        """Run until ``stop`` is set; ``session``: a host's shared Zenoh session (pnav.run.host,
         which finds this entry by the service's name in the ``pnav.services`` entry points)."""
         runtime = await Runtime.open(config, session=session)
         try:

@@ -253,7 +253,7 @@ async def local_stack(
     ``bus``: the Zenoh users to use (if None: made for this run and removed after it, or
     none at all in peer mode); ``ros_domains``: the ROS 2 domains the router carries for a
     ROS 2 robot link with no rmw_zenoh router of its own (common.contract.acl); ``hosts``:
-    the host identities of the processes running several services (pnav.host), each with
+    the host identities of the processes running several services (pnav.run.host), each with
     exactly its services' permissions (common.contract.acl.host_identity)."""
     local_zenoh = local_zenoh if local_zenoh is not None else LocalZenoh.from_env()
     postgres: EmbeddedPostgres | None = None

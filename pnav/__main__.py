@@ -2,6 +2,6 @@ from __future__ import annotations
 
 import sys
 
-from pnav.cli import main
+from pnav.cli.program import main
 
 sys.exit(main())

@@ -11,7 +11,7 @@ dictionary) and the router lets it put only its own keys:
 - the ``sim`` alone: sensor messages, the clock, the world (and answers on its queryable);
 - the ``bridge`` alone: ``cmd_vel`` and the acknowledgements of collision events.
 
-A host process running several services in one Zenoh session (pnav.host, docs/ARCHITECTURE.md
+A host process running several services in one Zenoh session (pnav.run.host, docs/ARCHITECTURE.md
 "Processes") authenticates as a host identity named after them (:func:`host_identity`:
 ``host-strategy-planner-controller-decision``) whose permissions are derived, never written:
 exactly the union of its services' (:func:`hosted_services`).
@@ -67,7 +67,7 @@ _EGRESS = [
 ]
 _ROS2_MESSAGES = _EGRESS
 HOST_PREFIX = "host-"
-# The services a host runs unless told otherwise (pnav.launcher, --processes composed): its
+# The services a host runs unless told otherwise (pnav.run.launcher, --processes composed): its
 # identity is in compose's router config, so a composed deployment needs no other ACL.
 DEFAULT_HOSTED = ("strategy", "planner", "controller", "decision")
 

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from common import bus, ros2types
-from pnav.bench.report import emit, machine
+from pnav.bench.figures import emit, machine
 from services.bridge import ros2msgs
 from services.sim import ros2wire
 

@@ -41,7 +41,7 @@ from common.contract import keys
 from common.db import create_pool
 from common.engine import Engine, Rule
 from common.testing import EmbeddedPostgres, free_port
-from pnav.bench.engine import drive
+from pnav.bench.engine_rate import drive
 
 TABLE = "hop_probe"
 STAGES = ("thread", "loop", "rule", "insert", "notified")

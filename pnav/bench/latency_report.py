@@ -12,9 +12,9 @@ from typing import Any
 
 import uvloop
 
-from pnav.bench import provenance as prov
-from pnav.bench.latency import LINKS, measure
-from pnav.bench.report import emit, machine, percentiles
+from pnav.bench import provenance_samples as prov
+from pnav.bench.figures import emit, machine, percentiles
+from pnav.bench.sense_to_act import LINKS, measure
 
 # the targets: robots -> p99 ms, on a 2-core machine
 TARGETS_MS = {1: 5.0, 10: 10.0, 50: 50.0}

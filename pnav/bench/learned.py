@@ -1,11 +1,11 @@
 """Benchmark: one learned_drive decision against one dwa decision, on the same scenes.
 
 ``python -m pnav.bench.learned [--model FILE] [--scenes N] [--set NAME] [--json FILE]`` decides
-the made-up scenes of ``pnav.bench.dwa`` (``default``: the Jackal in clutter, a path 10 m ahead;
-``barn``: BARN-like clutter and a bending path; ``barn_box``: those with the Jackal's true box,
-which dwa then checks too) with dwa's default params and with learned_drive (features, then
-the model: it never looks at the footprint, so its cost is one for every set), and prints the
-milliseconds per
+the made-up scenes of ``pnav.bench.dwa_decision`` (``default``: the Jackal in clutter, a path
+10 m ahead; ``barn``: BARN-like clutter and a bending path; ``barn_box``: those with the
+Jackal's true box, which dwa then checks too) with dwa's default params and with learned_drive
+(features, then the model: it never looks at the footprint, so its cost is one for every set),
+and prints the milliseconds per
 decision of each (best of the passes, wall and CPU) and their ratio. Without ``--model`` the
 model is a (32, 32) network with random weights: its cost is the cost of any model of that
 shape, which is all a timing needs.
@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from pnav.bench.dwa import JACKAL, POLYGONS, barn, scenes
-from pnav.bench.report import emit, machine
+from pnav.bench.dwa_decision import JACKAL, POLYGONS, barn, scenes
+from pnav.bench.figures import emit, machine
 from pnav_learned.drive import recommend
 from pnav_learned.features import FEATURES
 from pnav_learned.model import FORMAT, Model, load, parse

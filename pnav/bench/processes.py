@@ -21,7 +21,7 @@ from typing import Any
 import psutil
 
 from common.tasks import cancel_and_wait
-from pnav.launcher import RunningStack
+from pnav.run.launcher import RunningStack
 
 
 def postmaster(stack: RunningStack) -> psutil.Process | None:

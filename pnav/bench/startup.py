@@ -33,10 +33,10 @@ from common import bus
 from common.config import ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime
-from pnav import stack_commands
+from pnav.bench.figures import emit, machine
 from pnav.bench.processes import memory_mb, pss_mb, roles, stack_processes
-from pnav.bench.report import emit, machine
-from pnav.launcher import StackOptions, launched
+from pnav.cli import stack_commands
+from pnav.run.launcher import StackOptions, launched
 
 TARGET_S, TARGET_MB = 1.0, 300.0  # issue 31
 ROBOT_POLL_S = 0.01

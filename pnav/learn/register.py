@@ -45,7 +45,7 @@ def row_for(file: Path, name: str | None, version: str | None) -> RegisteredMode
 
 async def register(row: RegisteredModel, description: str = "") -> int:
     """Write ``row`` (notified); a (name, version) registered already is refused."""
-    from pnav import stack_commands
+    from pnav.cli import stack_commands
 
     rt = await stack_commands.open_runtime()
     try:

@@ -3,6 +3,6 @@ cost is measured against (docs/MONOLITH.md). ``run_monolith_episode`` is the ent
 
 from __future__ import annotations
 
-from pnav.monolith.episode import MonolithOutcome, run_monolith_episode
+from pnav.monolith.monolith_episode import MonolithOutcome, run_monolith_episode
 
 __all__ = ["MonolithOutcome", "run_monolith_episode"]

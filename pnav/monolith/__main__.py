@@ -15,10 +15,10 @@ import sys
 from pathlib import Path
 
 from common.errors import WorldError
-from pnav.monolith.episode import run_monolith_episode
+from pnav.bench.nav.stack_episode import Combo, Episode
+from pnav.bench.nav.worldfile import is_benchmark_world, read_benchmark
+from pnav.monolith.monolith_episode import run_monolith_episode
 from pnav.monolith.summary import describe, summary
-from pnav.navbench.episode import Combo, Episode
-from pnav.navbench.worldfile import is_benchmark_world, read_benchmark
 
 DEFAULT_TIME_LIMIT_S = 120.0
 

@@ -2,7 +2,7 @@
 
 Each scenario service reaches the contract through its store (``services/<svc>/store.py``),
 which reads and writes through a *source*: in the stack the SQL one, here the in-memory one of
-``pnav/monolith/<svc>.py``, over these tables. The store above the source (its caches, what
+``pnav/monolith/memory_<svc>.py``, over these tables. The store above the source (its caches, what
 notifications told it) is the service's own and runs here unchanged.
 
 Rows are dicts with the contract's column names. :meth:`MemoryContract.insert` gives a row

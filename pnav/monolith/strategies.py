@@ -6,7 +6,7 @@ instead of keeping a copy of the rows that could drift from them. A migration th
 or deletes strategy rows is refused here rather than ignored.
 
 A benchmark combo is the shipped strategy with another planner scenario, under the code
-``Combo.code``: what ``pnav.navbench.episode.ensure_combo`` inserts in the stack.
+``Combo.code``: what ``pnav.bench.nav.stack_episode.ensure_combo`` inserts in the stack.
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ from typing import Any
 
 from common.contract import records
 from common.contract.migrate import schema_text
+from pnav.bench.nav.stack_episode import Combo
 from pnav.monolith.contract import AdapterError
-from pnav.navbench.episode import Combo
 
 _TOKEN = re.compile(r"\s+|--[^\n]*|'(?:[^']|'')*'|NULL|-?\d+(?:\.\d+)?|[(),;]|[^\s(),;']+")
 _INSERT = re.compile(r"INSERT INTO strategy\s*\(([^)]*)\)\s*VALUES", re.IGNORECASE)

@@ -7,9 +7,9 @@ from typing import Any
 
 import numpy as np
 
-from pnav.monolith.episode import MonolithOutcome
-from pnav.navbench.episode import Outcome
-from pnav.navbench.metrics import path_length
+from pnav.bench.nav.scores import path_length
+from pnav.bench.nav.stack_episode import Outcome
+from pnav.monolith.monolith_episode import MonolithOutcome
 
 
 def percentile(values: list[float], q: float) -> float | None:

@@ -361,7 +361,7 @@ class Bridge:
 async def serve(
     config: ServiceConfig, stop: asyncio.Event, session: zenoh.Session | None = None
 ) -> None:
-    """Run until ``stop`` is set; ``session``: a host's shared Zenoh session (pnav.host)."""
+    """Run until ``stop`` is set; ``session``: a host's shared Zenoh session (pnav.run.host)."""
     settings = BridgeSettings.from_env()
     link = RobotLinkSettings.from_env()
     runtime = await Runtime.open(config, session=session)

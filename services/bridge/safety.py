@@ -4,7 +4,7 @@ Whatever priority chose a command2robot row, the bridge checks it against the ro
 laser scan before it becomes a cmd_vel, as Nav2's collision monitor sits between controller
 and base (its "stop"/"slowdown" polygons, sized from the speed as its "approach" model is).
 Pure geometry and bookkeeping here, no I/O; :mod:`.commands` and the reference's bridge
-(``pnav/monolith/bridge.py``) both call :meth:`SafetyLayer.judge`.
+(``pnav/monolith/memory_bridge.py``) both call :meth:`SafetyLayer.judge`.
 
 Speed zones come first: a robot whose centre is inside a speed_limit zone (:mod:`.zones`)
 has its linear speed capped at the zone's ``max_speed_mps`` (LIMITED, the reason naming the

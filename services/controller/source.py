@@ -1,6 +1,6 @@
 """The controller's raw reads and writes of the contract: :class:`ControllerSource` (a
 Protocol) and :class:`PgControllerSource`, them in Postgres (through
-``common.contract.records``). pnav/monolith/controller.py has them in memory;
+``common.contract.records``). pnav/monolith/memory_controller.py has them in memory;
 services/controller/store.py keeps what notifications told the service and gives the rules
 their host."""
 

@@ -2,7 +2,7 @@
 
 - :class:`~services.controller.source.ControllerSource`: the raw typed reads and the one
   write, as a Protocol, and :class:`~services.controller.source.PgControllerSource`, them in
-  Postgres (services/controller/source.py; re-exported here); pnav/monolith/controller.py
+  Postgres (services/controller/source.py; re-exported here); pnav/monolith/memory_controller.py
   has them in memory;
 - :class:`ControllerStore`: the one object the service holds. It implements the rules'
   :class:`~common.controller_core.scenario.Host`, keeps the caches, and learns from the

@@ -31,7 +31,7 @@ ID_TABLES: tuple[str, ...] = (
     keys.ROBOT_LEASE,
     keys.PLANNED_PATH,
 )
-# recommendation input -> the sensor table it names (pnav/bench/provenance.py: the scan
+# recommendation input -> the sensor table it names (pnav/bench/provenance_samples.py: the scan
 # starts a controller's recommendation, the odometry a planner's)
 ORIGINS: tuple[tuple[str, str], ...] = (
     ("laser_scan", keys.LASER_SCAN),

@@ -2,7 +2,7 @@
 
 :class:`DecisionSource` is the typed Protocol of those reads and writes (one read of every
 live recommendation, the newest command per robot, and the writes); :class:`PgDecisionSource`
-is its Postgres implementation (pnav.monolith.decision has the in-memory one). The service's
+is its Postgres implementation (pnav.monolith.memory_decision has the in-memory one). The service's
 :class:`~services.decision.store.DecisionStore` holds one and keeps what it read and wrote.
 
 Each write is a single statement (a data-modifying CTE): the decision rows and the

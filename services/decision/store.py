@@ -3,7 +3,7 @@
 - :class:`~services.decision.source.DecisionSource`: the raw typed reads and writes, with
   their SQL (services/decision/source.py; re-exported here with
   :class:`~services.decision.source.PgDecisionSource`, its Postgres implementation);
-  pnav.monolith.decision has the in-memory one.
+  pnav.monolith.memory_decision has the in-memory one.
 - :class:`DecisionStore`: the one object the service holds. It keeps the last command issued
   per robot (read from the table on the first look and for robots regained from another
   replica) and the live recommendations (from the rows' images, CONTRACT.md "Row images";

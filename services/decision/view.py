@@ -1,7 +1,7 @@
 """What the decision rules see of the contract: a Protocol, no pool, no service.
 
 :class:`~services.decision.store.DecisionStore` implements it on Postgres in the service and
-on the in-memory contract in the monolith (pnav.monolith.decision); a test may implement it
+on the in-memory contract in the monolith (pnav.monolith.memory_decision); a test may implement it
 with anything. The rules import this module and the pure ``arbitration`` only.
 """
 

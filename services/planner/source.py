@@ -1,6 +1,6 @@
 """The planner's raw reads and writes of the contract: :class:`PlannerSource` (a Protocol)
 and :class:`PgPlannerSource`, them in SQL on an asyncpg pool, the planner's only SQL.
-pnav.monolith.planner has the in-memory source; services/planner/store.py keeps what
+pnav.monolith.memory_planner has the in-memory source; services/planner/store.py keeps what
 notifications told the service and gives the rules their view."""
 
 from __future__ import annotations

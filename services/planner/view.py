@@ -1,7 +1,7 @@
 """What the planner's rules see of the store: two small Protocols, never a pool or a service.
 
 ``PlannerStore`` (store.py) implements them over Postgres in the service and over the
-in-memory contract in the monolith (pnav/monolith/planner.py); a test may implement them
+in-memory contract in the monolith (pnav/monolith/memory_planner.py); a test may implement them
 however it likes. Target rules (the move scenarios, the battery rules) take a
 :class:`PlannerView`; the meta-planner a :class:`MetaView`.
 """

@@ -1,7 +1,8 @@
-"""``python -m services.sim``: the simulator service, or its benchmark with ``--bench``.
+"""``python -m services.sim``: the simulator service.
 
     python -m services.sim --world worlds/warehouse.yaml [--gui] [--rate R|max] [--robots N]
-    python -m services.sim --bench --robots 10 --seconds 60 [--world worlds/warehouse.yaml]
+
+Its benchmark (``python -m pnav.bench.sim_rate``) takes the same options.
 
 Options fall back to environment variables (for containers): PNAV_SIM_WORLD, PNAV_SIM_RATE,
 PNAV_SIM_ROBOTS, PNAV_SIM_BATTERY, PNAV_SIM_SEED, PNAV_SIM_SCAN_HZ, PNAV_SIM_MODEL,
@@ -19,7 +20,6 @@ import os
 import sys
 import threading
 from collections.abc import Sequence
-from dataclasses import replace
 from pathlib import Path
 
 from common.bus import open_session
@@ -29,7 +29,6 @@ from common.errors import ConfigError, ConnectionFailure, UsageError
 from common.lifeline import die_with_parent
 from common.log import event, setup
 from common.robotlink import NATIVE, RobotLinkSettings
-from services.sim.bench import report, run_bench
 from services.sim.clock import parse_rate
 from services.sim.signals import SignalStop
 from services.sim.sim import CMD_TIMEOUT_S, SimConfig
@@ -37,19 +36,15 @@ from services.sim.world import World, load_world
 
 log = logging.getLogger("services.sim")
 
-WORLDS_DIR = Path(__file__).resolve().parents[2] / "worlds"
-BENCH_WORLD = WORLDS_DIR / "warehouse.yaml"
-
 
 def _env(name: str) -> str | None:
     value = os.environ.get(name, "").strip()
     return value or None
 
 
-def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(
-        prog="python -m services.sim", description="proactive-nav pybullet simulator"
-    )
+def sim_parser(prog: str = "python -m services.sim") -> argparse.ArgumentParser:
+    """The sim's options (its benchmark, pnav.bench.sim_rate, adds its own to them)."""
+    ap = argparse.ArgumentParser(prog=prog, description="proactive-nav pybullet simulator")
     ap.add_argument(
         "--world",
         default=_env("PNAV_SIM_WORLD"),
@@ -140,15 +135,11 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     ap.add_argument(
         "--physics-hz", type=float, default=240.0, help="physics steps per sim second (default 240)"
     )
-    ap.add_argument(
-        "--bench",
-        action="store_true",
-        help="benchmark: run flat out without Zenoh and print sim s per wall s",
-    )
-    ap.add_argument(
-        "--seconds", type=float, default=60.0, help="sim seconds to run in --bench (default 60)"
-    )
-    return ap.parse_args(argv)
+    return ap
+
+
+def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    return sim_parser().parse_args(argv)
 
 
 def _int_env(name: str) -> int | None:
@@ -173,7 +164,7 @@ def _float_env(name: str) -> float | None:
 
 def build(args: argparse.Namespace) -> tuple[World, SimConfig, float]:
     """The world, config and rate the arguments ask for; UsageError if they are wrong."""
-    path = args.world or (str(BENCH_WORLD) if args.bench else None)
+    path = args.world
     if not path:
         raise ConfigError("no world: pass --world worlds/<name>.yaml or set PNAV_SIM_WORLD")
     world = load_world(path, args.model)
@@ -278,7 +269,7 @@ def announce_world(world: World) -> int:
 
 
 def prestart(args: list[str]) -> None:
-    """What the sim imports only once it runs (pnav.prestart imports it ahead, while the
+    """What the sim imports only once it runs (pnav.run.prestart imports it ahead, while the
     launcher makes Postgres ready): the node and its gate and tracer (:func:`serve`) and
     numpy's random module (the world's noise, numpy imports it on first use)."""
     for module in ("numpy.random", "common.trace", "services.sim.gate", "services.sim.node"):
@@ -291,9 +282,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = parse_args(argv)
         world, config, rate = build(args)
-        if args.bench:
-            print(report(run_bench(world, replace(config, gui=False), args.seconds)), flush=True)
-            return 0
         if args.world_only:
             return announce_world(world)
         return serve(world, config, rate, args.trace, args.max_lag, args.lockstep)

@@ -46,7 +46,7 @@ DEFAULT_CHARGE_POWER_W = 20.0
 DEFAULT_WALL_HEIGHT_M = 0.3
 
 # The keys of each mapping of a world file: any other is refused, naming the closest one.
-# ``benchmark`` is the navigation benchmark's block (docs/NAVBENCH.md), read by pnav.navbench.
+# ``benchmark`` is the navigation benchmark's block (docs/NAVBENCH.md), read by pnav.bench.nav.
 WORLD_KEYS = (
     "name",
     "map",

@@ -2,7 +2,7 @@
 
 - :class:`StrategySource`: the raw typed reads and writes (the meta rule's scan, a command's
   snapshot, treating a command, the default strategy); :class:`PgStrategySource` is its
-  Postgres implementation (pnav.monolith.strategy has the in-memory one).
+  Postgres implementation (pnav.monolith.memory_strategy has the in-memory one).
 - :class:`StrategyStore`: the one object the service holds; it stamps writes with sim time,
   answers ``owns`` and implements :class:`~services.strategy.view.StrategyView`, all the
   rules see.

@@ -1,7 +1,7 @@
 """What the strategy rules see of the contract: a Protocol and the records it returns.
 
 :class:`~services.strategy.store.StrategyStore` implements :class:`StrategyView` on Postgres
-in the service and on the in-memory contract in the monolith (pnav.monolith.strategy). The
+in the service and on the in-memory contract in the monolith (pnav.monolith.memory_strategy). The
 rules import this module and the pure ``commands`` only: no pool, no service, no SQL. A
 command table is named by its contract name (``user_command``, ``system_command``).
 """

@@ -227,7 +227,7 @@ async def test_a_service_writes_leases_and_statistics_only_under_its_own_name(
 async def test_the_cli_drives_a_robot_as_pnav_user_and_a_service_role_cannot(
     admin: asyncpg.Connection, empty_db_url: str, zenoh_settings: ZenohSettings
 ) -> None:
-    from pnav import stack_commands
+    from pnav.cli import stack_commands
 
     await admin.execute("INSERT INTO robot (robot_id) VALUES ('r1')")
 

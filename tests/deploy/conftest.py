@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from common.testing import acl_router
-from pnav.credentials import ZENOH_PASSWORDS
+from pnav.run.credentials import ZENOH_PASSWORDS
 from tests.deploy.test_compose import ROUTER_CONFIG, SECRETS
 
 

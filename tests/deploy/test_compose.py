@@ -48,13 +48,13 @@ from common.contract.grants import role_name
 from common.contract.roles import bootstrap, role_url
 from common.errors import UsageError
 from common.testing import free_port
-from pnav.credentials import (
+from pnav.run.credentials import (
     DB_PASSWORDS,
     SUPERUSER_PASSWORD,
     ZENOH_PASSWORDS,
     ZENOH_USERS_FILE,
 )
-from pnav.launcher import SCENARIO_SERVICES, StackOptions
+from pnav.run.launcher import SCENARIO_SERVICES, StackOptions
 
 ROOT = Path(__file__).resolve().parents[2]
 DEPLOY = ROOT / "deploy"
@@ -357,7 +357,7 @@ def test_the_variable_scan_sees_every_place_the_code_reads_variables() -> None:
     assert "common/config.py" in read["PNAV_ZENOH_CONNECT"]
     assert "services/sim/__main__.py" in read["PNAV_SIM_ROBOTS"]
     assert "services/bridge/settings.py" in read["PNAV_BRIDGE_WATCHDOG_S"]
-    assert "pnav/stackfile.py" in read["PNAV_STATE_DIR"]
+    assert "pnav/run/stackfile.py" in read["PNAV_STATE_DIR"]
     assert not any(name.endswith("_") for name in read)  # prefixes in docstrings are not names
 
 
@@ -455,7 +455,7 @@ def test_the_shell_sets_the_database_name_and_the_passwords() -> None:
 def test_pnav_secrets_writes_every_variable_the_compose_file_requires(tmp_path: Path) -> None:
     from common.contract import acl
     from common.contract.grants import BUS_IDENTITIES, LOGIN_ROLES
-    from pnav.credentials import generate
+    from pnav.run.credentials import generate
 
     # one password per role of CONTRACT.md and per identity on the bus, none forgotten
     assert set(DB_PASSWORDS) == set(LOGIN_ROLES)

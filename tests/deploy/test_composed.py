@@ -1,6 +1,6 @@
 """deploy/docker-compose.composed.yml, the composed alternative to one container per
 scenario service: valid Compose over the main file, and the host it runs is the one
-`pnav up --processes composed` runs (pnav.host), as the same identity and roles."""
+`pnav up --processes composed` runs (pnav.run.host), as the same identity and roles."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from typing import Any
 import yaml
 
 from common.contract import acl
-from pnav.credentials import ZENOH_PASSWORDS
+from pnav.run.credentials import ZENOH_PASSWORDS
 from tests.deploy.test_compose import compose, schema_errors
 from tests.deploy.test_swap import merged
 
@@ -33,7 +33,7 @@ def test_the_host_replaces_the_four_containers_as_their_union() -> None:
     for name in HOSTED:  # not started unless the "separate" profile is asked for
         assert services[name]["profiles"] == ["separate"]
     host = services["host"]
-    assert host["command"] == ["python", "-m", "pnav.host", *HOSTED]
+    assert host["command"] == ["python", "-m", "pnav.run.host", *HOSTED]
     env = host["environment"]
     assert env["PNAV_ZENOH_USER"] == acl.host_identity(HOSTED) == acl.DEFAULT_HOSTS[0]
     assert env["PNAV_ZENOH_PASSWORD"] == (

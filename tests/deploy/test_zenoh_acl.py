@@ -231,7 +231,7 @@ def test_each_identity_announces_exactly_the_tables_it_may_write(
 def test_a_host_announces_exactly_the_tables_its_services_may_write(
     fleet: Fleet, heard: Heard
 ) -> None:
-    """The host identity (pnav.host) may do what its services may together, and no more."""
+    """The host identity (pnav.run.host) may do what its services may together, and no more."""
     hosted = acl.hosted_services(HOST)
     assert hosted == ("strategy", "planner", "controller", "decision")
     session = fleet.session(HOST)
@@ -304,7 +304,7 @@ def test_a_client_without_valid_credentials_gets_no_session(
 
 
 def test_the_launchers_report_is_put_by_the_local_routers_own_session(tmp_path: Path) -> None:
-    """pnav/supervisor/<launcher> (pnav.supervisor_report) is put by the launcher on its
+    """pnav/supervisor/<launcher> (pnav.run.supervisor_report) is put by the launcher on its
     router's own session, which is not a client: the access control, which lets no client
     put it, does not stop it."""
     with local_router(tmp_path) as (endpoint, passwords, router):

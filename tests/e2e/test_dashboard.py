@@ -22,7 +22,7 @@ import pytest
 
 from common.config import ServiceConfig
 from common.runtime import Runtime
-from pnav.launcher import DashboardOptions, StackOptions, launched
+from pnav.run.launcher import DashboardOptions, StackOptions, launched
 
 pytestmark = pytest.mark.timeout(240)
 

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
+from pnav.bench.faults.bad_goals import bad_goals
 from pnav.bench.faults.catalogue import mission_goal, select
-from pnav.bench.faults.report import misses
 from pnav.bench.faults.trial import Result, run_trial
-from pnav.bench.faults.world import bad_goals
+from pnav.bench.faults.verdict import misses
 
 pytestmark = pytest.mark.timeout(240)
 

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from pnav.navbench.episode import LAG, Combo, Episode, Outcome, run_episode
-from pnav.navbench.worldfile import load_suite
+from pnav.bench.nav.stack_episode import LAG, Combo, Episode, Outcome, run_episode
+from pnav.bench.nav.worldfile import load_suite
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
 

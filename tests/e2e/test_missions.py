@@ -14,9 +14,10 @@ import pytest
 from common.config import ServiceConfig
 from common.runtime import Runtime
 from common.testing import eventually
-from pnav import demo, stack_commands
-from pnav.launcher import RunningStack, StackOptions, launched
-from pnav.mission import MissionLog, MissionMonitor
+from pnav.cli import stack_commands
+from pnav.run import demo
+from pnav.run.launcher import RunningStack, StackOptions, launched
+from pnav.run.mission import MissionLog, MissionMonitor
 
 pytestmark = pytest.mark.timeout(240)
 

@@ -16,8 +16,8 @@ from common.config import ServiceConfig
 from common.postmaster import kill_postmaster
 from common.runtime import Runtime
 from common.testing import EmbeddedPostgres, eventually
-from pnav import stack_commands
-from pnav.launcher import StackOptions, launched
+from pnav.cli import stack_commands
+from pnav.run.launcher import StackOptions, launched
 
 pytestmark = pytest.mark.timeout(240)
 

@@ -9,8 +9,8 @@ import math
 import pytest
 
 from common.contract import people
-from pnav import stack_commands
-from pnav.launcher import StackOptions, launched
+from pnav.cli import stack_commands
+from pnav.run.launcher import StackOptions, launched
 from tests.e2e.test_missions import RATE, describe, reached, stack_monitor
 
 pytestmark = pytest.mark.timeout(240)

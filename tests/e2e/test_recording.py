@@ -14,10 +14,10 @@ from mcap.reader import make_reader
 
 from common.config import ServiceConfig
 from common.runtime import Runtime
-from pnav import stack_commands
-from pnav.launcher import StackOptions, launched
-from pnav.mission import MissionMonitor
+from pnav.cli import stack_commands
 from pnav.record import topics
+from pnav.run.launcher import StackOptions, launched
+from pnav.run.mission import MissionMonitor
 
 pytestmark = [pytest.mark.timeout(240), pytest.mark.slow]
 

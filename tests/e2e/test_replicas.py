@@ -37,7 +37,7 @@ from common.config import ZenohSettings
 from common.contract.roles import role_url
 from common.lease import history_overlaps, live_replicas, ownership
 from common.testing import acl_router, eventually
-from pnav.credentials import ZENOH_PASSWORDS
+from pnav.run.credentials import ZENOH_PASSWORDS
 from tests.deploy.test_compose import ROUTER_CONFIG, SECRETS
 
 pytestmark = pytest.mark.timeout(240)

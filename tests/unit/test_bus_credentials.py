@@ -20,7 +20,7 @@ from common.contract import keys
 from common.errors import ConnectionFailure, UsageError
 from common.stack import BusCredentials, LocalZenoh, local_stack
 from common.testing import eventually
-from pnav.stackfile import StackInfo
+from pnav.run.stackfile import StackInfo
 
 pytestmark = pytest.mark.timeout(60)
 

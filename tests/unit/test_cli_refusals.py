@@ -17,7 +17,8 @@ from common.config import ZenohSettings
 from common.contract import limits
 from common.errors import ContractError
 from common.robotmodel import MODELS
-from pnav import cli, stack_commands
+from pnav.cli import program as cli
+from pnav.cli import stack_commands
 
 
 def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:

@@ -1,4 +1,4 @@
-"""How a local stack's services share processes (pnav.composition): --processes, which
+"""How a local stack's services share processes (pnav.run.composition): --processes, which
 services a host runs, its process spec, and whose log file each of its lines goes to."""
 
 from __future__ import annotations
@@ -14,10 +14,10 @@ from common.config import ZenohSettings
 from common.contract import acl
 from common.errors import UsageError
 from common.stack import BusCredentials, LocalStack
-from pnav.cli import build_parser
-from pnav.composition import COMPOSE_AT_MOST_CORES, hosted, parse_processes, resolve_processes
-from pnav.launcher import StackOptions, parse_replace, service_specs
-from pnav.process_supervisor import line_writer
+from pnav.cli.program import build_parser
+from pnav.run.composition import COMPOSE_AT_MOST_CORES, hosted, parse_processes, resolve_processes
+from pnav.run.launcher import StackOptions, parse_replace, service_specs
+from pnav.run.process_supervisor import line_writer
 
 WORLD = Path("worlds/open_room.yaml")
 SCENARIO = ("strategy", "planner", "controller", "decision")
@@ -77,7 +77,7 @@ def test_composed_the_four_scenario_services_are_one_host_process_with_their_rol
     specs = service_specs(stack, StackOptions(processes="composed"), WORLD)
     assert [s.name for s in specs] == ["sim", "bridge", "host"]
     host = specs[-1]
-    assert host.argv == [sys.executable, "-m", "pnav.host", *SCENARIO]
+    assert host.argv == [sys.executable, "-m", "pnav.run.host", *SCENARIO]
     assert host.parts == SCENARIO
     for name in SCENARIO:
         assert host.env[f"PNAV_DATABASE_URL_{name.upper()}"] == stack.url_for(name)

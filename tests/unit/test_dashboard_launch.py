@@ -12,9 +12,9 @@ from common.config import ZenohSettings
 from common.errors import UsageError
 from common.stack import LocalStack
 from common.testing import free_port
-from pnav.cli import build_parser
-from pnav.dashboard_cli import dashboard_options
-from pnav.launcher import (
+from pnav.cli.dashboard_options import dashboard_options
+from pnav.cli.program import build_parser
+from pnav.run.launcher import (
     DashboardOptions,
     StackOptions,
     lockstep_env,

@@ -8,12 +8,12 @@ import pytest
 
 from common.errors import UsageError
 from common.trace import CMD_VEL, Tracer
-from pnav import cli
+from pnav.bench.faults.bad_goals import bad_goals
 from pnav.bench.faults.catalogue import catalogue, mission_goal, select
 from pnav.bench.faults.context import FORGED_COMMAND_ID
-from pnav.bench.faults.report import as_json, misses
 from pnav.bench.faults.trial import Result, forged_commands_applied
-from pnav.bench.faults.world import bad_goals
+from pnav.bench.faults.verdict import as_json, misses
+from pnav.cli import program as cli
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -1,11 +1,11 @@
 """The faults benchmark's "rows lost": keys committed before, looked for after; rows the
-retention policy prunes anyway are not counted (pnav/bench/faults/rows.py)."""
+retention policy prunes anyway are not counted (pnav/bench/faults/committed_rows.py)."""
 
 from __future__ import annotations
 
 import asyncpg
 
-from pnav.bench.faults import rows
+from pnav.bench.faults import committed_rows
 
 
 async def test_a_deleted_row_is_lost_and_a_row_retention_pruned_is_not(
@@ -31,10 +31,10 @@ async def test_a_deleted_row_is_lost_and_a_row_retention_pruned_is_not(
         )
         for i in range(3)
     ]
-    before = await rows.snapshot(conn)
+    before = await committed_rows.snapshot(conn)
     assert before.keys["goal"] == {str(g) for g in goals}
     assert before.keys["robot"] == {"r1"}
-    assert await rows.lost(conn, before) == {}
+    assert await committed_rows.lost(conn, before) == {}
 
     await conn.execute("DELETE FROM goal WHERE id = $1", goals[1])
     # three newer battery rows: retention (3 per robot) would prune the first three
@@ -45,9 +45,9 @@ async def test_a_deleted_row_is_lost_and_a_row_retention_pruned_is_not(
             10.0 + i,
         )
     await conn.execute("DELETE FROM battery WHERE id = ANY($1::bigint[])", battery)
-    assert await rows.lost(conn, before) == {"goal": 1}
+    assert await committed_rows.lost(conn, before) == {"goal": 1}
 
     await conn.execute("DELETE FROM battery WHERE id = (SELECT max(id) FROM battery)")
-    newer = await rows.snapshot(conn)
+    newer = await committed_rows.snapshot(conn)
     await conn.execute("DELETE FROM battery WHERE id = (SELECT max(id) FROM battery)")
-    assert await rows.lost(conn, newer) == {"battery": 1}  # one of the kept ones: lost
+    assert await committed_rows.lost(conn, newer) == {"battery": 1}  # one of the kept ones: lost

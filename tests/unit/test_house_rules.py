@@ -192,49 +192,13 @@ SHARED_NAMES = frozenset(
 # still here. The list may only shrink: an entry that no longer collides fails the test too,
 # so it is taken out with the rename that settles it.
 KNOWN_COLLISIONS: dict[str, frozenset[str]] = {
-    # pnav/bench modules named after what they measure (the benchmark tree moves to one
-    # place under issue 33; rename there, not twice)
-    "dwa": frozenset({"pnav/bench/dwa.py", "pnav_local/dwa.py"}),
-    "engine": frozenset({"common/engine/engine.py", "pnav/bench/engine.py"}),
-    "latency": frozenset({"pnav/bench/latency.py", "services/bridge/bench/latency.py"}),
-    "nav2actions": frozenset({"pnav/bench/nav2actions.py", "pnav/ros2/nav2actions.py"}),
-    "provenance": frozenset({"pnav/bench/provenance.py", "services/dashboard/provenance.py"}),
-    "zones": frozenset(
-        {"common/contract/zones.py", "pnav/bench/zones.py", "services/bridge/zones.py"}
-    ),
-    "report": frozenset(
-        {
-            "pnav/bench/faults/report.py",
-            "pnav/bench/report.py",
-            "pnav/navbench/report.py",
-            "services/bridge/bench/report.py",
-        }
-    ),
-    "rows": frozenset({"pnav/bench/faults/rows.py", "services/bridge/rows.py"}),
+    # the services' own world and zone modules (renamed with the services' files, issue 33)
     "world": frozenset(
-        {
-            "pnav/bench/faults/world.py",
-            "services/bridge/world.py",
-            "services/planner/world.py",
-            "services/sim/world.py",
-        }
+        {"services/bridge/world.py", "services/planner/world.py", "services/sim/world.py"}
     ),
-    "bench": frozenset({"services/controller/bench.py", "services/sim/bench.py"}),
-    "compare": frozenset({"pnav/monolith/compare.py", "pnav/navbench/compare.py"}),
-    "episode": frozenset({"pnav/monolith/episode.py", "pnav/navbench/episode.py"}),
-    "metrics": frozenset({"pnav/navbench/metrics.py", "services/dashboard/metrics.py"}),
-    # the in-process reference's stand-ins, named after the service they stand in for
-    "bridge": frozenset({"pnav/monolith/bridge.py", "services/bridge/bridge.py"}),
-    "controller": frozenset(
-        {"examples/sql_controller/controller.py", "pnav/monolith/controller.py"}
-    ),
-    # test infrastructure, to become a private module (issue 33)
-    "stack": frozenset(
-        {"common/stack.py", "pnav/monolith/stack.py", "services/bridge/bench/stack.py"}
-    ),
+    "zones": frozenset({"common/contract/zones.py", "services/bridge/zones.py"}),
     # a common/ module and a service's (or plug-in's) own narrower one of the same noun
     "battery": frozenset({"services/planner/battery.py", "services/sim/battery.py"}),
-    "cli": frozenset({"pnav/cli.py", "pnav/learn/cli.py"}),
     "clock": frozenset({"common/clock.py", "services/sim/clock.py"}),
     "config": frozenset({"common/config.py", "examples/sql_controller/config.py"}),
     "errors": frozenset({"common/errors.py", "pnav_learned/errors.py"}),

@@ -7,9 +7,8 @@ from pathlib import Path
 import pytest
 
 from common.trace import CMD_VEL, NO_REF, TraceEvent, Tracer, read_trace
-from pnav.bench import provenance as prov
+from pnav.bench import provenance_samples as prov
 from pnav.bench.hall import write_hall
-from pnav.bench.latency import join_trace, notifications_lost
 from pnav.bench.latency_report import (
     beside_floor,
     latency_figures,
@@ -17,6 +16,7 @@ from pnav.bench.latency_report import (
     table,
     target_for,
 )
+from pnav.bench.sense_to_act import join_trace, notifications_lost
 from services.sim.world import load_world
 
 T0 = 1_800_000_000.0  # wall seconds, as Postgres' clock_timestamp() gives them

@@ -1,5 +1,5 @@
 """A mission followed from the tables ends when its goal fails or is cancelled, with the
-goal's reason, instead of waiting out its time limit (pnav/mission.py)."""
+goal's reason, instead of waiting out its time limit (pnav/run/mission.py)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from collections.abc import AsyncIterator
 import asyncpg
 import pytest
 
-from pnav.mission import GoalEnded, MissionMonitor
+from pnav.run.mission import GoalEnded, MissionMonitor
 
 
 @pytest.fixture

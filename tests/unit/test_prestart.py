@@ -1,6 +1,6 @@
-"""A process started ahead of its environment (pnav.prestart, pnav.process_supervisor.Prestart)
-runs its module with the environment sent to it, as ``python -m`` would have; closed
-empty, or not taken, it ends without running it."""
+"""A process started ahead of its environment (pnav.run.prestart,
+pnav.run.process_supervisor.Prestart) runs its module with the environment sent to it, as
+``python -m`` would have; closed empty, or not taken, it ends without running it."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from pnav.prestart import Prestart
+from pnav.run.prestart import Prestart
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -80,4 +80,4 @@ def test_warming_a_module_runs_its_prestart_hook() -> None:
     """The sim imports its node only once it runs; started ahead, it imports it while it
     waits (services/sim/__main__.py, prestart)."""
     assert not _imports_node("import services.sim.__main__")
-    assert _imports_node("from pnav.prestart import warm; warm('services.sim', [])")
+    assert _imports_node("from pnav.run.prestart import warm; warm('services.sim', [])")

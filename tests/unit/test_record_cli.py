@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from pnav import cli
+from pnav.cli import program as cli
 
 
 @pytest.mark.parametrize("command", ["up", "demo"])

@@ -10,8 +10,8 @@ import pytest
 from common.config import ZenohSettings
 from common.errors import UsageError
 from common.stack import LocalStack
-from pnav.cli import build_parser
-from pnav.launcher import StackOptions, parse_replicas, service_specs
+from pnav.cli.program import build_parser
+from pnav.run.launcher import StackOptions, parse_replicas, service_specs
 
 
 def test_replicas_are_repeatable_and_comma_separated() -> None:
@@ -81,7 +81,7 @@ def test_a_bare_count_replicates_every_scenario_service() -> None:
 
 
 def test_bench_latency_robot_counts() -> None:
-    from pnav.cli import parse_counts
+    from pnav.cli.program import parse_counts
 
     assert parse_counts("1,10,50", "--robots") == [1, 10, 50]
     args = build_parser().parse_args(["bench", "latency"])
@@ -94,7 +94,7 @@ def test_bench_latency_robot_counts() -> None:
 def test_a_replaced_service_runs_the_given_command_with_the_same_environment() -> None:
     import sys
 
-    from pnav.launcher import parse_replace
+    from pnav.run.launcher import parse_replace
 
     replace = parse_replace(["controller=python -m examples.sql_controller --flag 'a b'"])
     assert replace == {
@@ -121,14 +121,14 @@ def test_a_replaced_service_runs_the_given_command_with_the_same_environment() -
     ],
 )
 def test_a_bad_replace_value_says_why(value: str, message: str) -> None:
-    from pnav.launcher import parse_replace
+    from pnav.run.launcher import parse_replace
 
     with pytest.raises(UsageError, match=message):
         parse_replace([value])
 
 
 def test_up_lockstep_waits_for_every_service_started_but_a_replaced_one() -> None:
-    from pnav.launcher import lockstep_env, parse_replace
+    from pnav.run.launcher import lockstep_env, parse_replace
 
     args = build_parser().parse_args(["up", "--lockstep"])
     assert args.lockstep
@@ -158,7 +158,7 @@ def test_the_model_option_reaches_the_sim_and_only_the_sim() -> None:
 def test_each_service_connects_as_its_own_role_and_a_replacement_as_the_replaced_one() -> None:
     from dataclasses import replace as with_fields
 
-    from pnav.launcher import parse_replace
+    from pnav.run.launcher import parse_replace
 
     roles = {n: f"postgresql://pnav_{n}:pw@/y" for n in ("bridge", "planner", "controller")}
     stack = with_fields(local(), role_urls=roles)

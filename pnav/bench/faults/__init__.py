@@ -27,10 +27,10 @@ from pathlib import Path
 import uvloop
 
 from common.outage import fold_outage_logs
+from pnav.bench.faults.bad_goals import bad_goals
 from pnav.bench.faults.catalogue import mission_goal, select
-from pnav.bench.faults.report import as_json, misses, table
 from pnav.bench.faults.trial import Result, run_trial
-from pnav.bench.faults.world import bad_goals
+from pnav.bench.faults.verdict import as_json, misses, table
 
 DEFAULT_RATE = "2"
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from common.errors import UsageError
-from pnav.launcher import resolve_world
+from pnav.run.launcher import resolve_world
 
 SERVICES = ("sim", "bridge", "strategy", "planner", "controller", "decision")
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from common.config import ZenohSettings
 from common.runtime import Runtime
 from common.stack import BusCredentials
-from pnav.launcher import RunningStack
+from pnav.run.launcher import RunningStack
 
 ROBOT = "r1"
 # the first seq of spoofed odometry, and the first command_id of a forged cmd_vel: above

@@ -9,8 +9,8 @@ from typing import TYPE_CHECKING, Any
 
 from common.contract import keys
 from common.runtime import Runtime
-from pnav import stack_commands
 from pnav.bench.faults.context import ROBOT, Context, Injection
+from pnav.cli import stack_commands
 
 if TYPE_CHECKING:
     from pnav.bench.faults.catalogue import Fault

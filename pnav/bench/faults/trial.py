@@ -29,13 +29,13 @@ from common.runtime import Runtime
 from common.stack import BusCredentials
 from common.testing import router_process
 from common.trace import CMD_VEL, read_trace
-from pnav import stack_commands
-from pnav.bench.faults import rows
+from pnav.bench.faults import committed_rows
 from pnav.bench.faults.catalogue import Fault
 from pnav.bench.faults.context import FORGED_COMMAND_ID, ROBOT, SPOOF_SEQ, Context
 from pnav.bench.faults.inject import inject
-from pnav.launcher import DashboardOptions, StackOptions, launched
-from pnav.mission import GoalEnded, MissionMonitor
+from pnav.cli import stack_commands
+from pnav.run.launcher import DashboardOptions, StackOptions, launched
+from pnav.run.mission import GoalEnded, MissionMonitor
 
 T = TypeVar("T")
 
@@ -100,9 +100,9 @@ async def _recovered(rt: Runtime, since: float) -> float | None:
     return None
 
 
-async def _rows_lost(rt: Runtime, snapshot: rows.Snapshot) -> dict[str, int]:
+async def _rows_lost(rt: Runtime, snapshot: committed_rows.Snapshot) -> dict[str, int]:
     async with rt.database.pool.acquire() as conn:
-        return await rows.lost(conn, snapshot)
+        return await committed_rows.lost(conn, snapshot)
 
 
 def sim_figures(sim_log: Path) -> dict[str, float]:
@@ -215,7 +215,7 @@ async def _mission(fault: Fault, ctx: Context, result: Result) -> None:
         return
     collisions_before = monitor.log.collisions
     async with rt.database.pool.acquire() as conn:
-        snapshot = await rows.snapshot(conn)
+        snapshot = await committed_rows.snapshot(conn)
     injection = await inject(fault, ctx)
     ended = time.monotonic()
     result.restart_s = injection.restart_s

@@ -23,8 +23,8 @@ from common import bus
 from common.contract import keys
 from common.runtime import Runtime
 from common.testing import eventually
-from pnav.process_supervisor import ProcessSpec, Supervisor
-from pnav.supervisor_report import SupervisorReport
+from pnav.run.process_supervisor import ProcessSpec, Supervisor
+from pnav.run.supervisor_report import SupervisorReport
 from services.dashboard.metrics import Metrics, MetricsConfig
 
 pytestmark = pytest.mark.timeout(60)

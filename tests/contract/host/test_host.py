@@ -1,4 +1,4 @@
-"""The scenario services composed in one host process (pnav.host), against the contract.
+"""The scenario services composed in one host process (pnav.run.host), against the contract.
 
 The stack runs as ``pnav up --processes composed`` runs it: the sim and the bridge apart,
 strategy, planner, controller and decision in one host with one Zenoh session and the host
@@ -23,9 +23,9 @@ from common.config import ServiceConfig, ZenohSettings
 from common.contract import acl, keys
 from common.runtime import Runtime
 from common.testing import eventually
-from pnav import stack_commands
-from pnav.launcher import StackOptions, launched
-from pnav.mission import MissionMonitor
+from pnav.cli import stack_commands
+from pnav.run.launcher import StackOptions, launched
+from pnav.run.mission import MissionMonitor
 
 pytestmark = pytest.mark.timeout(180)
 

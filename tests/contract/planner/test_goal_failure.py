@@ -7,7 +7,7 @@ import numpy as np
 
 from common.contract import keys
 from common.testing import eventually
-from pnav import stack_commands
+from pnav.cli import stack_commands
 from services.planner.service import PlannerService
 from tests.contract.planner.conftest import ROBOT, World
 

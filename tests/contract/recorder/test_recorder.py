@@ -29,7 +29,7 @@ from common.config import ZenohSettings
 from common.contract import keys
 from common.runtime import Runtime
 from common.testing import ClockPlayer
-from pnav import cli
+from pnav.cli import program as cli
 from pnav.record import topics
 
 pytestmark = pytest.mark.timeout(90)

@@ -14,7 +14,7 @@ import pytest
 
 from common.robotmodel import load_model
 from common.testing import eventually
-from pnav.launcher import WORLDS, StackOptions, launched
+from pnav.run.launcher import WORLDS, StackOptions, launched
 
 pytestmark = pytest.mark.timeout(180)
 

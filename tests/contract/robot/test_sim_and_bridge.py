@@ -13,7 +13,7 @@ import asyncpg
 import pytest
 
 from common.testing import eventually
-from pnav.launcher import StackOptions, launched
+from pnav.run.launcher import StackOptions, launched
 from services.sim.robot import BURGER
 
 pytestmark = pytest.mark.timeout(120)

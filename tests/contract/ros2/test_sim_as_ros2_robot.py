@@ -14,7 +14,7 @@ from common import bus, ros2types
 from common.contract import rmw_zenoh as rz
 from common.testing import eventually
 from common.trace import CMD_VEL, NO_REF, read_trace
-from pnav.launcher import StackOptions, launched
+from pnav.run.launcher import StackOptions, launched
 
 pytestmark = [pytest.mark.timeout(120), pytest.mark.slow]
 

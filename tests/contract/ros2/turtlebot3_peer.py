@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from common import ros2types
-from pnav.launcher import StackOptions
+from pnav.run.launcher import StackOptions
 
 TYPES = (
     ros2types.LASER_SCAN,

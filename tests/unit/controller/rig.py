@@ -13,7 +13,7 @@ from common.contract.records import Robot, Strategy
 from common.controller_core.scenario import Key, installed_scenarios
 from common.engine import Engine
 from pnav.monolith.contract import MemoryContract
-from pnav.monolith.controller import MemoryControllerSource
+from pnav.monolith.memory_controller import MemoryControllerSource
 from services.controller.meta import ControllerState, Scenarios, seed_controller
 from services.controller.store import ControllerStore
 from tests.unit.controller.scans import BURGER, Obstacle, scan

@@ -14,7 +14,7 @@ from common.contract.records import Robot, Strategy
 from common.controller_core.scenario import Command, installed_scenarios
 from common.engine import Rule
 from pnav.monolith.contract import MemoryContract
-from pnav.monolith.controller import MemoryControllerSource
+from pnav.monolith.memory_controller import MemoryControllerSource
 from services.controller.avoid_left import AvoidLeft
 from services.controller.avoid_right import AvoidRight
 from services.controller.safety_stop import SafetyStop

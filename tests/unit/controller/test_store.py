@@ -10,7 +10,7 @@ from common.contract import keys
 from common.contract.recommendations import Recommendation
 from common.contract.records import Odometry, Strategy
 from pnav.monolith.contract import MemoryContract
-from pnav.monolith.controller import MemoryControllerSource
+from pnav.monolith.memory_controller import MemoryControllerSource
 from services.controller.store import RECHECK_S
 from tests.unit.controller.rig import Rig
 

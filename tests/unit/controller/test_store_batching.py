@@ -10,7 +10,7 @@ from dataclasses import replace
 from common.contract.recommendations import Recommendation
 from common.contract.records import Odometry, Strategy
 from pnav.monolith.contract import MemoryContract
-from pnav.monolith.controller import MemoryControllerSource
+from pnav.monolith.memory_controller import MemoryControllerSource
 from services.controller.safety_stop import SafetyStop
 from tests.unit.controller.rig import Rig
 from tests.unit.controller.scans import BURGER

@@ -12,15 +12,15 @@ from common.contract import keys
 from common.contract.recommendations import Recommendation
 from common.engine import Rule
 from common.planner_core.scenario import RobotInfo
-from pnav.monolith.bridge import Applied, Bridge
+from pnav.bench.nav.stack_episode import Combo
 from pnav.monolith.contract import AdapterError, MemoryContract
-from pnav.monolith.controller import MemoryControllerSource
-from pnav.monolith.decision import MemoryDecisionSource
 from pnav.monolith.engines import SteppedEngine
-from pnav.monolith.planner import planner_engine
-from pnav.monolith.stack import MonolithStack
+from pnav.monolith.memory_bridge import Applied, Bridge
+from pnav.monolith.memory_controller import MemoryControllerSource
+from pnav.monolith.memory_decision import MemoryDecisionSource
+from pnav.monolith.memory_planner import planner_engine
+from pnav.monolith.monolith_stack import MonolithStack
 from pnav.monolith.strategies import combo_strategy, shipped_strategies
-from pnav.navbench.episode import Combo
 from services.decision.arbitration import RobotDecision
 from services.planner.routes import Target
 from services.planner.world import RobotState

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from common.contract import records
-from pnav.monolith.episode import MonolithOutcome, run_monolith_episode
-from pnav.monolith.stack import MonolithStack
+from pnav.bench.nav.stack_episode import Combo, Episode, Outcome
+from pnav.bench.nav.worldfile import read_benchmark
+from pnav.monolith.monolith_episode import MonolithOutcome, run_monolith_episode
+from pnav.monolith.monolith_stack import MonolithStack
 from pnav.monolith.strategies import combo_strategy, shipped_strategies
-from pnav.navbench.episode import Combo, Episode, Outcome
-from pnav.navbench.worldfile import read_benchmark
 from services.controller.avoid_left import AvoidLeft
 from services.controller.avoid_right import AvoidRight
 from services.controller.safety_stop import SafetyStop

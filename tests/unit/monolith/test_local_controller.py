@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from pnav.monolith.episode import run_monolith_episode
-from pnav.navbench.episode import Combo, Episode
-from pnav.navbench.worldfile import read_benchmark
+from pnav.bench.nav.stack_episode import Combo, Episode
+from pnav.bench.nav.worldfile import read_benchmark
+from pnav.monolith.monolith_episode import run_monolith_episode
 
 ROOT = Path(__file__).resolve().parents[3]
 FAST = Combo("GOTO_FAST", "turn_then_move")

@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 
 from common.errors import UsageError
-from pnav import cli
-from pnav.navbench import barn, worlds_cli
-from pnav.navbench.barn import BarnLayout, field_boxes, generate_barn_world, time_limit
-from pnav.navbench.barnfile import write_barn_world
-from pnav.navbench.robots import RobotFit, resolve_model
-from pnav.navbench.worldfile import occupied_cells, read_benchmark
+from pnav.bench.nav import barn, worlds_cli
+from pnav.bench.nav.barn import BarnLayout, field_boxes, generate_barn_world, time_limit
+from pnav.bench.nav.barnfile import write_barn_world
+from pnav.bench.nav.robots import RobotFit, resolve_model
+from pnav.bench.nav.worldfile import occupied_cells, read_benchmark
+from pnav.cli import program as cli
 from services.sim.world import load_world
 from tests.unit.navbench.conftest import min_clearance
 

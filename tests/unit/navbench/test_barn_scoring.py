@@ -11,15 +11,15 @@ from pathlib import Path
 import pytest
 import yaml
 
-from pnav import cli
-from pnav.navbench import barn, runner
-from pnav.navbench import episode as episode_module
-from pnav.navbench.barn import generate_barn_world
-from pnav.navbench.barnfile import write_barn_world
-from pnav.navbench.episode import Episode, Outcome
-from pnav.navbench.metrics import RunResult, barn_score, evaluate_run
-from pnav.navbench.robots import RobotFit, for_model, resolve_model, too_big
-from pnav.navbench.worldfile import load_suite, read_benchmark
+from pnav.bench.nav import barn, runner
+from pnav.bench.nav import stack_episode as episode_module
+from pnav.bench.nav.barn import generate_barn_world
+from pnav.bench.nav.barnfile import write_barn_world
+from pnav.bench.nav.robots import RobotFit, for_model, resolve_model, too_big
+from pnav.bench.nav.scores import RunResult, barn_score, evaluate_run
+from pnav.bench.nav.stack_episode import Episode, Outcome
+from pnav.bench.nav.worldfile import load_suite, read_benchmark
+from pnav.cli import program as cli
 from services.sim.world import load_world
 
 pytestmark = pytest.mark.timeout(60)

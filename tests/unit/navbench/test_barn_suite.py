@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from common.robotmodel import load_model
-from pnav.navbench import barn, worlds_cli
-from pnav.navbench.search import reference_path
-from pnav.navbench.worldfile import load_suite
+from pnav.bench.nav import barn, worlds_cli
+from pnav.bench.nav.search import reference_path
+from pnav.bench.nav.worldfile import load_suite
 from services.sim.world import load_world
 from tests.unit.navbench.test_barn_protocol import world_truth
 

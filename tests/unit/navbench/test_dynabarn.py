@@ -14,12 +14,12 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from pnav.navbench import dynabarn, render, worlds_cli
-from pnav.navbench.barn import BarnLayout
-from pnav.navbench.dynabarn import generate_dynabarn_world
-from pnav.navbench.dynabarnfile import write_dynabarn_world
-from pnav.navbench.robots import resolve_model
-from pnav.navbench.worldfile import load_suite, read_benchmark
+from pnav.bench.nav import dynabarn, render, worlds_cli
+from pnav.bench.nav.barn import BarnLayout
+from pnav.bench.nav.dynabarn import generate_dynabarn_world
+from pnav.bench.nav.dynabarnfile import write_dynabarn_world
+from pnav.bench.nav.robots import resolve_model
+from pnav.bench.nav.worldfile import load_suite, read_benchmark
 from services.sim.world import load_world
 
 pytestmark = pytest.mark.timeout(120)

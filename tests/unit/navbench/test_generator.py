@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pnav.navbench.automaton import AutomatonRule, neighbour_counts, smooth
-from pnav.navbench.generator import (
+from pnav.bench.nav.automaton import AutomatonRule, neighbour_counts, smooth
+from pnav.bench.nav.generator import (
     DEFAULT_LAYOUT,
     LEVELS,
     ORIGIN,
@@ -20,8 +20,8 @@ from pnav.navbench.generator import (
     generate_world,
     rasterize,
 )
-from pnav.navbench.search import astar, inflate, reference_path
-from pnav.navbench.worldfile import write_world
+from pnav.bench.nav.search import astar, inflate, reference_path
+from pnav.bench.nav.worldfile import write_world
 from services.sim.robot import BURGER
 from tests.unit.navbench.conftest import min_clearance
 

@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from pnav.navbench.metrics import (
+from pnav.bench.nav.scores import (
     RunResult,
     barn_score,
     default_time_limit,

@@ -12,10 +12,10 @@ import numpy.typing as npt
 import pytest
 import yaml
 
-from pnav.navbench import render
-from pnav.navbench.png import encode_png, write_png
-from pnav.navbench.render import draw_run, draw_world, render_run
-from pnav.navbench.worldfile import load_suite, read_benchmark
+from pnav.bench.nav import render
+from pnav.bench.nav.png import encode_png, write_png
+from pnav.bench.nav.render import draw_run, draw_world, render_run
+from pnav.bench.nav.worldfile import load_suite, read_benchmark
 from services.sim.mapserver import encode_pgm, map_yaml
 
 pytestmark = pytest.mark.timeout(20)

@@ -19,11 +19,11 @@ import pytest
 from common import bus
 from common.contract.migrate import schema_text
 from common.errors import UsageError
-from pnav import cli
-from pnav.navbench import compare, progress, report, runner
-from pnav.navbench import episode as episode_module
-from pnav.navbench.episode import Combo, Episode, Outcome
-from pnav.navbench.worldfile import BenchmarkWorld, load_suite
+from pnav.bench.nav import nav_report, progress, run_diff, runner
+from pnav.bench.nav import stack_episode as episode_module
+from pnav.bench.nav.stack_episode import Combo, Episode, Outcome
+from pnav.bench.nav.worldfile import BenchmarkWorld, load_suite
+from pnav.cli import program as cli
 from services.planner.meta import move_scenarios
 
 pytestmark = pytest.mark.timeout(60)
@@ -138,7 +138,7 @@ def test_a_stalled_run_is_a_failure_that_says_why(suite: list[BenchmarkWorld]) -
         False,
         0.0,
     )
-    assert any("stalled" in line for line in report.attention([rec]))
+    assert any("stalled" in line for line in nav_report.attention([rec]))
 
 
 def test_collisions_and_timeouts(suite: list[BenchmarkWorld]) -> None:
@@ -356,15 +356,15 @@ def test_compare_finds_the_runs_that_changed(suite: list[BenchmarkWorld]) -> Non
         runner.to_record(world, DIRECT, 0, "stack", Outcome("stalled", 9.0, path[:40])),
     ]
     before = [r.to_json() for r in now]
-    assert compare.compare(now, before)[-1] == (
+    assert run_diff.compare(now, before)[-1] == (
         "2 of 2 runs with the same outcome, 2 on the same path; largest time change 0.000 s"
     )
-    assert "the same path, point for point" in compare.compare(now, before)[0]
+    assert "the same path, point for point" in run_diff.compare(now, before)[0]
     arrival = now[0].result.time_s
     before[0]["time_s"] = arrival - 0.5
     before[0]["trajectory"] = [[t, x + 0.1, y] for t, x, y in before[0]["trajectory"]]
     before[1]["outcome"] = "success"
-    lines = compare.compare(now, before)
+    lines = run_diff.compare(now, before)
     assert f"time {arrival - 0.5:.3f} -> {round(arrival, 4):.3f} s (+0.500)" in lines[0]
     assert "DIFFERENT" not in lines[0]
 
@@ -376,7 +376,7 @@ def test_compare_finds_the_runs_that_changed(suite: list[BenchmarkWorld]) -> Non
     assert lines[-1] == (
         "1 of 2 runs with the same outcome, 1 on the same path; largest time change 0.500 s"
     )
-    assert compare.parted_m([], [[0.0, 1.0, 1.0]]) != compare.parted_m([], [])  # both NaN
+    assert run_diff.parted_m([], [[0.0, 1.0, 1.0]]) != run_diff.parted_m([], [])  # both NaN
 
 
 # --- the episode's own pure parts -----------------------------------------------------------

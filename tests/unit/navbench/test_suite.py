@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from pnav.navbench.generator import LEVELS, generate_world
-from pnav.navbench.search import reference_path
-from pnav.navbench.worldfile import load_suite, occupied_cells, read_benchmark, write_world
-from pnav.navbench.worlds_cli import world_header
+from pnav.bench.nav.generator import LEVELS, generate_world
+from pnav.bench.nav.search import reference_path
+from pnav.bench.nav.worldfile import load_suite, occupied_cells, read_benchmark, write_world
+from pnav.bench.nav.worlds_cli import world_header
 from services.sim.robot import BURGER
 from services.sim.world import load_world
 from tests.unit.navbench.conftest import min_clearance

@@ -9,9 +9,9 @@ import pytest
 import yaml
 
 from common.errors import WorldError
-from pnav.navbench.generator import generate_world
-from pnav.navbench.worldfile import load_suite, read_benchmark, write_world
-from pnav.navbench.worlds_cli import main
+from pnav.bench.nav.generator import generate_world
+from pnav.bench.nav.worldfile import load_suite, read_benchmark, write_world
+from pnav.bench.nav.worlds_cli import main
 from services.sim.world import load_world
 
 pytestmark = pytest.mark.timeout(30)

@@ -14,7 +14,7 @@ from common.contract import keys
 from common.engine import Engine
 from common.planner_core.scenario import MoveScenario
 from pnav.monolith.contract import MemoryContract
-from pnav.monolith.planner import MemoryPlannerSource
+from pnav.monolith.memory_planner import MemoryPlannerSource
 from pnav.monolith.strategies import shipped_strategies
 from services.planner import meta
 from services.planner.store import PlannerStore

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from common.bus import Notification
 from common.contract import keys
-from pnav.monolith.planner import MemoryPlannerSource
+from pnav.monolith.memory_planner import MemoryPlannerSource
 from services.planner.store import FAST_REFRESH_S, REFRESH_S
 from tests.unit.planner.harness import ROBOT, Planner
 

@@ -20,8 +20,8 @@ from common.bus import Notification
 from common.contract import keys
 from common.engine import Engine
 from pnav.monolith.contract import MemoryContract
+from pnav.monolith.memory_strategy import strategy_engine, user_command
 from pnav.monolith.strategies import shipped_strategies
-from pnav.monolith.strategy import strategy_engine, user_command
 
 Active = tuple[str, str | None, str, int | None] | None
 Treated = tuple[str, int, str, str]

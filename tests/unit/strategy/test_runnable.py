@@ -11,7 +11,7 @@ from common.contract import keys
 from common.contract.offers import Offers
 from common.engine import Engine
 from pnav.monolith.contract import MemoryContract
-from pnav.monolith.strategy import strategy_engine, user_command
+from pnav.monolith.memory_strategy import strategy_engine, user_command
 from services.strategy.commands import RobotState, decide
 from services.strategy.runnable import Needs, refusal
 
