@@ -27,7 +27,7 @@ from common.collision import collides_on_grid, collides_with_points, path_poses
 from common.footprint import Footprint
 from services.planner.grid import XY, PlanGrid
 from services.planner.obstacles import Points
-from services.planner.world import MapData
+from services.planner.world_model import MapData
 
 MAX_REFITS = 8  # collisions blocked and planned around before the circumscribed fallback
 FIT_MARGIN_M = 0.02  # clearance the polygon keeps from obstacles along the path, m

@@ -8,7 +8,7 @@ robot, started by the meta-planner's supervisor: one object that runs while it i
 the robot's planner scenario (a ``common.engine.Behaviour``). The rule stays here, not in
 common/, because everything it does is the planner's own: the target (routes.Target), the
 route and its progress (tracking.py), the planned_path rows (published_path.py), the robot's state
-(world.py) and the store's view (view.py). Per activation:
+(world_model.py) and the store's view (view.py). Per activation:
 
 1. acquisition: the newest odometry (at most every EVAL_PERIOD_S of sim time, unless a
    goal notification came or a recommendation is due by the cadence), the target (the active
@@ -44,7 +44,7 @@ from services.planner.routes import Target
 from services.planner.target import RuleKey, Spec, TargetRule
 from services.planner.tracking import Progress, Route, heading_error
 from services.planner.view import PlannerView
-from services.planner.world import RobotState
+from services.planner.world_model import RobotState
 
 logger = logging.getLogger("pnav.planner")
 

@@ -19,7 +19,7 @@ from common.contract.zones import Zone
 from common.db import Database
 from common.planner_core.scenario import RobotInfo
 from services.planner.published_path import PathRow
-from services.planner.world import MapRow, Station
+from services.planner.world_model import MapRow, Station
 
 ROBOTS_SQL = (
     "SELECT robot_id, world, max_linear_mps, max_angular_rps, footprint_radius_m, "

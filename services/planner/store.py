@@ -45,7 +45,7 @@ from services.planner.published_path import PathRow
 from services.planner.routes import Router, Target
 from services.planner.source import PlannerSource
 from services.planner.tracking import Progress
-from services.planner.world import MapData, RobotState, Station, World
+from services.planner.world_model import MapData, RobotState, Station, World
 
 logger = logging.getLogger("pnav.planner")
 

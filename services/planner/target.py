@@ -15,7 +15,7 @@ from typing import ClassVar, NamedTuple
 from common import log
 from common.engine.behaviour import Behaviour
 from services.planner.view import PlannerView
-from services.planner.world import RobotState
+from services.planner.world_model import RobotState
 
 logger = logging.getLogger("pnav.planner")
 

@@ -22,7 +22,7 @@ from common.contract import records
 from services.planner.published_path import empty_row
 from services.planner.target import RuleKey, Spec, TargetRule
 from services.planner.view import PlannerView
-from services.planner.world import RobotState
+from services.planner.world_model import RobotState
 
 logger = logging.getLogger("pnav.planner")
 

@@ -17,7 +17,7 @@ from common.planner_core.scenario import RobotInfo
 from services.planner.published_path import PathRow
 from services.planner.routes import Target
 from services.planner.tracking import Progress
-from services.planner.world import MapData, RobotState, Station
+from services.planner.world_model import MapData, RobotState, Station
 
 
 class Clocks(Protocol):

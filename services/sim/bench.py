@@ -17,7 +17,7 @@ from typing import Any
 
 from common.bus import pack
 from services.sim.sim import SimConfig, Simulation
-from services.sim.world import World
+from services.sim.world_spec import World
 
 # sim seconds between two commands to a robot: the decision service's re-issue period
 REISSUE_S = 0.1

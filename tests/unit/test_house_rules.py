@@ -198,10 +198,7 @@ KNOWN_COLLISIONS: dict[str, frozenset[str]] = {
     "engine": frozenset({"common/engine/engine.py", "pnav/bench/engine.py"}),
     "latency": frozenset({"pnav/bench/latency.py", "services/bridge/bench/latency.py"}),
     "nav2actions": frozenset({"pnav/bench/nav2actions.py", "pnav/ros2/nav2actions.py"}),
-    "provenance": frozenset({"pnav/bench/provenance.py", "services/dashboard/provenance.py"}),
-    "zones": frozenset(
-        {"common/contract/zones.py", "pnav/bench/zones.py", "services/bridge/zones.py"}
-    ),
+    "zones": frozenset({"common/contract/zones.py", "pnav/bench/zones.py"}),
     "report": frozenset(
         {
             "pnav/bench/faults/report.py",
@@ -210,19 +207,9 @@ KNOWN_COLLISIONS: dict[str, frozenset[str]] = {
             "services/bridge/bench/report.py",
         }
     ),
-    "rows": frozenset({"pnav/bench/faults/rows.py", "services/bridge/rows.py"}),
-    "world": frozenset(
-        {
-            "pnav/bench/faults/world.py",
-            "services/bridge/world.py",
-            "services/planner/world.py",
-            "services/sim/world.py",
-        }
-    ),
     "bench": frozenset({"services/controller/bench.py", "services/sim/bench.py"}),
     "compare": frozenset({"pnav/monolith/compare.py", "pnav/navbench/compare.py"}),
     "episode": frozenset({"pnav/monolith/episode.py", "pnav/navbench/episode.py"}),
-    "metrics": frozenset({"pnav/navbench/metrics.py", "services/dashboard/metrics.py"}),
     # the in-process reference's stand-ins, named after the service they stand in for
     "bridge": frozenset({"pnav/monolith/bridge.py", "services/bridge/bridge.py"}),
     "controller": frozenset(
@@ -232,18 +219,11 @@ KNOWN_COLLISIONS: dict[str, frozenset[str]] = {
     "stack": frozenset(
         {"common/stack.py", "pnav/monolith/stack.py", "services/bridge/bench/stack.py"}
     ),
-    # a common/ module and a service's (or plug-in's) own narrower one of the same noun
-    "battery": frozenset({"services/planner/battery.py", "services/sim/battery.py"}),
     "cli": frozenset({"pnav/cli.py", "pnav/learn/cli.py"}),
-    "clock": frozenset({"common/clock.py", "services/sim/clock.py"}),
-    "config": frozenset({"common/config.py", "examples/sql_controller/config.py"}),
+    # one concept in two places, kept on purpose: a package's own exceptions live in its
+    # errors module (the house rules), and a service's own PNAV_<SERVICE>_* tunables in its
+    # settings module, as its rows live in its store
     "errors": frozenset({"common/errors.py", "pnav_learned/errors.py"}),
-    "gate": frozenset({"services/dashboard/gate.py", "services/sim/gate.py"}),
-    "images": frozenset({"common/images.py", "services/bridge/images.py"}),
-    "limits": frozenset({"common/contract/limits.py", "services/bridge/limits.py"}),
-    "lockstep": frozenset({"common/lockstep.py", "services/sim/lockstep.py"}),
-    "messages": frozenset({"services/bridge/messages.py", "services/sim/messages.py"}),
-    "params": frozenset({"common/controller_core/params.py", "pnav_local/params.py"}),
     "settings": frozenset({"services/bridge/settings.py", "services/dashboard/settings.py"}),
 }
 

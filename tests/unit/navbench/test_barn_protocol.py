@@ -19,7 +19,7 @@ from pnav.navbench.barn import BarnLayout, field_boxes, generate_barn_world, tim
 from pnav.navbench.barnfile import write_barn_world
 from pnav.navbench.robots import RobotFit, resolve_model
 from pnav.navbench.worldfile import occupied_cells, read_benchmark
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 from tests.unit.navbench.conftest import min_clearance
 
 pytestmark = pytest.mark.timeout(120)

@@ -20,7 +20,7 @@ from pnav.navbench.episode import Episode, Outcome
 from pnav.navbench.metrics import RunResult, barn_score, evaluate_run
 from pnav.navbench.robots import RobotFit, for_model, resolve_model, too_big
 from pnav.navbench.worldfile import load_suite, read_benchmark
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 
 pytestmark = pytest.mark.timeout(60)
 
