@@ -28,7 +28,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Awaitable, Callable, Iterable
-from typing import Any
+from typing import Any, Unpack
 
 import services.planner.chargers as chargers
 import services.planner.obstacles as obstacles
@@ -36,7 +36,12 @@ from common import log
 from common.bus import Notification
 from common.contract import keys, records
 from common.contract.offers import Offers
-from common.contract.recommendations import Recommendation, recommendation_key
+from common.contract.recommendations import (
+    Recommendation,
+    SystemFields,
+    VelocityFields,
+    recommendation_key,
+)
 from common.freshness import FreshCache
 from common.images import GuardedStore, ImageGuard
 from common.planner_core.scenario import RobotInfo
@@ -263,8 +268,7 @@ class PlannerStore(GuardedStore):
     async def live_system(self, robot_id: str, command: str) -> float | None:
         return await self.source.live_system(robot_id, command, self.now())
 
-    async def recommend_velocity(self, robot_id: str, **row: Any) -> None:
-        # the keywords view.py declares for the rules, as Recommendation.velocity takes them
+    async def recommend_velocity(self, robot_id: str, **row: Unpack[VelocityFields]) -> None:
         rec = Recommendation.velocity(robot_id, **row)
         if self.outbox is not None:
             self.outbox.add(rec)
@@ -282,7 +286,7 @@ class PlannerStore(GuardedStore):
             )
         return self.outbox.flush
 
-    async def recommend_system(self, robot_id: str, **row: Any) -> int:
+    async def recommend_system(self, robot_id: str, **row: Unpack[SystemFields]) -> int:
         rec = Recommendation.system(robot_id, **row)
         return await self.source.recommend(rec)
 

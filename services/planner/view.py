@@ -9,10 +9,11 @@ however it likes. Target rules (the move scenarios, the battery rules) take a
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import Any, Protocol
+from typing import Any, Protocol, Unpack
 
 from common.contract import records
 from common.contract.offers import Offers
+from common.contract.recommendations import SystemFields, VelocityFields
 from common.planner_core.scenario import RobotInfo
 from services.planner.published_path import PathRow
 from services.planner.routes import Target
@@ -70,34 +71,11 @@ class Contract(Clocks, Protocol):
     async def live_system(self, robot_id: str, command: str) -> float | None:
         """Expiry of this robot's newest unexpired ``command`` recommendation, if any."""
 
-    async def recommend_velocity(
-        self,
-        robot_id: str,
-        *,
-        source: str,
-        priority: int,
-        linear: float,
-        angular: float,
-        stamp: float,
-        ttl_s: float,
-        reason: str,
-        inputs: dict[str, Any],
-    ) -> None:
+    async def recommend_velocity(self, robot_id: str, **row: Unpack[VelocityFields]) -> None:
         """Write a velocity recommendation (the service's store holds it until the end of
         the activation and writes the activation's rows in one statement)."""
 
-    async def recommend_system(
-        self,
-        robot_id: str,
-        *,
-        source: str,
-        priority: int,
-        command: str,
-        stamp: float,
-        ttl_s: float,
-        reason: str,
-        inputs: dict[str, Any],
-    ) -> int: ...
+    async def recommend_system(self, robot_id: str, **row: Unpack[SystemFields]) -> int: ...
 
     async def publish_path(self, path: PathRow) -> int:
         """Write a planned_path row and notify (CONTRACT.md, planned_path); its id."""
