@@ -32,18 +32,10 @@ class Clocks(Protocol):
         """The clock of the planner's own gates: wall s in a service, sim s in lockstep."""
 
 
-class Contract(Clocks, Protocol):
-    """The rows the target rules read and write, and what notifications told the store."""
-
-    def odometry_notes(self, robot_id: str) -> int:
-        """How many odometry notifications named the robot so far."""
-
-    def goal_news(self, robot: RobotState) -> bool:
-        """Whether a goal notification for the robot came since its goal was last read."""
-
-    async def active_goal(self, robot: RobotState) -> records.Goal | None:
-        """The robot's active goal, read again only after a goal notification for it (or
-        FAST_REFRESH_S after the last read)."""
+class Rows(Protocol):
+    """The newest sensor rows and the goal writes, as the rules see them and the source
+    (source.py) has them: the store answers from a row image where a fresh one came with a
+    notification, and from its source otherwise."""
 
     async def newest_odometry(self, robot_id: str) -> records.Odometry | None: ...
 
@@ -67,6 +59,20 @@ class Contract(Clocks, Protocol):
     ) -> bool:
         """Set a route's waypoint ``status`` (reached, failed) if it is pending and its goal
         active, and notify; whether it was."""
+
+
+class Contract(Clocks, Rows, Protocol):
+    """The rows the target rules read and write, and what notifications told the store."""
+
+    def odometry_notes(self, robot_id: str) -> int:
+        """How many odometry notifications named the robot so far."""
+
+    def goal_news(self, robot: RobotState) -> bool:
+        """Whether a goal notification for the robot came since its goal was last read."""
+
+    async def active_goal(self, robot: RobotState) -> records.Goal | None:
+        """The robot's active goal, read again only after a goal notification for it (or
+        FAST_REFRESH_S after the last read)."""
 
     async def live_system(self, robot_id: str, command: str) -> float | None:
         """Expiry of this robot's newest unexpired ``command`` recommendation, if any."""
