@@ -45,13 +45,15 @@ from __future__ import annotations
 
 import os
 import socket
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 from common.contract import keys
 from common.errors import ConfigError
 
 Env = Mapping[str, str]
+N = TypeVar("N", int, float)
 
 
 def _get(env: Env, name: str, default: str) -> str:
@@ -60,23 +62,20 @@ def _get(env: Env, name: str, default: str) -> str:
 
 
 def _float(env: Env, name: str, default: float, *, minimum: float = 0.0) -> float:
-    raw = _get(env, name, str(default))
-    try:
-        value = float(raw)
-    except ValueError:
-        raise ConfigError(f"{name}={raw!r} is not a number") from None
-    if not value >= minimum:
-        raise ConfigError(f"{name}={raw!r} must be at least {minimum}")
-    return value
+    return _parsed(env, name, default, float, "a number", minimum)
 
 
 def _int(env: Env, name: str, default: int, *, minimum: int = 0) -> int:
+    return _parsed(env, name, default, int, "a whole number", minimum)
+
+
+def _parsed(env: Env, name: str, default: N, parse: Callable[[str], N], what: str, minimum: N) -> N:
     raw = _get(env, name, str(default))
     try:
-        value = int(raw)
+        value = parse(raw)
     except ValueError:
-        raise ConfigError(f"{name}={raw!r} is not a whole number") from None
-    if value < minimum:
+        raise ConfigError(f"{name}={raw!r} is not {what}") from None
+    if not value >= minimum:  # NaN too
         raise ConfigError(f"{name}={raw!r} must be at least {minimum}")
     return value
 

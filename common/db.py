@@ -14,7 +14,7 @@ import logging
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping, Sequence
 from contextlib import asynccontextmanager
-from typing import Any
+from typing import Any, Protocol, TypeVar
 
 import asyncpg
 
@@ -150,6 +150,43 @@ def _redact(url: str) -> str:
     creds, host = rest.rsplit("@", 1)
     user = creds.split(":", 1)[0]
     return f"{scheme}://{user}:***@{host}" if ":" in creds else url
+
+
+# What a batch refused as data (a robot deleted meanwhile, a value out of a column's
+# range): its rows are written one by one instead, so one bad row costs only itself.
+REFUSED_AS_DATA = (asyncpg.IntegrityConstraintViolationError, asyncpg.DataError)
+
+
+class _OneRobots(Protocol):
+    @property
+    def robot_id(self) -> str: ...
+
+
+R = TypeVar("R", bound=_OneRobots)
+
+
+async def batch_or_each(
+    rows: Sequence[R],
+    batch: Callable[[], Awaitable[Sequence[int]]],
+    each: Callable[[R], Awaitable[int]],
+    what: str,
+    logger: logging.Logger,
+) -> list[int | None]:
+    """``batch()`` (``rows`` in one statement: their ids in order), or, when the database
+    refuses it as data (:data:`REFUSED_AS_DATA`), each row by ``each``: None for a row
+    refused too. Every refusal is logged on ``logger``, naming ``what`` the rows are."""
+    try:
+        return list(await batch())
+    except REFUSED_AS_DATA as exc:
+        logger.warning("%s batch refused (%r): writing its rows one by one", what, exc)
+    ids: list[int | None] = []
+    for row in rows:
+        try:
+            ids.append(await each(row))
+        except REFUSED_AS_DATA as exc:
+            logger.warning("%s row refused for %s: %r", what, row.robot_id, exc)
+            ids.append(None)
+    return ids
 
 
 class Changes:

@@ -36,7 +36,7 @@ from common.contract.records import LaserScan, Odometry, Robot
 from common.controller_core.scenario import Command, ControllerScenario
 from common.footprint import Footprint
 from common.scan import readings
-from pnav_local.params import DwaParams
+from pnav_local.dwa_params import DwaParams
 
 PRIORITY = 30
 

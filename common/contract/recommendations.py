@@ -10,16 +10,15 @@ robots; common.writebehind).
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
-from collections.abc import Mapping, Sequence
+from collections.abc import Awaitable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Final
-
-import asyncpg
+from typing import Any, Final, NotRequired, TypedDict, Unpack
 
 from common.contract import keys, tables
-from common.db import ASYNC_COMMIT, Database
+from common.db import ASYNC_COMMIT, Database, batch_or_each
 
 logger = logging.getLogger("pnav.contract")
 
@@ -48,9 +47,31 @@ FROM unnest({_ARRAYS})
      AS u({", ".join(RECOMMENDATION_COLUMNS)}), {ASYNC_COMMIT}
 RETURNING id, robot_id, source
 """
-# What a batch refused as data (a robot deleted meanwhile, a value a CHECK refuses): its
-# rows are written one by one instead, so one bad row costs only itself.
-_REFUSED = (asyncpg.IntegrityConstraintViolationError, asyncpg.DataError)
+
+
+class _Said(TypedDict):
+    """What every recommendation a scenario makes says besides its robot and its advice."""
+
+    source: str
+    priority: int
+    stamp: float  # sim time it was decided at
+    ttl_s: float  # valid until stamp + ttl_s
+    reason: str
+    inputs: NotRequired[dict[str, Any] | None]  # the rows it was derived from
+
+
+class VelocityFields(_Said):
+    """The keywords of a velocity recommendation (:meth:`Recommendation.velocity`, and
+    every writer that takes them on: :func:`recommend_velocity`, the planner's view)."""
+
+    linear: float
+    angular: float
+
+
+class SystemFields(_Said):
+    """The keywords of a system recommendation (:meth:`Recommendation.system`)."""
+
+    command: str
 
 
 @dataclass(frozen=True)
@@ -98,42 +119,22 @@ class Recommendation:
         )
 
     @classmethod
-    def velocity(
-        cls,
-        robot_id: str,
-        *,
-        source: str,
-        priority: int,
-        linear: float,
-        angular: float,
-        stamp: float,
-        ttl_s: float,
-        reason: str,
-        inputs: dict[str, Any] | None = None,
-    ) -> Recommendation:
+    def velocity(cls, robot_id: str, **f: Unpack[VelocityFields]) -> Recommendation:
         """A robot recommendation valid until ``stamp + ttl_s`` (sim time)."""
+        stamp = f["stamp"]
         return cls(
-            robot_id, "robot", source, priority, float(linear), float(angular), None,
-            stamp, stamp + ttl_s, inputs or {}, reason,
+            robot_id, "robot", f["source"], f["priority"], float(f["linear"]),
+            float(f["angular"]), None, stamp, stamp + f["ttl_s"], f.get("inputs") or {},
+            f["reason"],
         )  # fmt: skip
 
     @classmethod
-    def system(
-        cls,
-        robot_id: str,
-        *,
-        source: str,
-        priority: int,
-        command: str,
-        stamp: float,
-        ttl_s: float,
-        reason: str,
-        inputs: dict[str, Any] | None = None,
-    ) -> Recommendation:
+    def system(cls, robot_id: str, **f: Unpack[SystemFields]) -> Recommendation:
         """A system recommendation (e.g. CMD_BATTSAVE) valid until ``stamp + ttl_s``."""
+        stamp = f["stamp"]
         return cls(
-            robot_id, "system", source, priority, None, None, command,
-            stamp, stamp + ttl_s, inputs or {}, reason,
+            robot_id, "system", f["source"], f["priority"], None, None, f["command"],
+            stamp, stamp + f["ttl_s"], f.get("inputs") or {}, f["reason"],
         )  # fmt: skip
 
     def values(self) -> tuple[Any, ...]:
@@ -179,35 +180,29 @@ async def write_recommendations(db: Database, rows: Sequence[Recommendation]) ->
         return [await write_recommendation(db, rows[0])]
     columns = [list(column) for column in zip(*(row.values() for row in rows), strict=True)]
     columns[_INPUTS] = [json.dumps(inputs) for inputs in columns[_INPUTS]]
-    try:
-        ids = await db.write_rows(
+    images = [(row.robot_id, row.image()) for row in rows]
+
+    def batch() -> Awaitable[Sequence[int]]:
+        return db.write_rows(
             keys.COMMAND_RECOMMENDATION,
             _RECOMMEND_MANY,
             *columns,
-            images=[(row.robot_id, row.image()) for row in rows],
+            images=images,
             pair_on=("robot_id", "source"),
         )
-    except _REFUSED as exc:
-        logger.warning("recommendation batch refused (%r): writing its rows one by one", exc)
-        return [await _write_alone(db, row) for row in rows]
-    return list(ids)
+
+    return await batch_or_each(
+        rows, batch, functools.partial(write_recommendation, db), "recommendation", logger
+    )
 
 
-async def _write_alone(db: Database, row: Recommendation) -> int | None:
-    try:
-        return await write_recommendation(db, row)
-    except _REFUSED as exc:
-        logger.warning("recommendation for %s refused: %r", row.robot_id, exc)
-        return None
-
-
-async def recommend_velocity(db: Database, robot_id: str, **fields: Any) -> int:
+async def recommend_velocity(db: Database, robot_id: str, **fields: Unpack[VelocityFields]) -> int:
     """Write a robot recommendation valid until ``stamp + ttl_s`` (sim time) and notify,
     with the row's image; ``fields``: :meth:`Recommendation.velocity`'s keywords."""
     return await write_recommendation(db, Recommendation.velocity(robot_id, **fields))
 
 
-async def recommend_system(db: Database, robot_id: str, **fields: Any) -> int:
+async def recommend_system(db: Database, robot_id: str, **fields: Unpack[SystemFields]) -> int:
     """Write a system recommendation (e.g. CMD_BATTSAVE) and notify, with the row's image;
     ``fields``: :meth:`Recommendation.system`'s keywords."""
     return await write_recommendation(db, Recommendation.system(robot_id, **fields))

@@ -218,6 +218,18 @@ class Engine:
             self.counters.safety_run += len(first)
         return len(first)
 
+    def _capped(self, ran: int, max_rules: int, deadline: float) -> bool:
+        """Whether the activation stops here, at N rules run or past F (counted, and the
+        activation marked cut); asked only once a rule that is not a safety rule ran."""
+        if ran >= max_rules:
+            self.counters.capped_by_n += 1
+        elif self.clock() >= deadline:
+            self.counters.capped_by_f += 1
+        else:
+            return False
+        self.cut = True
+        return True
+
     async def _run_all(self, deadline: float) -> int:
         """The thesis' activation: rules from the head of ``current`` until N or F (the
         safety rules moved up behind the meta rules at the head, and uncut)."""
@@ -230,13 +242,7 @@ class Engine:
                 ran += await self._run_safety(None)
                 safety_ran = True
                 continue
-            if others and ran >= max_rules:
-                self.counters.capped_by_n += 1
-                self.cut = True
-                break
-            if others and self.clock() >= deadline:
-                self.counters.capped_by_f += 1
-                self.cut = True
+            if others and self._capped(ran, max_rules, deadline):
                 break
             await self.steps.run(current.popleft())
             ran += 1
@@ -265,13 +271,7 @@ class Engine:
             if robot is not None and robot not in focus:
                 passed.append(current.popleft())
                 continue
-            if others and ran >= max_rules:
-                self.counters.capped_by_n += 1
-                self.cut = True
-                break
-            if others and self.clock() >= deadline:
-                self.counters.capped_by_f += 1
-                self.cut = True
+            if others and self._capped(ran, max_rules, deadline):
                 break
             current.popleft()
             await self.steps.run(rule)

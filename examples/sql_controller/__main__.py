@@ -17,8 +17,8 @@ import sys
 import asyncpg
 import zenoh
 
-from examples.sql_controller.config import ConfigError, Settings
 from examples.sql_controller.controller import run
+from examples.sql_controller.environment import ConfigError, Settings
 
 logger = logging.getLogger("sql_controller")
 

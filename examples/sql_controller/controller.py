@@ -24,7 +24,7 @@ import asyncpg
 import zenoh
 
 from examples.sql_controller import store
-from examples.sql_controller.config import SERVICE, Settings
+from examples.sql_controller.environment import SERVICE, Settings
 from examples.sql_controller.leases import Leases
 from examples.sql_controller.policy import KNOWN, decide, param
 from examples.sql_controller.zenoh_io import (

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 
 import asyncpg
 
-from examples.sql_controller.config import SERVICE, Settings
+from examples.sql_controller.environment import SERVICE, Settings
 
 logger = logging.getLogger("sql_controller.leases")
 

@@ -21,7 +21,7 @@ from typing import Any
 import msgpack
 import zenoh
 
-from examples.sql_controller.config import Settings
+from examples.sql_controller.environment import Settings
 
 logger = logging.getLogger("sql_controller.zenoh")
 

@@ -30,7 +30,7 @@ from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
 from pnav.bench.figures import emit, machine
 from pnav_local.dwa import choose, command_for
-from pnav_local.params import DwaParams
+from pnav_local.dwa_params import DwaParams
 
 JACKAL = Robot("r1", 2.0, 4.0, 0.22, 270.0, max_linear_accel_mps2=10.0, max_angular_accel_rps2=20.0)
 BEAMS = 720

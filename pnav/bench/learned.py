@@ -28,7 +28,7 @@ from pnav_learned.drive import recommend
 from pnav_learned.features import FEATURES
 from pnav_learned.model import FORMAT, Model, load, parse
 from pnav_local.dwa import choose
-from pnav_local.params import DwaParams
+from pnav_local.dwa_params import DwaParams
 
 
 def random_model(hidden: tuple[int, ...] = (32, 32)) -> Model:

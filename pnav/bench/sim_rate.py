@@ -24,7 +24,7 @@ from common.bus import pack
 from common.errors import UsageError
 from services.sim.__main__ import build, sim_parser
 from services.sim.sim import SimConfig, Simulation
-from services.sim.world import World
+from services.sim.world_spec import World
 
 BENCH_WORLD = Path(__file__).resolve().parents[2] / "worlds" / "warehouse.yaml"
 

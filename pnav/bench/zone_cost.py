@@ -26,12 +26,12 @@ import numpy as np
 from common.contract.zones import KEEPOUT, SPEED_LIMIT, Zone
 from pnav.bench.figures import emit, machine
 from pnav.run.launcher import resolve_world
-from services.bridge.messages import LaserScan
 from services.bridge.safety import SafetyLayer, SafetyParams
+from services.bridge.sensor_payloads import LaserScan
 from services.planner.keepout import Keepouts
 from services.planner.path import plan_path
-from services.planner.world import MapData
-from services.sim.world import load_world
+from services.planner.world_model import MapData
+from services.sim.world_spec import load_world
 
 FOOTPRINT_M = 0.105  # the Burger's
 

@@ -31,7 +31,8 @@ from common.contract.limits import clamp
 from common.footprint import Footprint
 from pnav.bench.provenance_samples import origin_of
 from pnav.monolith.contract import MemoryContract, Row
-from services.bridge.messages import (
+from services.bridge.safety import LIMITED, STOPPED, UNCHECKED, SafetyLayer
+from services.bridge.sensor_payloads import (
     PARSERS,
     TABLE_OF_TOPIC,
     BatteryState,
@@ -40,7 +41,6 @@ from services.bridge.messages import (
     Odometry,
     SensorRecord,
 )
-from services.bridge.safety import LIMITED, STOPPED, UNCHECKED, SafetyLayer
 from services.bridge.settings import BridgeSettings
 from services.bridge.watchdog import Watchdog
 

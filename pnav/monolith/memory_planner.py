@@ -25,7 +25,7 @@ from pnav.monolith.contract import MemoryContract, Row
 from services.planner import meta
 from services.planner.published_path import PathRow
 from services.planner.store import PlannerStore
-from services.planner.world import MapRow, Station
+from services.planner.world_model import MapRow, Station
 
 
 def _strategy(row: Row) -> records.Strategy:

@@ -27,7 +27,7 @@ from pnav.monolith.memory_bridge import Applied
 from pnav.monolith.monolith_stack import MonolithStack
 from pnav.monolith.strategies import combo_strategy, shipped_strategies
 from services.sim.sim import SimConfig
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 
 
 @dataclass

@@ -40,9 +40,9 @@ from pnav.monolith.memory_bridge import Applied, Bridge
 from pnav.monolith.memory_controller import controller_engine
 from pnav.monolith.memory_decision import decision_engine
 from pnav.monolith.memory_planner import planner_engine
-from services.bridge.world import parse_world
+from services.bridge.world_message import parse_world
 from services.sim.sim import SimConfig, Simulation
-from services.sim.world import World
+from services.sim.world_spec import World
 
 GOAL_TOLERANCE_M = 0.15  # pnav.cli.stack_commands.set_goal's default, and the goal table's
 MAX_PASSES = 50  # engine passes in one step before the loop is deemed to spin

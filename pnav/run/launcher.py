@@ -71,7 +71,7 @@ class DashboardOptions:
 def check_world(world: Path, model: str | None) -> None:
     """Load the world as the sim will, with its robots' models: a bad world or model is a
     one-line UsageError now, not a sim that exits and is restarted over and over."""
-    from services.sim.world import load_world
+    from services.sim.world_spec import load_world
 
     load_world(world, model)
 

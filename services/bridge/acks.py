@@ -18,7 +18,7 @@ import zenoh
 from common import bus, lockstep
 from common.contract import keys
 from services.bridge.counters import Counters, RateLimitedLog
-from services.bridge.messages import Collision, SensorRecord
+from services.bridge.sensor_payloads import Collision, SensorRecord
 
 logger = logging.getLogger("pnav.bridge.acks")
 

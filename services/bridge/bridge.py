@@ -39,7 +39,10 @@ from common.trace import Tracer
 from services.bridge.acks import CollisionAcks
 from services.bridge.command_relay import CommandRelay
 from services.bridge.counters import Counters, RateLimitedLog
-from services.bridge.messages import (
+from services.bridge.ros2clock import Ros2Clock
+from services.bridge.ros2link import Ros2Link, native_topics
+from services.bridge.ros2map import Ros2Map
+from services.bridge.sensor_payloads import (
     UNKNOWN_ROBOT,
     LaserScan,
     MalformedMessage,
@@ -47,11 +50,8 @@ from services.bridge.messages import (
     SensorRecord,
     parse_sensor,
 )
-from services.bridge.ros2clock import Ros2Clock
-from services.bridge.ros2link import Ros2Link, native_topics
-from services.bridge.ros2map import Ros2Map
 from services.bridge.settings import BridgeSettings
-from services.bridge.world import World
+from services.bridge.world_message import World
 from services.bridge.world_sync import WorldSync
 from services.bridge.writer import SensorWriter
 

@@ -12,7 +12,7 @@ what the decision meant). Every row sent feeds the :class:`Watchdog`; a robot wh
 stream goes quiet for ``watchdog_s`` of sim time is sent one zero velocity
 (``command_id`` nil), and every known robot is sent one on shutdown.
 
-An image is first held to command2robot's rules and the ids the table can hold (images.py):
+An image is first held to command2robot's rules and the ids the table can hold (command_images.py):
 one that fails is counted, logged, and the table read instead: a forgery moves no robot.
 
 At start-up the newest rows already in the table are not replayed blindly: a row written
@@ -35,11 +35,11 @@ from common.clock import SimClock
 from common.contract import keys
 from common.contract.limits import clamp
 from common.tasks import cancel_and_wait
+from services.bridge.command_images import CommandImages
 from services.bridge.command_row import NEWEST, NEWEST_OF, Command
 from services.bridge.counters import Counters, RateLimitedLog
-from services.bridge.images import CommandImages
-from services.bridge.limits import RobotLimits
 from services.bridge.notes import SafetyNotes
+from services.bridge.robot_limits import RobotLimits
 from services.bridge.safety import LIMITED, STOPPED, UNCHECKED, SafetyLayer, Verdict
 from services.bridge.settings import BridgeSettings
 from services.bridge.watchdog import Watchdog

@@ -12,7 +12,7 @@ import asyncpg
 
 from common.contract import keys
 from common.footprint import Footprint
-from services.bridge.limits import Limits, limits_of
+from services.bridge.robot_limits import Limits, limits_of
 
 # LATERAL + LIMIT 1 walks the (robot_id, id DESC) index once per robot: the cost stays flat
 # however long command2robot grows (it is not a pruned sensor table).

@@ -43,7 +43,7 @@ class Counters:
     safety_stopped: int = 0
     safety_limited: int = 0
     safety_unchecked: int = 0
-    safety_zone_capped: int = 0  # of those, commands a speed zone capped (zones.py)
+    safety_zone_capped: int = 0  # of those, commands a speed zone capped (speed_zones.py)
     worlds_applied: int = 0
     worlds_unchanged: int = 0
     worlds_malformed: int = 0

@@ -29,8 +29,8 @@ from dataclasses import dataclass, field
 import asyncpg
 
 from common.outage import is_connection_error
-from services.bridge.messages import SensorRecord
-from services.bridge.rows import SensorTable
+from services.bridge.sensor_payloads import SensorRecord
+from services.bridge.sensor_tables import SensorTable
 
 logger = logging.getLogger("pnav.bridge.replay")
 

@@ -31,8 +31,8 @@ from typing import Any, Final
 
 import zenoh
 
-import services.bridge.messages as messages
 import services.bridge.ros2msgs as ros2msgs
+import services.bridge.sensor_payloads as messages
 from common import ros2types
 from common.contract import keys
 from common.contract import rmw_zenoh as rz
@@ -40,7 +40,7 @@ from common.robotlink import TWIST_STAMPED, RobotLinkSettings, RobotTopics
 from common.ros2node import Publisher, Ros2Node, type_of_key
 from common.trace import CMD_VEL, Tracer
 from services.bridge.counters import Counters
-from services.bridge.messages import MalformedMessage, SensorRecord
+from services.bridge.sensor_payloads import MalformedMessage, SensorRecord
 
 logger = logging.getLogger("pnav.bridge.ros2")
 

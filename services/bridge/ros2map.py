@@ -28,14 +28,14 @@ from typing import Any, Final
 
 import numpy as np
 
-import services.bridge.messages as messages
+import services.bridge.sensor_payloads as messages
 from common import ros2types
 from common.contract import keys
 from common.contract import rmw_zenoh as rz
 from common.db import Database
 from common.ros2node import Ros2Node, type_of_key
-from services.bridge.messages import MalformedMessage
-from services.bridge.world import MAX_CELLS
+from services.bridge.sensor_payloads import MalformedMessage
+from services.bridge.world_message import MAX_CELLS
 
 logger = logging.getLogger("pnav.bridge.ros2")
 

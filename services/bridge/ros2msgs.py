@@ -27,7 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common import ros2types
-from services.bridge.messages import NOT_FINITE, MalformedMessage
+from services.bridge.sensor_payloads import NOT_FINITE, MalformedMessage
 
 # the beams a ROS scan's ranges may hold that the contract's row has no value of (REP 117)
 NAN: Final = "nan"  # an invalid measurement

@@ -58,8 +58,8 @@ from common.sweep import (
     stopping_m,
     turn_sweep,
 )
-from services.bridge.messages import LaserScan
-from services.bridge.zones import Cap, SpeedZones
+from services.bridge.sensor_payloads import LaserScan
+from services.bridge.speed_zones import Cap, SpeedZones
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -160,7 +160,7 @@ class SafetyLayer:
         self.params = params
         self.scans: dict[str, Scan] = {}
         self.sent: dict[str, float] = {}  # the last linear speed sent, per robot
-        # the speed zones and each robot's pose (zones.py): caps applied before the scan's
+        # the speed zones and each robot's pose (speed_zones.py): caps applied before the scan's
         self.zones = SpeedZones()
 
     def scan(self, record: LaserScan) -> None:

@@ -2,9 +2,10 @@
 
 The sim answers a query on ``pnav/sim/world`` and republishes the world every second or so.
 :class:`WorldSync` asks once at start (and again every ``retry_s`` until a world is in),
-listens to the republications, and upserts the rows (:func:`~services.bridge.world.upsert_world`)
-only when the content differs from what it last applied: a byte-identical payload is skipped
-without even decoding it, a re-encoded but equal one after decoding. A refused payload is
+listens to the republications, and upserts the rows
+(:func:`~services.bridge.world_message.upsert_world`) only when the content differs from what
+it last applied: a byte-identical payload is skipped without even decoding it, a re-encoded
+but equal one after decoding. A refused payload is
 remembered too, so a sim republishing a broken world costs a byte comparison per second.
 """
 
@@ -23,8 +24,8 @@ from common.db import Database
 from common.lockstep import Ledger
 from common.tasks import cancel_and_wait
 from services.bridge.counters import Counters, RateLimitedLog
-from services.bridge.messages import MalformedMessage
-from services.bridge.world import World, parse_world, upsert_world
+from services.bridge.sensor_payloads import MalformedMessage
+from services.bridge.world_message import World, parse_world, upsert_world
 
 logger = logging.getLogger("pnav.bridge.world")
 

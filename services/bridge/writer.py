@@ -4,7 +4,7 @@ Latency first: one long-lived task per table waits for rows; the first row after
 spell is inserted on the next loop turn, alone. Rows that arrive while an INSERT is in
 flight wait for it and then go together in the next one, so the writer keeps up with any
 rate by growing its batches rather than its queue. Every batch is ONE statement per table
-for every robot in it (:mod:`services.bridge.rows`), prepared once per connection.
+for every robot in it (:mod:`services.bridge.sensor_tables`), prepared once per connection.
 
 After the INSERT (autocommitted, so already visible) the writer publishes one notification
 per robot in the batch carrying that robot's newest id and that row's image
@@ -37,9 +37,9 @@ from common.db import create_pool
 from common.errors import ConnectionFailure
 from common.tasks import cancel_and_wait
 from services.bridge.counters import Counters, RateLimitedLog
-from services.bridge.messages import SensorRecord
 from services.bridge.replay import Replay
-from services.bridge.rows import SENSOR_TABLES, SensorTable, newest_per_robot
+from services.bridge.sensor_payloads import SensorRecord
+from services.bridge.sensor_tables import SENSOR_TABLES, SensorTable, newest_per_robot
 
 logger = logging.getLogger("pnav.bridge.writer")
 

@@ -38,6 +38,7 @@ import asyncio
 import logging
 import time
 from collections.abc import Awaitable, Callable, Iterable
+from typing import Any
 
 import asyncpg
 
@@ -81,6 +82,17 @@ def _scan_id(pair: ScanAndOdometry) -> int | None:
 
 def _path_id(path: PlannedPath | None) -> int | None:
     return path.id if path is not None else None
+
+
+def _announce(
+    cache: FreshCache[str, Any], note: Notification, image: Callable[[str, Notification], bool]
+) -> None:
+    """A row of ``cache``'s table changed: every robot's entry is stale when the note names
+    no robot, else that robot's, unless ``image`` took the row from the note."""
+    if note.robot is None:
+        cache.announce_all()
+    elif not image(note.robot, note):
+        cache.announce(note.robot, note.id)
 
 
 class ControllerStore(GuardedStore):
@@ -156,18 +168,12 @@ class ControllerStore(GuardedStore):
     def note(self, note: Notification) -> None:
         """A change notification (on the event loop, before the engine wakes, if it does)."""
         if note.table == keys.LASER_SCAN:
-            if note.robot is None:
-                self.scans.announce_all()
-            elif not self._scan_image(note.robot, note):
-                self.scans.announce(note.robot, note.id)
+            _announce(self.scans, note, self._scan_image)
         elif note.table == keys.ODOMETRY:
             if note.robot is not None:
                 self._odometry_image(note.robot, note)
         elif note.table == keys.PLANNED_PATH:
-            if note.robot is None:
-                self.paths.announce_all()
-            elif not self._path_image(note.robot, note):
-                self.paths.announce(note.robot, note.id)
+            _announce(self.paths, note, self._path_image)
         elif note.table == keys.MODEL:
             self.models.announce(keys.MODEL)
         elif note.table in _META_TABLES or not note.table:

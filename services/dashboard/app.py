@@ -25,7 +25,7 @@ from starlette.routing import BaseRoute, Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-import services.dashboard.provenance as provenance
+import services.dashboard.decision_provenance as provenance
 from common.contract import keys, limits, zones
 from common.errors import ConnectionFailure
 from services.dashboard.gate import LOOPBACK_NAMES, AllowedHosts, Gate

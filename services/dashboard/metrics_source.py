@@ -1,4 +1,4 @@
-"""What /metrics reads from the contract tables: the SQL of services/dashboard/metrics.py.
+"""What /metrics reads from the contract tables: the SQL of services/dashboard/stack_metrics.py.
 
 Every read is a plain SELECT a foreign client may make (CONTRACT.md): ``engine_stats``,
 the open ``robot_lease`` rows whose holder still holds its advisory lock (``pg_locks``, as

@@ -30,8 +30,8 @@ from common.runtime import Runtime, run_service
 from services.dashboard.app import create_app
 from services.dashboard.gate import AllowedHosts
 from services.dashboard.hub import Hub
-from services.dashboard.metrics import Metrics, MetricsConfig
 from services.dashboard.settings import DashboardSettings
+from services.dashboard.stack_metrics import Metrics, MetricsConfig
 from services.dashboard.store import DashboardStore, PgDashboardSource
 
 SERVICE = "dashboard"

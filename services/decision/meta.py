@@ -35,8 +35,7 @@ from services.decision.arbitration import (
     decide_robot,
     decide_system,
 )
-from services.decision.robot_command import IssueRobotCommand
-from services.decision.system_command import IssueSystemCommand
+from services.decision.scenario import IssueRobotCommand, IssueSystemCommand
 from services.decision.view import DecisionView
 
 

@@ -14,16 +14,15 @@ are ONE statement (:data:`WRITE_COMMANDS2ROBOT_SQL`, one commit for all of them)
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import Awaitable, Sequence
 from typing import Any, Final, Protocol
-
-import asyncpg
 
 from common.contract import keys
 from common.contract.recommendations import Recommendation
-from common.db import Database
+from common.db import Database, batch_or_each
 from services.decision.arbitration import COMMAND2ROBOT, Issued, RobotDecision, SystemDecision
 
 logger = logging.getLogger("pnav.decision")
@@ -133,10 +132,6 @@ WITH decision AS (
 SELECT id, robot_id FROM decision
 """
 
-# What a batch refused as data (a robot deleted meanwhile, a value out of a column's
-# range): the rows are written one by one instead, so one bad row costs only itself.
-_REFUSED = (asyncpg.IntegrityConstraintViolationError, asyncpg.DataError)
-
 
 def commands_args(ds: Sequence[RobotDecision]) -> list[Any]:
     """The column arrays of :data:`WRITE_COMMANDS2ROBOT_SQL` for ``ds``."""
@@ -149,25 +144,15 @@ async def write_robot_commands(db: Database, ds: Sequence[RobotDecision]) -> lis
     ``ds``; None for a row the database refused (then written one by one; logged)."""
     if len(ds) == 1:
         return [await write_robot_command(db, ds[0])]
-    try:
-        ids = await db.write_rows(
-            keys.COMMAND2ROBOT,
-            WRITE_COMMANDS2ROBOT_SQL,
-            *commands_args(ds),
-            images=[(d.robot_id, d.image()) for d in ds],
-        )
-    except _REFUSED as exc:
-        logger.warning("command batch refused (%r): writing its rows one by one", exc)
-        return [await _write_alone(db, d) for d in ds]
-    return list(ids)
+    args = commands_args(ds)
+    images = [(d.robot_id, d.image()) for d in ds]
 
+    def batch() -> Awaitable[Sequence[int]]:
+        return db.write_rows(keys.COMMAND2ROBOT, WRITE_COMMANDS2ROBOT_SQL, *args, images=images)
 
-async def _write_alone(db: Database, d: RobotDecision) -> int | None:
-    try:
-        return await write_robot_command(db, d)
-    except _REFUSED as exc:
-        logger.warning("command2robot row refused for %s: %r", d.robot_id, exc)
-        return None
+    return await batch_or_each(
+        ds, batch, functools.partial(write_robot_command, db), "command2robot", logger
+    )
 
 
 async def write_system_command(db: Database, d: SystemDecision) -> int:

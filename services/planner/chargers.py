@@ -7,7 +7,7 @@ import math
 
 from common import log
 from services.planner.routes import Router
-from services.planner.world import RobotState, Station, World
+from services.planner.world_model import RobotState, Station, World
 
 logger = logging.getLogger("pnav.planner")
 

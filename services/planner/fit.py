@@ -27,7 +27,7 @@ from common.collision import collides_on_grid, collides_with_points, path_poses
 from common.footprint import Footprint
 from services.planner.grid import XY, PlanGrid
 from services.planner.obstacles import Points
-from services.planner.world import MapData
+from services.planner.world_model import MapData
 
 MAX_REFITS = 8  # collisions blocked and planned around before the circumscribed fallback
 FIT_MARGIN_M = 0.02  # clearance the polygon keeps from obstacles along the path, m
@@ -112,14 +112,4 @@ def _blocked_at(grid: PlanGrid, pose: Pose) -> PlanGrid:
     blocked = grid.blocked.copy()
     blocked[max(0, row - 1) : row + 2, max(0, col - 1) : col + 2] = True
     clearance = None if grid.clearance is None else np.array(grid.clearance, copy=True)
-    return PlanGrid(
-        blocked,
-        grid.resolution,
-        grid.origin_x,
-        grid.origin_y,
-        grid.origin_yaw,
-        clearance=clearance,
-        inflation_m=grid.inflation_m,
-        cost_radius_m=grid.cost_radius_m,
-        cost_weight=grid.cost_weight,
-    )
+    return grid.with_cells(blocked, clearance)

@@ -130,6 +130,20 @@ class PlanGrid:
     def costed(self) -> bool:
         return self.clearance is not None and self.cost_weight > 0.0 and self.cost_radius_m > 0.0
 
+    def with_cells(self, blocked: BoolGrid, clearance: FloatGrid | None) -> PlanGrid:
+        """This grid's frame, inflation and costs over other cells (its caches not copied)."""
+        return PlanGrid(
+            blocked,
+            self.resolution,
+            self.origin_x,
+            self.origin_y,
+            self.origin_yaw,
+            clearance=clearance,
+            inflation_m=self.inflation_m,
+            cost_radius_m=self.cost_radius_m,
+            cost_weight=self.cost_weight,
+        )
+
     def to_cell(self, x: float, y: float) -> tuple[float, float]:
         """World point -> fractional (col, row); cell (i, j) spans [i, i+1) x [j, j+1)."""
         dx, dy = x - self.origin_x, y - self.origin_y
@@ -258,14 +272,4 @@ def with_obstacles(grid: PlanGrid, points: np.ndarray[Any, np.dtype[np.float64]]
         clearance = clearance.copy()
         near = np.minimum(distance * grid.resolution, max(grid.inflation_m, grid.cost_radius_m))
         np.minimum(clearance[r0:r1, c0:c1], near, out=clearance[r0:r1, c0:c1])
-    return PlanGrid(
-        blocked,
-        grid.resolution,
-        grid.origin_x,
-        grid.origin_y,
-        grid.origin_yaw,
-        clearance=clearance,
-        inflation_m=grid.inflation_m,
-        cost_radius_m=grid.cost_radius_m,
-        cost_weight=grid.cost_weight,
-    )
+    return grid.with_cells(blocked, clearance)

@@ -30,13 +30,13 @@ from common.contract import keys, offers, records
 from common.engine import Engine, Rule, Supervisor
 from common.planner_core.scenario import SCENARIO_GROUP, MoveScenario
 from common.plugins import load_scenarios
-from services.planner.battery import BatteryCheck, ChargeComplete
+from services.planner.battery_rules import BatteryCheck, ChargeComplete
 from services.planner.recovery_rule import Recovery
 from services.planner.scenario import MoveRule, move_rule
 from services.planner.target import RuleKey, Spec, TargetRule
 from services.planner.unrunnable import Unrunnable
 from services.planner.view import PlannerStoreView, PlannerView
-from services.planner.world import RobotState
+from services.planner.world_model import RobotState
 
 logger = logging.getLogger("pnav.planner")
 

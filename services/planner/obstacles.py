@@ -33,7 +33,7 @@ import numpy as np
 from common.contract import records
 
 if TYPE_CHECKING:
-    from services.planner.world import RobotState, World
+    from services.planner.world_model import RobotState, World
 
 SEEN_RANGE_M = 4.0  # lidar hits farther than this are not used (pose error grows with range)
 UNMAPPED_M = 0.15  # a hit farther than this from every mapped obstacle is an unmapped one

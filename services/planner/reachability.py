@@ -30,7 +30,7 @@ import services.planner.keepout as keepout
 from common.contract.zones import Zone
 from services.planner.grid import XY, PlanGrid, clearance_cells
 from services.planner.path import SNAP_RADIUS_M, nearest_free
-from services.planner.world import MapData
+from services.planner.world_model import MapData
 
 
 def _xy(x: float, y: float) -> str:

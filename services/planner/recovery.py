@@ -25,7 +25,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from services.planner.battery import number
+from services.planner.battery_rules import number
 
 WATCH, BACK_UP, ROTATE, FAILED = "watch", "back_up", "rotate", "failed"
 

@@ -33,7 +33,7 @@ from services.planner.recovery import NOTHING, Action, Machine, Observation, Rec
 from services.planner.scenario import ODOM_MAX_AGE_S
 from services.planner.target import RuleKey, Spec, TargetRule
 from services.planner.view import PlannerView
-from services.planner.world import RobotState
+from services.planner.world_model import RobotState
 
 logger = logging.getLogger("pnav.planner")
 
@@ -189,9 +189,8 @@ class Recovery(TargetRule):
 
     async def _fail(self, odom: records.Odometry, goal: records.Goal, why: str) -> None:
         """Give the goal up with ``why`` (only if it is still active) and stop the robot."""
-        if not await self.view.mark_failed(goal.id, self.robot_id, why, self.sim_now):
+        if not await self.fail_goal(goal.id, why, self.sim_now):
             return  # superseded or cancelled meanwhile: not ours to close
-        self._log("goal failed", goal=goal.id, why=why)
         reason = f"goal {goal.id} failed: {why}: stop"
         await self._recommend(odom, goal, 0.0, 0.0, reason, STOP_VALIDITY_S)
 
@@ -205,16 +204,8 @@ class Recovery(TargetRule):
         ttl_s: float = VALIDITY_S,
     ) -> None:
         inputs: dict[str, Any] = {"odometry": odom.id, "odom_stamp": odom.stamp, "goal": goal.id}
-        await self.view.recommend_velocity(
-            self.robot_id,
-            source=self.scenario,
-            priority=PRIORITY,
-            linear=linear,
-            angular=angular,
-            stamp=odom.stamp,
-            ttl_s=ttl_s,
-            reason=reason,
-            inputs=inputs,
+        await self.recommend_move(
+            odom, linear, angular, reason, inputs, priority=PRIORITY, ttl_s=ttl_s
         )
 
     def _log(self, message: str, **fields: Any) -> None:

@@ -30,7 +30,7 @@ from services.planner.keepout import zones_key
 from services.planner.obstacles import Points, Seen, buckets, known, recent
 from services.planner.path import path_length, plan_path, with_obstacles
 from services.planner.tracking import Progress, Route, follow
-from services.planner.world import RobotState, Station, World, inflation_m
+from services.planner.world_model import RobotState, Station, World, inflation_m
 
 logger = logging.getLogger("pnav.planner")
 

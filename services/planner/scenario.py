@@ -8,7 +8,7 @@ robot, started by the meta-planner's supervisor: one object that runs while it i
 the robot's planner scenario (a ``common.engine.Behaviour``). The rule stays here, not in
 common/, because everything it does is the planner's own: the target (routes.Target), the
 route and its progress (tracking.py), the planned_path rows (published_path.py), the robot's state
-(world.py) and the store's view (view.py). Per activation:
+(world_model.py) and the store's view (view.py). Per activation:
 
 1. acquisition: the newest odometry (at most every EVAL_PERIOD_S of sim time, unless a
    goal notification came or a recommendation is due by the cadence), the target (the active
@@ -44,7 +44,7 @@ from services.planner.routes import Target
 from services.planner.target import RuleKey, Spec, TargetRule
 from services.planner.tracking import Progress, Route, heading_error
 from services.planner.view import PlannerView
-from services.planner.world import RobotState
+from services.planner.world_model import RobotState
 
 logger = logging.getLogger("pnav.planner")
 
@@ -344,16 +344,8 @@ class MoveRule(TargetRule, MoveScenario):
         """The map proves the goal unreachable: mark it failed, recommend one stop."""
         self.dropped.add(target.key)
         assert target.goal_id is not None  # only goals fail
-        if not await self.view.mark_failed(target.goal_id, self.robot_id, why, self.sim_now):
+        if not await self.fail_goal(target.goal_id, why, self.sim_now):
             return  # superseded or cancelled meanwhile: not ours to close
-        log.event(
-            logger,
-            logging.WARNING,
-            "goal failed",
-            robot=self.robot_id,
-            goal=target.goal_id,
-            why=why,
-        )
         self.said = Said(odom.stamp, target.key, Movement(0.0, 0.0, False))
         await self._recommend(odom, target, 0.0, 0.0, f"{target.label} failed: {why}: stop")
 
@@ -364,16 +356,8 @@ class MoveRule(TargetRule, MoveScenario):
         strategy = self.robot.strategy if self.robot else None
         if strategy is not None:
             inputs["strategy"] = strategy.code
-        await self.view.recommend_velocity(
-            self.robot_id,
-            source=self.scenario,
-            priority=PRIORITY,
-            linear=linear,
-            angular=angular,
-            stamp=odom.stamp,
-            ttl_s=VALIDITY_S,
-            reason=reason,
-            inputs=inputs,
+        await self.recommend_move(
+            odom, linear, angular, reason, inputs, priority=PRIORITY, ttl_s=VALIDITY_S
         )
 
     def _reason(self, move: Movement, error: float, progress: Progress, target: Target) -> str:

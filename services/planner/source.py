@@ -19,7 +19,8 @@ from common.contract.zones import Zone
 from common.db import Database
 from common.planner_core.scenario import RobotInfo
 from services.planner.published_path import PathRow
-from services.planner.world import MapRow, Station
+from services.planner.view import Rows
+from services.planner.world_model import MapRow, Station
 
 ROBOTS_SQL = (
     "SELECT robot_id, world, max_linear_mps, max_angular_rps, footprint_radius_m, "
@@ -52,7 +53,7 @@ LIVE_SYSTEM_SQL = (
 )
 
 
-class PlannerSource(Protocol):
+class PlannerSource(Rows, Protocol):
     """The planner's reads and writes of the contract, typed (CONTRACT.md has the tables)."""
 
     async def robots(self) -> list[RobotInfo]: ...
@@ -75,26 +76,6 @@ class PlannerSource(Protocol):
     ) -> records.Goal | None:
         """The robot's active goal with its route (``known``: as read last; its waypoints
         are kept while their count is unchanged)."""
-
-    async def newest_odometry(self, robot_id: str) -> records.Odometry | None: ...
-
-    async def newest_scan(self, robot_id: str) -> records.LaserScan | None: ...
-
-    async def newest_battery(self, robot_id: str) -> records.Battery | None: ...
-
-    async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
-        """Set the goal 'reached' if it is still active, and notify; whether it was."""
-
-    async def mark_failed(
-        self, goal_id: int, robot_id: str, reason: str, stamp: float, strategy: str | None = None
-    ) -> bool:
-        """Set the goal 'failed' with ``reason`` if it is still active (and, with ``strategy``,
-        the robot's active strategy is that one), and notify."""
-
-    async def mark_waypoint(
-        self, goal_id: int, seq: int, robot_id: str, status: str, reason: str | None, stamp: float
-    ) -> bool:
-        """Set a pending waypoint of an active goal ``status``, and notify; whether it was."""
 
     async def live_system(self, robot_id: str, command: str, now: float) -> float | None:
         """The newest expiry after ``now`` of the robot's ``command`` recommendations."""

@@ -28,7 +28,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Awaitable, Callable, Iterable
-from typing import Any
+from typing import Any, TypeVar, Unpack
 
 import services.planner.chargers as chargers
 import services.planner.obstacles as obstacles
@@ -36,7 +36,12 @@ from common import log
 from common.bus import Notification
 from common.contract import keys, records
 from common.contract.offers import Offers
-from common.contract.recommendations import Recommendation, recommendation_key
+from common.contract.recommendations import (
+    Recommendation,
+    SystemFields,
+    VelocityFields,
+    recommendation_key,
+)
 from common.freshness import FreshCache
 from common.images import GuardedStore, ImageGuard
 from common.planner_core.scenario import RobotInfo
@@ -45,9 +50,11 @@ from services.planner.published_path import PathRow
 from services.planner.routes import Router, Target
 from services.planner.source import PlannerSource
 from services.planner.tracking import Progress
-from services.planner.world import MapData, RobotState, Station, World
+from services.planner.world_model import MapData, RobotState, Station, World
 
 logger = logging.getLogger("pnav.planner")
+
+R = TypeVar("R")
 
 REFRESH_S = 2.0  # re-read robots, maps and stations at least this often (store clock)
 # Re-read the active strategies, and each robot's active goal, when a notification says they
@@ -229,10 +236,20 @@ class PlannerStore(GuardedStore):
             self._routes_changed.discard(robot_id)
         return await self._goals.get(robot_id, lambda: self.source.active_goal(robot_id, known))
 
+    def _kept(
+        self, images: dict[str, tuple[R, float] | None], robot_id: str, max_age_s: float
+    ) -> R | None:
+        """The newest row as its notification carried it, while it is younger than
+        ``max_age_s`` (wall or lockstep s); None: read the source."""
+        image = images.get(robot_id)
+        if image is not None and self._clock() - image[1] < max_age_s:
+            return image[0]
+        return None
+
     async def newest_odometry(self, robot_id: str) -> records.Odometry | None:
-        image = self._odometry.get(robot_id)
-        if image is not None and self._clock() - image[1] < FAST_REFRESH_S:
-            return image[0]  # the newest row, as its notification carried it
+        odometry = self._kept(self._odometry, robot_id, FAST_REFRESH_S)
+        if odometry is not None:
+            return odometry
         self.odometry_reads += 1
         return await self.source.newest_odometry(robot_id)
 
@@ -240,9 +257,9 @@ class PlannerStore(GuardedStore):
         return await self.source.newest_scan(robot_id)
 
     async def newest_battery(self, robot_id: str) -> records.Battery | None:
-        image = self._battery.get(robot_id)
-        if image is not None and self._clock() - image[1] < REFRESH_S:
-            return image[0]  # the newest row, as its notification carried it
+        battery = self._kept(self._battery, robot_id, REFRESH_S)
+        if battery is not None:
+            return battery
         self.battery_reads += 1
         return await self.source.newest_battery(robot_id)
 
@@ -263,8 +280,7 @@ class PlannerStore(GuardedStore):
     async def live_system(self, robot_id: str, command: str) -> float | None:
         return await self.source.live_system(robot_id, command, self.now())
 
-    async def recommend_velocity(self, robot_id: str, **row: Any) -> None:
-        # the keywords view.py declares for the rules, as Recommendation.velocity takes them
+    async def recommend_velocity(self, robot_id: str, **row: Unpack[VelocityFields]) -> None:
         rec = Recommendation.velocity(robot_id, **row)
         if self.outbox is not None:
             self.outbox.add(rec)
@@ -282,7 +298,7 @@ class PlannerStore(GuardedStore):
             )
         return self.outbox.flush
 
-    async def recommend_system(self, robot_id: str, **row: Any) -> int:
+    async def recommend_system(self, robot_id: str, **row: Unpack[SystemFields]) -> int:
         rec = Recommendation.system(robot_id, **row)
         return await self.source.recommend(rec)
 

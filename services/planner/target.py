@@ -10,12 +10,13 @@ activation, so a new strategy always starts from a blank rule.
 from __future__ import annotations
 
 import logging
-from typing import ClassVar, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 from common import log
+from common.contract import records
 from common.engine.behaviour import Behaviour
 from services.planner.view import PlannerView
-from services.planner.world import RobotState
+from services.planner.world_model import RobotState
 
 logger = logging.getLogger("pnav.planner")
 
@@ -48,4 +49,43 @@ class TargetRule(Behaviour[RuleKey, Spec]):
     def terminate(self, why: str) -> None:
         log.event(
             logger, logging.INFO, "planner rule ended", robot=self.robot_id, kind=self.kind, why=why
+        )
+
+    async def fail_goal(
+        self, goal_id: int, why: str, stamp: float, strategy: str | None = None
+    ) -> bool:
+        """Mark the goal failed with ``why`` and say so; False, saying nothing, if it was no
+        longer active (superseded or cancelled meanwhile: not ours to close) or, with
+        ``strategy``, the robot's strategy is no longer that one."""
+        if not await self.view.mark_failed(goal_id, self.robot_id, why, stamp, strategy):
+            return False
+        said: dict[str, Any] = {"goal": goal_id}
+        if strategy is not None:
+            said["strategy"] = strategy
+        log.event(logger, logging.WARNING, "goal failed", robot=self.robot_id, **said, why=why)
+        return True
+
+    async def recommend_move(
+        self,
+        odom: records.Odometry,
+        linear: float,
+        angular: float,
+        reason: str,
+        inputs: dict[str, Any],
+        *,
+        priority: int,
+        ttl_s: float,
+    ) -> None:
+        """Recommend a velocity from this rule (its scenario the source), stamped with the
+        odometry it was decided from and valid ``ttl_s`` sim seconds."""
+        await self.view.recommend_velocity(
+            self.robot_id,
+            source=self.scenario,
+            priority=priority,
+            linear=linear,
+            angular=angular,
+            stamp=odom.stamp,
+            ttl_s=ttl_s,
+            reason=reason,
+            inputs=inputs,
         )

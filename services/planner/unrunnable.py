@@ -13,18 +13,14 @@ the scenario is offered again (the meta-planner's spec changes).
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Iterator
 from typing import ClassVar
 
-from common import log
 from common.contract import records
 from services.planner.published_path import empty_row
 from services.planner.target import RuleKey, Spec, TargetRule
 from services.planner.view import PlannerView
-from services.planner.world import RobotState
-
-logger = logging.getLogger("pnav.planner")
+from services.planner.world_model import RobotState
 
 
 class Unrunnable(TargetRule):
@@ -64,13 +60,4 @@ class Unrunnable(TargetRule):
         self.failed.add(goal.id)
         # only while the robot's strategy is still the one it cannot run: a goal given just
         # after a switch this rule has not yet been ended for is the new strategy's
-        if await self.view.mark_failed(goal.id, self.robot_id, self.why, now, self.spec.strategy):
-            log.event(
-                logger,
-                logging.WARNING,
-                "goal failed",
-                robot=self.robot_id,
-                goal=goal.id,
-                strategy=self.spec.strategy,
-                why=self.why,
-            )
+        await self.fail_goal(goal.id, self.why, now, self.spec.strategy)

@@ -9,15 +9,16 @@ however it likes. Target rules (the move scenarios, the battery rules) take a
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import Any, Protocol
+from typing import Any, Protocol, Unpack
 
 from common.contract import records
 from common.contract.offers import Offers
+from common.contract.recommendations import SystemFields, VelocityFields
 from common.planner_core.scenario import RobotInfo
 from services.planner.published_path import PathRow
 from services.planner.routes import Target
 from services.planner.tracking import Progress
-from services.planner.world import MapData, RobotState, Station
+from services.planner.world_model import MapData, RobotState, Station
 
 
 class Clocks(Protocol):
@@ -31,18 +32,10 @@ class Clocks(Protocol):
         """The clock of the planner's own gates: wall s in a service, sim s in lockstep."""
 
 
-class Contract(Clocks, Protocol):
-    """The rows the target rules read and write, and what notifications told the store."""
-
-    def odometry_notes(self, robot_id: str) -> int:
-        """How many odometry notifications named the robot so far."""
-
-    def goal_news(self, robot: RobotState) -> bool:
-        """Whether a goal notification for the robot came since its goal was last read."""
-
-    async def active_goal(self, robot: RobotState) -> records.Goal | None:
-        """The robot's active goal, read again only after a goal notification for it (or
-        FAST_REFRESH_S after the last read)."""
+class Rows(Protocol):
+    """The newest sensor rows and the goal writes, as the rules see them and the source
+    (source.py) has them: the store answers from a row image where a fresh one came with a
+    notification, and from its source otherwise."""
 
     async def newest_odometry(self, robot_id: str) -> records.Odometry | None: ...
 
@@ -67,37 +60,28 @@ class Contract(Clocks, Protocol):
         """Set a route's waypoint ``status`` (reached, failed) if it is pending and its goal
         active, and notify; whether it was."""
 
+
+class Contract(Clocks, Rows, Protocol):
+    """The rows the target rules read and write, and what notifications told the store."""
+
+    def odometry_notes(self, robot_id: str) -> int:
+        """How many odometry notifications named the robot so far."""
+
+    def goal_news(self, robot: RobotState) -> bool:
+        """Whether a goal notification for the robot came since its goal was last read."""
+
+    async def active_goal(self, robot: RobotState) -> records.Goal | None:
+        """The robot's active goal, read again only after a goal notification for it (or
+        FAST_REFRESH_S after the last read)."""
+
     async def live_system(self, robot_id: str, command: str) -> float | None:
         """Expiry of this robot's newest unexpired ``command`` recommendation, if any."""
 
-    async def recommend_velocity(
-        self,
-        robot_id: str,
-        *,
-        source: str,
-        priority: int,
-        linear: float,
-        angular: float,
-        stamp: float,
-        ttl_s: float,
-        reason: str,
-        inputs: dict[str, Any],
-    ) -> None:
+    async def recommend_velocity(self, robot_id: str, **row: Unpack[VelocityFields]) -> None:
         """Write a velocity recommendation (the service's store holds it until the end of
         the activation and writes the activation's rows in one statement)."""
 
-    async def recommend_system(
-        self,
-        robot_id: str,
-        *,
-        source: str,
-        priority: int,
-        command: str,
-        stamp: float,
-        ttl_s: float,
-        reason: str,
-        inputs: dict[str, Any],
-    ) -> int: ...
+    async def recommend_system(self, robot_id: str, **row: Unpack[SystemFields]) -> int: ...
 
     async def publish_path(self, path: PathRow) -> int:
         """Write a planned_path row and notify (CONTRACT.md, planned_path); its id."""

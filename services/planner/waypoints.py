@@ -25,7 +25,7 @@ import services.planner.reachability as reachability
 from common.contract import records
 from common.contract.limits import DEFAULT_YAW_TOLERANCE_RAD
 from services.planner.routes import Target
-from services.planner.world import MapData, inflation_m
+from services.planner.world_model import MapData, inflation_m
 
 CHECK_AHEAD = 5  # waypoints judged against the map per look
 

@@ -29,10 +29,10 @@ from common.errors import ConfigError, ConnectionFailure, UsageError
 from common.lifeline import die_with_parent
 from common.log import event, setup
 from common.robotlink import NATIVE, RobotLinkSettings
-from services.sim.clock import parse_rate
+from services.sim.pacing import parse_rate
 from services.sim.signals import SignalStop
 from services.sim.sim import CMD_TIMEOUT_S, SimConfig
-from services.sim.world import World, load_world
+from services.sim.world_spec import World, load_world
 
 log = logging.getLogger("services.sim")
 
@@ -107,7 +107,7 @@ def sim_parser(prog: str = "python -m services.sim") -> argparse.ArgumentParser:
         type=float,
         default=_float_env("PNAV_SIM_MAX_LAG"),
         help="pace by the stack: never run more than S sim seconds past a robot's newest "
-        "decision (services/sim/gate.py; for --rate max) [PNAV_SIM_MAX_LAG]",
+        "decision (services/sim/lag_gate.py; for --rate max) [PNAV_SIM_MAX_LAG]",
     )
     ap.add_argument(
         "--lockstep",
@@ -115,7 +115,7 @@ def sim_parser(prog: str = "python -m services.sim") -> argparse.ArgumentParser:
         metavar="SERVICES",
         help="step only when the stack is quiet: hold at 0 until these services (a comma "
         "list, e.g. bridge,strategy,planner,controller,decision) report, then wait after "
-        "every message (services/sim/lockstep.py; same world and seed, same run) "
+        "every message (services/sim/lockstep_barrier.py; same world and seed, same run) "
         "[PNAV_LOCKSTEP]",
     )
     ap.add_argument(
@@ -208,7 +208,7 @@ def serve(
     lockstep: tuple[str, ...] = (),
 ) -> int:
     from common.trace import Tracer
-    from services.sim.gate import Gate
+    from services.sim.lag_gate import Gate
     from services.sim.node import SimNode
 
     stop = threading.Event()
@@ -272,7 +272,7 @@ def prestart(args: list[str]) -> None:
     """What the sim imports only once it runs (pnav.run.prestart imports it ahead, while the
     launcher makes Postgres ready): the node and its gate and tracer (:func:`serve`) and
     numpy's random module (the world's noise, numpy imports it on first use)."""
-    for module in ("numpy.random", "common.trace", "services.sim.gate", "services.sim.node"):
+    for module in ("numpy.random", "common.trace", "services.sim.lag_gate", "services.sim.node"):
         importlib.import_module(module)
 
 

@@ -20,7 +20,7 @@ import zenoh
 from common.bus import pack
 from common.contract import keys
 from common.log import event
-from services.sim.world import World
+from services.sim.world_spec import World
 
 log = logging.getLogger(__name__)
 

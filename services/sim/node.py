@@ -21,15 +21,15 @@ from common.contract import keys
 from common.log import event
 from common.robotlink import RobotLinkSettings
 from common.trace import CMD_VEL, NO_REF, Tracer
-from services.sim.clock import Pacer
-from services.sim.gate import Gate
-from services.sim.lockstep import Barrier
+from services.sim.lag_gate import Gate
+from services.sim.lockstep_barrier import Barrier
 from services.sim.matching import await_listeners, warn_unmatched
 from services.sim.outbox import CollisionOutbox
+from services.sim.pacing import Pacer
 from services.sim.ros2wire import TOPICS as ROS2_TOPICS
 from services.sim.ros2wire import make_wire
 from services.sim.sim import SimConfig, Simulation
-from services.sim.world import World
+from services.sim.world_spec import World
 
 log = logging.getLogger(__name__)
 
@@ -275,10 +275,10 @@ class SimNode:
 
     def _pass_gate(self, gate: Gate, stop: threading.Event) -> None:
         """Wait until the next step is no further than max_lag past every robot's newest
-        decision (gate.py), publishing the clock every GATE_CLOCK_SIM_S of sim time."""
+        decision (lag_gate.py), publishing the clock every GATE_CLOCK_SIM_S of sim time."""
         sim = self.sim
         if not gate.heard:
-            # services still starting: real time, not max (services/sim/gate.py)
+            # services still starting: real time, not max (services/sim/lag_lag_gate.py)
             stop.wait(sim.dt)
         gate.wait(sim.time, stop, self.publish_clock)
         if sim.time >= self._next_gate_clock:
@@ -288,8 +288,8 @@ class SimNode:
     def _run_lockstep(
         self, barrier: Barrier, stop: threading.Event, until_sim_s: float | None
     ) -> None:
-        """Step only when the stack is quiet (lockstep.py): the clock every LOCKSTEP_CLOCK_S,
-        then each reading of a step on its own, each followed by a wait."""
+        """Step only when the stack is quiet (lockstep_barrier.py): the clock every
+        LOCKSTEP_CLOCK_S, then each reading of a step on its own, each followed by a wait."""
         sim = self.sim
         pacer = Pacer(self.rate, sim.dt)
         self.publish_world()

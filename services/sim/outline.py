@@ -31,7 +31,7 @@ import numpy as np
 import numpy.typing as npt
 
 from services.sim.mapserver import OCCUPIED, OccupancyGrid
-from services.sim.world import World
+from services.sim.world_spec import World
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]

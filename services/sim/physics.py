@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import pybullet as p
 
 from common.footprint import Footprint
-from services.sim.world import World
+from services.sim.world_spec import World
 
 # distance under which two bodies count as touching, m
 CONTACT_TOLERANCE_M = 0.001

@@ -23,14 +23,14 @@ from common.errors import ConfigError
 from common.log import event
 from common.robotmodel import RobotModel
 from services.sim.battery import Battery, BatteryModel
-from services.sim.clock import Every
 from services.sim.fleetcast import Cast, FleetCast
 from services.sim.lidar import Lidar
 from services.sim.movers import Movers
 from services.sim.outline import Outline
+from services.sim.pacing import Every
 from services.sim.physics import CONTACT_TOLERANCE_M, Scene
 from services.sim.robot import RobotState, accelerate, clamp_command, integrate
-from services.sim.world import World
+from services.sim.world_spec import World
 
 log = logging.getLogger(__name__)
 

@@ -2,7 +2,7 @@
 
 A continuous rule (it clones itself). Each activation it reads, in one query, the pending
 user_command and system_command rows and the robots that have no active_strategy row, and
-creates the target rules of :mod:`services.strategy.apply` for the robots this replica owns
+creates the target rules of :mod:`services.strategy.scenario` for the robots this replica owns
 (docs/REPLICAS.md):
 
 - one :class:`ApplyDefaultStrategy` per robot with no active_strategy row;
@@ -23,7 +23,7 @@ from datetime import datetime
 
 from common.contract import keys
 from common.engine import Engine, Rule
-from services.strategy.apply import ApplyCommand, ApplyDefaultStrategy, Chain
+from services.strategy.scenario import ApplyCommand, ApplyDefaultStrategy, Chain
 from services.strategy.view import Pending, StrategyView
 
 

@@ -14,7 +14,8 @@ import services.strategy.meta as meta
 from common.bus import Notification
 from common.runtime import Runtime
 from common.service import ScenarioService
-from services.strategy.store import PgStrategySource, StrategyStore
+from services.strategy.source import PgStrategySource
+from services.strategy.store import StrategyStore
 
 
 class StrategyService(ScenarioService):

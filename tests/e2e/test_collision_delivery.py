@@ -21,7 +21,7 @@ from common.testing import eventually, router_process
 from services.bridge import Bridge, BridgeSettings
 from services.sim.node import SimNode
 from services.sim.sim import SimConfig
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -17,7 +17,7 @@ from pnav.bench.latency_report import (
     target_for,
 )
 from pnav.bench.sense_to_act import join_trace, notifications_lost
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 
 T0 = 1_800_000_000.0  # wall seconds, as Postgres' clock_timestamp() gives them
 US = 1e-3  # ms: float seconds near T0 resolve about 0.24 us, Postgres stamps 1 us

@@ -23,7 +23,7 @@ from common.lockstep import Ledger, LockstepTrigger, Status
 from common.runtime import Runtime
 from common.service import ScenarioService
 from common.testing import eventually
-from services.sim.lockstep import Barrier
+from services.sim.lockstep_barrier import Barrier
 
 ODOM = keys.robot_key("r1", keys.ODOM)
 ODOM_NOTE = keys.notify_key(keys.ODOMETRY, "r1")
@@ -239,7 +239,7 @@ def test_the_sim_waits_for_the_commands_the_bridge_sent(barrier: Barrier) -> Non
 def test_a_message_still_lacking_in_a_report_half_a_second_later_was_never_received(
     barrier: Barrier, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr("services.sim.lockstep.LOST_AFTER_S", 0.05)
+    monkeypatch.setattr("services.sim.lockstep_barrier.LOST_AFTER_S", 0.05)
     barrier._on_status(BRIDGE, status(1, {ODOM_NOTE: 3}, [(ODOM_SUBS, {})]))
     barrier.started = True
     barrier._on_status(PLANNER, status(1, {}, [(NOTE_SUBS, {})]))  # subscribed after 3 notes
@@ -258,7 +258,7 @@ def test_a_message_still_lacking_in_a_report_half_a_second_later_was_never_recei
 def test_the_hold_nudges_until_everyone_expected_is_there_and_quiet(
     barrier: Barrier, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr("services.sim.lockstep.LOST_AFTER_S", 0.1)
+    monkeypatch.setattr("services.sim.lockstep_barrier.LOST_AFTER_S", 0.1)
     stop = threading.Event()
     nudges = 0
 

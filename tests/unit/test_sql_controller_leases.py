@@ -13,7 +13,7 @@ import asyncpg
 from common.config import LeaseSettings
 from common.lease import LeaseManager, history_overlaps
 from common.testing import eventually
-from examples.sql_controller.config import Settings
+from examples.sql_controller.environment import Settings
 from examples.sql_controller.leases import Leases
 from tests.unit.pgproxy import PgProxy
 from tests.unit.test_lease import ROBOTS, SERVICE, add_robots

@@ -10,7 +10,7 @@ from common.errors import UsageError
 def bad_goals(world: Path) -> dict[str, tuple[float, float]]:
     """``outside``: 10 m beyond the map's far corner; ``obstacle``: the centre of the
     largest block of occupied cells on the map."""
-    from services.sim.world import load_world
+    from services.sim.world_spec import load_world
 
     grid = load_world(world).grid
     far = grid.cell_to_world(grid.width, grid.height)

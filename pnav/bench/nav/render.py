@@ -26,7 +26,7 @@ from pnav.bench.nav.png import encode_png
 from pnav.bench.nav.search import BoolGrid, Point, inflate
 from pnav.bench.nav.worldfile import BenchmarkWorld, occupied_cells
 from services.sim.mover import MoverSpec
-from services.sim.world import ObstacleSpec
+from services.sim.world_spec import ObstacleSpec
 
 Colour = tuple[int, int, int]
 Image = npt.NDArray[np.uint8]

@@ -31,7 +31,7 @@ from pnav.bench.nav.search import BoolGrid, Point
 from pnav.bench.nav.suitefile import FORMAT
 from services.sim.mapserver import OCCUPIED, OccupancyGrid, load_map
 from services.sim.mover import MoverSpec
-from services.sim.world import ObstacleSpec, load_world, read_world_yaml
+from services.sim.world_spec import ObstacleSpec, load_world, read_world_yaml
 
 
 def world_document(world: GeneratedWorld) -> dict[str, Any]:

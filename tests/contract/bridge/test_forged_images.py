@@ -18,7 +18,7 @@ import pytest
 from common.contract import keys
 from common.testing import eventually
 from services.bridge import BridgeSettings
-from services.bridge.images import ID_HORIZON
+from services.bridge.command_images import ID_HORIZON
 from tests.contract.bridge.conftest import BridgeFactory, FakeSim, ready, vel
 from tests.contract.bridge.test_command_images import decided, publish, started
 

@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, given, settings
 
 from common.contract import keys
 from common.testing import eventually
-from services.bridge import messages
+from services.bridge import sensor_payloads as messages
 from tests.contract.bridge.conftest import (
     BridgeFactory,
     FakeSim,

@@ -25,7 +25,7 @@ from common.runtime import Runtime
 from common.testing import eventually
 from pnav.run.process_supervisor import ProcessSpec, Supervisor
 from pnav.run.supervisor_report import SupervisorReport
-from services.dashboard.metrics import Metrics, MetricsConfig
+from services.dashboard.stack_metrics import Metrics, MetricsConfig
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -17,7 +17,7 @@ import pytest
 from common import bus
 from common.testing import eventually
 from pnav.run.launcher import launched, resolve_world
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 from tests.contract.ros2.nav2_client import NavClient
 from tests.contract.ros2.turtlebot3_peer import TurtleBot3, peer_stack_options
 

@@ -22,7 +22,7 @@ from common.contract import keys
 from common.testing import free_port
 from services.sim.node import SimNode
 from services.sim.sim import SimConfig
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 
 pytestmark = pytest.mark.timeout(60)
 

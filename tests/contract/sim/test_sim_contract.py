@@ -23,11 +23,11 @@ import zenoh
 from common.bus import open_session, pack, unpack
 from common.config import ZenohSettings
 from common.contract import keys
-from services.sim.gate import Gate
+from services.sim.lag_gate import Gate
 from services.sim.node import SimNode
 from services.sim.robot import BURGER
 from services.sim.sim import SimConfig
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 
 pytestmark = pytest.mark.timeout(60)
 

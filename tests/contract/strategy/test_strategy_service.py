@@ -15,7 +15,7 @@ from common.config import LeaseSettings, ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime
 from common.testing import ClockPlayer, eventually, running_service
-from services.strategy.apply import ApplyCommand
+from services.strategy.scenario import ApplyCommand
 from services.strategy.service import StrategyService
 from tests.contract.conftest import CLOCK_START, split_between
 

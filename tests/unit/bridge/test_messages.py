@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 
 from common.contract import keys
 from common.errors import ContractError
-from services.bridge import messages
-from services.bridge.messages import (
+from services.bridge import sensor_payloads as messages
+from services.bridge.sensor_payloads import (
     BatteryState,
     Collision,
     LaserScan,

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 from common.contract import keys
-from services.bridge.messages import Collision, Odometry
 from services.bridge.replay import Replay
-from services.bridge.rows import SENSOR_TABLES
+from services.bridge.sensor_payloads import Collision, Odometry
+from services.bridge.sensor_tables import SENSOR_TABLES
 
 
 class Clock:

@@ -8,8 +8,8 @@ from array import array
 import numpy as np
 
 from common.contract import keys
-from services.bridge.messages import LaserScan, Odometry
-from services.bridge.rows import SENSOR_TABLES, newest_per_robot
+from services.bridge.sensor_payloads import LaserScan, Odometry
+from services.bridge.sensor_tables import SENSOR_TABLES, newest_per_robot
 
 ODOMETRY = SENSOR_TABLES[Odometry]
 LASER_SCAN = SENSOR_TABLES[LaserScan]

@@ -10,7 +10,6 @@ import pytest
 from common import bus
 from common.contract import keys
 from common.errors import ConfigError
-from services.bridge.messages import LaserScan, parse_sensor
 from services.bridge.safety import (
     CLEAR,
     LIMITED,
@@ -21,6 +20,7 @@ from services.bridge.safety import (
     max_speed,
     stopping_m,
 )
+from services.bridge.sensor_payloads import LaserScan, parse_sensor
 from services.bridge.settings import BridgeSettings
 
 R = 0.105  # the burger's footprint radius

@@ -7,9 +7,9 @@ from __future__ import annotations
 import math
 
 from common.contract.zones import KEEPOUT, SPEED_LIMIT, Zone
-from services.bridge.messages import LaserScan
 from services.bridge.safety import CLEAR, LIMITED, STOPPED, SafetyLayer, SafetyParams
-from services.bridge.zones import Cap, SpeedZones
+from services.bridge.sensor_payloads import LaserScan
+from services.bridge.speed_zones import Cap, SpeedZones
 
 R = 0.105
 DECEL = 2.5

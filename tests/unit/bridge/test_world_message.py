@@ -9,8 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from common.robotmodel import load_model
-from services.bridge.messages import MalformedMessage
-from services.bridge.world import ROBOT_DEFAULTS, MapInfo, StationInfo, parse_world
+from services.bridge.sensor_payloads import MalformedMessage
+from services.bridge.world_message import ROBOT_DEFAULTS, MapInfo, StationInfo, parse_world
 from tests.unit.bridge import payloads
 from tests.unit.bridge.payloads import pack
 

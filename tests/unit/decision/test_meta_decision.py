@@ -21,7 +21,7 @@ from common.engine import Engine
 from pnav.monolith.contract import MemoryContract
 from pnav.monolith.memory_decision import MemoryDecisionSource, decision_engine
 from services.decision.arbitration import REISSUE_PERIOD_S, RobotDecision
-from services.decision.robot_command import IssueRobotCommand
+from services.decision.scenario import IssueRobotCommand
 from services.decision.store import REREAD_S
 
 Command = tuple[Any, ...]

@@ -23,7 +23,7 @@ from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
 from common.footprint import Footprint
 from pnav_local.dwa import Choice, path_in_robot_frame, stopping_speed
-from pnav_local.params import DwaParams
+from pnav_local.dwa_params import DwaParams
 
 Array = tr.FloatArray
 

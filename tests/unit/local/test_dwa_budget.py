@@ -17,7 +17,7 @@ from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
 from pnav_local.bounds import MAX_OBSTACLES, MAX_PATH_POINTS, PAIRS_PER_PRODUCT, nearest
 from pnav_local.dwa import choose, command_for
-from pnav_local.params import POSE_BUDGET, DwaParams, fit_budget, poses
+from pnav_local.dwa_params import POSE_BUDGET, DwaParams, fit_budget, poses
 
 JACKAL = Robot("r1", 2.0, 4.0, 0.22, 270.0, max_linear_accel_mps2=10.0, max_angular_accel_rps2=20.0)
 

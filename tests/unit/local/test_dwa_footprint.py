@@ -13,7 +13,7 @@ import pnav_local.clearance as clearance
 from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
 from pnav_local.dwa import choose
-from pnav_local.params import DwaParams
+from pnav_local.dwa_params import DwaParams
 from tests.unit.local import dwa_reference
 
 JACKAL = Robot(

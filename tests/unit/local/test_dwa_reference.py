@@ -14,7 +14,7 @@ import pytest
 from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
 from pnav_local.dwa import choose, command_for
-from pnav_local.params import DwaParams
+from pnav_local.dwa_params import DwaParams
 from tests.unit.local import dwa_reference
 
 JACKAL = Robot("r1", 2.0, 4.0, 0.22, 270.0, max_linear_accel_mps2=10.0, max_angular_accel_rps2=20.0)

@@ -14,7 +14,7 @@ from common.contract.planned_path import PlannedPath
 from common.contract.records import Odometry, Robot
 from pnav_local.clearance import Footprint
 from pnav_local.dwa import choose, command_for, stopping_speed
-from pnav_local.params import DwaParams
+from pnav_local.dwa_params import DwaParams
 from tests.unit.controller.scans import BURGER, scan
 
 JACKAL = Robot("r1", 2.0, 4.0, 0.22, 270.0, max_linear_accel_mps2=10.0, max_angular_accel_rps2=20.0)

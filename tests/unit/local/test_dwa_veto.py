@@ -16,9 +16,9 @@ from common.contract.records import LaserScan as ScanRow
 from common.footprint import Footprint
 from pnav_local import veto
 from pnav_local.dwa import choose, command_for
-from pnav_local.params import DwaParams
-from services.bridge.messages import LaserScan
+from pnav_local.dwa_params import DwaParams
 from services.bridge.safety import CLEAR, SafetyLayer, SafetyParams
+from services.bridge.sensor_payloads import LaserScan
 from tests.unit.local.test_dwa_reference import BOX, JACKAL, ROWS, scene
 
 BOX_FOOT = Footprint.of(JACKAL.footprint_radius_m, BOX)

@@ -23,10 +23,10 @@ from pnav.monolith.monolith_stack import MonolithStack
 from pnav.monolith.strategies import combo_strategy, shipped_strategies
 from services.decision.arbitration import RobotDecision
 from services.planner.routes import Target
-from services.planner.world import RobotState
+from services.planner.world_model import RobotState
 from services.sim.robot import BURGER
 from services.sim.sim import SimConfig
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 
 
 def contract_with_rows() -> tuple[MemoryContract, list[tuple[str, Any, Any]]]:

@@ -22,7 +22,7 @@ from services.controller.avoid_left import AvoidLeft
 from services.controller.avoid_right import AvoidRight
 from services.controller.safety_stop import SafetyStop
 from services.sim.sim import SimConfig
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 
 ROOT = Path(__file__).resolve().parents[3]
 EASY = ROOT / "worlds" / "barn" / "barn_easy_000.yaml"

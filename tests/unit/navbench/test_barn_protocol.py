@@ -19,7 +19,7 @@ from pnav.bench.nav.barnfile import write_barn_world
 from pnav.bench.nav.robots import RobotFit, resolve_model
 from pnav.bench.nav.worldfile import occupied_cells, read_benchmark
 from pnav.cli import program as cli
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 from tests.unit.navbench.conftest import min_clearance
 
 pytestmark = pytest.mark.timeout(120)

@@ -20,7 +20,7 @@ from pnav.bench.nav.scores import RunResult, barn_score, evaluate_run
 from pnav.bench.nav.stack_episode import Episode, Outcome
 from pnav.bench.nav.worldfile import load_suite, read_benchmark
 from pnav.cli import program as cli
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 
 pytestmark = pytest.mark.timeout(60)
 

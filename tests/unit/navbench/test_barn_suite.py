@@ -16,7 +16,7 @@ from common.robotmodel import load_model
 from pnav.bench.nav import barn, worlds_cli
 from pnav.bench.nav.search import reference_path
 from pnav.bench.nav.worldfile import load_suite
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 from tests.unit.navbench.test_barn_protocol import world_truth
 
 pytestmark = pytest.mark.timeout(120)

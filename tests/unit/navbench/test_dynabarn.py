@@ -20,7 +20,7 @@ from pnav.bench.nav.dynabarn import generate_dynabarn_world
 from pnav.bench.nav.dynabarnfile import write_dynabarn_world
 from pnav.bench.nav.robots import resolve_model
 from pnav.bench.nav.worldfile import load_suite, read_benchmark
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -14,7 +14,7 @@ from pnav.bench.nav.search import reference_path
 from pnav.bench.nav.worldfile import load_suite, occupied_cells, read_benchmark, write_world
 from pnav.bench.nav.worlds_cli import world_header
 from services.sim.robot import BURGER
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 from tests.unit.navbench.conftest import min_clearance
 
 pytestmark = pytest.mark.timeout(60)

@@ -12,7 +12,7 @@ from common.errors import WorldError
 from pnav.bench.nav.generator import generate_world
 from pnav.bench.nav.worldfile import load_suite, read_benchmark, write_world
 from pnav.bench.nav.worlds_cli import main
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 
 pytestmark = pytest.mark.timeout(30)
 

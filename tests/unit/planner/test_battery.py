@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from services.planner.battery import charged_enough, energy_needed, needs_charge, number
+from services.planner.battery_rules import charged_enough, energy_needed, needs_charge, number
 
 
 def test_energy_needed_is_distance_times_rate_plus_reserve() -> None:

@@ -17,7 +17,7 @@ from services.planner import move_while_turning, turn_then_move
 from services.planner.obstacles import see
 from services.planner.routes import Router, Target
 from services.planner.tracking import heading_error
-from services.planner.world import MapData, RobotState, World
+from services.planner.world_model import MapData, RobotState, World
 
 RES = 0.05
 FOOTPRINT = 0.105

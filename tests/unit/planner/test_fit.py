@@ -14,7 +14,7 @@ from common.footprint import Footprint
 from common.robotmodel import load_model
 from services.planner.fit import collision, fitted
 from services.planner.path import plan_path
-from services.planner.world import MapData, inflation_m
+from services.planner.world_model import MapData, inflation_m
 
 RES = 0.05
 BOX = load_model("jackal").footprint

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from services.planner import reachability
-from services.planner.world import MapData, inflation_m
+from services.planner.world_model import MapData, inflation_m
 from tests.unit.planner.harness import Planner
 
 RES = 0.05

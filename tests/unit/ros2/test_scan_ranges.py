@@ -9,7 +9,8 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from services.bridge import messages, ros2msgs
+from services.bridge import ros2msgs
+from services.bridge import sensor_payloads as messages
 from services.sim import ros2wire
 from tests.unit.bridge import payloads
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from common.errors import ConfigError
-from services.sim.clock import MAX, Every, Pacer, parse_rate
+from services.sim.pacing import MAX, Every, Pacer, parse_rate
 
 pytestmark = pytest.mark.timeout(10)
 

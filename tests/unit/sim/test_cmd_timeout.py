@@ -13,7 +13,7 @@ from common.errors import ConfigError
 from services.sim.__main__ import build, parse_args
 from services.sim.robot import BURGER
 from services.sim.sim import CMD_TIMEOUT_S, SimConfig, Simulation
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 from tests.unit.sim.conftest import MakeWorld
 
 pytestmark = pytest.mark.timeout(30)

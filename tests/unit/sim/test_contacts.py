@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from services.sim.physics import Scene
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 from tests.unit.sim.conftest import MakeWorld
 
 pytestmark = pytest.mark.timeout(60)

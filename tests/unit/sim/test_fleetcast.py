@@ -24,7 +24,7 @@ from services.sim.outline import Outline
 from services.sim.physics import Scene
 from services.sim.robot import BURGER
 from services.sim.sim import SimConfig, Simulation
-from services.sim.world import ObstacleSpec, RobotSpec, World, load_world
+from services.sim.world_spec import ObstacleSpec, RobotSpec, World, load_world
 from tests.unit.sim.conftest import MakeWorld
 
 pytestmark = pytest.mark.timeout(60)

@@ -15,7 +15,7 @@ from common.footprint import Footprint
 from common.robotmodel import load_model
 from services.sim.mapserver import OCCUPIED
 from services.sim.physics import CONTACT_TOLERANCE_M, Scene
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 from tests.unit.sim.conftest import MakeWorld
 
 pytestmark = pytest.mark.timeout(60)

@@ -13,7 +13,7 @@ from common.errors import ModelError, WorldError
 from common.robotmodel import load_model
 from services.sim.__main__ import build, parse_args
 from services.sim.robot import BURGER, accelerate
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 from tests.unit.sim.conftest import MakeWorld
 from tests.unit.sim.test_sim import simulate
 

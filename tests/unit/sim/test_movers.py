@@ -11,9 +11,9 @@ import pytest
 
 from common import bus
 from common.errors import WorldError
-from services.bridge.world import parse_world
+from services.bridge.world_message import parse_world
 from services.sim.sim import SimConfig, Simulation
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 from tests.unit.sim.conftest import MakeWorld
 from tests.unit.sim.test_sim import Recorder, simulate
 

@@ -11,7 +11,7 @@ import numpy as np
 from services.sim.mapserver import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 from services.sim.outline import BUCKET_M, MAX_BUCKETS, Outline, grid_faces
 from services.sim.robot import BURGER
-from services.sim.world import ObstacleSpec, RobotSpec, World
+from services.sim.world_spec import ObstacleSpec, RobotSpec, World
 
 Face = tuple[tuple[float, float], tuple[float, float]]
 

@@ -10,7 +10,7 @@ import pytest
 
 from services.sim.robot import BURGER
 from services.sim.sim import SimConfig, Simulation
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 from tests.unit.sim.conftest import MakeWorld
 
 pytestmark = pytest.mark.timeout(30)

@@ -13,7 +13,7 @@ import yaml
 
 from common.errors import WorldError
 from services.sim.mapserver import FREE
-from services.sim.world import World, load_world
+from services.sim.world_spec import World, load_world
 from tests.unit.sim.conftest import MakeWorld, draw, write_map, write_world
 
 pytestmark = pytest.mark.timeout(30)

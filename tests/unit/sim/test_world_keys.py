@@ -10,7 +10,7 @@ from typing import Any
 import pytest
 
 from common.errors import WorldError
-from services.sim.world import load_world
+from services.sim.world_spec import load_world
 from tests.unit.sim.conftest import MakeWorld, draw, write_map, write_world
 
 pytestmark = pytest.mark.timeout(30)

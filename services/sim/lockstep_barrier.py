@@ -1,6 +1,6 @@
 """Lockstep: the sim steps only when the whole stack is quiet (``--lockstep SERVICES``).
 
-Pacing by the stack (``--max-lag``, gate.py) bounds how stale a decision may be; between two
+Pacing by the stack (``--max-lag``, lag_gate.py) bounds how stale a decision may be; between two
 decisions the sim still runs on, so a run depends on the scheduling of a dozen processes.
 In lockstep the sim publishes the clock (every 0.05 s of sim time), then each reading of a
 step, one at a time, and after each waits until every participant (common.lockstep) reports

@@ -27,7 +27,7 @@ from services.planner.routes import Target
 from services.planner.scenario import ODOM_MAX_AGE_S
 from services.planner.target import RuleKey, Spec, TargetRule
 from services.planner.view import PlannerView
-from services.planner.world import RobotState
+from services.planner.world_model import RobotState
 
 logger = logging.getLogger("pnav.planner")
 

@@ -20,11 +20,13 @@ from __future__ import annotations
 import os
 import re
 import socket
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import TypeVar
 
 SERVICE = "controller"  # the family it replaces: its liveliness token and its leases say so
 _ID = re.compile(r"^[A-Za-z0-9_-]+$")  # one Zenoh key chunk
+N = TypeVar("N", int, float)
 
 
 class ConfigError(Exception):
@@ -37,23 +39,22 @@ def _text(env: Mapping[str, str], name: str, default: str) -> str:
 
 
 def _number(env: Mapping[str, str], name: str, default: float, minimum: float) -> float:
-    raw = _text(env, name, str(default))
-    try:
-        value = float(raw)
-    except ValueError:
-        raise ConfigError(f"{name}={raw!r} is not a number") from None
-    if not value >= minimum:
-        raise ConfigError(f"{name}={raw!r} must be at least {minimum}")
-    return value
+    return _parsed(env, name, default, float, "a number", minimum)
 
 
 def _whole(env: Mapping[str, str], name: str, default: int, minimum: int) -> int:
+    return _parsed(env, name, default, int, "a whole number", minimum)
+
+
+def _parsed(
+    env: Mapping[str, str], name: str, default: N, parse: Callable[[str], N], what: str, minimum: N
+) -> N:
     raw = _text(env, name, str(default))
     try:
-        value = int(raw)
+        value = parse(raw)
     except ValueError:
-        raise ConfigError(f"{name}={raw!r} is not a whole number") from None
-    if value < minimum:
+        raise ConfigError(f"{name}={raw!r} is not {what}") from None
+    if not value >= minimum:  # NaN too
         raise ConfigError(f"{name}={raw!r} must be at least {minimum}")
     return value
 

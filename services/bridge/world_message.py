@@ -30,7 +30,7 @@ from common.robotmodel import (
     MAX_RATE_HZ,
     load_model,
 )
-from services.bridge.messages import (
+from services.bridge.sensor_payloads import (
     BAD_MSGPACK,
     MISSING_FIELD,
     NOT_A_MAP,

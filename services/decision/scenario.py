@@ -1,10 +1,15 @@
-"""Target rule: write the velocity commands decided in one activation to command2robot.
+"""The decision scenario's target rules: write what the meta-decision rule decided.
 
-Created by the meta-decision rule with the decisions already made (one per robot, every
-robot it decided for in that activation); this rule only writes them: one command2robot row
-per robot and ``treated_by`` of the rows each considered, all in ONE statement and one
-commit (batching across robots: at 10 robots a command's cost is mostly its commit), then
-one notification per robot, with its row's image, so the bridge sends each at once.
+- :class:`IssueRobotCommand`: the velocity commands decided in one activation, already made
+  (one per robot, every robot it decided for in that activation); this rule only writes
+  them: one command2robot row per robot and ``treated_by`` of the rows each considered, all
+  in ONE statement and one commit (batching across robots: at 10 robots a command's cost is
+  mostly its commit), then one notification per robot, with its row's image, so the bridge
+  sends each at once.
+- :class:`IssueSystemCommand`: one decided system command (the feedback loop to the
+  strategy), for a new winning system recommendation: the pending system_command row and
+  ``treated_by`` of the system recommendations considered, in one statement, then a
+  notification of system_command so the strategy service applies it at once.
 """
 
 from __future__ import annotations
@@ -14,7 +19,7 @@ from collections.abc import Sequence
 
 from common import log
 from common.engine import Rule
-from services.decision.arbitration import RobotDecision
+from services.decision.arbitration import RobotDecision, SystemDecision
 from services.decision.view import DecisionView
 
 logger = logging.getLogger("pnav.decision")
@@ -65,3 +70,30 @@ class IssueRobotCommand(Rule):
                 considered=len(d.considered_ids),
                 reason=d.reason,
             )
+
+
+class IssueSystemCommand(Rule):
+    scenario = "decision"
+
+    def __init__(self, store: DecisionView, decision: SystemDecision) -> None:
+        self.store = store
+        self.decision = decision
+        self.robot_id = decision.robot_id  # a wake or hurry for this robot runs it
+
+    async def actions(self) -> None:
+        d = self.decision
+        if not self.store.owns(d.robot_id):
+            return  # given back since the decision: the next owner decides (as above)
+        row_id = await self.store.write_system_command(d)
+        log.event(
+            logger,
+            logging.INFO,
+            "system_command",
+            robot=d.robot_id,
+            id=row_id,
+            command=d.command,
+            stamp=round(d.stamp, 3),
+            recommendation_id=d.recommendation_id,
+            considered=list(d.considered_ids),
+            reason=d.reason,
+        )

@@ -29,7 +29,13 @@ import numpy as np
 
 from common.contract import tables
 from common.contract.inserts import Insert
-from services.bridge.messages import BatteryState, Collision, LaserScan, Odometry, SensorRecord
+from services.bridge.sensor_payloads import (
+    BatteryState,
+    Collision,
+    LaserScan,
+    Odometry,
+    SensorRecord,
+)
 
 Image = dict[str, Any]
 
