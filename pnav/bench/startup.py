@@ -10,7 +10,7 @@ between processes (Postgres' shared buffers, the Python runtime) are counted onc
 given per process too (``launcher`` is this process: the Zenoh router and the benchmark's
 own reading).
 
-Where the time goes: the launcher's steps (common.stack.LocalStack.phases: Postgres' data
+Where the time goes: the launcher's steps (pnav.run.local_stack.LocalStack.phases: Postgres' data
 directory made, from the template cluster or by initdb, and the server started; the router;
 roles, passwords and migrations), then for each service the first line of its log (it has
 imported its code, connected and started: the sim's first line says it runs, once the

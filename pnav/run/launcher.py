@@ -27,10 +27,10 @@ from zenoh import Session
 from common.config import ZenohSettings
 from common.contract import acl
 from common.errors import UsageError
-from common.stack import BusCredentials, LocalStack, local_stack
-from common.testing import free_port
 from pnav.run import stackfile
 from pnav.run.composition import HOST_PROCESS, host_spec, hosted, resolve_processes
+from pnav.run.embedded_postgres import free_port
+from pnav.run.local_stack import BusCredentials, LocalStack, local_stack
 from pnav.run.prestart import Prestart
 from pnav.run.process_supervisor import ProcessSpec, Supervisor
 from pnav.run.supervisor_report import SupervisorReport

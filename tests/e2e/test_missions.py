@@ -13,7 +13,7 @@ import pytest
 
 from common.config import ServiceConfig
 from common.runtime import Runtime
-from common.testing import eventually
+from pnav._testing import eventually
 from pnav.cli import stack_commands
 from pnav.run import demo
 from pnav.run.launcher import RunningStack, StackOptions, launched

@@ -15,8 +15,9 @@ import pytest
 from common.config import ServiceConfig
 from common.postmaster import kill_postmaster
 from common.runtime import Runtime
-from common.testing import EmbeddedPostgres, eventually
+from pnav._testing import eventually
 from pnav.cli import stack_commands
+from pnav.run.embedded_postgres import EmbeddedPostgres
 from pnav.run.launcher import StackOptions, launched
 
 pytestmark = pytest.mark.timeout(240)

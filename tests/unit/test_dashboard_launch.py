@@ -10,10 +10,9 @@ import pytest
 
 from common.config import ZenohSettings
 from common.errors import UsageError
-from common.stack import LocalStack
-from common.testing import free_port
 from pnav.cli.dashboard_options import dashboard_options
 from pnav.cli.program import build_parser
+from pnav.run.embedded_postgres import free_port
 from pnav.run.launcher import (
     DashboardOptions,
     StackOptions,
@@ -21,6 +20,7 @@ from pnav.run.launcher import (
     resolve_dashboard,
     service_specs,
 )
+from pnav.run.local_stack import LocalStack
 
 
 def local() -> LocalStack:

@@ -11,7 +11,7 @@ import asyncpg
 import pytest
 
 from common.pgtemplate import seed_from_template, template_dir
-from common.testing import EmbeddedPostgres
+from pnav.run.embedded_postgres import EmbeddedPostgres
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -13,7 +13,7 @@ import asyncpg
 import pytest
 
 from common.robotmodel import load_model
-from common.testing import eventually
+from pnav._testing import eventually
 from pnav.run.launcher import WORLDS, StackOptions, launched
 
 pytestmark = pytest.mark.timeout(180)

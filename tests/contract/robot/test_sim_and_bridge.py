@@ -12,7 +12,7 @@ import math
 import asyncpg
 import pytest
 
-from common.testing import eventually
+from pnav._testing import eventually
 from pnav.run.launcher import StackOptions, launched
 from services.sim.robot import BURGER
 
