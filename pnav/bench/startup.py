@@ -35,7 +35,8 @@ from common.runtime import Runtime
 from pnav.bench.figures import emit, machine
 from pnav.bench.processes import memory_mb, pss_mb, roles, stack_processes
 from pnav.cli import stack_commands
-from pnav.run.launcher import StackOptions, launched
+from pnav.run.launcher import launched
+from pnav.run.stack_options import StackOptions
 
 TARGET_S, TARGET_MB = 1.0, 300.0  # issue 31
 ROBOT_POLL_S = 0.01

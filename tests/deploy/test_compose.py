@@ -54,7 +54,7 @@ from pnav.run.credentials import (
     ZENOH_USERS_FILE,
 )
 from pnav.run.embedded_postgres import free_port
-from pnav.run.launcher import SCENARIO_SERVICES, StackOptions
+from pnav.run.stack_options import SCENARIO_SERVICES, StackOptions
 
 ROOT = Path(__file__).resolve().parents[2]
 DEPLOY = ROOT / "deploy"

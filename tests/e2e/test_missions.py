@@ -16,8 +16,9 @@ from common.runtime import Runtime
 from pnav._testing import eventually
 from pnav.cli import stack_commands
 from pnav.run import demo
-from pnav.run.launcher import RunningStack, StackOptions, launched
+from pnav.run.launcher import RunningStack, launched
 from pnav.run.mission import MissionLog, MissionMonitor
+from pnav.run.stack_options import StackOptions
 
 pytestmark = pytest.mark.timeout(240)
 

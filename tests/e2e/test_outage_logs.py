@@ -18,7 +18,8 @@ from common.runtime import Runtime
 from pnav._testing import eventually
 from pnav.cli import stack_commands
 from pnav.run.embedded_postgres import EmbeddedPostgres
-from pnav.run.launcher import StackOptions, launched
+from pnav.run.launcher import launched
+from pnav.run.stack_options import StackOptions
 
 pytestmark = pytest.mark.timeout(240)
 

@@ -33,9 +33,10 @@ from pnav.bench.faults.catalogue import Fault
 from pnav.bench.faults.context import FORGED_COMMAND_ID, ROBOT, SPOOF_SEQ, Context
 from pnav.bench.faults.inject import inject
 from pnav.cli import stack_commands
-from pnav.run.launcher import DashboardOptions, StackOptions, launched
+from pnav.run.launcher import launched
 from pnav.run.local_stack import BusCredentials
 from pnav.run.mission import GoalEnded, MissionMonitor
+from pnav.run.stack_options import DashboardOptions, StackOptions
 
 T = TypeVar("T")
 

@@ -24,8 +24,9 @@ from common.contract import acl, keys
 from common.runtime import Runtime
 from pnav._testing import eventually
 from pnav.cli import stack_commands
-from pnav.run.launcher import StackOptions, launched
+from pnav.run.launcher import launched
 from pnav.run.mission import MissionMonitor
+from pnav.run.stack_options import StackOptions
 
 pytestmark = pytest.mark.timeout(180)
 

@@ -13,7 +13,8 @@ import asyncpg
 import pytest
 
 from pnav._testing import eventually
-from pnav.run.launcher import StackOptions, launched
+from pnav.run.launcher import launched
+from pnav.run.stack_options import StackOptions
 from services.sim.robot import BURGER
 
 pytestmark = pytest.mark.timeout(120)
