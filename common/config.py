@@ -118,7 +118,7 @@ class ZenohSettings:
     user: str | None = None
     password: str | None = field(default=None, repr=False)
     # the user/password dictionary a router or peer checks the sessions that link to it
-    # against (a local stack: common.stack); None accepts any session
+    # against (a local stack: pnav.run.local_stack); None accepts any session
     users_file: str | None = None
     data_queue: int = DATA_QUEUE_BATCHES  # transport/link/tx/queue/size/data of every link
 

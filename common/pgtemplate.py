@@ -5,7 +5,7 @@ quiet 2-core machine, 7-8 s on a loaded one (docs/BENCHMARKS.md, "Start-up: wher
 seconds and megabytes went").
 
 The copy is the cluster ``initdb`` would make (same build, same options) with what the
-caller's ``prepare`` gave it (common.stack: the contract's roles without passwords, its
+caller's ``prepare`` gave it (pnav.run.local_stack: the contract's roles without passwords, its
 migrations and grants); each stack then sets its own passwords, settings and grants, as
 before. Templates live under ``$XDG_CACHE_HOME/pnav`` (``~/.cache/pnav``);
 ``PNAV_PG_TEMPLATE=0`` runs ``initdb`` every time.
@@ -51,10 +51,11 @@ def template_dir(variant: str = "") -> Path | None:
     ``$XDG_CACHE_HOME/pnav``, else ``~/.cache/pnav``), or None when ``PNAV_PG_TEMPLATE=0``
     or pgserver is not installed. Its name changes with the build (the ``postgres`` binary's
     path, size and time), so a new pgserver never copies an old build's cluster, and with
-    ``variant`` (what the caller put in it: the contract's migrations, common.stack)."""
+    ``variant`` (what the caller put in it: the contract's migrations, pnav.run.local_stack)."""
     if _switched_off("PNAV_PG_TEMPLATE"):
         return None
-    # pgserver wants a runtime dir at import time (as common.testing.EmbeddedPostgres.start)
+    # pgserver wants a runtime dir at import time (as EmbeddedPostgres.start does,
+    # pnav/run/embedded_postgres.py)
     if not os.environ.get("XDG_RUNTIME_DIR"):
         os.environ["XDG_RUNTIME_DIR"] = tempfile.mkdtemp(prefix="pnav-run-")
     try:

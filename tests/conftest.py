@@ -19,7 +19,8 @@ import uvloop
 
 from common.config import ZenohSettings
 from common.contract.migrate import apply_migrations
-from common.testing import EmbeddedPostgres, loopback_zenoh
+from pnav._testing import loopback_zenoh
+from pnav.run.embedded_postgres import EmbeddedPostgres
 
 TEMPLATE = "pnav_contract_template"
 

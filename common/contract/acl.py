@@ -21,7 +21,7 @@ Postgres. Anything else is denied; a client with no valid user/password is refus
 session. ``python -m common.contract.acl`` prints the router's whole config
 (deploy/zenoh/router.json5, which a test compares with this output).
 
-The local stack's router (``pnav up``: common.stack, common.bus.start_router) is opened from
+The local stack's router (``pnav up``: pnav.run.local_stack, common.bus.start_router) is opened from
 the same :func:`router_config`, only its endpoint, dictionary file and queue size being its
 own, so one access control holds in compose and on one machine. A router's own session (the
 launcher's supervisor report) is not a client of it and is not checked.

@@ -48,10 +48,10 @@ from common.config import EngineSettings, ZenohSettings
 from common.contract import keys
 from common.db import create_pool
 from common.engine import Engine, Rule
-from common.stack import LocalZenoh
-from common.testing import EmbeddedPostgres
 from pnav.bench.figures import emit, machine, percentiles
 from pnav.bench.hop import router_process
+from pnav.run.embedded_postgres import EmbeddedPostgres
+from pnav.run.local_stack import LocalZenoh
 
 PERIOD_S = 0.05  # 20 Hz, as `pnav bench latency` drives its robots
 WARMUP_S = 2.0

@@ -25,7 +25,7 @@ from multiprocessing.synchronize import Event
 
 import zenoh
 
-from common.testing import free_port
+from pnav.run.embedded_postgres import free_port
 
 BODY = b"x" * 3300  # a 360-beam scan's notification with its image, about
 

@@ -29,7 +29,7 @@ from common.config import EngineSettings, ZenohSettings
 from common.contract import keys
 from common.engine import Engine, Rule
 from common.service import wake_on_notifications
-from common.testing import loopback_zenoh
+from pnav._testing import loopback_zenoh
 from pnav.bench.figures import emit, machine, percentiles
 
 BENCH_TABLE = keys.GOAL  # any watched table will do; no database is involved

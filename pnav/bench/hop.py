@@ -40,8 +40,8 @@ from common.config import EngineSettings, ZenohSettings
 from common.contract import keys
 from common.db import create_pool
 from common.engine import Engine, Rule
-from common.testing import EmbeddedPostgres, free_port
 from pnav.bench.engine_rate import drive
+from pnav.run.embedded_postgres import EmbeddedPostgres, free_port
 
 TABLE = "hop_probe"
 STAGES = ("thread", "loop", "rule", "insert", "notified")

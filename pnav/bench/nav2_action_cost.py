@@ -40,9 +40,9 @@ from common.robotlink import RobotLinkSettings, RobotTopics
 from common.ros2action import CANCELED
 from common.ros2interfaces import CANCEL_GOAL, NAVIGATE_TO_POSE
 from common.runtime import Runtime
-from common.testing import EmbeddedPostgres, free_port
 from pnav.bench.figures import emit, machine
 from pnav.ros2.rviz import RvizLink
+from pnav.run.embedded_postgres import EmbeddedPostgres, free_port
 
 STEPS = ("send_goal", "cancel_goal", "get_result")
 

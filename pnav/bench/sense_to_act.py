@@ -35,7 +35,8 @@ from pnav.bench import provenance_samples as prov
 from pnav.bench.hall import Hall, write_hall
 from pnav.bench.processes import Usage
 from pnav.cli import stack_commands
-from pnav.run.launcher import StackOptions, launched
+from pnav.run.launcher import launched
+from pnav.run.stack_options import StackOptions
 
 LINKS = ("native", "ros2")
 # the stack's own router carries the ROS 2 domain (docs/ROS2.md); nothing else is on it

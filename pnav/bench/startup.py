@@ -10,7 +10,7 @@ between processes (Postgres' shared buffers, the Python runtime) are counted onc
 given per process too (``launcher`` is this process: the Zenoh router and the benchmark's
 own reading).
 
-Where the time goes: the launcher's steps (common.stack.LocalStack.phases: Postgres' data
+Where the time goes: the launcher's steps (pnav.run.local_stack.LocalStack.phases: Postgres' data
 directory made, from the template cluster's spare, a copy of it or by initdb, and the server
 started; the router;
 roles, passwords and migrations), then for each service the first line of its log (it has
@@ -36,7 +36,8 @@ from common.runtime import Runtime
 from pnav.bench.figures import emit, machine
 from pnav.bench.processes import memory_mb, pss_mb, roles, stack_processes
 from pnav.cli import stack_commands
-from pnav.run.launcher import StackOptions, launched
+from pnav.run.launcher import launched
+from pnav.run.stack_options import StackOptions
 
 TARGET_S, TARGET_MB = 1.0, 300.0  # issue 31
 ROBOT_POLL_S = 0.01

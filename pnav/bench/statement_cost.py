@@ -28,7 +28,7 @@ import uvloop
 
 from common.db import create_pool
 from common.lane import Lane
-from common.testing import EmbeddedPostgres
+from pnav.run.embedded_postgres import EmbeddedPostgres
 
 SETUP = (
     "CREATE TABLE lane_probe (id bigserial PRIMARY KEY, robot_id text NOT NULL, stamp float8,"

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     # imported when used: `pnav --help` does not load the launcher's dependencies
-    from pnav.run.launcher import DashboardOptions
+    from pnav.run.stack_options import DashboardOptions
 
 
 def _port(text: str) -> int:
@@ -62,7 +62,7 @@ def add_dashboard_options(parser: argparse.ArgumentParser, default_port: int | N
 
 
 def dashboard_options(args: argparse.Namespace) -> DashboardOptions | None:
-    from pnav.run.launcher import DashboardOptions
+    from pnav.run.stack_options import DashboardOptions
 
     if args.no_dashboard:
         return None

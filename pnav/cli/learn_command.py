@@ -87,7 +87,7 @@ async def _dataset(args: argparse.Namespace) -> int:
     if args.db_dir is not None:
         if not (args.db_dir / "PG_VERSION").is_file():
             raise UsageError(f"--db-dir {args.db_dir}: not a Postgres data directory")
-        from common.testing import EmbeddedPostgres
+        from pnav.run.embedded_postgres import EmbeddedPostgres
 
         # stopped again at the end (the data directory given is never removed)
         postgres = EmbeddedPostgres(args.db_dir)

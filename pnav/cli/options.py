@@ -163,7 +163,7 @@ def processes_option(parser: argparse.ArgumentParser) -> None:
 
 def apply_processes(args: argparse.Namespace) -> None:
     """``--processes`` for every stack the command starts (a benchmark's workers' too):
-    PNAV_PROCESSES, which pnav.run.launcher.StackOptions reads."""
+    PNAV_PROCESSES, which pnav.run.stack_options.StackOptions reads."""
     if getattr(args, "processes", None):
         os.environ["PNAV_PROCESSES"] = args.processes
 

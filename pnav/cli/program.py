@@ -370,7 +370,8 @@ def _secrets(args: argparse.Namespace) -> int:
 
 
 def _up(args: argparse.Namespace) -> int:
-    from pnav.run.launcher import StackOptions, lockstep_env, parse_replace, parse_replicas
+    from pnav.run.launcher import lockstep_env, parse_replace, parse_replicas
+    from pnav.run.stack_options import StackOptions
     from pnav.run.up import up
 
     options = StackOptions(

@@ -157,7 +157,7 @@ async def owners(rt: Runtime) -> tuple[dict[str, int], dict[str, list[str]]]:
     """Live replicas per scenario service, and robot -> the owning instance of each service
     that runs more than one replica (a lone replica owns every robot: nothing to show)."""
     from common import lease
-    from pnav.run.launcher import SCENARIO_SERVICES
+    from pnav.run.stack_options import SCENARIO_SERVICES
 
     replicas: dict[str, int] = {}
     owned: dict[str, list[str]] = {}

@@ -18,8 +18,8 @@ from common.errors import UsageError
 from pnav.run.process_supervisor import ProcessSpec
 
 if TYPE_CHECKING:
-    from common.stack import LocalStack
-    from pnav.run.launcher import StackOptions
+    from pnav.run.local_stack import LocalStack
+    from pnav.run.stack_options import StackOptions
 
 # --processes: auto (composed on a machine of few cores), composed, separate
 PROCESSES = ("auto", "composed", "separate")

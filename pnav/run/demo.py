@@ -29,8 +29,9 @@ from common.config import ServiceConfig
 from common.robotmodel import DEFAULT_MODEL, load_model
 from common.runtime import Runtime
 from pnav.cli import stack_commands
-from pnav.run.launcher import DashboardOptions, StackOptions, launched
+from pnav.run.launcher import launched
 from pnav.run.mission import GoalEnded, MissionLog, MissionMonitor
+from pnav.run.stack_options import DashboardOptions, StackOptions
 
 ROBOT = "r1"
 WORLD = "warehouse"

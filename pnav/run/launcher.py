@@ -1,6 +1,7 @@
 """Start the whole stack on one machine: Postgres, a Zenoh router, and every service.
 
-Used by ``pnav up`` (until Ctrl-C), ``pnav demo`` (for one mission) and the benchmarks.
+Used by ``pnav up`` (until Ctrl-C), ``pnav demo`` (for one mission) and the benchmarks, with
+the options of pnav/run/stack_options.py.
 Services run under a :class:`~pnav.run.process_supervisor.Supervisor`, each in a process of its own
 (``processes="separate"``) or, composed, the scenario services together in one host process
 (pnav.run.host; ``"composed"``, and ``"auto"`` on a machine of at most
@@ -18,7 +19,7 @@ import socket
 import sys
 import tempfile
 from collections.abc import AsyncIterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
 
@@ -27,19 +28,17 @@ from zenoh import Session
 from common.config import ZenohSettings
 from common.contract import acl
 from common.errors import UsageError
-from common.stack import BusCredentials, LocalStack, local_stack
-from common.testing import free_port
 from pnav.run import stackfile
 from pnav.run.composition import HOST_PROCESS, host_spec, hosted, resolve_processes
+from pnav.run.embedded_postgres import free_port
+from pnav.run.local_stack import LocalStack, local_stack
 from pnav.run.prestart import Prestart
 from pnav.run.process_supervisor import ProcessSpec, Supervisor
+from pnav.run.stack_options import SCENARIO_SERVICES, DashboardOptions, StackOptions
 from pnav.run.supervisor_report import SupervisorReport
 
 ROOT = Path(__file__).resolve().parents[2]
 WORLDS = ROOT / "worlds"
-SCENARIO_SERVICES = ("strategy", "planner", "controller", "decision")
-DEFAULT_ZENOH_PORT = 7447
-DEFAULT_HTTP_PORT = 8080
 
 
 def resolve_world(world: str) -> Path:
@@ -52,63 +51,12 @@ def resolve_world(world: str) -> Path:
     raise UsageError(f"no world {world!r}: give a world file, or one of: {names}")
 
 
-@dataclass(frozen=True)
-class DashboardOptions:
-    """The dashboard the stack serves (services/dashboard, docs/DASHBOARD.md)."""
-
-    host: str = "127.0.0.1"
-    port: int | None = DEFAULT_HTTP_PORT  # None: a free port, chosen at launch
-    # host names the page may be reached by besides the loopback ones and ``host``
-    # (PNAV_DASHBOARD_ALLOWED_HOSTS, services/dashboard/gate.py)
-    allowed_hosts: tuple[str, ...] = ()
-
-    @property
-    def url(self) -> str:
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"http://{host}:{self.port}/"
-
-
 def check_world(world: Path, model: str | None) -> None:
     """Load the world as the sim will, with its robots' models: a bad world or model is a
     one-line UsageError now, not a sim that exits and is restarted over and over."""
     from services.sim.world_spec import load_world
 
     load_world(world, model)
-
-
-@dataclass
-class StackOptions:
-    world: str = "warehouse"
-    rate: str = "1"
-    gui: bool = False
-    robots: int | None = None
-    battery: float | None = None
-    # robot model of every robot the world does not give one (None: the Burger)
-    model: str | None = None
-    data_dir: Path | None = None
-    zenoh_port: int | None = DEFAULT_ZENOH_PORT  # None: any free port
-    log_dir: Path | None = None
-    echo: bool = False
-    services: tuple[str, ...] = ("sim", "bridge", *SCENARIO_SERVICES)
-    extra_env: dict[str, str] = field(default_factory=dict)
-    # the Zenoh users of the run (made for it if None); given when extra_env points the
-    # stack at a router of the caller's that checks the same users (pnav bench faults)
-    bus: BusCredentials | None = None
-    # processes per scenario service (default 1): replicas split the robots (common.lease)
-    replicas: dict[str, int] = field(default_factory=dict)
-    # service -> the command run in its place (another implementation, docs/SWAP.md)
-    replace: dict[str, list[str]] = field(default_factory=dict)
-    # record the mission into this MCAP file (pnav/record, docs/RECORDING.md)
-    record: Path | None = None
-    # its encoding: "foxglove" (Foxglove's schemas) or "ros2" (ros2msg, CDR)
-    record_encoding: str = "foxglove"
-    # the dashboard, supervised like the services; None: none (tests and benchmarks)
-    dashboard: DashboardOptions | None = None
-    # one process per service ("separate"), the scenario services in one host process
-    # ("composed"), or composed on a machine of few cores ("auto": resolve_processes)
-    processes: str = field(default_factory=lambda: os.environ.get("PNAV_PROCESSES") or "auto")
-    # the services a composed stack runs in its host (those not replicated nor replaced)
-    host_services: tuple[str, ...] = acl.DEFAULT_HOSTED
 
 
 @dataclass

@@ -45,7 +45,7 @@ class StackInfo:
     # each role's DSN (common.contract.roles): a service started by hand next to the stack
     # connects as its own role, `url_for("controller")`; database_url is people's (pnav_user)
     role_urls: dict[str, str] = field(default_factory=dict)
-    # each bus identity's Zenoh password for this run (common.stack.BusCredentials); the
+    # each bus identity's Zenoh password for this run (pnav.run.local_stack.BusCredentials); the
     # router refuses a session without one
     zenoh_passwords: dict[str, str] = field(default_factory=dict)
 

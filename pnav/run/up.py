@@ -11,7 +11,8 @@ from common import log
 from common.errors import UsageError
 from common.postmaster import clean_up
 from pnav.run import stackfile
-from pnav.run.launcher import StackOptions, launched
+from pnav.run.launcher import launched
+from pnav.run.stack_options import StackOptions
 
 logger = logging.getLogger("pnav.up")
 

@@ -13,7 +13,7 @@ import pytest
 from common.config import ServiceConfig, ZenohSettings
 from common.runtime import Runtime
 from common.service import ScenarioService
-from common.testing import ClockPlayer, eventually
+from pnav._testing import ClockPlayer, eventually
 
 CLOCK_START = 10.0
 

@@ -20,7 +20,7 @@ from common.config import LeaseSettings
 from common.contract.grants import lease_holders, parse_grants, role_name
 from common.contract.roles import role_url
 from common.lease import LeaseManager, lease_key, live_replicas, ownership
-from common.testing import as_service_role, eventually
+from pnav._testing import as_service_role, eventually
 from pnav.bench.faults import theft
 
 SERVICE = "controller"

@@ -21,7 +21,7 @@ import pytest
 from common.contract import keys
 from common.contract.grants import role_name
 from common.contract.roles import PEOPLE_IDLE_IN_TRANSACTION, role_url
-from common.testing import as_service_role
+from pnav._testing import as_service_role
 
 
 async def user_url(db_url: str) -> str:

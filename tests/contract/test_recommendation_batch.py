@@ -24,7 +24,7 @@ from common.contract.recommendations import (
 from common.db import ASYNC_COMMIT
 from common.errors import UsageError
 from common.runtime import Runtime
-from common.testing import eventually
+from pnav._testing import eventually
 
 NOT_IN_THE_IMAGE = ("created_at", "treated_by", "tx")
 

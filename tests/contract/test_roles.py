@@ -20,7 +20,7 @@ from common.contract import grants as g
 from common.contract.migrate import apply_migrations
 from common.contract.roles import RolesUnavailable, bootstrap, role_url
 from common.runtime import Runtime
-from common.testing import EmbeddedPostgres
+from pnav.run.embedded_postgres import EmbeddedPostgres
 
 
 @pytest.fixture
@@ -261,7 +261,7 @@ async def test_the_cli_drives_a_robot_as_pnav_user_and_a_service_role_cannot(
 async def test_a_stack_given_a_plain_account_migrates_and_runs_everything_as_it(
     pg: EmbeddedPostgres, caplog: pytest.LogCaptureFixture
 ) -> None:
-    from common.stack import _set_up_roles
+    from pnav.run.local_stack import _set_up_roles
 
     name = f"t_plain_{uuid.uuid4().hex[:8]}"
     pg._server.psql(f"CREATE ROLE {name} LOGIN; CREATE DATABASE {name} OWNER {name};")

@@ -13,7 +13,7 @@ from common.config import EngineSettings, ServiceConfig, ZenohSettings
 from common.contract import offers
 from common.controller_core.scenario import installed_scenarios
 from common.service import ScenarioService
-from common.testing import as_service_role, eventually, running_service
+from pnav._testing import as_service_role, eventually, running_service
 from services.controller.service import ControllerService
 from services.planner.meta import move_scenarios
 from services.planner.service import PlannerService

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from common.testing import acl_router
+from pnav._testing import acl_router
 from pnav.run.credentials import ZENOH_PASSWORDS
 from tests.deploy.test_compose import ROUTER_CONFIG, SECRETS
 

@@ -47,14 +47,14 @@ from common.contract import acl, keys
 from common.contract.grants import role_name
 from common.contract.roles import bootstrap, role_url
 from common.errors import UsageError
-from common.testing import free_port
 from pnav.run.credentials import (
     DB_PASSWORDS,
     SUPERUSER_PASSWORD,
     ZENOH_PASSWORDS,
     ZENOH_USERS_FILE,
 )
-from pnav.run.launcher import SCENARIO_SERVICES, StackOptions
+from pnav.run.embedded_postgres import free_port
+from pnav.run.stack_options import SCENARIO_SERVICES, StackOptions
 
 ROOT = Path(__file__).resolve().parents[2]
 DEPLOY = ROOT / "deploy"

@@ -8,8 +8,9 @@ each in its turn:
 - ``compose``: a router from that file (the eclipse-zenoh package runs the same router code
   as zenohd, in-process: only its listen endpoint and the path of its user/password
   dictionary are changed for the test);
-- ``local``: the router of a local stack (``pnav up``), as common.stack.local_stack starts
-  it: common.bus.start_router with the run's user/password file (common.stack.BusCredentials);
+- ``local``: the router of a local stack (``pnav up``), as pnav.run.local_stack.local_stack
+  starts it: common.bus.start_router with the run's user/password file
+  (pnav.run.local_stack.BusCredentials);
 
 and clients with each identity and its password:
 
@@ -35,8 +36,9 @@ from common.config import ZenohSettings
 from common.contract import acl, keys
 from common.contract.grants import BUS_IDENTITIES, USER, written_tables
 from common.errors import ConnectionFailure
-from common.stack import BusCredentials
-from common.testing import acl_router, free_port
+from pnav._testing import acl_router
+from pnav.run.embedded_postgres import free_port
+from pnav.run.local_stack import BusCredentials
 
 ROUTER_CONFIG = Path(__file__).resolve().parents[2] / "deploy" / "zenoh" / "router.json5"
 PASSWORDS = {name: f"pw-{name}-{i}" for i, name in enumerate((*BUS_IDENTITIES, *acl.DEFAULT_HOSTS))}
@@ -89,7 +91,7 @@ class Fleet:
 
 @contextlib.contextmanager
 def local_router(directory: Path) -> Iterator[tuple[str, dict[str, str], zenoh.Session]]:
-    """The router of a local stack, started as common.stack.local_stack starts it."""
+    """The router of a local stack, started as pnav.run.local_stack.local_stack starts it."""
     creds = BusCredentials.create(directory)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = bus.start_router((endpoint,), str(creds.users_file))

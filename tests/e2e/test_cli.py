@@ -12,7 +12,7 @@ from pathlib import Path
 import psutil
 import pytest
 
-from common.testing import free_port
+from pnav.run.embedded_postgres import free_port
 
 pytestmark = pytest.mark.timeout(180)
 

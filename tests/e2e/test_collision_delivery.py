@@ -17,7 +17,7 @@ from common import bus
 from common.config import ServiceConfig, ZenohSettings
 from common.contract import keys
 from common.runtime import Runtime
-from common.testing import eventually, router_process
+from pnav._testing import eventually, router_process
 from services.bridge import Bridge, BridgeSettings
 from services.sim.node import SimNode
 from services.sim.sim import SimConfig

@@ -22,7 +22,8 @@ import pytest
 
 from common.config import ServiceConfig
 from common.runtime import Runtime
-from pnav.run.launcher import DashboardOptions, StackOptions, launched
+from pnav.run.launcher import launched
+from pnav.run.stack_options import DashboardOptions, StackOptions
 
 pytestmark = pytest.mark.timeout(240)
 

@@ -17,7 +17,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from common.testing import EmbeddedPostgres
+from pnav.run.embedded_postgres import EmbeddedPostgres
 from pnav_learned.features import FEATURES, sector_minima
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]

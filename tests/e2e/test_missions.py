@@ -13,11 +13,12 @@ import pytest
 
 from common.config import ServiceConfig
 from common.runtime import Runtime
-from common.testing import eventually
+from pnav._testing import eventually
 from pnav.cli import stack_commands
 from pnav.run import demo
-from pnav.run.launcher import RunningStack, StackOptions, launched
+from pnav.run.launcher import RunningStack, launched
 from pnav.run.mission import MissionLog, MissionMonitor
+from pnav.run.stack_options import StackOptions
 
 pytestmark = pytest.mark.timeout(240)
 

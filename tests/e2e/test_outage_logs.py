@@ -15,9 +15,11 @@ import pytest
 from common.config import ServiceConfig
 from common.postmaster import kill_postmaster
 from common.runtime import Runtime
-from common.testing import EmbeddedPostgres, eventually
+from pnav._testing import eventually
 from pnav.cli import stack_commands
-from pnav.run.launcher import StackOptions, launched
+from pnav.run.embedded_postgres import EmbeddedPostgres
+from pnav.run.launcher import launched
+from pnav.run.stack_options import StackOptions
 
 pytestmark = pytest.mark.timeout(240)
 

@@ -10,7 +10,8 @@ import pytest
 
 from common.contract import people
 from pnav.cli import stack_commands
-from pnav.run.launcher import StackOptions, launched
+from pnav.run.launcher import launched
+from pnav.run.stack_options import StackOptions
 from tests.e2e.test_missions import RATE, describe, reached, stack_monitor
 
 pytestmark = pytest.mark.timeout(240)

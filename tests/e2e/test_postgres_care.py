@@ -18,7 +18,7 @@ import psutil
 import pytest
 
 from common.postmaster import alive, clean_up, postmaster_pid
-from common.testing import free_port
+from pnav.run.embedded_postgres import free_port
 
 pytestmark = pytest.mark.timeout(120)
 

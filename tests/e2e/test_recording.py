@@ -16,8 +16,9 @@ from common.config import ServiceConfig
 from common.runtime import Runtime
 from pnav.cli import stack_commands
 from pnav.record import topics
-from pnav.run.launcher import StackOptions, launched
+from pnav.run.launcher import launched
 from pnav.run.mission import MissionMonitor
+from pnav.run.stack_options import StackOptions
 
 pytestmark = [pytest.mark.timeout(240), pytest.mark.slow]
 

@@ -36,7 +36,7 @@ import yaml
 from common.config import ZenohSettings
 from common.contract.roles import role_url
 from common.lease import history_overlaps, live_replicas, ownership
-from common.testing import acl_router, eventually
+from pnav._testing import acl_router, eventually
 from pnav.run.credentials import ZENOH_PASSWORDS
 from tests.deploy.test_compose import ROUTER_CONFIG, SECRETS
 

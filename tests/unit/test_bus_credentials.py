@@ -1,4 +1,4 @@
-"""A local stack's Zenoh users (common.stack.BusCredentials): a process that was not given
+"""A local stack's Zenoh users (pnav.run.local_stack.BusCredentials): a process that was not given
 this run's password cannot join; the stack's own processes hear each other through the
 router that checks them; and that router lets each identity put only its own keys, as the
 compose router does (every key family: tests/deploy/test_zenoh_acl.py)."""
@@ -18,8 +18,8 @@ from common import bus
 from common.config import ZenohSettings
 from common.contract import keys
 from common.errors import ConnectionFailure, UsageError
-from common.stack import BusCredentials, LocalZenoh, local_stack
-from common.testing import eventually
+from pnav._testing import eventually
+from pnav.run.local_stack import BusCredentials, LocalZenoh, local_stack
 from pnav.run.stackfile import StackInfo
 
 pytestmark = pytest.mark.timeout(60)

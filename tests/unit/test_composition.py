@@ -13,11 +13,12 @@ import pytest
 from common.config import ZenohSettings
 from common.contract import acl
 from common.errors import UsageError
-from common.stack import BusCredentials, LocalStack
 from pnav.cli.program import build_parser
 from pnav.run.composition import COMPOSE_AT_MOST_CORES, hosted, parse_processes, resolve_processes
-from pnav.run.launcher import StackOptions, parse_replace, service_specs
+from pnav.run.launcher import parse_replace, service_specs
+from pnav.run.local_stack import BusCredentials, LocalStack
 from pnav.run.process_supervisor import line_writer
+from pnav.run.stack_options import StackOptions
 
 WORLD = Path("worlds/open_room.yaml")
 SCENARIO = ("strategy", "planner", "controller", "decision")

@@ -10,17 +10,12 @@ import pytest
 
 from common.config import ZenohSettings
 from common.errors import UsageError
-from common.stack import LocalStack
-from common.testing import free_port
 from pnav.cli.dashboard_options import dashboard_options
 from pnav.cli.program import build_parser
-from pnav.run.launcher import (
-    DashboardOptions,
-    StackOptions,
-    lockstep_env,
-    resolve_dashboard,
-    service_specs,
-)
+from pnav.run.embedded_postgres import free_port
+from pnav.run.launcher import lockstep_env, resolve_dashboard, service_specs
+from pnav.run.local_stack import LocalStack
+from pnav.run.stack_options import DashboardOptions, StackOptions
 
 
 def local() -> LocalStack:

@@ -10,7 +10,7 @@ import asyncpg
 import pytest
 
 from common.postmaster import kill_postmaster
-from common.testing import EmbeddedPostgres
+from pnav.run.embedded_postgres import EmbeddedPostgres
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -18,7 +18,7 @@ from common.config import EngineSettings, ZenohSettings
 from common.contract import keys
 from common.engine import Engine, Rule
 from common.lockstep import Ledger, LockstepTrigger
-from common.testing import eventually
+from pnav._testing import eventually
 
 
 class Bot(Rule):

@@ -1,10 +1,14 @@
-"""No two modules of the project import each other at module level, directly or through
-others (an import circle): whichever is imported first would see the other half-made.
+"""No two modules of the project import each other, directly or through others (an import
+circle).
 
-The modules' own import statements are read (not run): those at module level, including
-inside a module-level ``try``/``if`` but not ``if TYPE_CHECKING:`` (never run) nor inside a
-function (run later, when both modules are whole). ``from a.b import c`` is an edge to
-``a.b.c`` when that is a module of the project, else to ``a.b``.
+Two checks read the modules' own import statements (not run). At module level (including
+inside a module-level ``try``/``if`` but not ``if TYPE_CHECKING:`` nor inside a function):
+there a circle is a bug, whichever is imported first would see the other half-made. And
+everywhere, a function's imports and the type checker's included (issue 33): a circle hidden
+in a function still makes two modules one, and breaks as soon as the import moves to the top;
+it is broken by moving the piece both need to where both can import it. The circles still to
+break are listed (``KNOWN_CYCLES``). ``from a.b import c`` is an edge to ``a.b.c`` when that
+is a module of the project, else to ``a.b``.
 """
 
 from __future__ import annotations
@@ -14,14 +18,14 @@ from collections.abc import Iterator
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-PACKAGES = ("common", "services", "pnav", "pnav_local", "examples")
+PACKAGES = ("common", "services", "pnav", "pnav_local", "pnav_learned", "examples")
 
 
-def _modules() -> dict[str, Path]:
+def _modules(root: Path = ROOT) -> dict[str, Path]:
     found: dict[str, Path] = {}
     for package in PACKAGES:
-        for path in sorted((ROOT / package).rglob("*.py")):
-            parts = list(path.relative_to(ROOT).with_suffix("").parts)
+        for path in sorted((root / package).rglob("*.py")):
+            parts = list(path.relative_to(root).with_suffix("").parts)
             if parts[-1] == "__init__":
                 parts.pop()
             found[".".join(parts)] = path
@@ -52,10 +56,20 @@ def _top_level(body: list[ast.stmt]) -> Iterator[ast.Import | ast.ImportFrom]:
             yield from _top_level(node.body)
 
 
-def _edges(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
+def _everywhere(tree: ast.Module) -> Iterator[ast.Import | ast.ImportFrom]:
+    """Every import of a module: in functions and ``if TYPE_CHECKING:`` blocks too."""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import | ast.ImportFrom):
+            yield node
+
+
+def _edges(
+    name: str, path: Path, modules: dict[str, Path], *, everywhere: bool = False
+) -> set[str]:
     is_package = path.name == "__init__.py"
     out: set[str] = set()
-    for node in _top_level(ast.parse(path.read_text(), str(path)).body):
+    tree = ast.parse(path.read_text(), str(path))
+    for node in _everywhere(tree) if everywhere else _top_level(tree.body):
         if isinstance(node, ast.Import):
             targets = [alias.name for alias in node.names]
         else:
@@ -119,3 +133,44 @@ def test_the_check_finds_a_circle() -> None:
     # the check itself: a circle of three, and one module beside it that is not in it
     graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
     assert _circles(graph) == [["a", "b", "c"]]
+
+
+# Circles through a function's or the type checker's imports, not yet broken, each with why
+# it is still here. The list may only shrink: a listed circle that is gone fails the test too,
+# so it is taken out with the change that breaks it.
+KNOWN_CYCLES = [
+    # the planner's obstacles name its World and RobotState in their type hints while
+    # world.py builds on obstacles' PoseTrail and Seen: broken with the planner's own files
+    # (issue 33, the services' layout)
+    ["services.planner.obstacles", "services.planner.world"],
+]
+
+
+def _every_circle(root: Path = ROOT) -> list[list[str]]:
+    modules = _modules(root)
+    graph = {name: _edges(name, path, modules, everywhere=True) for name, path in modules.items()}
+    return sorted(_circles(graph))
+
+
+def test_no_import_circle_even_through_functions_or_type_hints() -> None:
+    assert _every_circle() == KNOWN_CYCLES
+
+
+def test_the_check_finds_a_circle_hidden_in_a_function_or_a_type_hint(tmp_path: Path) -> None:
+    tools = tmp_path / "pnav" / "tools"
+    tools.mkdir(parents=True)
+    (tmp_path / "pnav" / "__init__.py").write_text("")
+    (tools / "__init__.py").write_text("")
+    (tools / "a.py").write_text("from pnav.tools.b import thing\n")
+    (tools / "b.py").write_text("def thing():\n    from pnav.tools import c\n")
+    (tools / "c.py").write_text("def f():\n    from . import a\n")
+    (tools / "d.py").write_text("import pnav.tools.a\n")  # on the way in, not in the circle
+    (tools / "e.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from pnav.tools.f import F\n"
+    )
+    (tools / "f.py").write_text("import pnav.tools.e as e\nclass F: ...\n")
+    (tools / "g.py").write_text("from pnav.tools import a, e, not_a_module\n")
+    assert _every_circle(tmp_path) == [
+        ["pnav.tools.a", "pnav.tools.b", "pnav.tools.c"],
+        ["pnav.tools.e", "pnav.tools.f"],
+    ]

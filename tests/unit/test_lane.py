@@ -11,7 +11,7 @@ import pytest
 
 from common.db import create_pool
 from common.lane import Lane
-from common.testing import eventually
+from pnav._testing import eventually
 
 PID = "SELECT pg_backend_pid()"
 

@@ -18,7 +18,7 @@ import pytest
 
 from common.config import LeaseSettings
 from common.lease import LeaseManager, history_overlaps, live_replicas, ownership
-from common.testing import eventually
+from pnav._testing import eventually
 
 SERVICE = "controller"
 ROBOTS = [f"r{i}" for i in range(1, 7)]

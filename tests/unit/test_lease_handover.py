@@ -18,7 +18,7 @@ import pytest
 import common.lease.cycle as cycle
 from common.config import LeaseSettings
 from common.lease import REBALANCE, LeaseManager, history_overlaps, lease_key, ownership
-from common.testing import eventually
+from pnav._testing import eventually
 
 SERVICE = "decision"
 ROBOTS = ["r1", "r2"]

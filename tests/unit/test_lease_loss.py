@@ -17,7 +17,7 @@ import asyncpg
 
 from common.config import LeaseSettings
 from common.lease import LeaseManager, history_overlaps
-from common.testing import eventually
+from pnav._testing import eventually
 from tests.unit.pgproxy import PgProxy
 from tests.unit.test_lease import ROBOTS, SERVICE, Watch, add_robots
 

@@ -13,7 +13,7 @@ from common.engine import Rule
 from common.lease import ownership
 from common.runtime import Runtime
 from common.service import ScenarioService
-from common.testing import eventually, running_service
+from pnav._testing import eventually, running_service
 
 SERVICE = "counter"
 

@@ -1,4 +1,4 @@
-"""Zenoh between the processes of a local stack (common.stack.LocalZenoh), on loopback.
+"""Zenoh between the processes of a local stack (pnav.run.local_stack.LocalZenoh), on loopback.
 
 By default every local process is a client of the launcher's router, which checks its user
 and password (tests/unit/test_bus_credentials.py). With ``PNAV_LOCAL_ZENOH=peer`` it
@@ -19,8 +19,8 @@ from common.bus import Notification, Notifier
 from common.config import ZenohSettings
 from common.contract import keys
 from common.errors import ConfigError
-from common.stack import PEER_LISTEN, LocalZenoh
-from common.testing import eventually, loopback_zenoh
+from pnav._testing import eventually, loopback_zenoh
+from pnav.run.local_stack import PEER_LISTEN, LocalZenoh
 
 
 def test_local_processes_are_authenticated_clients_unless_told_to_be_peers() -> None:

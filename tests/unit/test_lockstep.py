@@ -22,7 +22,7 @@ from common.engine import Engine, Rule
 from common.lockstep import Ledger, LockstepTrigger, Status
 from common.runtime import Runtime
 from common.service import ScenarioService
-from common.testing import eventually
+from pnav._testing import eventually
 from services.sim.lockstep_barrier import Barrier
 
 ODOM = keys.robot_key("r1", keys.ODOM)

@@ -14,7 +14,7 @@ import asyncpg
 import pytest
 
 from common.pgtemplate import UNUSED_DAYS, leave_spare, seed_from_template, template_dir
-from common.testing import EmbeddedPostgres
+from pnav.run.embedded_postgres import EmbeddedPostgres
 
 pytestmark = pytest.mark.timeout(120)
 

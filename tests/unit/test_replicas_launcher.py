@@ -9,9 +9,10 @@ import pytest
 
 from common.config import ZenohSettings
 from common.errors import UsageError
-from common.stack import LocalStack
 from pnav.cli.program import build_parser
-from pnav.run.launcher import StackOptions, parse_replicas, service_specs
+from pnav.run.launcher import parse_replicas, service_specs
+from pnav.run.local_stack import LocalStack
+from pnav.run.stack_options import StackOptions
 
 
 def test_replicas_are_repeatable_and_comma_separated() -> None:

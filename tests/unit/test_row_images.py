@@ -12,7 +12,7 @@ from common.config import DATA_QUEUE_BATCHES, ZenohSettings
 from common.contract import keys
 from common.db import Database, create_pool
 from common.freshness import Sequences
-from common.testing import eventually
+from pnav._testing import eventually
 
 GOAL_KEY = keys.notify_key(keys.GOAL, "r1")
 

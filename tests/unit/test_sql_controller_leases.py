@@ -12,9 +12,9 @@ import asyncpg
 
 from common.config import LeaseSettings
 from common.lease import LeaseManager, history_overlaps
-from common.testing import eventually
 from examples.sql_controller.environment import Settings
 from examples.sql_controller.leases import Leases
+from pnav._testing import eventually
 from tests.unit.pgproxy import PgProxy
 from tests.unit.test_lease import ROBOTS, SERVICE, add_robots
 

@@ -19,8 +19,8 @@ from common.config import ZenohSettings
 from common.contract import keys
 from common.contract.migrate import apply_migrations
 from common.errors import ConnectionFailure
-from common.testing import EmbeddedPostgres, free_port
 from pnav.bench.bridge.player import world
+from pnav.run.embedded_postgres import EmbeddedPostgres, free_port
 
 # the bridge must have written the world's robots within this long
 READY_TIMEOUT_S = 30.0

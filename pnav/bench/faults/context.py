@@ -9,8 +9,8 @@ from dataclasses import dataclass, field
 
 from common.config import ZenohSettings
 from common.runtime import Runtime
-from common.stack import BusCredentials
 from pnav.run.launcher import RunningStack
+from pnav.run.local_stack import BusCredentials
 
 ROBOT = "r1"
 # the first seq of spoofed odometry, and the first command_id of a forged cmd_vel: above

@@ -10,7 +10,7 @@ For ``seconds``, every 0.1 s, it publishes on r1's keys:
   row has.
 
 Each goes out through the identity's own Zenoh credentials (the bench made them for the run:
-common.stack.BusCredentials); without them, through the bench's own session (as the tests
+pnav.run.local_stack.BusCredentials); without them, through the bench's own session (as the tests
 do, past the ACL). Then it checks what the readers did with them: no command2robot row
 written meanwhile cites a recommendation the table does not have, and no cmd_vel carried a
 forged command id (the robot moved on none of them). Either one is a breach.

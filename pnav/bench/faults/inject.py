@@ -7,7 +7,7 @@ What each kind means here:
 - ``postgres``: SIGKILL of the embedded postmaster (``postmaster.pid``); ``restart_s`` is
   the time until a connection succeeds again (the launcher's Keeper restarted it).
 - ``freeze``: SIGSTOP, then SIGCONT, of the Zenoh router. The bench runs the router in a
-  process of its own (``common.testing.router_process``, as the router-freeze test does) and
+  process of its own (``pnav._testing.router_process``, as the router-freeze test does) and
   points every service at it, so the router alone is frozen.
 - ``cut``: SIGSTOP, then SIGCONT, of one service's process: its links to the router and to
   Postgres are cut (sockets open, nothing moves) as a pulled cable would, and come back.
@@ -203,7 +203,7 @@ async def _at_30_hz(seconds: float, put: Any) -> int:
 
 async def _spoof(fault: Fault, ctx: Context) -> Injection:
     out = Injection()
-    # a process on the machine that was not given a password (common.stack.BusCredentials)
+    # a process on the machine that was not given a password (pnav.run.local_stack.BusCredentials)
     outsider = dataclasses.replace(ctx.zenoh, user=None, password=None, users_file=None)
     try:
         (await asyncio.to_thread(bus.open_session, outsider)).close()

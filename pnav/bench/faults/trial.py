@@ -26,16 +26,17 @@ from common.contract import keys
 from common.contract.grants import USER
 from common.outage import is_connection_error
 from common.runtime import Runtime
-from common.stack import BusCredentials
-from common.testing import router_process
 from common.trace import CMD_VEL, read_trace
+from pnav._testing import router_process
 from pnav.bench.faults import committed_rows
 from pnav.bench.faults.catalogue import Fault
 from pnav.bench.faults.context import FORGED_COMMAND_ID, ROBOT, SPOOF_SEQ, Context
 from pnav.bench.faults.inject import inject
 from pnav.cli import stack_commands
-from pnav.run.launcher import DashboardOptions, StackOptions, launched
+from pnav.run.launcher import launched
+from pnav.run.local_stack import BusCredentials
 from pnav.run.mission import GoalEnded, MissionMonitor
+from pnav.run.stack_options import DashboardOptions, StackOptions
 
 T = TypeVar("T")
 
@@ -156,7 +157,7 @@ async def run_trial(
     result = Result(fault.name, fault.what)
     started = time.monotonic()
     # the stack's Zenoh users, checked by the router process too, with the same access
-    # control: a forger meets the same defence as on a `pnav up` stack (common.stack)
+    # control: a forger meets the same defence as on a `pnav up` stack (pnav.run.local_stack)
     secrets_dir = Path(tempfile.mkdtemp(prefix="pnav-bus-"))
     bus = BusCredentials.create(secrets_dir)
     try:

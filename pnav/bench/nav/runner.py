@@ -257,10 +257,10 @@ def with_model(
     worlds: list[BenchmarkWorld], robot: RobotFit | None, folder: Path
 ) -> list[BenchmarkWorld]:
     """``--model NAME``: every world run and scored with that robot model
-    (``pnav.bench.nav.robots.for_model``); None: each world with its own."""
+    (``pnav.bench.nav.worldfile.for_model``); None: each world with its own."""
     if robot is None:
         return worlds
-    from pnav.bench.nav.robots import for_model, too_big
+    from pnav.bench.nav.worldfile import for_model, too_big
 
     tight = too_big(worlds, robot)
     if tight:

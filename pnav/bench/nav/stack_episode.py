@@ -49,7 +49,8 @@ from pnav.bench.nav.scores import GOAL_TOLERANCE_M
 from pnav.bench.processes import Usage
 from pnav.bench.sense_to_act import Collected, collect
 from pnav.cli import stack_commands
-from pnav.run.launcher import StackOptions, launched
+from pnav.run.launcher import launched
+from pnav.run.stack_options import StackOptions
 
 SUCCESS_RADIUS_M = GOAL_TOLERANCE_M  # BARN: the goal counts as reached within 0.3 m
 MAX_LAG_S = 0.1  # the decision service re-issues every 0.1 s sim: never staler than that

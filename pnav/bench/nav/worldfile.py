@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +26,7 @@ from common.errors import WorldError
 from pnav.bench.nav import suitefile
 from pnav.bench.nav.difficulty import Difficulty
 from pnav.bench.nav.generator import LEVELS, GeneratedWorld
+from pnav.bench.nav.robots import RobotFit
 from pnav.bench.nav.scores import GOAL_TOLERANCE_M, TOP_SPEED_MPS, default_time_limit, optimal_time
 from pnav.bench.nav.search import BoolGrid, Point
 from pnav.bench.nav.suitefile import FORMAT
@@ -202,61 +203,37 @@ def load_suite(folder: str | Path) -> list[BenchmarkWorld]:
     return sorted(worlds, key=lambda w: (order.get(w.level, len(order)), w.name))
 
 
-COLUMNS = ("world", "level", "seed", "tries", "fill", "L_ref m", "OT s", "limit s")
+def for_model(world: BenchmarkWorld, robot: RobotFit, folder: Path) -> BenchmarkWorld:
+    """``world`` run and scored with ``robot``: OT at its top speed, the BARN protocol's time
+    limit for that speed (the default protocol keeps the world's), and, when the world was
+    made for another model (or names none), a copy of its world file under ``folder`` whose
+    robot is this model (the map and the obstacles unchanged)."""
+    from pnav.bench.nav import barn, dynabarn
+    from pnav.bench.nav.scores import optimal_time
 
-
-def table_rows(worlds: Sequence[GeneratedWorld]) -> list[list[str]]:
-    rows = []
-    for w in worlds:
-        length = w.reference.length_m
-        timing = [f"{optimal_time(length):.1f}", f"{default_time_limit(length):.0f}"]
-        rows.append(suitefile.field_row(w, f"{length:.2f}", *timing))
-    return rows
-
-
-def suite_tables(worlds: Sequence[GeneratedWorld]) -> str:
-    return suitefile.field_tables(COLUMNS, table_rows(worlds), worlds)
-
-
-def write_preview(path: Path, world: GeneratedWorld) -> None:
-    """A picture of the freshly generated world: map, reference path, start and goal."""
-    # render reads benchmark worlds (this module): imported here, not at load time
-    from pnav.bench.nav.render import draw_generated, write_world_png
-
-    write_world_png(path, draw_generated(world))
-
-
-def suite_markdown(worlds: Sequence[GeneratedWorld], command: str) -> str:
-    used = dict.fromkeys(w.level for w in worlds)
-    level_rows = [
-        [
-            level,
-            f"{LEVELS[level].fill_probability}",
-            str(LEVELS[level].smoothing_iterations),
-            str(LEVELS[level].fill_threshold),
-            str(LEVELS[level].clear_threshold),
-        ]
-        for level in used
-    ]
-    return suitefile.suite_page(
-        "BARN-style",
-        "The method, the levels, the metrics and the world file fields are in `docs/NAVBENCH.md`.",
-        command,
-        "`python -m pnav.bench.nav.worlds_cli generate ...` takes the same options. The "
-        "output does not depend on the machine: the same command writes the same bytes.",
-        "## Levels",
-        suitefile.markdown_table(
-            ("level", "fill probability", "smoothing steps", "fill if >=", "clear if <="),
-            level_rows,
-        ),
-        "## Means per level",
-        suitefile.markdown_table(suitefile.MEAN_COLUMNS, suitefile.level_means(worlds)),
-        "## Worlds",
-        "`fill`: occupied share of the field; `tries`: fields drawn until one had a path; "
-        "`L_ref`: reference path length; `OT`: optimal time at 0.22 m/s; `limit`: the "
-        "suggested time limit (8 OT, rounded up to 10 s); then the difficulty metrics.",
-        suitefile.markdown_table((*COLUMNS, *suitefile.METRIC_COLUMNS), table_rows(worlds)),
+    limit = world.time_limit_s
+    if world.protocol in (barn.PROTOCOL, dynabarn.PROTOCOL):
+        limit = barn.time_limit(robot.max_linear_mps)
+    world_file = world.world_file
+    if robot.name != world.model:
+        doc = yamldoc.load(world.world_file.read_text())
+        doc["map"] = str(world.map_file.resolve())  # the copy lives elsewhere
+        for entry in doc["robots"]:
+            entry["model"] = robot.world_ref
+        folder.mkdir(parents=True, exist_ok=True)
+        world_file = folder / f"{world.name}__{robot.name}.yaml"
+        world_file.write_text(yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
+    return replace(
+        world,
+        world_file=world_file,
+        top_speed_mps=robot.max_linear_mps,
+        optimal_time_s=optimal_time(world.reference_length_m, robot.max_linear_mps),
+        time_limit_s=limit,
+        model=robot.name,
     )
 
 
-SUITE_FILES = suitefile.SuiteFiles(write_world, write_preview, suite_markdown, suite_tables)
+def too_big(worlds: Sequence[BenchmarkWorld], robot: RobotFit) -> list[str]:
+    """The worlds whose path was checked for a smaller robot than ``robot``: it may not fit
+    through them."""
+    return [w.name for w in worlds if robot.footprint_radius_m > w.footprint_radius_m + 1e-9]

@@ -127,7 +127,7 @@ def generated_suite(
 ) -> tuple[Sequence[Any], SuiteFiles[Any]]:
     """The worlds ``args`` ask for, and how their protocol writes them: ``barn``, the same
     files with the obstacles as world obstacles (barnfile.py); ``dynabarn``, BARN's corridor
-    crossed by movers (dynabarnfile.py); else the default protocol (worldfile.py)."""
+    crossed by movers (dynabarnfile.py); else the default protocol (generatedfile.py)."""
     from pnav.bench.nav.robots import resolve_model
 
     if protocol == "barn":
@@ -143,10 +143,10 @@ def generated_suite(
         robot = resolve_model(args.model or BARN_DEFAULT_MODEL)
         suite = dynabarn.generate_dynabarn_suite(levels, args.count, args.seed, robot)
         return suite, dynabarnfile.SUITE_FILES
-    from pnav.bench.nav import generator, worldfile
+    from pnav.bench.nav import generatedfile, generator
 
     levels = checked_levels(args, list(generator.LEVELS))
-    return generator.generate_suite(levels, args.count, args.seed), worldfile.SUITE_FILES
+    return generator.generate_suite(levels, args.count, args.seed), generatedfile.SUITE_FILES
 
 
 def finish(out: Path, written_names: Sequence[str]) -> int:

@@ -19,7 +19,7 @@ from common import bus
 from common.config import ServiceConfig, ZenohSettings
 from common.contract import keys
 from common.runtime import Runtime
-from common.testing import as_service_role, eventually
+from pnav._testing import as_service_role, eventually
 from services.bridge import Bridge, BridgeSettings
 from tests.unit.bridge import payloads
 from tests.unit.bridge.payloads import pack

@@ -8,7 +8,7 @@ import asyncio
 import asyncpg
 
 from common.contract import keys
-from common.testing import eventually
+from pnav._testing import eventually
 from tests.contract.bridge.conftest import SETTLE_S, BridgeFactory, FakeSim, bridge_with_world
 from tests.unit.bridge import payloads
 

@@ -16,7 +16,7 @@ import pytest
 from common.bus import Notification
 from common.contract import keys
 from common.footprint import Footprint
-from common.testing import eventually
+from pnav._testing import eventually
 from services.bridge import Bridge, BridgeSettings
 from tests.contract.bridge.conftest import BridgeFactory, FakeSim, Inbox, command, ready, vel
 

@@ -16,7 +16,7 @@ import asyncpg
 import pytest
 
 from common.contract import keys
-from common.testing import eventually
+from pnav._testing import eventually
 from services.bridge import BridgeSettings
 from services.bridge.command_images import ID_HORIZON
 from tests.contract.bridge.conftest import BridgeFactory, FakeSim, ready, vel

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 
 from common.contract import keys
-from common.testing import eventually
+from pnav._testing import eventually
 from services.bridge import sensor_payloads as messages
 from tests.contract.bridge.conftest import (
     BridgeFactory,

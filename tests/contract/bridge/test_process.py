@@ -12,7 +12,7 @@ import pytest
 
 from common.config import ZenohSettings
 from common.contract import keys
-from common.testing import eventually
+from pnav._testing import eventually
 from tests.contract.bridge.conftest import SETTLE_S, FakeSim
 from tests.unit.bridge import payloads
 

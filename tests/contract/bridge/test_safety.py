@@ -9,7 +9,7 @@ import asyncpg
 import pytest
 
 from common.contract import keys
-from common.testing import eventually
+from pnav._testing import eventually
 from tests.contract.bridge.conftest import BridgeFactory, FakeSim, Inbox, command, ready, vel
 from tests.unit.bridge import payloads
 

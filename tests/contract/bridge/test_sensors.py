@@ -9,7 +9,7 @@ import asyncpg
 import pytest
 
 from common.contract import keys
-from common.testing import eventually
+from pnav._testing import eventually
 from tests.contract.bridge.conftest import (
     SETTLE_S,
     BridgeFactory,

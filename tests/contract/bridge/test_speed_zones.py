@@ -10,7 +10,7 @@ import asyncpg
 import pytest
 
 from common.contract import keys
-from common.testing import eventually
+from pnav._testing import eventually
 from tests.contract.bridge.conftest import BridgeFactory, FakeSim, command, ready
 from tests.contract.bridge.test_safety import noted, sent_for
 from tests.unit.bridge import payloads

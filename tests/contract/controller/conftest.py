@@ -32,7 +32,7 @@ from common import bus
 from common.config import EngineSettings, ServiceConfig, ZenohSettings
 from common.contract import keys
 from common.db import connect
-from common.testing import as_service_role, publish_clock, running_service
+from pnav._testing import as_service_role, publish_clock, running_service
 
 T = TypeVar("T")
 

@@ -16,7 +16,7 @@ from common.config import EngineSettings, ServiceConfig, ZenohSettings
 from common.contract import keys
 from common.engine.engine import Engine
 from common.service import ScenarioService
-from common.testing import running_service
+from pnav._testing import running_service
 from pnav_local.dwa import Dwa
 from tests.contract.controller.conftest import Feeder, eventually
 

@@ -18,7 +18,7 @@ import pytest
 
 from common.config import EngineSettings, LeaseSettings, ServiceConfig, ZenohSettings
 from common.contract import keys
-from common.testing import running_service
+from pnav._testing import running_service
 from tests.contract.conftest import split_between
 from tests.contract.controller.conftest import BEAMS, ROBOT, Feeder, Obstacle, eventually
 

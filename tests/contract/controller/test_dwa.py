@@ -15,7 +15,7 @@ import pytest
 
 from common.config import EngineSettings, ServiceConfig, ZenohSettings
 from common.contract import keys
-from common.testing import running_service
+from pnav._testing import running_service
 from tests.contract.controller.conftest import ROBOT, Feeder, Obstacle, eventually
 
 PERIOD_S = 0.2

@@ -17,7 +17,7 @@ import pytest
 from common.config import EngineSettings, ServiceConfig, ZenohSettings
 from common.contract import keys
 from common.runtime import Runtime
-from common.testing import eventually, publish_clock, running_service
+from pnav._testing import eventually, publish_clock, running_service
 from services.controller.service import ControllerService
 from services.controller.store import ControllerStore
 from tests.contract.controller.conftest import ROBOT, SIM_START

@@ -21,7 +21,7 @@ from common.config import EngineSettings, ServiceConfig, ZenohSettings
 from common.contract import keys, records
 from common.db import Database
 from common.runtime import Runtime
-from common.testing import publish_clock, running_service
+from pnav._testing import publish_clock, running_service
 from services.controller.service import ControllerService
 from services.controller.store import ODOMETRY_LISTENS, ControllerStore
 from tests.contract.controller.conftest import BEAMS, ROBOT, SIM_START, eventually

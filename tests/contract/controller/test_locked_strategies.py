@@ -10,7 +10,7 @@ import time
 from common.config import EngineSettings, ServiceConfig, ZenohSettings
 from common.contract.grants import role_name
 from common.contract.roles import role_url
-from common.testing import as_service_role, running_service
+from pnav._testing import as_service_role, running_service
 from pnav.bench.faults import tablelock
 from services.controller.service import ControllerService
 from services.controller.store import ControllerStore

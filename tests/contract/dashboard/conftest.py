@@ -23,7 +23,7 @@ from common.bus import Notification
 from common.config import ServiceConfig, ZenohSettings
 from common.contract import keys
 from common.runtime import Runtime
-from common.testing import eventually
+from pnav._testing import eventually
 from services.dashboard.service import Dashboard
 from services.dashboard.settings import DashboardSettings
 

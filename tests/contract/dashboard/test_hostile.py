@@ -17,7 +17,7 @@ from websockets.asyncio.client import connect
 from common.config import ZenohSettings
 from common.contract import limits
 from common.runtime import Runtime
-from common.testing import eventually
+from pnav._testing import eventually
 from services.dashboard.settings import DashboardSettings
 from tests.contract.dashboard.conftest import ROBOT, Fleet, Running, serving
 

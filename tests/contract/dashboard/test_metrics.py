@@ -22,7 +22,7 @@ from starlette.applications import Starlette
 from common import bus
 from common.contract import keys
 from common.runtime import Runtime
-from common.testing import eventually
+from pnav._testing import eventually
 from pnav.run.process_supervisor import ProcessSpec, Supervisor
 from pnav.run.supervisor_report import SupervisorReport
 from services.dashboard.stack_metrics import Metrics, MetricsConfig

@@ -14,7 +14,7 @@ import httpx
 import pytest
 
 from common.config import ZenohSettings
-from common.testing import free_port
+from pnav.run.embedded_postgres import free_port
 
 pytestmark = pytest.mark.timeout(90)
 

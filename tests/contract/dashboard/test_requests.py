@@ -12,7 +12,7 @@ import pytest
 
 from common.contract import keys
 from common.runtime import Runtime
-from common.testing import eventually
+from pnav._testing import eventually
 from services.dashboard.orders import Orders
 from services.dashboard.requests import GoalRequest, Refused
 from tests.contract.dashboard.conftest import ROBOT, Fleet, Running

@@ -15,7 +15,7 @@ from websockets.exceptions import InvalidStatus
 
 from common.contract import keys
 from common.runtime import Runtime
-from common.testing import eventually
+from pnav._testing import eventually
 from tests.contract.dashboard.conftest import ROBOT, Fleet, Running
 
 pytestmark = pytest.mark.timeout(90)

@@ -10,7 +10,7 @@ import httpx
 import pytest
 
 from common.runtime import Runtime
-from common.testing import eventually
+from pnav._testing import eventually
 from tests.contract.dashboard.conftest import Running
 
 pytestmark = pytest.mark.timeout(90)

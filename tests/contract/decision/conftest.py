@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from common.config import EngineSettings, ServiceConfig, ZenohSettings
-from common.testing import as_service_role
+from pnav._testing import as_service_role
 
 
 @pytest.fixture

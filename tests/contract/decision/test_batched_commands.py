@@ -15,7 +15,7 @@ from common import bus
 from common.bus import Notification
 from common.contract import keys, recommendations
 from common.runtime import Runtime
-from common.testing import eventually
+from pnav._testing import eventually
 from services.decision.arbitration import RobotDecision
 from services.decision.source import PgDecisionSource
 from tests.contract.decision.test_decision_service import add_robot

@@ -13,7 +13,7 @@ import pytest
 from common.config import LeaseSettings, ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime
-from common.testing import ClockPlayer, eventually, running_service
+from pnav._testing import ClockPlayer, eventually, running_service
 from services.decision.service import DecisionService
 from tests.contract.conftest import split_between
 

@@ -15,7 +15,7 @@ from typing import Any
 from common.config import ServiceConfig
 from common.contract import keys, recommendations
 from common.runtime import Runtime
-from common.testing import ClockPlayer, eventually, running_service
+from pnav._testing import ClockPlayer, eventually, running_service
 from services.decision.service import DecisionService
 from services.decision.store import DecisionStore
 from tests.contract.decision.test_decision_service import add_robot, clock_at, newest_from

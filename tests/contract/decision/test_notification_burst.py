@@ -10,7 +10,7 @@ import pytest
 from common.config import ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime
-from common.testing import eventually, running_service
+from pnav._testing import eventually, running_service
 from services.decision.service import DecisionService
 
 ROBOTS = [f"r{i}" for i in range(50)]

@@ -22,10 +22,11 @@ from common import bus
 from common.config import ServiceConfig, ZenohSettings
 from common.contract import acl, keys
 from common.runtime import Runtime
-from common.testing import eventually
+from pnav._testing import eventually
 from pnav.cli import stack_commands
-from pnav.run.launcher import StackOptions, launched
+from pnav.run.launcher import launched
 from pnav.run.mission import MissionMonitor
+from pnav.run.stack_options import StackOptions
 
 pytestmark = pytest.mark.timeout(180)
 

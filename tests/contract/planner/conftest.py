@@ -22,7 +22,7 @@ from common import bus
 from common.config import EngineSettings, ServiceConfig, ZenohSettings
 from common.contract import keys
 from common.db import Database, create_pool
-from common.testing import as_service_role, eventually, publish_clock, running_service
+from pnav._testing import as_service_role, eventually, publish_clock, running_service
 from services.planner.service import PlannerService
 
 ROBOT = "r1"

@@ -11,7 +11,7 @@ import math
 from typing import Any
 
 from common.contract import keys
-from common.testing import eventually
+from pnav._testing import eventually
 from services.planner.service import PlannerService
 from services.planner.store import PlannerStore
 from tests.contract.planner.conftest import ROBOT, World

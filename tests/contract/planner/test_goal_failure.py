@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from common.contract import keys
-from common.testing import eventually
+from pnav._testing import eventually
 from pnav.cli import stack_commands
 from services.planner.service import PlannerService
 from tests.contract.planner.conftest import ROBOT, World

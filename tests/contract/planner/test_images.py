@@ -16,7 +16,7 @@ import pytest
 
 from common.config import EngineSettings, ServiceConfig, ZenohSettings
 from common.contract import keys
-from common.testing import running_service
+from pnav._testing import running_service
 from services.planner.service import PlannerService
 from services.planner.store import PlannerStore
 from tests.contract.planner.conftest import ROBOT, World

@@ -11,7 +11,7 @@ import asyncpg
 
 from common import bus
 from common.contract import keys
-from common.testing import eventually
+from pnav._testing import eventually
 from services.planner.service import PlannerService
 from tests.contract.planner.conftest import ROBOT, World
 

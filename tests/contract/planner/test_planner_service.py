@@ -11,7 +11,7 @@ import numpy as np
 
 from common.config import EngineSettings, LeaseSettings, ServiceConfig, ZenohSettings
 from common.contract import keys
-from common.testing import eventually, running_service
+from pnav._testing import eventually, running_service
 from services.planner.service import PlannerService
 from tests.contract.conftest import split_between
 from tests.contract.planner.conftest import ROBOT, World

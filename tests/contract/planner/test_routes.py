@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 
 from common.contract import people
-from common.testing import eventually
+from pnav._testing import eventually
 from services.planner.service import PlannerService
 from tests.contract.planner.conftest import ROBOT, World
 

@@ -5,7 +5,7 @@ with the reason, not left ``active``."""
 from __future__ import annotations
 
 from common.contract import keys
-from common.testing import eventually
+from pnav._testing import eventually
 from services.planner.service import PlannerService
 from tests.contract.planner.conftest import World
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from common.contract import zones
 from common.contract.zones import Zone
-from common.testing import eventually
+from pnav._testing import eventually
 from services.planner.service import PlannerService
 from tests.contract.planner.conftest import ROBOT, World
 from tests.contract.planner.test_goal_failure import walled_room

@@ -28,7 +28,7 @@ from mcap_protobuf.decoder import DecoderFactory
 from common.config import ZenohSettings
 from common.contract import keys
 from common.runtime import Runtime
-from common.testing import ClockPlayer
+from pnav._testing import ClockPlayer
 from pnav.cli import program as cli
 from pnav.record import topics
 

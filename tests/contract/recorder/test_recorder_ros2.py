@@ -17,7 +17,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from common.config import ZenohSettings
 from common.runtime import Runtime
-from common.testing import ClockPlayer
+from pnav._testing import ClockPlayer
 from pnav.cli import program as cli
 from pnav.record import ros2
 from tests.contract.recorder.test_recorder import ROBOT, start_recorder, write_mission

@@ -13,8 +13,9 @@ import asyncpg
 import pytest
 
 from common.robotmodel import load_model
-from common.testing import eventually
-from pnav.run.launcher import WORLDS, StackOptions, launched
+from pnav._testing import eventually
+from pnav.run.launcher import WORLDS, launched
+from pnav.run.stack_options import StackOptions
 
 pytestmark = pytest.mark.timeout(180)
 

@@ -12,8 +12,9 @@ import math
 import asyncpg
 import pytest
 
-from common.testing import eventually
-from pnav.run.launcher import StackOptions, launched
+from pnav._testing import eventually
+from pnav.run.launcher import launched
+from pnav.run.stack_options import StackOptions
 from services.sim.robot import BURGER
 
 pytestmark = pytest.mark.timeout(120)

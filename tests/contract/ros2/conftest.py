@@ -17,7 +17,7 @@ from common.config import ServiceConfig, ZenohSettings
 from common.robotlink import RobotLinkSettings, RobotTopics
 from common.ros2node import Publisher, Ros2Node
 from common.runtime import Runtime
-from common.testing import as_service_role, eventually
+from pnav._testing import as_service_role, eventually
 from services.bridge import Bridge
 from services.sim import ros2wire
 from tests.contract.bridge.conftest import FAST, SETTLE_S, FakeSim

@@ -16,7 +16,7 @@ from common import bus, ros2types
 from common.clock import SimClock
 from common.config import ZenohSettings
 from common.robotlink import RobotLinkSettings
-from common.testing import eventually
+from pnav._testing import eventually
 from services.bridge import Bridge
 from tests.contract.bridge.conftest import SETTLE_S, FakeSim, command
 from tests.contract.ros2.conftest import Robot, odom_msg, scan_msg, start_ros2_bridge

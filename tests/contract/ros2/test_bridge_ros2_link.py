@@ -13,7 +13,7 @@ import pytest
 
 from common import ros2types
 from common.contract import rmw_zenoh as rz
-from common.testing import eventually
+from pnav._testing import eventually
 from services.bridge import Bridge
 from services.bridge.ros2link import MAX_RATE_HZ
 from tests.contract.bridge.conftest import SETTLE_S, FakeSim, command

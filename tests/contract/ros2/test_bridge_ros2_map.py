@@ -16,7 +16,7 @@ from common.config import ZenohSettings
 from common.contract import rmw_zenoh as rz
 from common.robotlink import RobotLinkSettings
 from common.ros2node import Ros2Node
-from common.testing import eventually
+from pnav._testing import eventually
 from tests.contract.bridge.conftest import FakeSim
 from tests.contract.ros2.conftest import start_ros2_bridge
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import asyncpg
 import pytest
 
-from common.testing import eventually
+from pnav._testing import eventually
 from pnav.run.launcher import launched, resolve_world
 from services.sim.world_spec import load_world
 from tests.contract.ros2.turtlebot3_peer import TurtleBot3, peer_stack_options

@@ -15,7 +15,7 @@ import asyncpg
 import pytest
 
 from common import bus
-from common.testing import eventually
+from pnav._testing import eventually
 from pnav.run.launcher import launched, resolve_world
 from services.sim.world_spec import load_world
 from tests.contract.ros2.nav2_client import NavClient

@@ -22,9 +22,10 @@ from common.config import ServiceConfig, ZenohSettings
 from common.contract.grants import USER
 from common.robotlink import RobotLinkSettings, RobotTopics
 from common.runtime import Runtime
-from common.stack import BusCredentials
-from common.testing import as_service_role, eventually, free_port
+from pnav._testing import as_service_role, eventually
 from pnav.ros2.rviz import RvizLink
+from pnav.run.embedded_postgres import free_port
+from pnav.run.local_stack import BusCredentials
 from tests.contract.ros2.nav2_client import NavClient, pose
 
 pytestmark = pytest.mark.slow

@@ -16,7 +16,7 @@ from common.config import ZenohSettings
 from common.ros2action import CANCELED, CANCELING, ActionServer
 from common.ros2interfaces import NAVIGATE_TO_POSE
 from common.ros2node import Ros2Node
-from common.testing import eventually
+from pnav._testing import eventually
 from tests.contract.ros2.nav2_client import NavClient
 
 pytestmark = pytest.mark.slow

@@ -18,7 +18,7 @@ from common.config import ServiceConfig, ZenohSettings
 from common.robotlink import RobotLinkSettings, RobotTopics
 from common.ros2node import Ros2Node
 from common.runtime import Runtime
-from common.testing import as_service_role, eventually
+from pnav._testing import as_service_role, eventually
 from pnav.ros2.rviz import RvizLink
 from tests.contract.bridge.conftest import SETTLE_S
 

@@ -12,9 +12,10 @@ import pytest
 
 from common import bus, ros2types
 from common.contract import rmw_zenoh as rz
-from common.testing import eventually
 from common.trace import CMD_VEL, NO_REF, read_trace
-from pnav.run.launcher import StackOptions, launched
+from pnav._testing import eventually
+from pnav.run.launcher import launched
+from pnav.run.stack_options import StackOptions
 
 pytestmark = [pytest.mark.timeout(120), pytest.mark.slow]
 

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from common import ros2types
-from pnav.run.launcher import StackOptions
+from pnav.run.stack_options import StackOptions
 
 TYPES = (
     ros2types.LASER_SCAN,

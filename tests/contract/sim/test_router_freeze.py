@@ -19,7 +19,7 @@ import pytest
 from common.bus import open_session, pack
 from common.config import ZenohSettings
 from common.contract import keys
-from common.testing import free_port
+from pnav.run.embedded_postgres import free_port
 from services.sim.node import SimNode
 from services.sim.sim import SimConfig
 from services.sim.world_spec import load_world

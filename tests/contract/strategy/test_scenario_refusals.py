@@ -10,7 +10,7 @@ import asyncpg
 from common.config import ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime
-from common.testing import ClockPlayer, running_service
+from pnav._testing import ClockPlayer, running_service
 from services.strategy.service import StrategyService
 from tests.contract.strategy.test_strategy_service import (
     active,

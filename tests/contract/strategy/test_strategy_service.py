@@ -14,7 +14,7 @@ from common import bus
 from common.config import LeaseSettings, ServiceConfig
 from common.contract import keys
 from common.runtime import Runtime
-from common.testing import ClockPlayer, eventually, running_service
+from pnav._testing import ClockPlayer, eventually, running_service
 from services.strategy.scenario import ApplyCommand
 from services.strategy.service import StrategyService
 from tests.contract.conftest import CLOCK_START, split_between

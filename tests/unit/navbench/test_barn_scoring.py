@@ -15,10 +15,10 @@ from pnav.bench.nav import barn, runner
 from pnav.bench.nav import stack_episode as episode_module
 from pnav.bench.nav.barn import generate_barn_world
 from pnav.bench.nav.barnfile import write_barn_world
-from pnav.bench.nav.robots import RobotFit, for_model, resolve_model, too_big
+from pnav.bench.nav.robots import RobotFit, resolve_model
 from pnav.bench.nav.scores import RunResult, barn_score, evaluate_run
 from pnav.bench.nav.stack_episode import Episode, Outcome
-from pnav.bench.nav.worldfile import load_suite, read_benchmark
+from pnav.bench.nav.worldfile import for_model, load_suite, read_benchmark, too_big
 from pnav.cli import program as cli
 from services.sim.world_spec import load_world
 

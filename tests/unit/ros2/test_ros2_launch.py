@@ -9,10 +9,11 @@ import pytest
 
 from common.config import ZenohSettings
 from common.errors import UsageError
-from common.stack import LocalStack
 from pnav.cli.options import robot_link_env
 from pnav.cli.program import build_parser
-from pnav.run.launcher import StackOptions, service_specs
+from pnav.run.launcher import service_specs
+from pnav.run.local_stack import LocalStack
+from pnav.run.stack_options import StackOptions
 
 
 def _local() -> LocalStack:

@@ -64,7 +64,7 @@ from common.contract.roles import bootstrap, is_superuser, role_url
 from common.errors import ConfigError
 from common.pgtemplate import Seeded, leave_spare, seed_from_template
 from common.postmaster import Keeper, Lifeline, start_lifeline
-from common.testing import EmbeddedPostgres, free_port
+from pnav.run.embedded_postgres import EmbeddedPostgres, free_port
 
 # Every local peer listens on loopback only, on a port of the kernel's choosing: the router
 # tells the others where (gossip), so nothing needs a fixed port but the router.
@@ -183,7 +183,7 @@ class LocalStack:
 
 
 _PASSWORD_HBA = """\
-# written by proactive-nav (common/stack.py): the superuser keeps trust on this private
+# written by proactive-nav (pnav/run/local_stack.py): the superuser keeps trust on this private
 # socket (pgserver's tooling uses it), every other role gives its password
 local   all   postgres   trust
 local   all   all        scram-sha-256
