@@ -154,7 +154,7 @@ def alive_watch(service: str | None = None) -> str:
     return f"{PREFIX}/alive/{service or '*'}/*"
 
 
-# -- lockstep with the sim (common/lockstep.py, services/sim/lockstep_barrier.py) ------------------
+# -- lockstep with the sim (common/lockstep.py, services/sim/lockstep_barrier.py) --------
 def lockstep_key(service: str, instance: str) -> str:
     return f"{PREFIX}/lockstep/{service}/{instance}"
 

@@ -80,7 +80,7 @@ class Engine:
         counts F, within an activation and between two (default: monotonic wall time);
         ``fatal``: errors a rule's step raises that stop the engine instead of discarding
         the rule (the monolith's own plumbing failing, not a rule's error)."""
-        self.settings = settings or EngineSettings()
+        self._settings = settings or EngineSettings()
         self.name = name
         self.current: deque[Rule] = deque()
         self.next: deque[Rule] = deque()
@@ -113,7 +113,19 @@ class Engine:
         self._ending: asyncio.Future[None] | None = None
         self._at_end: list[ActivationEnd] = []
 
+    @property
+    def settings(self) -> EngineSettings:
+        """F, N, P and the rule budget."""
+        return self._settings
+
+    @settings.setter
+    def settings(self, value: EngineSettings) -> None:
+        # the steps time every rule against the budget: a new value reaches them too
+        self._settings = value
+        self.steps.settings = value
+
     # -- putting rules in ------------------------------------------------------------------
+
     def add(self, rule: Rule) -> None:
         """Append ``rule`` to the end of the current queue."""
         if not isinstance(rule, Rule):
