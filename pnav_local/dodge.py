@@ -48,12 +48,15 @@ _RANGE_TOLERANCE_M = 1e-4
 def movers_in_robot_frame(
     tracker: Tracker, pose: tuple[float, float, float]
 ) -> list[threats.Mover]:
-    """The moving tracks seen in the newest scan, in the robot's frame at that scan."""
+    """The moving tracks (seen in the newest scan, or hidden a moment: predicted on), in the
+    robot's frame at the newest scan."""
     ox, oy, yaw = pose
     c, s = math.cos(yaw), math.sin(yaw)
     out = []
-    for k in tracker.moving():
-        dx, dy = k.last_x - ox, k.last_y - oy
+    now = tracker.last_t if tracker.last_t is not None else 0.0
+    for k in tracker.movers():
+        x, y = k.at(now)
+        dx, dy = x - ox, y - oy
         out.append(
             threats.Mover(
                 k.id,
