@@ -44,7 +44,7 @@ MAX_TRACKS = 48
 WINDOW_S = 0.5  # the velocity is fitted over this much history
 MIN_SPAN_S = 0.2
 MIN_SEEN = 4
-MOVING_MPS = 0.15  # slower tracks are treated as standing (view changes, noise)
+MOVING_MPS = 0.1  # slower tracks are treated as standing (view changes, noise)
 FORGET_S = 0.5  # a track unseen this long is dropped
 # a moving track unseen for at most this long (hidden behind another mover, or merged into
 # its cluster as two pass close) is still predicted where its velocity takes it
