@@ -42,6 +42,7 @@ SPEEDS = (1.0, 0.85, 0.7, 0.55, 0.4, 0.25, 0.1, 0.0)  # shares of the top speed
 # side rather than waiting seconds for it to cross)
 TURNS = (0.0, 0.1, -0.1, 0.25, -0.25, 0.5, -0.5)
 BRISK_SHARE = 0.4  # of the top speed: a motion at least this fast keeps the robot going
+ON_COURSE_DEG = 45.0  # a straight yield keeps to the path only if the robot faces along it
 BACK_SHARE = 0.4  # backing out, where the lidar sees behind
 
 
@@ -157,12 +158,16 @@ def choose(
     movers: list[Mover],
     points: FloatArray,
     sees_behind: bool,
+    ahead: tuple[float, float] = (1.0, 0.0),
 ) -> Motion:
-    """The evasive motion to recommend. Of the motions that meet no mover within the
-    horizon: the fastest straight on at a brisk speed (``BRISK_SHARE`` of the top or more:
-    a yield on the path); else the brisk turn that gets farthest ahead (past a slow mover's
-    side: waiting for it to cross takes seconds, in other movers' way), the gentlest first
-    on a tie; else the straightest, then the fastest of the slower ones (down to the stop).
+    """The evasive motion to recommend. ``ahead``: the unit direction (robot frame) the
+    robot is to make progress in (toward its path's carrot; straight ahead without one). Of
+    the motions that meet no mover within the horizon: the fastest straight on at a brisk
+    speed (``BRISK_SHARE`` of the top or more: a yield on the path), if the robot faces
+    within ``ON_COURSE_DEG`` of ``ahead``; else the brisk motion that ends farthest along
+    ``ahead`` (past a slow mover's side: waiting for it to cross takes seconds, in other
+    movers' way; back toward the path when off it), the gentlest first on a tie; else the
+    straightest, then the fastest of the slower ones (down to the stop).
     If every one meets a mover, the one meeting it latest (then the straighter, then the
     faster). A motion other than the stop must keep clear of the static hits: tested in
     that order of preference until one does (the stop always does)."""
@@ -177,13 +182,15 @@ def choose(
     safe = [mp for mp in judged if math.isinf(mp[0].ttc)]
     if safe:
         brisk = BRISK_SHARE * top
+        on_course = math.atan2(abs(ahead[1]), ahead[0]) <= math.radians(ON_COURSE_DEG)
 
         def preference(mp: tuple[Motion, FloatArray]) -> tuple[float, ...]:
             motion, poses = mp
-            if motion.v >= brisk and motion.w == 0.0:
+            if motion.v >= brisk and motion.w == 0.0 and on_course:
                 return (0.0, -motion.v)
             if motion.v >= brisk:
-                return (1.0, -round(float(poses[-1, 0]), 3), abs(motion.w))
+                gain = float(poses[-1, 0] * ahead[0] + poses[-1, 1] * ahead[1])
+                return (1.0, -round(gain, 3), abs(motion.w))
             return (2.0, abs(motion.w), -motion.v)
 
         order = sorted(safe, key=preference)

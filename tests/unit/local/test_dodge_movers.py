@@ -9,10 +9,13 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
+from common.contract.planned_path import PlannedPath
 from common.contract.records import Odometry
 from pnav_local import threats
+from pnav_local.dodge import path_ahead
 from pnav_local.tracks import COAST_S, Tracker
 from tests.unit.local.scene import JACKAL, JACKAL_BOX, Disc, Segment, box, scan_at
 
@@ -117,3 +120,32 @@ def test_the_box_turned_is_judged_at_each_pose() -> None:
     turning = threats.rollout(0.0, 0.0, 0.0, 2.0, JACKAL_BOX)  # in place, 2 rad/s
     t, k = threats.ttc(turning, [mover], JACKAL_BOX.footprint)
     assert k == 1 and t <= 0.6, "the corner swings out to 0.333 m"
+
+
+def test_evasive_motions_make_progress_along_the_path_not_the_heading() -> None:
+    # a mover crossing 2.3 m ahead from the right at 0.8 m/s, the robot at 2 m/s: facing
+    # along its path, a straight yield; facing 60 degrees off it (dwa had turned it round
+    # something), the brisk motion that ends farthest along the path: a turn back toward it
+    # (a straight yield there, or a turn judged by the heading, led the robot off its way)
+    mover = [threats.Mover(1, 2.3, -1.0, 0.0, 0.8, 0.19)]
+    none = np.zeros((0, 2))
+    on = threats.choose(2.0, 0.0, JACKAL_BOX, mover, none, False, (1.0, 0.0))
+    assert (on.v, on.w, on.ttc) == (0.8, 0.0, math.inf), "a yield on the path"
+    for deg, side in ((60.0, 1.0), (-60.0, -1.0), (90.0, 1.0)):
+        a = math.radians(deg)
+        off = threats.choose(2.0, 0.0, JACKAL_BOX, mover, none, False, (math.cos(a), math.sin(a)))
+        assert math.isinf(off.ttc) and off.v >= threats.BRISK_SHARE * 2.0, deg
+        assert off.w * side > 0.0, (deg, off)
+
+
+def test_the_path_ahead_is_two_metres_on_from_the_nearest_point() -> None:
+    path = PlannedPath(1, "r1", 0.0, 1, "goal", 2.4, 10.7, (2.4, 2.4, 2.4), (0.7, 5.0, 10.7), 10.0)
+    # on the path facing up it: straight ahead
+    assert path_ahead(path, (2.4, 1.0, NORTH)) == pytest.approx((1.0, 0.0))
+    # facing east on it: the path is to the left
+    assert path_ahead(path, (2.4, 1.0, 0.0)) == pytest.approx((0.0, 1.0))
+    # 2 m to its right, facing up: ahead and to the left, 45 degrees (the carrot 2 m on)
+    ux, uy = path_ahead(path, (4.4, 3.0, NORTH))
+    assert math.degrees(math.atan2(uy, ux)) == pytest.approx(45.0, abs=1.0)
+    # no path: straight ahead
+    assert path_ahead(None, (2.4, 1.0, 0.0)) == (1.0, 0.0)
