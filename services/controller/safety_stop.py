@@ -22,14 +22,6 @@ direction of travel toward the freer side (``safety_turn_rps``): the robot recov
 of freezing with an obstacle in front of it forever. Priority 100: above every other
 shipped scenario, so nothing overrides it while it is live.
 
-How long a stop lives (``ttl_s``): until the robot can have stopped and the next scans have
-been judged: the time to brake from its speed at the robot row's acceleration, and at least
-``TTL_PERIODS`` scan periods (at least ``MIN_TTL_S``, at most the usual 0.5 s). Once the
-robot stands it no longer fires (nothing is swept), and a stop held on after that pins a
-standing robot wherever it stopped, in a moving obstacle's line too (the dynamic suite's
-Jackal, a 50 Hz lidar: held 0.5 s, hit standing while dodge asked it to step away). With a
-slow lidar (the Burger's 5 Hz: 3 periods are 0.6 s) the stop still lives the usual 0.5 s.
-
 A safety rule of the engine (``safety = True``): in every activation the engine runs every
 robot's safety_stop before any other scenario, dwa's heavy decisions included, and never
 cuts it by N or F (docs/ENGINE.md, "Safety rules first").
@@ -48,8 +40,6 @@ from common.controller_core.scenario import Command, ControllerScenario
 from services.controller.sectors import ScanView, deg
 
 MOVING_MPS = 0.01  # below this the robot is not translating (odometry noise, creeping)
-MIN_TTL_S = 0.1
-TTL_PERIODS = 3.0  # a stop lives at least this many scan periods (within the bounds)
 # How far the freer side is judged: where the robot can go once it has turned.
 FREER_HORIZON_M = 1.0
 # the cone round the direction of travel the lidar must see into for the robot to move
@@ -79,28 +69,6 @@ class SafetyStop(ControllerScenario):
     priority = 100
     needs_odometry = True
     safety = True  # runs first in each activation, uncut (docs/ENGINE.md)
-
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        self.last_stamp: float | None = None  # the newest scan judged
-        self.period_s = 0.0  # the time between the last two scans judged
-        self.braking_s = 0.0  # how long the robot takes to stop from its speed at that scan
-
-    def judge(self, scan: LaserScan, odom: Odometry | None) -> Command | None:
-        if self.last_stamp is not None and scan.stamp > self.last_stamp:
-            self.period_s = scan.stamp - self.last_stamp
-        self.last_stamp = scan.stamp
-        accel = self.spec.robot.max_linear_accel_mps2
-        speed = abs(odom.linear_mps) if odom is not None else 0.0
-        self.braking_s = speed / accel if accel > 0.0 else self.validity_s
-        return super().judge(scan, odom)
-
-    def ttl_s(self) -> float:
-        """Until the robot can have stopped and the next scans are judged (module doc)."""
-        if self.period_s <= 0.0:
-            return self.validity_s  # one scan seen: its period is not known yet
-        held = max(MIN_TTL_S, TTL_PERIODS * self.period_s, self.braking_s)
-        return min(self.validity_s, held)
 
     @classmethod
     def decide(
