@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
 from common.controller_core.scenario import Command, ControllerScenario, Key, ScenarioSpec
 from common.engine import Behaviour
@@ -42,18 +43,22 @@ MAX_TTL_S = 0.5
 TTL_PERIODS = 3.0  # a recommendation lives this many scan periods (within the two above)
 BEHIND_DEG = 30.0  # backing out needs beams within this of straight behind
 STANDING_MPS = 0.05
+CARROT_M = 2.0  # evasive motions are judged by their progress toward the path this far on
 _RANGE_TOLERANCE_M = 1e-4
 
 
 def movers_in_robot_frame(
     tracker: Tracker, pose: tuple[float, float, float]
 ) -> list[threats.Mover]:
-    """The moving tracks seen in the newest scan, in the robot's frame at that scan."""
+    """The moving tracks (seen in the newest scan, or hidden a moment: predicted on), in the
+    robot's frame at the newest scan."""
     ox, oy, yaw = pose
     c, s = math.cos(yaw), math.sin(yaw)
     out = []
-    for k in tracker.moving():
-        dx, dy = k.last_x - ox, k.last_y - oy
+    now = tracker.last_t if tracker.last_t is not None else 0.0
+    for k in tracker.movers():
+        x, y = k.at(now)
+        dx, dy = x - ox, y - oy
         out.append(
             threats.Mover(
                 k.id,
@@ -85,9 +90,48 @@ def static_hits(scan: LaserScan, tracker: Tracker) -> tuple[np.ndarray[Any, Any]
     return pts, behind
 
 
-def decide_for(tracker: Tracker, scan: LaserScan, odom: Odometry, robot: Robot) -> Command | None:
+def path_ahead(path: PlannedPath | None, pose: tuple[float, float, float]) -> tuple[float, float]:
+    """The unit direction (robot frame at ``pose``) toward the point ``CARROT_M`` along the
+    path from its point nearest the robot; straight ahead without a path (or at its end)."""
+    if path is None or path.empty:
+        return (1.0, 0.0)
+    xs, ys = np.asarray(path.xs, dtype=np.float64), np.asarray(path.ys, dtype=np.float64)
+    # the nearest point of the path (on its segments), then CARROT_M on along it
+    x, y, i = float(xs[0]), float(ys[0]), 0
+    if len(xs) > 1:
+        ex, ey = np.diff(xs), np.diff(ys)
+        lengths = np.maximum(ex * ex + ey * ey, 1e-12)
+        f = np.clip(((pose[0] - xs[:-1]) * ex + (pose[1] - ys[:-1]) * ey) / lengths, 0.0, 1.0)
+        px, py = xs[:-1] + f * ex, ys[:-1] + f * ey
+        i = int(np.argmin(np.hypot(px - pose[0], py - pose[1])))
+        x, y = float(px[i]), float(py[i])
+    left = CARROT_M
+    for j in range(i + 1, len(xs)):
+        step = math.hypot(float(xs[j]) - x, float(ys[j]) - y)
+        if step >= left:
+            f_j = left / step
+            x, y = x + f_j * (float(xs[j]) - x), y + f_j * (float(ys[j]) - y)
+            break
+        left -= step
+        x, y = float(xs[j]), float(ys[j])
+    dx, dy = x - pose[0], y - pose[1]
+    d = math.hypot(dx, dy)
+    if d < 0.1:
+        return (1.0, 0.0)
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    return ((c * dx + s * dy) / d, (-s * dx + c * dy) / d)
+
+
+def decide_for(
+    tracker: Tracker,
+    scan: LaserScan,
+    odom: Odometry,
+    robot: Robot,
+    path: PlannedPath | None = None,
+) -> Command | None:
     """Update the tracks with the scan; the evasive command, or None when no mover threatens
-    what the robot is about to do."""
+    what the robot is about to do. ``path``: the route in force, which evasive motions make
+    progress along (none: straight ahead)."""
     tracker.update(scan, odom)
     pose = robot_pose(scan, odom)
     movers = movers_in_robot_frame(tracker, pose)
@@ -98,7 +142,7 @@ def decide_for(tracker: Tracker, scan: LaserScan, odom: Odometry, robot: Robot) 
     if math.isinf(threat.ttc):
         return None
     points, behind = static_hits(scan, tracker)
-    choice = threats.choose(v0, w0, robot, movers, points, behind)
+    choice = threats.choose(v0, w0, robot, movers, points, behind, path_ahead(path, pose))
     mover = next(m for m in movers if m.track == threat.mover)
     if abs(v0) < STANDING_MPS:
         act = "step out of its way" if choice.v != 0.0 else "stand"
@@ -123,10 +167,16 @@ class Dodge(ControllerScenario):
     needs_odometry = True
 
     tracker: Tracker  # the robot's tracks, scan after scan
+    path: PlannedPath | None = None  # the route in force, read with each scan
 
     def initialise(self) -> None:
         super().initialise()
         self.tracker = Tracker()
+
+    async def data_acquisition(self) -> None:
+        # the path in force, from the store's cache (read again on a planned_path note)
+        self.path = await self.host.planned_path(self.spec.robot.robot_id) if self.live else None
+        await super().data_acquisition()
 
     def resume(self, lost: Behaviour[Key, ScenarioSpec]) -> None:
         # restarted after an error: the tracks seen so far still hold
@@ -143,7 +193,7 @@ class Dodge(ControllerScenario):
     def judge(self, scan: LaserScan, odom: Odometry | None) -> Command | None:
         if odom is None:
             return None
-        return decide_for(self.tracker, scan, odom, self.spec.robot)
+        return decide_for(self.tracker, scan, odom, self.spec.robot, self.path)
 
     def ttl_s(self) -> float:
         period = self.tracker.period_s

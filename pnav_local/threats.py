@@ -2,11 +2,12 @@
 judgement; docs/CONTROLLER.md, "dodge").
 
 Everything here is in the robot's frame at the scan (x ahead, y left), a fixed frame for the
-prediction: each moving track is a disc (its radius plus the footprint plus a margin that
-grows with time: the prediction's error grows with it) at constant velocity, and the robot
-follows a *motion*: a target velocity reached within its acceleration limits after the
-scan-to-wheels delay. A motion's time to collision is the first predicted time its
-footprint meets a mover's disc within the horizon (inf: none). The static hits of the scan
+prediction: each moving track is a disc (its radius plus a margin that grows with time: the
+prediction's error grows with it) at constant velocity, and the robot follows a *motion*: a
+target velocity reached within its acceleration limits after the scan-to-wheels delay. A
+motion's time to collision is the first predicted time the robot's footprint (its polygon,
+turned with each pose: a box's corners reach farther than its sides; or its disc) comes
+within a mover's disc within the horizon (inf: none). The static hits of the scan
 (the beams not on a moving cluster) must stay clear of any evasive motion other than the
 stop, or be no nearer than they are now.
 
@@ -23,6 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.contract.records import Robot
+from common.footprint import Footprint
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -35,7 +37,12 @@ STATIC_MARGIN_M = 0.02
 MAX_STATIC = 1024
 GRID_M = 0.04
 SPEEDS = (1.0, 0.85, 0.7, 0.55, 0.4, 0.25, 0.1, 0.0)  # shares of the top speed
-TURNS = (0.0, 0.5, -0.5)  # shares of the top turn rate, and the measured one
+# shares of the top turn rate: straight on, and gentle to sharp turns either way (a gentle one
+# moves the robot a few tenths of a metre off its line within a second: past a slow mover's
+# side rather than waiting seconds for it to cross)
+TURNS = (0.0, 0.1, -0.1, 0.25, -0.25, 0.5, -0.5)
+BRISK_SHARE = 0.4  # of the top speed: a motion at least this fast keeps the robot going
+ON_COURSE_DEG = 45.0  # a straight yield keeps to the path only if the robot faces along it
 BACK_SHARE = 0.4  # backing out, where the lidar sees behind
 
 
@@ -60,10 +67,10 @@ class Motion:
 
 
 def rollout(v0: float, w0: float, v: float, w: float, robot: Robot) -> FloatArray:
-    """The robot's positions (STEPS x 2) over the horizon, from rest at the origin facing +x
-    at (v0, w0), the target (v, w) reached at the robot's accelerations after the delay."""
+    """The robot's poses (STEPS x 3: x, y, heading) over the horizon, from the origin facing
+    +x at (v0, w0), the target (v, w) reached at the robot's accelerations after the delay."""
     dt = HORIZON_S / STEPS
-    out = np.empty((STEPS, 2))
+    out = np.empty((STEPS, 3))
     x = y = th = 0.0
     cv, cw = v0, w0
     av, aw = robot.max_linear_accel_mps2, robot.max_angular_accel_rps2
@@ -77,7 +84,7 @@ def rollout(v0: float, w0: float, v: float, w: float, robot: Robot) -> FloatArra
         x += cv * dt * math.cos(mid)
         y += cv * dt * math.sin(mid)
         th += cw * dt
-        out[k] = (x, y)
+        out[k] = (x, y, th)
     return out
 
 
@@ -85,21 +92,31 @@ def times() -> FloatArray:
     return np.asarray(np.arange(1, STEPS + 1) * (HORIZON_S / STEPS), dtype=np.float64)
 
 
-def ttc(poses: FloatArray, movers: list[Mover], footprint_m: float) -> tuple[float, int | None]:
-    """The first predicted contact of the poses with a mover: (time, track) or (inf, None)."""
+def _local(poses: FloatArray, xy: FloatArray) -> FloatArray:
+    """Points (steps x k x 2, one set per pose) in the robot's frame at each pose."""
+    c, sn = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
+    dx, dy = xy[..., 0] - poses[:, 0:1], xy[..., 1] - poses[:, 1:2]
+    return np.stack([c * dx + sn * dy, -sn * dx + c * dy], axis=-1)
+
+
+def ttc(poses: FloatArray, movers: list[Mover], footprint: Footprint) -> tuple[float, int | None]:
+    """The first predicted contact of the poses with a mover: (time, track) or (inf, None).
+    The footprint is the robot's true outline at each pose (a box's corners reach farther
+    than its sides), the mover a disc of its radius plus the margins."""
     if not movers:
         return math.inf, None
     ts = times()
     m = np.asarray([(k.x, k.y, k.vx, k.vy, k.radius) for k in movers], dtype=np.float64)
-    mx = m[:, 0][None, :] + m[:, 2][None, :] * ts[:, None]  # steps x movers
-    my = m[:, 1][None, :] + m[:, 3][None, :] * ts[:, None]
-    gap = np.hypot(poses[:, 0:1] - mx, poses[:, 1:2] - my)
-    reach = m[:, 4][None, :] + footprint_m + MARGIN_M + MARGIN_MPS * ts[:, None]
-    hit = gap < reach
     # contact at the start too: a mover already touching the margin counts at once
-    now = np.hypot(m[:, 0], m[:, 1]) < m[:, 4] + footprint_m + MARGIN_M
+    now = footprint.clearance(m[:, 0:2]) < m[:, 4] + MARGIN_M
     if now.any():
         return 0.0, movers[int(np.flatnonzero(now)[0])].track
+    mx = m[:, 0][None, :] + m[:, 2][None, :] * ts[:, None]  # steps x movers
+    my = m[:, 1][None, :] + m[:, 3][None, :] * ts[:, None]
+    local = _local(poses, np.stack([mx, my], axis=-1))
+    gap = footprint.clearance(local.reshape(-1, 2)).reshape(mx.shape)
+    reach = m[:, 4][None, :] + MARGIN_M + MARGIN_MPS * ts[:, None]
+    hit = gap < reach
     rows = np.flatnonzero(hit.any(axis=1))
     if len(rows) == 0:
         return math.inf, None
@@ -117,20 +134,21 @@ def static_points(xy: FloatArray) -> FloatArray:
     return np.asarray(pts[order[:MAX_STATIC]], dtype=np.float64)
 
 
-def clear_of_static(poses: FloatArray, points: FloatArray, footprint_m: float) -> bool:
-    """No pose nearer a static hit than the footprint plus a margin, or than the robot is now
-    (a robot already that close may move if it gets no closer)."""
+def clear_of_static(poses: FloatArray, points: FloatArray, footprint: Footprint) -> bool:
+    """No pose's outline nearer a static hit than a margin, or than the robot's is now (a
+    robot already that close may move if it gets no closer)."""
     if len(points) == 0:
         return True
-    dist = np.hypot(points[:, 0], points[:, 1])
-    now = float(dist.min())
-    limit = min(footprint_m + STATIC_MARGIN_M, now - 0.005)
+    now = float(footprint.clearance(points).min())
+    limit = min(STATIC_MARGIN_M, now - 0.005)
     # only what the poses can come near matters
-    points = points[dist <= float(np.hypot(poses[:, 0], poses[:, 1]).max()) + limit]
+    dist = np.hypot(points[:, 0], points[:, 1])
+    far = float(np.hypot(poses[:, 0], poses[:, 1]).max()) + footprint.circumscribed_m + limit
+    points = points[dist <= far]
     if len(points) == 0:
         return True
-    d = np.hypot(poses[:, 0:1] - points[None, :, 0], poses[:, 1:2] - points[None, :, 1])
-    return bool(d.min() >= limit)
+    local = _local(poses, np.broadcast_to(points, (len(poses), *points.shape)))
+    return bool(footprint.clearance(local.reshape(-1, 2)).min() >= limit)
 
 
 def choose(
@@ -140,28 +158,46 @@ def choose(
     movers: list[Mover],
     points: FloatArray,
     sees_behind: bool,
+    ahead: tuple[float, float] = (1.0, 0.0),
 ) -> Motion:
-    """The evasive motion to recommend. Of the motions that meet no mover within the
-    horizon, the straightest (a swerve leaves the path; slowing on it does not), then the
-    fastest forward; if every one meets a mover, the one meeting it latest (then the
-    straighter, then the faster). A motion other than the stop must keep clear of the
-    static hits: tested in that order of preference until one does (the stop always does),
-    so a decision seldom tests more than a few."""
+    """The evasive motion to recommend. ``ahead``: the unit direction (robot frame) the
+    robot is to make progress in (toward its path's carrot; straight ahead without one). Of
+    the motions that meet no mover within the horizon: the fastest straight on at a brisk
+    speed (``BRISK_SHARE`` of the top or more: a yield on the path), if the robot faces
+    within ``ON_COURSE_DEG`` of ``ahead``; else the brisk motion that ends farthest along
+    ``ahead`` (past a slow mover's side: waiting for it to cross takes seconds, in other
+    movers' way; back toward the path when off it), the gentlest first on a tie; else the
+    straightest, then the fastest of the slower ones (down to the stop).
+    If every one meets a mover, the one meeting it latest (then the straighter, then the
+    faster). A motion other than the stop must keep clear of the static hits: tested in
+    that order of preference until one does (the stop always does)."""
     top, wmax = robot.max_linear_mps, robot.max_angular_rps
     speeds = [s * top for s in SPEEDS] + ([-BACK_SHARE * top] if sees_behind else [])
     judged: list[tuple[Motion, FloatArray]] = []
     for v in speeds:
         for w in [s * wmax for s in TURNS] if v != 0.0 else [0.0]:
             poses = rollout(v0, w0, v, w, robot)
-            t, k = ttc(poses, movers, robot.footprint_radius_m)
+            t, k = ttc(poses, movers, robot.footprint)
             judged.append((Motion(v, w, t, k), poses))
     safe = [mp for mp in judged if math.isinf(mp[0].ttc)]
     if safe:
-        order = sorted(safe, key=lambda mp: (-abs(mp[0].w), mp[0].v), reverse=True)
+        brisk = BRISK_SHARE * top
+        on_course = math.atan2(abs(ahead[1]), ahead[0]) <= math.radians(ON_COURSE_DEG)
+
+        def preference(mp: tuple[Motion, FloatArray]) -> tuple[float, ...]:
+            motion, poses = mp
+            if motion.v >= brisk and motion.w == 0.0 and on_course:
+                return (0.0, -motion.v)
+            if motion.v >= brisk:
+                gain = float(poses[-1, 0] * ahead[0] + poses[-1, 1] * ahead[1])
+                return (1.0, -round(gain, 3), abs(motion.w))
+            return (2.0, abs(motion.w), -motion.v)
+
+        order = sorted(safe, key=preference)
     else:
         order = sorted(judged, key=lambda mp: (mp[0].ttc, -abs(mp[0].w), mp[0].v), reverse=True)
     for motion, poses in order:
-        if motion.v == 0.0 or clear_of_static(poses, points, robot.footprint_radius_m):
+        if motion.v == 0.0 or clear_of_static(poses, points, robot.footprint):
             return motion
     stop = next(m for m, _ in judged if m.v == 0.0)
     return stop
@@ -173,7 +209,7 @@ def expected(v0: float, w0: float, robot: Robot, movers: list[Mover]) -> Motion:
     on a clear way does)."""
     worst: Motion | None = None
     for v in (v0, robot.max_linear_mps if v0 >= -0.01 else v0):
-        t, k = ttc(rollout(v0, w0, v, w0, robot), movers, robot.footprint_radius_m)
+        t, k = ttc(rollout(v0, w0, v, w0, robot), movers, robot.footprint)
         if worst is None or t < worst.ttc:
             worst = Motion(v, w0, t, k)
     assert worst is not None

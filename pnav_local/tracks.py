@@ -9,10 +9,14 @@ face the lidar sees). Centres go to the world frame with the odometry at the sca
 to the scan's stamp at the measured velocity), and each is matched to the nearest track
 predicted to that time, within a gate that grows with the time since the track was seen.
 A track's velocity is the least-squares slope of its centres over the last ``WINDOW_S``
-of sim time; a track is *moving* once it spans ``MIN_SPAN_S`` with ``MIN_SEEN`` sightings
-and its speed is at least ``MOVING_MPS``. A cluster cut by the edge of the lidar's field
+of sim time; a track is *moving* once it spans ``MIN_SPAN_S`` with ``MIN_SEEN`` sightings,
+its speed is at least ``MOVING_MPS``, its points have left the surface an older scan showed
+(``DISPLACED_M``) and its centres lie on the fitted line (``FIT_RMS_M``: a static object's
+apparent motion wanders, a body's is steady). A cluster cut by the edge of the lidar's field
 or by something nearer in front of it changes shape as the robot moves, so it is matched
-but never adds to its track's velocity.
+but never adds to its track's velocity nor tells whether it left its surface. A moving
+track unseen for at most ``COAST_S`` (hidden behind another mover, or merged with it into
+one cluster) is still predicted on at its velocity (:meth:`Tracker.movers`).
 
 Deterministic (no randomness, ties broken by index) and bounded: at most ``MAX_CLUSTERS``
 clusters (the nearest) and ``MAX_TRACKS`` tracks per robot, whatever the scan holds.
@@ -40,14 +44,21 @@ MAX_TRACKS = 48
 WINDOW_S = 0.5  # the velocity is fitted over this much history
 MIN_SPAN_S = 0.2
 MIN_SEEN = 4
-MOVING_MPS = 0.15  # slower tracks are treated as standing (view changes, noise)
+MOVING_MPS = 0.1  # slower tracks are treated as standing (view changes, noise)
 FORGET_S = 0.5  # a track unseen this long is dropped
+# a moving track unseen for at most this long (hidden behind another mover, or merged into
+# its cluster as two pass close) is still predicted where its velocity takes it
+COAST_S = 0.3
 # A static object seen from a new place changes shape (a box's faces turn into view), and its
 # centre seems to move by up to half a metre a second as the robot passes: so a track also
 # has to have left the surface it showed LAG_S ago: the median of its points' distances to
-# that scan's points beyond DISPLACED_M
+# that scan's points beyond DISPLACED_M (the lidar's noise is 1 mm: 2 cm is far beyond it)...
 LAG_S = 0.3
-DISPLACED_M = 0.04
+DISPLACED_M = 0.02
+# ...and its centres have to lie on a line travelled at constant speed: a static object's
+# apparent motion (the centre estimate wandering as faces turn into view) is not steady, a
+# body's is (the RMS of the centres about the fitted line within FIT_RMS_M)
+FIT_RMS_M = 0.02
 HISTORY_S = 0.6
 GATE_M = 0.25  # the match gate, plus GATE_MPS x the time since the track was seen
 GATE_MPS = 1.5
@@ -83,6 +94,8 @@ class Track:
     sightings: int = 0
     beams: tuple[int, int] = (0, -1)  # the newest cluster's first and last beam
     displaced: bool = False  # its points left the surface an older scan showed
+    fit_rms: float = math.inf  # the centres' RMS distance from the fitted constant velocity
+    whole: bool = False  # the newest cluster's outline was all there
 
     @property
     def speed(self) -> float:
@@ -93,7 +106,12 @@ class Track:
         if self.sightings < MIN_SEEN or len(self.seen) < MIN_SEEN:
             return False
         span = self.seen[-1][0] - self.seen[0][0]
-        return span >= MIN_SPAN_S and self.speed >= MOVING_MPS and self.displaced
+        return (
+            span >= MIN_SPAN_S
+            and self.speed >= MOVING_MPS
+            and self.displaced
+            and self.fit_rms <= FIT_RMS_M
+        )
 
     def at(self, t: float) -> tuple[float, float]:
         """Where the track is predicted at sim time ``t`` (constant velocity)."""
@@ -103,6 +121,7 @@ class Track:
     def add(self, t: float, c: Cluster) -> None:
         self.last_t, self.last_x, self.last_y = t, c.x, c.y
         self.beams = (c.first, c.last)
+        self.whole = c.whole
         self.radius = 0.7 * self.radius + 0.3 * c.radius
         self.sightings += 1
         if not c.whole:
@@ -119,8 +138,10 @@ class Track:
         denom = float(ts @ ts)
         if denom <= 1e-9:
             return
-        self.vx = float(ts @ (a[:, 1] - a[:, 1].mean())) / denom
-        self.vy = float(ts @ (a[:, 2] - a[:, 2].mean())) / denom
+        dx, dy = a[:, 1] - a[:, 1].mean(), a[:, 2] - a[:, 2].mean()
+        self.vx = float(ts @ dx) / denom
+        self.vy = float(ts @ dy) / denom
+        self.fit_rms = float(np.sqrt(np.mean((dx - self.vx * ts) ** 2 + (dy - self.vy * ts) ** 2)))
 
 
 def robot_pose(scan: LaserScan, odom: Odometry) -> tuple[float, float, float]:
@@ -267,7 +288,8 @@ class Tracker:
             return
         ref = old[-1][1]
         for k in self.tracks:
-            if k.last_t != t or k.speed < MOVING_MPS:
+            # a cut outline changes as the view does: its points prove nothing either way
+            if k.last_t != t or k.speed < MOVING_MPS or not k.whole:
                 continue
             pts = world[k.beams[0] : k.beams[1] + 1]
             pts = pts[np.isfinite(pts[:, 0])]
@@ -284,3 +306,10 @@ class Tracker:
     def moving(self) -> list[Track]:
         """The tracks that move, seen in the newest scan."""
         return [k for k in self.tracks if k.moving and k.last_t == self.last_t]
+
+    def movers(self) -> list[Track]:
+        """The tracks that move, seen in the newest scan or unseen for at most ``COAST_S``
+        (a mover hidden for a moment is still there): :meth:`Track.at` says where."""
+        if self.last_t is None:
+            return []
+        return [k for k in self.tracks if k.moving and self.last_t - k.last_t <= COAST_S]

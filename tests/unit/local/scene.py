@@ -12,6 +12,17 @@ import numpy as np
 from common.contract.records import LaserScan, Odometry, Robot
 
 JACKAL = Robot("r1", 2.0, 4.0, 0.22, 270.0, max_linear_accel_mps2=10.0, max_angular_accel_rps2=20.0)
+# the Jackal as its true box (models/jackal.yaml): 0.508 x 0.430 m, corners 0.333 m out
+JACKAL_BOX = Robot(
+    "r1",
+    2.0,
+    4.0,
+    0.22,
+    270.0,
+    max_linear_accel_mps2=10.0,
+    max_angular_accel_rps2=20.0,
+    footprint_polygon=((0.254, -0.215), (0.254, 0.215), (-0.254, 0.215), (-0.254, -0.215)),
+)
 BEAMS = 720
 ANGLE_MIN = -math.radians(135.0)
 INCREMENT = math.radians(270.0) / (BEAMS - 1)
