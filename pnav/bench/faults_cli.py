@@ -1,4 +1,4 @@
-"""The ``pnav bench faults`` command line, kept light: pnav/cli/program.py builds every parser
+"""The ``pnav bench faults`` command line, kept light: pnav/cli/parser.py builds every parser
 at each start, and the benchmark itself (pnav.bench.faults) imports the whole launcher."""
 
 from __future__ import annotations

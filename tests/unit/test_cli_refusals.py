@@ -17,6 +17,7 @@ from common.config import ZenohSettings
 from common.contract import limits
 from common.errors import ContractError
 from common.robotmodel import MODELS
+from pnav.cli import parser as cli_parser
 from pnav.cli import program as cli
 from pnav.cli import stack_commands
 
@@ -163,7 +164,7 @@ def test_a_good_goal_is_written_and_a_database_refusal_is_one_line_too(
     assert code == 0 and "r1: goal 1 set to (1.5, -2.0)" in out, err
     # Another path that skipped the checks in front (here: both disabled) still gets a
     # one-line refusal from the goal table's CHECK, not an asyncpg traceback.
-    monkeypatch.setattr(cli, "tolerance", float)
+    monkeypatch.setattr(cli_parser, "tolerance", float)
     monkeypatch.setattr(limits, "check_goal", lambda *_: None)
     code, _, err = run_cli(["goal", "1", "1", "--tolerance", "nan"], capsys)
     assert_one_line_refusal(code, err, "database refused", "goal_tolerance_bounded")

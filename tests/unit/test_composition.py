@@ -13,7 +13,7 @@ import pytest
 from common.config import ZenohSettings
 from common.contract import acl
 from common.errors import UsageError
-from pnav.cli.program import build_parser
+from pnav.cli.parser import build_parser
 from pnav.run.composition import COMPOSE_AT_MOST_CORES, hosted, parse_processes, resolve_processes
 from pnav.run.launcher import parse_replace, service_specs
 from pnav.run.local_stack import BusCredentials, LocalStack

@@ -11,7 +11,7 @@ import pytest
 from common.config import ZenohSettings
 from common.errors import UsageError
 from pnav.cli.dashboard_options import dashboard_options
-from pnav.cli.program import build_parser
+from pnav.cli.parser import build_parser
 from pnav.run.embedded_postgres import free_port
 from pnav.run.launcher import lockstep_env, resolve_dashboard, service_specs
 from pnav.run.local_stack import LocalStack

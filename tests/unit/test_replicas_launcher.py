@@ -9,7 +9,7 @@ import pytest
 
 from common.config import ZenohSettings
 from common.errors import UsageError
-from pnav.cli.program import build_parser
+from pnav.cli.parser import build_parser
 from pnav.run.launcher import parse_replicas, service_specs
 from pnav.run.local_stack import LocalStack
 from pnav.run.stack_options import StackOptions
@@ -82,7 +82,7 @@ def test_a_bare_count_replicates_every_scenario_service() -> None:
 
 
 def test_bench_latency_robot_counts() -> None:
-    from pnav.cli.program import parse_counts
+    from pnav.cli.options import parse_counts
 
     assert parse_counts("1,10,50", "--robots") == [1, 10, 50]
     args = build_parser().parse_args(["bench", "latency"])

@@ -10,7 +10,7 @@ import pytest
 from common.config import ZenohSettings
 from common.errors import UsageError
 from pnav.cli.options import robot_link_env
-from pnav.cli.program import build_parser
+from pnav.cli.parser import build_parser
 from pnav.run.launcher import service_specs
 from pnav.run.local_stack import LocalStack
 from pnav.run.stack_options import StackOptions
