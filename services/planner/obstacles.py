@@ -26,14 +26,11 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from common.contract import records
-
-if TYPE_CHECKING:
-    from services.planner.world_model import RobotState, World
 
 SEEN_RANGE_M = 4.0  # lidar hits farther than this are not used (pose error grows with range)
 UNMAPPED_M = 0.15  # a hit farther than this from every mapped obstacle is an unmapped one
@@ -100,34 +97,6 @@ class PoseTrail:
             return None
         best = min(near, key=lambda p: abs(p[0] - stamp))
         return best[1], best[2], best[3]
-
-
-def see(world: World, state: RobotState, scan: records.LaserScan) -> None:
-    """Remember the unmapped obstacles of ``scan`` on ``state.seen``: hits within
-    SEEN_RANGE_M that are farther than UNMAPPED_M from every obstacle of the robot's map,
-    placed in the world with the robot's pose at the scan's stamp (nothing changes when
-    there is no map or no pose for that stamp)."""
-    data = world.map_for(state.info)
-    pose = state.poses.at(scan.stamp)
-    if data is None or pose is None:
-        return
-    x, y, yaw = pose
-    ranges = np.asarray(scan.ranges, dtype=np.float64)
-    with np.errstate(invalid="ignore"):
-        valid = (ranges >= scan.range_min - 1e-4) & (ranges <= SEEN_RANGE_M)
-    angles = scan.angles()[valid] + yaw
-    grid = data.grid(state.info.footprint.inscribed_m)
-    reach = ranges[valid] + SURFACE_PUSH_CELLS * grid.resolution
-    hits = np.column_stack((x + reach * np.cos(angles), y + reach * np.sin(angles)))
-    if grid.clearance is not None and len(hits):
-        cols, rows, inside = grid.cells_of(hits)  # hits off the map are dropped
-        mapped = grid.clearance[rows[inside], cols[inside]] <= UNMAPPED_M
-        hits = hits[inside][~mapped]
-    hits = one_per_cell(hits, grid.resolution)
-    kept, kept_at = remembered(state.seen, scan, (x, y, yaw), hits)
-    points = np.concatenate((hits, kept)) if len(kept) else hits
-    seen_at = np.concatenate((np.full(len(hits), scan.stamp), kept_at))
-    state.seen = Seen(scan.id, scan.stamp, points[:MAX_REMEMBERED], seen_at[:MAX_REMEMBERED])
 
 
 def one_per_cell(points: Points, cell_m: float) -> Points:

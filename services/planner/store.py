@@ -31,7 +31,6 @@ from collections.abc import Awaitable, Callable, Iterable
 from typing import Any, TypeVar, Unpack
 
 import services.planner.chargers as chargers
-import services.planner.obstacles as obstacles
 from common import log
 from common.bus import Notification
 from common.contract import keys, records
@@ -50,7 +49,7 @@ from services.planner.published_path import PathRow
 from services.planner.routes import Router, Target
 from services.planner.source import PlannerSource
 from services.planner.tracking import Progress
-from services.planner.world_model import MapData, RobotState, Station, World
+from services.planner.world_model import MapData, RobotState, Station, World, see
 
 logger = logging.getLogger("pnav.planner")
 
@@ -313,7 +312,7 @@ class PlannerStore(GuardedStore):
         return self.world.map_for(info)
 
     def see(self, robot: RobotState, scan: records.LaserScan) -> None:
-        obstacles.see(self.world, robot, scan)
+        see(self.world, robot, scan)
 
     def route_for(
         self, robot: RobotState, x: float, y: float, target: Target, now: float | None = None

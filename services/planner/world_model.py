@@ -22,7 +22,16 @@ from common.contract.zones import Zone
 from common.planner_core.scenario import RobotInfo
 from services.planner.grid import OCCUPIED_AT, PlanGrid, plan_grid
 from services.planner.keepout import Keepouts, with_keepouts, zones_key
-from services.planner.obstacles import PoseTrail, Seen
+from services.planner.obstacles import (
+    MAX_REMEMBERED,
+    SEEN_RANGE_M,
+    SURFACE_PUSH_CELLS,
+    UNMAPPED_M,
+    PoseTrail,
+    Seen,
+    one_per_cell,
+    remembered,
+)
 from services.planner.tracking import Route
 
 logger = logging.getLogger("pnav.planner")
@@ -207,3 +216,31 @@ class World:
         if what not in self._warned:
             self._warned.add(what)
             log.event(logger, logging.WARNING, message, **fields)
+
+
+def see(world: World, state: RobotState, scan: records.LaserScan) -> None:
+    """Remember the unmapped obstacles of ``scan`` on ``state.seen``: hits within
+    SEEN_RANGE_M that are farther than UNMAPPED_M from every obstacle of the robot's map,
+    placed in the world with the robot's pose at the scan's stamp (nothing changes when
+    there is no map or no pose for that stamp)."""
+    data = world.map_for(state.info)
+    pose = state.poses.at(scan.stamp)
+    if data is None or pose is None:
+        return
+    x, y, yaw = pose
+    ranges = np.asarray(scan.ranges, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        valid = (ranges >= scan.range_min - 1e-4) & (ranges <= SEEN_RANGE_M)
+    angles = scan.angles()[valid] + yaw
+    grid = data.grid(state.info.footprint.inscribed_m)
+    reach = ranges[valid] + SURFACE_PUSH_CELLS * grid.resolution
+    hits = np.column_stack((x + reach * np.cos(angles), y + reach * np.sin(angles)))
+    if grid.clearance is not None and len(hits):
+        cols, rows, inside = grid.cells_of(hits)  # hits off the map are dropped
+        mapped = grid.clearance[rows[inside], cols[inside]] <= UNMAPPED_M
+        hits = hits[inside][~mapped]
+    hits = one_per_cell(hits, grid.resolution)
+    kept, kept_at = remembered(state.seen, scan, (x, y, yaw), hits)
+    points = np.concatenate((hits, kept)) if len(kept) else hits
+    seen_at = np.concatenate((np.full(len(hits), scan.stamp), kept_at))
+    state.seen = Seen(scan.id, scan.stamp, points[:MAX_REMEMBERED], seen_at[:MAX_REMEMBERED])

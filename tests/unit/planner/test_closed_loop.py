@@ -14,10 +14,9 @@ import pytest
 from common.contract.records import LaserScan, Odometry
 from common.planner_core.scenario import Movement, RobotInfo
 from services.planner import move_while_turning, turn_then_move
-from services.planner.obstacles import see
 from services.planner.routes import Router, Target
 from services.planner.tracking import heading_error
-from services.planner.world_model import MapData, RobotState, World
+from services.planner.world_model import MapData, RobotState, World, see
 
 RES = 0.05
 FOOTPRINT = 0.105

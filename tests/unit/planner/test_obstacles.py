@@ -13,9 +13,8 @@ import pytest
 
 from common.contract.records import LaserScan, Odometry
 from common.planner_core.scenario import RobotInfo
-from services.planner.obstacles import see
 from services.planner.routes import Router, Target
-from services.planner.world_model import MapData, RobotState, World
+from services.planner.world_model import MapData, RobotState, World, see
 from tests.unit.planner.test_closed_loop import RES, lidar
 
 
