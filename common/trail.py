@@ -1,0 +1,136 @@
+"""Where the robot has just been: its own recent poses, as evidence that the space its
+footprint swept there is free.
+
+A lidar that does not see behind the robot (the Jackal's 270 degrees) cannot say the way
+back is clear, so nothing backed up blind, and a box robot that had driven into a pocket it
+could not turn in stood there until its goal failed (the BARN-protocol hard worlds: every
+turn blocked by a corner, every arc forward blocked). But the robot drove in: every point
+its outline covered on the way, in the last TRAIL_S seconds, was free then. In a world whose
+obstacles stay put, backing out along the same poses meets nothing; recovery retraces them
+(:meth:`Trail.retrace_turn`), and safety_stop lets a blind reverse on that trail pass
+(:meth:`Trail.covers`) where it stops any other.
+
+Only outline points are tested (every SAMPLE_M along the footprint's edges at poses
+SAMPLE_M apart along the motion): a point counts as covered within COVER_TOLERANCE_M of
+some pose's outline. Poses are kept at least KEEP_STEP_M or KEEP_TURN_RAD apart, at most
+MAX_POSES and TRAIL_S seconds of sim time old (a moving obstacle may have stepped in
+since: the memory is short, and backing up is slow).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from common.footprint import Footprint
+
+FloatArray = npt.NDArray[np.float64]
+
+TRAIL_S = 30.0  # sim s: older poses are not evidence of free space
+MAX_POSES = 300
+KEEP_STEP_M = 0.02  # a pose is kept when this far from the last kept one
+KEEP_TURN_RAD = math.radians(5.0)  # ... or turned this much
+SAMPLE_M = 0.03  # outline points and motion poses tested this far apart
+COVER_TOLERANCE_M = 0.005  # how far outside every past outline a point may lie
+
+Pose = tuple[float, float, float, float]  # (stamp, x, y, yaw), world frame
+
+
+@dataclass
+class Trail:
+    """The robot's recent poses (odometry), oldest first."""
+
+    poses: deque[Pose] = field(default_factory=lambda: deque(maxlen=MAX_POSES))
+
+    def note(self, stamp: float, x: float, y: float, yaw: float) -> None:
+        """Keep this pose if it is far enough from the last one kept; a stamp going back
+        (the sim restarted) starts afresh."""
+        poses = self.poses
+        if poses and stamp < poses[-1][0] - 1.0:
+            poses.clear()
+        if poses:
+            _, lx, ly, lyaw = poses[-1]
+            turned = abs(math.atan2(math.sin(yaw - lyaw), math.cos(yaw - lyaw)))
+            if math.hypot(x - lx, y - ly) < KEEP_STEP_M and turned < KEEP_TURN_RAD:
+                return
+        poses.append((stamp, x, y, yaw))
+        while poses and poses[-1][0] - poses[0][0] > TRAIL_S:
+            poses.popleft()
+
+    def covers(
+        self,
+        footprint: Footprint,
+        pose: tuple[float, float, float],
+        linear: float,
+        angular: float,
+        distance_m: float,
+    ) -> bool:
+        """Whether the footprint moving from ``pose`` (world) at ``(linear, angular)`` for
+        ``distance_m`` of travel keeps every point of its outline within what its outline
+        covered at the trail's poses (or at ``pose`` itself)."""
+        if not self.poses or linear == 0.0:
+            return False
+        kept = np.array([p[1:] for p in self.poses] + [pose], dtype=np.float64)
+        steps = max(1, math.ceil(distance_m / SAMPLE_M))
+        s = np.arange(1, steps + 1) * (distance_m / steps) * math.copysign(1.0, linear)
+        turn_per_m = angular / linear
+        x0, y0, yaw0 = pose
+        yaw = yaw0 + turn_per_m * s
+        if abs(turn_per_m) > 1e-9:
+            lx = np.sin(turn_per_m * s) / turn_per_m
+            ly = (1.0 - np.cos(turn_per_m * s)) / turn_per_m
+        else:
+            lx, ly = s, np.zeros_like(s)
+        c0, s0 = math.cos(yaw0), math.sin(yaw0)
+        xs, ys = x0 + c0 * lx - s0 * ly, y0 + s0 * lx + c0 * ly
+        points = _outline_points(footprint)
+        c, sn = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
+        wx = (xs[:, None] + c * points[None, :, 0] - sn * points[None, :, 1]).ravel()
+        wy = (ys[:, None] + sn * points[None, :, 0] + c * points[None, :, 1]).ravel()
+        covered = np.zeros(len(wx), dtype=np.bool_)
+        for px, py, pyaw in kept[::-1]:  # the newest first: most points are covered there
+            todo = np.flatnonzero(~covered)
+            if not len(todo):
+                break
+            dx, dy = wx[todo] - px, wy[todo] - py
+            cp, sp = math.cos(pyaw), math.sin(pyaw)
+            local = np.stack([cp * dx + sp * dy, -sp * dx + cp * dy], axis=1)
+            covered[todo] = footprint.clearance(local) <= COVER_TOLERANCE_M
+        return bool(covered.all())
+
+    def retrace_turn(self, pose: tuple[float, float, float], back_m: float) -> float | None:
+        """The curvature (rad per m) that backs the robot at ``pose`` toward the trail's
+        pose ``back_m`` behind along it (pure pursuit, in reverse); None if the trail does
+        not reach that far behind the robot."""
+        x, y, yaw = pose
+        walked, last = 0.0, (x, y)
+        target = None
+        for _, px, py, _ in reversed(self.poses):
+            walked += math.hypot(px - last[0], py - last[1])
+            last = (px, py)
+            if walked >= back_m:
+                target = (px, py)
+                break
+        if target is None:
+            return None
+        dx, dy = target[0] - x, target[1] - y
+        tx = math.cos(yaw) * dx + math.sin(yaw) * dy
+        ty = -math.sin(yaw) * dx + math.cos(yaw) * dy
+        if tx >= 0.0:
+            return None  # the trail behind is not behind the robot: no reverse follows it
+        return 2.0 * ty / max(tx * tx + ty * ty, 1e-9)
+
+
+def _outline_points(footprint: Footprint) -> FloatArray:
+    """Points every SAMPLE_M along the footprint's outline (robot frame)."""
+    v = footprint.vertices
+    out = []
+    for a, b in zip(v, np.roll(v, -1, axis=0), strict=True):
+        n = max(1, math.ceil(float(np.hypot(*(b - a))) / SAMPLE_M))
+        out.append(a[None, :] + np.linspace(0.0, 1.0, n, endpoint=False)[:, None] * (b - a))
+    points: FloatArray = np.vstack(out)
+    return points
