@@ -12,9 +12,11 @@ obstacles stay put, backing out along the same poses meets nothing; recovery ret
 
 Only outline points are tested (every SAMPLE_M along the footprint's edges at poses
 SAMPLE_M apart along the motion): a point counts as covered within COVER_TOLERANCE_M of
-some pose's outline. Poses are kept at least KEEP_STEP_M or KEEP_TURN_RAD apart, at most
-MAX_POSES and TRAIL_S seconds of sim time old (a moving obstacle may have stepped in
-since: the memory is short, and backing up is slow).
+some pose's outline, the trail's poses interpolated FILL_M and FILL_RAD apart (the robot
+swept between two odometry readings too: a box turning as it went left notches between
+its outlines a tenth of a second apart, 7 mm deep at a corner). Poses are kept at least
+KEEP_STEP_M or KEEP_TURN_RAD apart, at most MAX_POSES and TRAIL_S seconds of sim time old
+(a moving obstacle may have stepped in since: the memory is short, and backing up is slow).
 """
 
 from __future__ import annotations
@@ -36,6 +38,8 @@ KEEP_STEP_M = 0.02  # a pose is kept when this far from the last kept one
 KEEP_TURN_RAD = math.radians(5.0)  # ... or turned this much
 SAMPLE_M = 0.03  # outline points and motion poses tested this far apart
 COVER_TOLERANCE_M = 0.005  # how far outside every past outline a point may lie
+FILL_M = 0.01  # the trail's poses interpolated this close together when testing
+FILL_RAD = math.radians(1.0)
 
 Pose = tuple[float, float, float, float]  # (stamp, x, y, yaw), world frame
 
@@ -74,7 +78,10 @@ class Trail:
         covered at the trail's poses (or at ``pose`` itself)."""
         if not self.poses or linear == 0.0:
             return False
-        kept = np.array([p[1:] for p in self.poses] + [pose], dtype=np.float64)
+        reach = 2.0 * footprint.circumscribed_m + distance_m
+        kept = _filled(
+            np.array([p[1:] for p in self.poses] + [pose], dtype=np.float64), pose, reach
+        )
         steps = max(1, math.ceil(distance_m / SAMPLE_M))
         s = np.arange(1, steps + 1) * (distance_m / steps) * math.copysign(1.0, linear)
         turn_per_m = angular / linear
@@ -92,7 +99,7 @@ class Trail:
         wx = (xs[:, None] + c * points[None, :, 0] - sn * points[None, :, 1]).ravel()
         wy = (ys[:, None] + sn * points[None, :, 0] + c * points[None, :, 1]).ravel()
         covered = np.zeros(len(wx), dtype=np.bool_)
-        for px, py, pyaw in kept[::-1]:  # the newest first: most points are covered there
+        for px, py, pyaw in kept:  # the newest first: most points are covered there
             todo = np.flatnonzero(~covered)
             if not len(todo):
                 break
@@ -123,6 +130,24 @@ class Trail:
         if tx >= 0.0:
             return None  # the trail behind is not behind the robot: no reverse follows it
         return 2.0 * ty / max(tx * tx + ty * ty, 1e-9)
+
+
+def _filled(poses: FloatArray, pose: tuple[float, float, float], reach_m: float) -> FloatArray:
+    """The poses (x, y, yaw; oldest first) within ``reach_m`` of ``pose``, with poses
+    interpolated between each two at most FILL_M and FILL_RAD apart."""
+    near = np.hypot(poses[:, 0] - pose[0], poses[:, 1] - pose[1]) <= reach_m
+    out = []
+    for a, b, both in zip(poses[:-1], poses[1:], near[:-1] & near[1:], strict=True):
+        if not both:
+            continue
+        turn = math.atan2(math.sin(b[2] - a[2]), math.cos(b[2] - a[2]))
+        n = max(
+            1, math.ceil(max(math.hypot(b[0] - a[0], b[1] - a[1]) / FILL_M, abs(turn) / FILL_RAD))
+        )
+        f = np.arange(n)[:, None] / n
+        out.append(np.hstack([a[:2] + f * (b[:2] - a[:2]), a[2] + f * turn]))
+    filled: FloatArray = np.vstack([poses[-1:], *out[::-1]])  # the newest first
+    return filled
 
 
 def _outline_points(footprint: Footprint) -> FloatArray:
