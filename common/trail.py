@@ -61,6 +61,8 @@ class Trail:
             turned = abs(math.atan2(math.sin(yaw - lyaw), math.cos(yaw - lyaw)))
             if math.hypot(x - lx, y - ly) < KEEP_STEP_M and turned < KEEP_TURN_RAD:
                 return
+            if (x - lx) * math.cos(lyaw) + (y - ly) * math.sin(lyaw) < -KEEP_STEP_M / 2:
+                return  # backing up, on the trail already: the way back stays as it was
         poses.append((stamp, x, y, yaw))
         while poses and poses[-1][0] - poses[0][0] > TRAIL_S:
             poses.popleft()
@@ -114,9 +116,14 @@ class Trail:
         pose ``back_m`` behind along it (pure pursuit, in reverse); None if the trail does
         not reach that far behind the robot."""
         x, y, yaw = pose
+        poses = list(self.poses)
+        if not poses:
+            return None
+        # from the trail's pose nearest the robot (a robot backing up is behind the newest)
+        near = min(range(len(poses)), key=lambda i: math.hypot(poses[i][1] - x, poses[i][2] - y))
         walked, last = 0.0, (x, y)
         target = None
-        for _, px, py, _ in reversed(self.poses):
+        for _, px, py, _ in reversed(poses[: near + 1]):
             walked += math.hypot(px - last[0], py - last[1])
             last = (px, py)
             if walked >= back_m:
