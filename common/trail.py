@@ -37,7 +37,11 @@ MAX_POSES = 300
 KEEP_STEP_M = 0.02  # a pose is kept when this far from the last kept one
 KEEP_TURN_RAD = math.radians(5.0)  # ... or turned this much
 SAMPLE_M = 0.03  # outline points and motion poses tested this far apart
-COVER_TOLERANCE_M = 0.005  # how far outside every past outline a point may lie
+# how far outside every past outline a point may lie: what odometry, the interpolation and
+# a pure-pursuit arc against the trail's own curves leave (3 to 7 mm backing 0.3 m out of
+# barn_hard_001's gap); the bridge's safety layer lets a turning corner come as near a
+# return (common.sweep.TURN_MARGIN_M)
+COVER_TOLERANCE_M = 0.01
 FILL_M = 0.01  # the trail's poses interpolated this close together when testing
 FILL_RAD = math.radians(1.0)
 
@@ -49,20 +53,26 @@ class Trail:
     """The robot's recent poses (odometry), oldest first."""
 
     poses: deque[Pose] = field(default_factory=lambda: deque(maxlen=MAX_POSES))
+    last: Pose | None = None  # the pose noted last, kept or not
 
     def note(self, stamp: float, x: float, y: float, yaw: float) -> None:
-        """Keep this pose if it is far enough from the last one kept; a stamp going back
-        (the sim restarted) starts afresh."""
-        poses = self.poses
+        """Keep this pose if it is far enough from the last one kept and the robot did not
+        get here backing up (then it is on the trail already, and the way back stays as it
+        was); a stamp going back (the sim restarted) starts afresh."""
+        poses, before = self.poses, self.last
+        self.last = (stamp, x, y, yaw)
         if poses and stamp < poses[-1][0] - 1.0:
             poses.clear()
+            before = None
+        if before is not None:
+            _, bx, by, byaw = before
+            if (x - bx) * math.cos(byaw) + (y - by) * math.sin(byaw) < -1e-3:
+                return
         if poses:
             _, lx, ly, lyaw = poses[-1]
             turned = abs(math.atan2(math.sin(yaw - lyaw), math.cos(yaw - lyaw)))
             if math.hypot(x - lx, y - ly) < KEEP_STEP_M and turned < KEEP_TURN_RAD:
                 return
-            if (x - lx) * math.cos(lyaw) + (y - ly) * math.sin(lyaw) < -KEEP_STEP_M / 2:
-                return  # backing up, on the trail already: the way back stays as it was
         poses.append((stamp, x, y, yaw))
         while poses and poses[-1][0] - poses[0][0] > TRAIL_S:
             poses.popleft()

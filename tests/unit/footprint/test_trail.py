@@ -76,12 +76,16 @@ def test_backing_up_adds_nothing_and_the_retrace_goes_on_from_where_the_robot_is
     count = len(trail.poses)
     a = end[2] - 0.105  # 10.5 cm back along the arc it came in on
     back = (math.sin(a), 1.0 - math.cos(a), a)
-    trail.note(50.0, *back)  # backing up: on the trail already
+    trail.note(5.0, *back)  # backing up: on the trail already
     assert len(trail.poses) == count
     # steered on from where the robot is, for the pose 0.2 m behind it on the same arc
     turn = trail.retrace_turn(back, 0.2)
     assert turn == pytest.approx(1.0, abs=0.01)
     assert trail.covers(FOOT, back, -0.15, -0.15 * turn, 0.3)
+    # then forward again, turning off right: noted (it is going somewhere new)
+    ahead = (back[0] + 0.05 * math.cos(back[2] - 0.3), back[1] + 0.05 * math.sin(back[2] - 0.3))
+    trail.note(6.0, *ahead, back[2] - 0.3)
+    assert len(trail.poses) == count + 1
 
 
 def test_poses_are_kept_a_step_apart_and_for_a_while_only() -> None:
