@@ -42,6 +42,7 @@ SAMPLE_M = 0.03  # outline points and motion poses tested this far apart
 # barn_hard_001's gap); the bridge's safety layer lets a turning corner come as near a
 # return (common.sweep.TURN_MARGIN_M)
 COVER_TOLERANCE_M = 0.01
+MAX_TURN_PER_M = 10.0  # the hardest curvature a retrace asks for (1.5 rad/s at 0.15 m/s)
 FILL_M = 0.01  # the trail's poses interpolated this close together when testing
 FILL_RAD = math.radians(1.0)
 
@@ -147,6 +148,25 @@ class Trail:
         if tx >= 0.0:
             return None  # the trail behind is not behind the robot: no reverse follows it
         return 2.0 * ty / max(tx * tx + ty * ty, 1e-9)
+
+    def turn_behind(self, pose: tuple[float, float, float], back_m: float) -> float | None:
+        """The curvature (rad per m) the trail itself took over its last ``back_m`` up to
+        the pose nearest ``pose``: its heading change over the distance covered (a robot
+        that turned as it crept keeps to it backing at that rate, where an arc toward a pose
+        farther back cuts across); at most MAX_TURN_PER_M either way. None without a pose
+        that far back."""
+        x, y, _ = pose
+        poses = list(self.poses)
+        if not poses:
+            return None
+        near = min(range(len(poses)), key=lambda i: math.hypot(poses[i][1] - x, poses[i][2] - y))
+        walked, turned = 0.0, 0.0
+        for a, b in zip(reversed(poses[:near]), reversed(poses[1 : near + 1]), strict=True):
+            walked += math.hypot(b[1] - a[1], b[2] - a[2])
+            turned += math.atan2(math.sin(b[3] - a[3]), math.cos(b[3] - a[3]))
+            if walked >= back_m:
+                return max(-MAX_TURN_PER_M, min(MAX_TURN_PER_M, turned / walked))
+        return None
 
 
 def _filled(poses: FloatArray, pose: tuple[float, float, float], reach_m: float) -> FloatArray:

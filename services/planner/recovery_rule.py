@@ -47,6 +47,8 @@ FREER_HORIZON_M = 1.0  # how far the freer side is judged
 REAR_CONE_RAD = math.radians(30)  # beams this close to straight back see the rear
 TURN_MARGIN_M = 0.02  # room a turning footprint keeps from the returns, m
 RETRACE_M = 0.2  # backing along the trail: the pose this far back along it is steered for
+RETRACE_BEND_M = 0.05  # ... or the curvature the trail took over this much of it
+RETRACE_AHEAD_M = 0.035  # the trail must cover one step and this much more
 
 
 def surroundings(
@@ -100,13 +102,16 @@ def retrace(
     trail: Trail, footprint: Footprint, odom: records.Odometry, back_up_mps: float
 ) -> float | None:
     """The curvature (rad/m) that backs the robot up along ``trail`` and keeps its outline
-    within where the trail's outlines were, for the distance it needs to stop and the margin
-    behind (REAR_MARGIN_M) beyond one step; 0 straight back if only that does; None if
-    neither: nothing behind is known to be clear."""
+    within where the trail's outlines were for one step and RETRACE_AHEAD_M beyond (the
+    latency and braking at back-up speed, with room); 0 straight back if only that does;
+    None if none does: nothing behind is known to be clear."""
     pose = (odom.x, odom.y, odom.yaw)
-    ahead = back_up_mps * EVAL_PERIOD_S + REAR_MARGIN_M
-    turn = trail.retrace_turn(pose, RETRACE_M)
-    for k in (turn, 0.0):
+    ahead = back_up_mps * EVAL_PERIOD_S + RETRACE_AHEAD_M
+    # the curvature the trail took just behind (a robot that turned as it crept in), the
+    # arc toward its pose RETRACE_M back, or straight: the first that keeps to it (judged
+    # again at every step, so a trail that bends is followed bend by bend)
+    curves = (trail.turn_behind(pose, RETRACE_BEND_M), trail.retrace_turn(pose, RETRACE_M))
+    for k in (*curves, 0.0):
         if k is not None and trail.covers(footprint, pose, -back_up_mps, -back_up_mps * k, ahead):
             return k
     return None

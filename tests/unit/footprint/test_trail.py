@@ -142,3 +142,22 @@ def test_recovery_backs_a_blind_box_along_its_trail_then_rotates_where_it_ends()
     m2.step(seen(0.0, None), p)
     m2.step(seen(2.0, None, clear=False), p)
     assert m2.state == ROTATE
+
+
+def test_a_robot_that_turned_as_it_crept_in_backs_out_on_that_bend() -> None:
+    # 0.5 m straight along +x, then 8 cm creeping while turning 0.3 rad right (a box
+    # easing into a pocket): the arc toward the pose 0.2 m back cuts across the bend and
+    # straight back leaves it; the bend's own curvature (-3.75 rad/m) keeps to it
+    trail = straight_in(0.5)
+    x, y, yaw = 0.5, 0.0, 0.0
+    for j in range(1, 9):
+        yaw -= 0.3 / 8
+        x, y = x + 0.01 * math.cos(yaw), y + 0.01 * math.sin(yaw)
+        trail.note(3.0 + 0.1 * j, x, y, yaw)
+    odom = Odometry(1, "r1", 4.0, x, y, yaw, 0.0, 0.0)
+    pursuit = trail.retrace_turn((x, y, yaw), 0.2)
+    assert pursuit is not None
+    assert not trail.covers(FOOT, (x, y, yaw), -0.15, -0.15 * pursuit, 0.05)
+    assert not trail.covers(FOOT, (x, y, yaw), -0.15, 0.0, 0.05)
+    turn = retrace(trail, FOOT, odom, 0.15)
+    assert turn == pytest.approx(-3.75, abs=0.01)
