@@ -49,7 +49,6 @@ FREER_HORIZON_M = 1.0
 # the cone round the direction of travel the lidar must see into for the robot to move
 TRAVEL_CONE_DEG = 30.0
 AHEAD = (-deg(TRAVEL_CONE_DEG), deg(TRAVEL_CONE_DEG))
-TRAIL_SLACK_M = 0.02  # a blind reverse on the trail: it must cover this beyond the stop
 BEHIND = (deg(180.0 - TRAVEL_CONE_DEG), deg(180.0 + TRAVEL_CONE_DEG))
 
 
@@ -139,15 +138,16 @@ class SafetyStop(ControllerScenario):
 
 
 def _retraced(trail: Trail, odom: Odometry, robot: Robot, p: SafetyParams) -> bool:
-    """Whether the footprint polygon, moving on as measured for its look-ahead, braking and
-    TRAIL_SLACK_M, stays within where its outline was along the trail (a disc's blind side is
+    """Whether the footprint polygon, moving on as measured for its look-ahead and braking,
+    stays within where its outline was along the trail (a disc's blind side is
     never judged so: it turns in place to see)."""
     footprint = robot.footprint
     if footprint.is_disc:
         return False
     speed = abs(odom.linear_mps)
     # the trail's own cover is the margin (1 cm beyond where the outline was); a bend in
-    # it is judged at the next scan, with the turn rate measured then
-    distance = speed * p.lookahead_s + robot.braking_m(speed) + TRAIL_SLACK_M
+    # it is judged at the next scan, with the turn rate measured then (the measured turn
+    # lags the one commanded: judged farther on, a retrace changing its curvature stopped)
+    distance = speed * p.lookahead_s + robot.braking_m(speed)
     pose = (odom.x, odom.y, odom.yaw)
     return trail.covers(footprint, pose, odom.linear_mps, odom.angular_rps, distance)

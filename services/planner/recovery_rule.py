@@ -107,10 +107,10 @@ def retrace(
     None if none does: nothing behind is known to be clear."""
     pose = (odom.x, odom.y, odom.yaw)
     ahead = back_up_mps * EVAL_PERIOD_S + RETRACE_AHEAD_M
-    # the curvature the trail took just behind (a robot that turned as it crept in), the
-    # arc toward its pose RETRACE_M back, or straight: the first that keeps to it (judged
-    # again at every step, so a trail that bends is followed bend by bend)
-    curves = (trail.turn_behind(pose, RETRACE_BEND_M), trail.retrace_turn(pose, RETRACE_M))
+    # the arc toward the trail's pose RETRACE_M back (steady, step after step), the bend
+    # the trail took just behind (a robot that turned as it crept in), or straight: the
+    # first that keeps to it (judged again at every step)
+    curves = (trail.retrace_turn(pose, RETRACE_M), trail.turn_behind(pose, RETRACE_BEND_M))
     for k in (*curves, 0.0):
         if k is not None and trail.covers(footprint, pose, -back_up_mps, -back_up_mps * k, ahead):
             return k
