@@ -31,6 +31,7 @@ import numpy.typing as npt
 from common.footprint import Footprint
 
 FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
 
 TRAIL_S = 30.0  # sim s: older poses are not evidence of free space
 MAX_POSES = 300
@@ -45,6 +46,7 @@ COVER_TOLERANCE_M = 0.01
 MAX_TURN_PER_M = 10.0  # the hardest curvature a retrace asks for (1.5 rad/s at 0.15 m/s)
 FILL_M = 0.01  # the trail's poses interpolated this close together when testing
 FILL_RAD = math.radians(1.0)
+PAIRS_AT_ONCE = 1 << 15  # point x pose pairs tested at once (bounded memory)
 
 Pose = tuple[float, float, float, float]  # (stamp, x, y, yaw), world frame
 
@@ -111,16 +113,19 @@ class Trail:
         c, sn = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
         wx = (xs[:, None] + c * points[None, :, 0] - sn * points[None, :, 1]).ravel()
         wy = (ys[:, None] + sn * points[None, :, 0] + c * points[None, :, 1]).ravel()
-        covered = np.zeros(len(wx), dtype=np.bool_)
-        for px, py, pyaw in kept:  # the newest first: most points are covered there
-            todo = np.flatnonzero(~covered)
-            if not len(todo):
-                break
-            dx, dy = wx[todo] - px, wy[todo] - py
-            cp, sp = math.cos(pyaw), math.sin(pyaw)
-            local = np.stack([cp * dx + sp * dy, -sp * dx + cp * dy], axis=1)
-            covered[todo] = footprint.clearance(local) <= COVER_TOLERANCE_M
-        return bool(covered.all())
+        # the robot's own pose first (most of the outline backs into it), then every other
+        # pose at once, PAIRS_AT_ONCE point x pose pairs at a time
+        left = ~_inside(footprint, kept[:1], wx, wy)[0]
+        todo = np.flatnonzero(left)
+        rest = kept[1:]
+        if len(todo) and len(rest):
+            rows = max(1, PAIRS_AT_ONCE // len(todo))
+            for i in range(0, len(rest), rows):
+                inside = _inside(footprint, rest[i : i + rows], wx[todo], wy[todo]).any(axis=0)
+                todo = todo[~inside]
+                if not len(todo):
+                    break
+        return not len(todo)
 
     def retrace_turn(self, pose: tuple[float, float, float], back_m: float) -> float | None:
         """The curvature (rad per m) that backs the robot at ``pose`` toward the trail's
@@ -171,20 +176,60 @@ class Trail:
 
 def _filled(poses: FloatArray, pose: tuple[float, float, float], reach_m: float) -> FloatArray:
     """The poses (x, y, yaw; oldest first) within ``reach_m`` of ``pose``, with poses
-    interpolated between each two at most FILL_M and FILL_RAD apart."""
+    interpolated between each two at most FILL_M and FILL_RAD apart; ``poses``' last (the
+    robot's own) first."""
     near = np.hypot(poses[:, 0] - pose[0], poses[:, 1] - pose[1]) <= reach_m
-    out = []
-    for a, b, both in zip(poses[:-1], poses[1:], near[:-1] & near[1:], strict=True):
-        if not both:
-            continue
-        turn = math.atan2(math.sin(b[2] - a[2]), math.cos(b[2] - a[2]))
-        n = max(
-            1, math.ceil(max(math.hypot(b[0] - a[0], b[1] - a[1]) / FILL_M, abs(turn) / FILL_RAD))
-        )
-        f = np.arange(n)[:, None] / n
-        out.append(np.hstack([a[:2] + f * (b[:2] - a[:2]), a[2] + f * turn]))
-    filled: FloatArray = np.vstack([poses[-1:], *out[::-1]])  # the newest first
+    both = np.flatnonzero(near[:-1] & near[1:])
+    a, b = poses[both], poses[both + 1]
+    turn = np.arctan2(np.sin(b[:, 2] - a[:, 2]), np.cos(b[:, 2] - a[:, 2]))
+    step = np.hypot(b[:, 0] - a[:, 0], b[:, 1] - a[:, 1])
+    n = np.maximum(1, np.ceil(np.maximum(step / FILL_M, np.abs(turn) / FILL_RAD))).astype(np.int64)
+    pair = np.repeat(np.arange(len(both)), n)
+    f = (np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)) / n[pair]
+    d = np.column_stack([b[:, 0] - a[:, 0], b[:, 1] - a[:, 1], turn])[pair]
+    filled: FloatArray = np.vstack([poses[-1:], a[pair] + f[:, None] * d])
     return filled
+
+
+def _inside(footprint: Footprint, poses: FloatArray, wx: FloatArray, wy: FloatArray) -> BoolArray:
+    """[pose, point]: whether each world point lies within COVER_TOLERANCE_M of the outline
+    placed at each pose (or inside it)."""
+    dx = wx[None, :] - poses[:, 0:1]
+    dy = wy[None, :] - poses[:, 1:2]
+    c, s = np.cos(poses[:, 2:3]), np.sin(poses[:, 2:3])
+    lx, ly = c * dx + s * dy, -s * dx + c * dy
+    box = _box(footprint)
+    if box is not None:
+        # a rectangle along the robot's axes (the Jackal's) in closed form: the general
+        # outline distance was most of a recovery step's time
+        cx, cy, hx, hy = box
+        ex = np.maximum(np.abs(lx - cx) - hx, 0.0)
+        ey = np.maximum(np.abs(ly - cy) - hy, 0.0)
+        near: BoolArray = ex * ex + ey * ey <= COVER_TOLERANCE_M * COVER_TOLERANCE_M
+        return near
+    local = np.stack([lx.ravel(), ly.ravel()], axis=1)
+    out: BoolArray = (footprint.clearance(local) <= COVER_TOLERANCE_M).reshape(dx.shape)
+    return out
+
+
+def _box(footprint: Footprint) -> tuple[float, float, float, float] | None:
+    """(centre x, centre y, half length, half width) of a rectangular footprint with sides
+    along the robot's axes; None for any other outline."""
+    v = footprint.vertices
+    if footprint.is_disc or len(v) != 4:
+        return None
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    corners = {(bool(x == hi[0]), bool(y == hi[1])) for x, y in v}
+    on_x = np.isin(v[:, 0], (lo[0], hi[0])).all()
+    on_y = np.isin(v[:, 1], (lo[1], hi[1])).all()
+    if not (on_x and on_y) or len(corners) != 4:
+        return None
+    return (
+        float(lo[0] + hi[0]) / 2.0,
+        float(lo[1] + hi[1]) / 2.0,
+        float(hi[0] - lo[0]) / 2.0,
+        float(hi[1] - lo[1]) / 2.0,
+    )
 
 
 def _outline_points(footprint: Footprint) -> FloatArray:

@@ -30,7 +30,14 @@ from common.collision import collides_with_points
 from common.contract import records
 from common.footprint import Footprint
 from common.trail import Trail
-from services.planner.recovery import NOTHING, Action, Machine, Observation, RecoveryParams
+from services.planner.recovery import (
+    NOTHING,
+    ROTATE,
+    Action,
+    Machine,
+    Observation,
+    RecoveryParams,
+)
 from services.planner.scenario import ODOM_MAX_AGE_S
 from services.planner.target import RuleKey, Spec, TargetRule
 from services.planner.view import PlannerView
@@ -173,7 +180,9 @@ class Recovery(TargetRule):
                     scan, info.footprint, params.back_up_m, params.rotate_rad
                 )
                 back: float | None = None
-                if not sees_back(scan) and not info.footprint.is_disc:
+                # (not while rotating: only a back-up reads it)
+                turning = self.machine.state == ROTATE
+                if not sees_back(scan) and not info.footprint.is_disc and not turning:
                     # blind behind: back up only where the robot has just been
                     speed = min(params.back_up_mps, info.max_linear_mps)
                     back = retrace(self.trail, info.footprint, self.odom, speed)

@@ -161,3 +161,14 @@ def test_a_robot_that_turned_as_it_crept_in_backs_out_on_that_bend() -> None:
     assert not trail.covers(FOOT, (x, y, yaw), -0.15, 0.0, 0.05)
     turn = retrace(trail, FOOT, odom, 0.15)
     assert turn == pytest.approx(-3.75, abs=0.01)
+
+
+def test_the_boxes_closed_form_agrees_with_the_general_outline() -> None:
+    # the same box with a fifth vertex in the middle of its front edge takes the general
+    # outline distance; every verdict is the same as the rectangle's closed form
+    general = Footprint.of(0.22, (BOX[0], (0.254, 0.0), *BOX[1:]))
+    trail, end = curved_in(step=0.05)
+    for turn in (-3.0, -1.0, 0.0, 1.0, 2.5):
+        for distance in (0.03, 0.1, 0.3, 0.6):
+            boxed = trail.covers(FOOT, end, -0.15, -0.15 * turn, distance)
+            assert trail.covers(general, end, -0.15, -0.15 * turn, distance) == boxed
