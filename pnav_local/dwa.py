@@ -125,7 +125,7 @@ def choose(
     are checked with; None: the disc of the robot's ``footprint_radius_m``."""
     top = robot.max_linear_mps
     lookahead = p.lookahead_m or max(0.8, top * (p.horizon_s + p.delay_s) + 0.3)
-    local = tr.localise(path_in_robot_frame(path, odom), lookahead)
+    local = tr.localise(path_in_robot_frame(path, odom), lookahead, p.sight_m)
     if local is None:
         return None
     radius = robot.footprint_radius_m
@@ -139,9 +139,10 @@ def choose(
     v_cap = math.sqrt(2.0 * accel * max(0.0, local.remaining_m)) * 0.8
     straight = max(0.0, tr.straight_gap(points, radius) - radius - p.safety_margin_m)
     v_cap = min(v_cap, stopping_speed(straight, p.safety_lookahead_s, accel))
-    # the turn rate that faces the carrot at the horizon's end: a robot a few degrees off
-    # could otherwise only overshoot (the grid's steps are coarse) and stood still instead
-    align = math.atan2(local.carrot[1], local.carrot[0]) / p.horizon_s
+    # the turn rate that faces the carrot (or where the path is seen to lead, local.facing)
+    # at the horizon's end: a robot a few degrees off could otherwise only overshoot (the
+    # grid's steps are coarse) and stood still instead
+    align = math.atan2(local.facing[1], local.facing[0]) / p.horizon_s
     win = tr.window(
         odom.linear_mps,
         odom.angular_rps,

@@ -63,6 +63,10 @@ class DwaParams:
     delay_s: float = 0.1  # scan to wheels: the robot keeps its velocity meanwhile
     margin_m: float = 0.05  # kept beyond the footprint radius
     lookahead_m: float = 0.0  # the carrot along the path; 0: beyond what the horizon reaches
+    # the robot faces the carrot only while the line to it passes this near the path's
+    # bends; else where the path bends out of that sight (trajectories.sighted); 0: always
+    # the carrot
+    sight_m: float = 0.1
     # a slow arc must stay clear as far as the robot goes in this long at top speed, not
     # only for the horizon (the Jackal: 0.4 m; the Burger: 4 cm, nearly the horizon alone)
     min_travel_s: float = 0.2
@@ -109,6 +113,7 @@ class DwaParams:
             delay_s=get("dwa_delay_s", d.delay_s, 0.0, 2.0),
             margin_m=get("dwa_margin_m", d.margin_m, 0.0, 2.0),
             lookahead_m=get("dwa_lookahead_m", d.lookahead_m, 0.0, 20.0),
+            sight_m=get("dwa_sight_m", d.sight_m, 0.0, 20.0),
             min_travel_s=get("dwa_min_travel_s", d.min_travel_s, 0.0, 10.0),
             clearance_cap_m=get("dwa_clearance_cap_m", d.clearance_cap_m, 0.01, 10.0),
             blocked_path_factor=get("dwa_blocked_path_factor", d.blocked_path_factor, 0.0, 1.0),

@@ -49,6 +49,8 @@ from pnav_local.clearance import Footprint
 # Obstacles are merged onto a grid this fine before the distance test: a 720-beam scan of a
 # cluttered world has many hits a few millimetres apart, which tell nothing more.
 MERGE_M = 0.04
+# The most path vertices the line of sight is judged over (``sighted``: vertex x vertex).
+SIGHT_POINTS = 128
 
 
 @dataclass(frozen=True)
@@ -209,11 +211,20 @@ class Local:
     points: FloatArray  # the path's vertices from the robot's projection on, in order
     carrot: tuple[float, float]  # ``lookahead`` along the path ahead
     remaining_m: float  # from the projection to the path's end
+    # where the robot should face: the carrot, or where the path bends out of sight before
+    # it, that far along the line of sight (:func:`sighted`); None: the carrot
+    aim: tuple[float, float] | None = None
+
+    @property
+    def facing(self) -> tuple[float, float]:
+        """The point the heading term and the turn toward the path look at."""
+        return self.carrot if self.aim is None else self.aim
 
 
-def localise(path_xy: FloatArray, lookahead_m: float) -> Local | None:
+def localise(path_xy: FloatArray, lookahead_m: float, sight_m: float = 0.0) -> Local | None:
     """The path (robot frame, n x 2) from the robot's projection on it: the vertices ahead
-    up to the carrot, the carrot, and the length left. None for fewer than one point."""
+    up to the carrot, the carrot, and the length left; with ``sight_m`` > 0, the aim
+    (:func:`sighted`). None for fewer than one point."""
     if len(path_xy) == 0:
         return None
     if len(path_xy) == 1:
@@ -237,7 +248,58 @@ def localise(path_xy: FloatArray, lookahead_m: float) -> Local | None:
         f = (lookahead_m - cumulative[k - 1]) / max(steps[k - 1], 1e-12)
         carrot = ahead[k - 1] + f * (ahead[k] - ahead[k - 1])
         kept = np.vstack([ahead[:k], carrot])
-    return Local(thin(kept, MAX_PATH_POINTS), (float(carrot[0]), float(carrot[1])), remaining)
+    kept = thin(kept, MAX_PATH_POINTS)
+    end = (float(carrot[0]), float(carrot[1]))
+    aim = sighted(kept, sight_m) if sight_m > 0.0 else None
+    return Local(kept, end, remaining, None if aim == end else aim)
+
+
+def sighted(points: FloatArray, sight_m: float) -> tuple[float, float]:
+    """Where to face along the path ``points`` (robot frame, from the robot's projection to
+    the carrot): the carrot while the straight line from the robot to it passes within
+    ``sight_m`` of every vertex between; else the farthest point along the path whose line
+    does, moved out along that line to the carrot's distance (a direction to face, as far
+    off as the carrot).
+
+    A carrot far along a path that winds through clutter lies behind what the path goes
+    round: facing it, the Jackal stood turned toward a gap it could not pass (every arc
+    forward inadmissible, standing still the best score) while the path led the other way
+    (BARN hard worlds, docs/CONTROLLER.md, *dwa*)."""
+    carrot = points[-1]
+    # the projection itself is where the robot is, not a bend; a vertex x vertex product,
+    # so at most SIGHT_POINTS of them (bounded work, as every other product here)
+    ahead = thin(points[1:], SIGHT_POINTS)
+    n = len(ahead)
+    end = (float(carrot[0]), float(carrot[1]))
+    if n < 2:
+        return end
+    # deviation[k, j]: vertex j's distance from the line robot -> vertex k (j < k counts)
+    k2 = np.maximum(np.einsum("ij,ij->i", ahead, ahead), 1e-18)
+    t = np.clip(ahead @ ahead.T / k2[:, None], 0.0, 1.0)  # [k, j]: j projected on 0 -> k
+    dx = ahead[None, :, 0] - t * ahead[:, None, 0]
+    dy = ahead[None, :, 1] - t * ahead[:, None, 1]
+    before = np.tri(n, n, -1, dtype=bool)
+    worst = np.where(before, dx * dx + dy * dy, 0.0).max(axis=1)
+    out = np.flatnonzero(worst > sight_m * sight_m)
+    if len(out) == 0:
+        return end
+    k = int(out[0])  # in sight up to vertex k - 1 (k >= 1: vertex 0 is always in sight)
+    a, b = ahead[k - 1], ahead[k]
+    # the farthest point of the leg a -> b still in sight: a few fractions along it
+    fractions = np.linspace(0.0, 1.0, 17)
+    q = a[None, :] + fractions[:, None] * (b - a)[None, :]
+    q2 = np.maximum(np.einsum("ij,ij->i", q, q), 1e-18)
+    prior = ahead[:k]
+    tq = np.clip(q @ prior.T / q2[:, None], 0.0, 1.0)
+    ex = prior[None, :, 0] - tq * q[:, None, 0]
+    ey = prior[None, :, 1] - tq * q[:, None, 1]
+    seen = (ex * ex + ey * ey).max(axis=1) <= sight_m * sight_m
+    point = q[int(np.flatnonzero(seen)[-1])] if seen.any() else a
+    reach = math.hypot(*point)
+    if reach < 1e-9:
+        return end
+    scale = max(math.hypot(*end), reach) / reach
+    return float(point[0] * scale), float(point[1] * scale)
 
 
 def densify(points: FloatArray, step_m: float = 0.05) -> FloatArray:
@@ -358,6 +420,7 @@ def _terms(
     before = math.hypot(cx - start[0], cy - start[1])
     progress = (before - np.hypot(cx - ex, cy - ey)) / reach
     path = to_path(ex, ey, local.points) / reach
+    cx, cy = local.facing  # the heading looks where the path can be seen to lead
     # the heading along the whole arc, not at its end only: a loop that swings far off
     # and comes back facing the carrot is no better than it is; a turn in place toward the
     # carrot is better than standing still, even if it overshoots a little

@@ -15,7 +15,10 @@ robot's braking distance at its acceleration limit (``v^2 / (2 max_linear_accel_
 robot row's), so the stop comes before the margin is used up rather than after.
 
 Moving toward a side its lidar does not see (backing up with a 270-degree lidar), the robot
-has no evidence the way is clear: it stops, and says so (``blind``).
+has no evidence the way is clear: it stops, and says so (``blind``), unless the robot is
+retracing its own recent trail (a footprint polygon backing out of a pocket, recovery's
+back-up): where its outline just was, for the distance the stop needs, nothing stood a
+moment ago (common/trail.py, ``Trail.covers``).
 
 When it fires it recommends zero linear velocity and a turn in place that swings the
 direction of travel toward the freer side (``safety_turn_rps``): the robot recovers instead
@@ -37,6 +40,7 @@ from common.contract.limits import clamp
 from common.contract.records import LaserScan, Odometry, Robot
 from common.controller_core.params import number
 from common.controller_core.scenario import Command, ControllerScenario
+from common.trail import Trail
 from services.controller.sectors import ScanView, deg
 
 MOVING_MPS = 0.01  # below this the robot is not translating (odometry noise, creeping)
@@ -70,10 +74,26 @@ class SafetyStop(ControllerScenario):
     needs_odometry = True
     safety = True  # runs first in each activation, uncut (docs/ENGINE.md)
 
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.trail = Trail()  # the robot's poses at each scan judged: the way back it knows
+
+    def judge(self, scan: LaserScan, odom: Odometry | None) -> Command | None:
+        if odom is not None:
+            self.trail.note(odom.stamp, odom.x, odom.y, odom.yaw)
+        spec = self.spec
+        return self.decide(scan, odom, spec.robot, spec.params, self.trail)
+
     @classmethod
     def decide(
-        cls, scan: LaserScan, odom: Odometry | None, robot: Robot, params: Mapping[str, Any]
+        cls,
+        scan: LaserScan,
+        odom: Odometry | None,
+        robot: Robot,
+        params: Mapping[str, Any],
+        trail: Trail | None = None,
     ) -> Command | None:
+        """``trail``: the robot's recent poses; a blind move that retraces them passes."""
         p = SafetyParams.read(params)
         view = ScanView.of(scan)
         stop_m = robot.footprint_radius_m + p.margin_m
@@ -86,6 +106,8 @@ class SafetyStop(ControllerScenario):
         reach_m = stop_m + abs(linear) * p.lookahead_s + robot.braking_m(linear)
         way = "forward" if direction > 0 else "backward"
         if not view.sees(AHEAD if direction > 0 else BEHIND):
+            if odom is not None and trail is not None and _retraced(trail, odom, robot, p):
+                return None  # where the outline just was: clear a moment ago
             return Command(
                 0.0,
                 0.0,
@@ -113,3 +135,19 @@ class SafetyStop(ControllerScenario):
             f"{reach_m:.2f} m (footprint {robot.footprint_radius_m:.3f} + margin "
             f"{p.margin_m:.2f} + look-ahead + braking): stop, turn toward the freer {side}",
         )
+
+
+def _retraced(trail: Trail, odom: Odometry, robot: Robot, p: SafetyParams) -> bool:
+    """Whether the footprint polygon, moving on as measured for its look-ahead and braking,
+    stays within where its outline was along the trail (a disc's blind side is
+    never judged so: it turns in place to see)."""
+    footprint = robot.footprint
+    if footprint.is_disc:
+        return False
+    speed = abs(odom.linear_mps)
+    # the trail's own cover is the margin (1 cm beyond where the outline was); a bend in
+    # it is judged at the next scan, with the turn rate measured then (the measured turn
+    # lags the one commanded: judged farther on, a retrace changing its curvature stopped)
+    distance = speed * p.lookahead_s + robot.braking_m(speed)
+    pose = (odom.x, odom.y, odom.yaw)
+    return trail.covers(footprint, pose, odom.linear_mps, odom.angular_rps, distance)

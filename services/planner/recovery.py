@@ -9,7 +9,9 @@ tick (tests/unit/planner/test_recovery.py):
   ``progress_m`` in ``no_progress_s``. Either starts a recovery, at most ``attempts`` times
   per goal; one more and the goal is given up: ``fail``, with the reason;
 - ``back_up``: straight back at ``back_up_mps`` for ``back_up_m``, unless the lidar shows
-  something behind (then straight to rotate);
+  something behind (then straight to rotate); a robot whose lidar does not see behind backs
+  up only along its own trail, as far as that reaches (``back_turn``: the curvature that
+  retraces it, recovery_rule.py and common/trail.py), and rotates where it does not;
 - ``rotate``: turn in place by ``rotate_rad`` toward the freer side;
 - then ``replan`` (the route is planned again from where the robot is, around what the
   lidar shows now) and back to ``watch``, afresh.
@@ -75,6 +77,10 @@ class Observation:
     # how close counts as there: a robot there turns to a heading or stands, never stuck
     leg: int | None = None
     there_m: float = 0.0
+    # backing up: the turn per metre of travel (rad/m) that keeps to the trail the robot
+    # came along (a lidar blind behind: only that way is known to be clear); None: straight
+    # back, the lidar sees there
+    back_turn: float | None = None
 
 
 @dataclass(frozen=True)
@@ -195,11 +201,13 @@ class Machine:
         if not o.rear_clear or gone >= p.back_up_m or o.stamp - since >= p.maneuver_s:
             self._begin(ROTATE, o)
             return self._rotate(o, p)
+        # backward at -v, a curvature k turns at -v k (the arc's own turn per metre)
+        along = "" if o.back_turn is None else " along its trail"
         return Action(
             "drive",
             -p.back_up_mps,
-            0.0,
-            f"{self._label(p)}: backing up, {gone:.2f} of {p.back_up_m:.2f} m",
+            -p.back_up_mps * (o.back_turn or 0.0),
+            f"{self._label(p)}: backing up{along}, {gone:.2f} of {p.back_up_m:.2f} m",
         )
 
     def _rotate(self, o: Observation, p: RecoveryParams) -> Action:

@@ -29,7 +29,15 @@ from common import log
 from common.collision import collides_with_points
 from common.contract import records
 from common.footprint import Footprint
-from services.planner.recovery import NOTHING, Action, Machine, Observation, RecoveryParams
+from common.trail import Trail
+from services.planner.recovery import (
+    NOTHING,
+    ROTATE,
+    Action,
+    Machine,
+    Observation,
+    RecoveryParams,
+)
 from services.planner.scenario import ODOM_MAX_AGE_S
 from services.planner.target import RuleKey, Spec, TargetRule
 from services.planner.view import PlannerView
@@ -45,6 +53,9 @@ REAR_MARGIN_M = 0.1  # beyond the footprint and the distance to back up
 FREER_HORIZON_M = 1.0  # how far the freer side is judged
 REAR_CONE_RAD = math.radians(30)  # beams this close to straight back see the rear
 TURN_MARGIN_M = 0.02  # room a turning footprint keeps from the returns, m
+RETRACE_M = 0.2  # backing along the trail: the pose this far back along it is steered for
+RETRACE_BEND_M = 0.05  # ... or the curvature the trail took over this much of it
+RETRACE_AHEAD_M = 0.035  # the trail must cover one step and this much more
 
 
 def surroundings(
@@ -73,7 +84,6 @@ def surroundings(
         rear_clear = not bool(behind.any())
     else:
         rear_clear = footprint.travel_m(points, forward=False) >= back_up_m + REAR_MARGIN_M
-    sees_back = bool((np.abs(angles) >= math.pi - REAR_CONE_RAD).any())
     capped = np.where(valid, np.minimum(ranges, FREER_HORIZON_M), FREER_HORIZON_M)
     left, right = angles > 0, angles < 0
     left_open = float(capped[left].mean()) if left.any() else 0.0
@@ -87,7 +97,31 @@ def surroundings(
         right_turn = _free_turn(footprint, points, -rotate_rad)
         if left_turn != right_turn:
             left_freer = left_turn > right_turn
-    return sees_back and rear_clear, left_freer
+    return sees_back(scan) and rear_clear, left_freer
+
+
+def sees_back(scan: records.LaserScan) -> bool:
+    """Whether the lidar has beams straight behind the robot (a 270-degree one has not)."""
+    return bool((np.abs(scan.angles()) >= math.pi - REAR_CONE_RAD).any())
+
+
+def retrace(
+    trail: Trail, footprint: Footprint, odom: records.Odometry, back_up_mps: float
+) -> float | None:
+    """The curvature (rad/m) that backs the robot up along ``trail`` and keeps its outline
+    within where the trail's outlines were for one step and RETRACE_AHEAD_M beyond (the
+    latency and braking at back-up speed, with room); 0 straight back if only that does;
+    None if none does: nothing behind is known to be clear."""
+    pose = (odom.x, odom.y, odom.yaw)
+    ahead = back_up_mps * EVAL_PERIOD_S + RETRACE_AHEAD_M
+    # the arc toward the trail's pose RETRACE_M back (steady, step after step), the bend
+    # the trail took just behind (a robot that turned as it crept in), or straight: the
+    # first that keeps to it (judged again at every step)
+    curves = (trail.retrace_turn(pose, RETRACE_M), trail.turn_behind(pose, RETRACE_BEND_M))
+    for k in (*curves, 0.0):
+        if k is not None and trail.covers(footprint, pose, -back_up_mps, -back_up_mps * k, ahead):
+            return k
+    return None
 
 
 def _free_turn(footprint: Footprint, points: np.ndarray[Any, Any], turn: float) -> float:
@@ -109,6 +143,7 @@ class Recovery(TargetRule):
     def __init__(self, view: PlannerView, key: RuleKey, spec: Spec) -> None:
         super().__init__(view, key, spec)
         self.machine = Machine()
+        self.trail = Trail()  # where the robot has been: the way back a blind rear may take
         self.robot: RobotState | None = None
         self.odom: records.Odometry | None = None
         self.goal: records.Goal | None = None
@@ -128,6 +163,8 @@ class Recovery(TargetRule):
             return
         self.evaluated_at = self.sim_now
         self.odom = await view.newest_odometry(self.robot_id)
+        if self.odom is not None:
+            self.trail.note(self.odom.stamp, self.odom.x, self.odom.y, self.odom.yaw)
         self.goal = await view.active_goal(self.robot)
         if not all(self.activation_guards()):
             return
@@ -142,7 +179,15 @@ class Recovery(TargetRule):
                 clear, left = surroundings(
                     scan, info.footprint, params.back_up_m, params.rotate_rad
                 )
-                o = self._observe(self.odom, self.goal, radius, clear, left)
+                back: float | None = None
+                # (not while rotating: only a back-up reads it)
+                turning = self.machine.state == ROTATE
+                if not sees_back(scan) and not info.footprint.is_disc and not turning:
+                    # blind behind: back up only where the robot has just been
+                    speed = min(params.back_up_mps, info.max_linear_mps)
+                    back = retrace(self.trail, info.footprint, self.odom, speed)
+                    clear = back is not None
+                o = self._observe(self.odom, self.goal, radius, clear, left, back)
         params = RecoveryParams(
             **{**vars(params), "back_up_mps": min(params.back_up_mps, info.max_linear_mps)}
         )
@@ -155,6 +200,7 @@ class Recovery(TargetRule):
         footprint_m: float,
         rear_clear: bool = True,
         left_freer: bool = True,
+        back_turn: float | None = None,
     ) -> Observation:
         leg = waypoints.route_target(goal)  # the route's next pose, as its rows say
         return Observation(
@@ -164,6 +210,7 @@ class Recovery(TargetRule):
             left_freer,
             leg.seq,
             leg.reach_m + arrival.ALIGN_SLACK_M,
+            back_turn,
         )
 
     def activation_guards(self) -> Iterator[bool]:

@@ -104,7 +104,7 @@ def choose(
     top, radius, accel = robot.max_linear_mps, robot.footprint_radius_m, robot.max_linear_accel_mps2
     outline = radius if polygon is None else max(math.hypot(x, y) for x, y in polygon)
     lookahead = p.lookahead_m or max(0.8, top * (p.horizon_s + p.delay_s) + 0.3)
-    local = tr.localise(path_in_robot_frame(path, odom), lookahead)
+    local = tr.localise(path_in_robot_frame(path, odom), lookahead, p.sight_m)
     if local is None:
         return None
     reach = p.obstacle_range_m or (top * (p.horizon_s + p.delay_s) + outline + 0.5)
@@ -116,7 +116,7 @@ def choose(
         odom.linear_mps, odom.angular_rps, max_v=top, max_w=robot.max_angular_rps,
         accel_v=accel, accel_w=robot.max_angular_accel_rps2, dt=p.window_s,
         v_samples=p.linear_samples, w_samples=p.angular_samples, v_cap=v_cap,
-        extra_w=math.atan2(local.carrot[1], local.carrot[0]) / p.horizon_s,
+        extra_w=math.atan2(local.facing[1], local.facing[0]) / p.horizon_s,
     )  # fmt: skip
     start = tr.start_pose(odom.linear_mps, odom.angular_rps, p.delay_s)
     near = math.hypot(start[0], start[1]) + float(win.v.max()) * p.horizon_s + outline + 0.5
@@ -214,6 +214,7 @@ def score(
                     / np.maximum((ab * ab).sum(axis=1), 1e-12), 0.0, 1.0)  # fmt: skip
         path[i] = np.hypot(ex - a[:, 0] - t * ab[:, 0], ey - a[:, 1] - t * ab[:, 1]).min()
     path /= reach
+    cx, cy = local.facing
     bearing = np.arctan2(cy - ys, cx - xs) - yaws
     along = np.abs(np.arctan2(np.sin(bearing), np.cos(bearing))) / math.pi
     along = np.where(np.hypot(cx - xs, cy - ys) < 0.1 * reach, 0.0, along)
