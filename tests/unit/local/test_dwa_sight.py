@@ -7,12 +7,12 @@ import math
 
 import numpy as np
 import pytest
-from pnav_local.params import DwaParams
 
 import pnav_local.trajectories as tr
 from common.contract.planned_path import PlannedPath
 from common.contract.records import Odometry, Robot
 from pnav_local.dwa import choose, command_for
+from pnav_local.dwa_params import DwaParams
 from tests.unit.controller.scans import scan
 
 JACKAL = Robot("r1", 2.0, 4.0, 0.22, 270.0, max_linear_accel_mps2=10.0, max_angular_accel_rps2=20.0)
