@@ -28,6 +28,17 @@ def add_learn_parser(commands: argparse._SubParsersAction[argparse.ArgumentParse
     data.add_argument(
         "--horizon", type=float, default=3.0, metavar="S", help="outcome horizon, sim s (3)"
     )
+    data.add_argument(
+        "--label",
+        choices=("dwa",),
+        help="targets: what this controller would have commanded in each recorded state"
+        " (DAgger), not what the stack decided",
+    )
+    data.add_argument(
+        "--label-strategy",
+        metavar="CODE",
+        help="the strategy row whose dwa_* params the label uses (default: the robot's active)",
+    )
     train = steps.add_parser("train", help="train a learned scenario's model on datasets")
     train.add_argument(
         "--data", type=Path, required=True, nargs="+", metavar="FILE.parquet", help="one or more"
@@ -78,10 +89,12 @@ def _hidden(text: str) -> tuple[int, ...]:
 async def _dataset(args: argparse.Namespace) -> int:
     import asyncpg
 
-    from pnav.learn import dataset
+    from pnav.learn import dataset, relabel
 
     if not args.horizon > 0:
         raise UsageError(f"--horizon {args.horizon}: must be positive")
+    if args.label_strategy is not None and args.label is None:
+        raise UsageError("--label-strategy: only with --label")
     postgres: Any = None
     dsn = args.dsn
     if args.db_dir is not None:
@@ -96,16 +109,26 @@ async def _dataset(args: argparse.Namespace) -> int:
     try:
         conn = await asyncpg.connect(dsn)
         try:
-            found = await dataset.read(conn, args.horizon)
+            label = None
+            if args.label is not None:
+                label = await relabel.labeller(conn, args.label, args.label_strategy)
+            found = await dataset.read(conn, args.horizon, label)
         finally:
             await conn.close()
     finally:
         if postgres is not None:
             postgres.stop()
-    dataset.to_parquet(found, str(args.out), {"pnav.horizon_s": str(args.horizon)})
+    meta = {"pnav.horizon_s": str(args.horizon)}
+    if args.label is not None:
+        meta["pnav.label"] = args.label
+    dataset.to_parquet(found, str(args.out), meta)
+    labelled = ""
+    if args.label is not None:
+        silent = sum(1 for v in found.columns["linear_mps_cmd"] if v != v)  # NaN
+        labelled = f", labelled by {args.label} ({silent} where it had nothing to say)"
     print(
         f"{found.examples} examples from {found.decisions} decisions"
-        f" ({found.skipped} with no scan, odometry or path) -> {args.out}"
+        f" ({found.skipped} with no scan, odometry or path){labelled} -> {args.out}"
     )
     return 0
 

@@ -24,12 +24,15 @@ import json
 import math
 from collections import defaultdict
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from pnav_learned.features import FEATURES, features, sector_minima
 from pnav_learned.history import HISTORY_FEATURES, History, sample
+
+if TYPE_CHECKING:
+    from pnav.learn.relabel import Labeller
 
 DEFAULT_HORIZON_S = 3.0
 
@@ -37,6 +40,8 @@ DEFAULT_HORIZON_S = 3.0
 META = ("decision_id", "robot_id", "stamp", "strategy", "scan_id", "odometry_id", "path_id")
 TARGETS = ("linear_mps_cmd", "angular_rps_cmd")
 OUTCOMES = ("source", "progress_m", "collision", "goal_status")
+# with a label (relabel.py): what the stack decided, beside the label's targets
+DECIDED = ("decided_linear_mps", "decided_angular_rps", "decided_source")
 
 
 @dataclass
@@ -86,11 +91,16 @@ class Dataset:
         return len(self.columns["decision_id"])
 
 
-async def read(conn: Any, horizon_s: float = DEFAULT_HORIZON_S) -> Dataset:
-    """Every decision of the database ``conn`` opens, as examples."""
+async def read(
+    conn: Any, horizon_s: float = DEFAULT_HORIZON_S, label: Labeller | None = None
+) -> Dataset:
+    """Every decision of the database ``conn`` opens, as examples. ``label``: the targets
+    are its command for each example's state (NaN where it has none), ``source`` its name,
+    and what the stack decided moves to the DECIDED columns."""
     scans = await _by_robot(
         conn,
-        "SELECT id, robot_id, stamp, angle_min, angle_increment, ranges FROM laser_scan"
+        "SELECT id, robot_id, stamp, angle_min, angle_increment, range_min, range_max, ranges"
+        " FROM laser_scan"
         " ORDER BY robot_id, stamp, id",
     )
     odom = await _by_robot(
@@ -100,7 +110,8 @@ async def read(conn: Any, horizon_s: float = DEFAULT_HORIZON_S) -> Dataset:
     )
     paths = await _by_robot(
         conn,
-        "SELECT id, robot_id, stamp, goal_id, xs, ys FROM planned_path"
+        "SELECT id, robot_id, stamp, goal_id, target, target_x, target_y, xs, ys, length_m"
+        " FROM planned_path"
         " ORDER BY robot_id, stamp, id",
     )
     hits = await _by_robot(
@@ -117,6 +128,8 @@ async def read(conn: Any, horizon_s: float = DEFAULT_HORIZON_S) -> Dataset:
         " ORDER BY c.robot_id, c.stamp, c.id"
     )
     names = (*META, *FEATURES, *HISTORY_FEATURES, *TARGETS, *OUTCOMES)
+    if label is not None:
+        names = (*names, *DECIDED)
     columns: dict[str, list[Any]] = {n: [] for n in names}
     histories: dict[str, History] = defaultdict(History)
     skipped = 0
@@ -160,6 +173,13 @@ async def read(conn: Any, horizon_s: float = DEFAULT_HORIZON_S) -> Dataset:
             **dict(zip(FEATURES, row.tolist(), strict=True)),
             **dict(zip(HISTORY_FEATURES, history.features().tolist(), strict=True)),
         }
+        if label is not None:
+            values["decided_linear_mps"] = d["linear_mps"]
+            values["decided_angular_rps"] = d["angular_rps"]
+            values["decided_source"] = values["source"]
+            said = label(robot, scan, o, path)
+            values["linear_mps_cmd"], values["angular_rps_cmd"] = said or (math.nan, math.nan)
+            values["source"] = label.name
         for name, value in values.items():
             columns[name].append(value)
     return Dataset(columns, len(decisions), skipped)
