@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import os
 import signal
 import sys
 from collections.abc import Awaitable, Callable
@@ -147,9 +148,47 @@ class Runtime:
 
 
 ServiceMain = Callable[[ServiceConfig, asyncio.Event], Awaitable[None]]
+
+# How long a service may take to drain once asked to stop before its process leaves anyway.
+# A stop can find Postgres or the router gone (the launcher was killed, and its lifeline
+# stopped Postgres): a start still waiting for them, or a last write, would wait for ever,
+# and a process whose launcher is gone has nobody left to kill it. Longer than the
+# supervisor's own grace (pnav.run.process_supervisor), which kills a slower one first.
+STOP_LIMIT_S = 20.0
 # A service's entry as a host process starts it (pnav.run.host, entry point group
 # ``pnav.services``): ``serve(config, stop, session)``, the session being the host's.
 HostedMain = Callable[[ServiceConfig, asyncio.Event, "zenoh.Session | None"], Awaitable[None]]
+
+
+def _stop_limit_s() -> float:
+    raw = os.environ.get("PNAV_STOP_LIMIT_S", "").strip()
+    try:
+        return float(raw) if raw else STOP_LIMIT_S
+    except ValueError:
+        return STOP_LIMIT_S
+
+
+async def until_stopped(
+    work: Awaitable[None],
+    stop: asyncio.Event,
+    limit_s: float,
+    leave: Callable[[int], Any] = os._exit,
+) -> None:
+    """Await ``work``; once ``stop`` is set, give it ``limit_s`` to return, then leave the
+    process (exit code 1, logged): a drain that cannot end must not keep it alive."""
+    task = asyncio.ensure_future(work)
+    asked = asyncio.ensure_future(stop.wait())
+    try:
+        await asyncio.wait({task, asked}, return_when=asyncio.FIRST_COMPLETED)
+        if not task.done():
+            done, _ = await asyncio.wait({task}, timeout=limit_s)
+            if not done:
+                logger.error("did not stop within %.1f s of being asked to; leaving", limit_s)
+                logging.shutdown()
+                leave(1)
+    finally:
+        asked.cancel()
+    await task
 
 
 def run_service(service: str, main: ServiceMain, argv: list[str] | None = None) -> int:
@@ -172,7 +211,7 @@ def run_service(service: str, main: ServiceMain, argv: list[str] | None = None) 
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, stop.set)
-        await main(config, stop)
+        await until_stopped(main(config, stop), stop, _stop_limit_s())
 
     try:
         uvloop.run(runner())

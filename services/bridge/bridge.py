@@ -184,10 +184,19 @@ class Bridge:
         log.event(logger, logging.INFO, "bridge counters", **self.counters.snapshot())
 
     async def run(self, stop: asyncio.Event) -> None:
+        # a stop asked while starting ends the start: a start can wait for a Postgres or a
+        # router that is gone (its launcher killed), and would wait for ever
+        starting = asyncio.ensure_future(self.start())
+        asked = asyncio.ensure_future(stop.wait())
         try:
-            await self.start()
+            await asyncio.wait({starting, asked}, return_when=asyncio.FIRST_COMPLETED)
+            if not starting.done():
+                await cancel_and_wait([starting])
+                return
+            starting.result()
             await stop.wait()
         finally:
+            asked.cancel()
             await self.stop()
 
     # -- sensors -------------------------------------------------------------------------
