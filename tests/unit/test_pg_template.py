@@ -26,6 +26,21 @@ def same_tree(a: Path, b: Path) -> bool:
     return all(same_tree(a / d, b / d) for d in cmp.common_dirs)
 
 
+async def databases_served(data_dir: Path) -> int:
+    """How many databases a server started on ``data_dir`` serves (then stopped)."""
+    server = EmbeddedPostgres(data_dir)
+    server.start()
+    try:
+        conn = await asyncpg.connect(server.dsn())
+        try:
+            count: int = await conn.fetchval("SELECT count(*) FROM pg_database")
+            return count
+        finally:
+            await conn.close()
+    finally:
+        server.stop()
+
+
 async def test_a_seeded_directory_is_the_template_and_serves(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -40,16 +55,7 @@ async def test_a_seeded_directory_is_the_template_and_serves(
     assert (data / "PG_VERSION").is_file()
     assert same_tree(template, data)
     assert not seed_from_template(data)  # a cluster is there already: left alone
-    server = EmbeddedPostgres(data)
-    server.start()
-    try:
-        conn = await asyncpg.connect(server.dsn())
-        try:
-            assert await conn.fetchval("SELECT count(*) FROM pg_database") == 3
-        finally:
-            await conn.close()
-    finally:
-        server.stop()
+    assert await databases_served(data) == 3
 
 
 def test_no_template_when_switched_off(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -87,16 +93,7 @@ async def test_a_stopped_stack_leaves_a_spare_that_one_next_stack_takes_whole(
     assert (taken.stat().st_mode & 0o777) == (template.stat().st_mode & 0o777)
     assert seed_from_template(fresh(tmp_path, "third")) == "copy"  # the spare was taken
     assert [p.name for p in template.parent.iterdir()] == [template.name]  # nothing left
-    server = EmbeddedPostgres(taken)
-    server.start()
-    try:
-        conn = await asyncpg.connect(server.dsn())
-        try:
-            assert await conn.fetchval("SELECT count(*) FROM pg_database") == 3
-        finally:
-            await conn.close()
-    finally:
-        server.stop()
+    assert await databases_served(taken) == 3
 
 
 def test_no_spare_is_made_or_taken_when_switched_off(
