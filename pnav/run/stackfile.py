@@ -16,6 +16,7 @@ from pathlib import Path
 from common.config import ZenohSettings
 from common.contract.grants import USER
 from common.errors import UsageError
+from common.postmaster import alive
 
 
 def state_dir() -> Path:
@@ -93,16 +94,6 @@ def remove(pid: int) -> None:
             stack_file().unlink()
 
 
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def _load() -> StackInfo | None:
     try:
         data = json.loads(stack_file().read_text())
@@ -114,13 +105,13 @@ def _load() -> StackInfo | None:
 def read() -> StackInfo | None:
     """The running stack, or None (no file, or its launcher is gone)."""
     info = _load()
-    return info if info is not None and _alive(info.pid) else None
+    return info if info is not None and alive(info.pid) else None
 
 
 def leftover() -> StackInfo | None:
     """The file of a stack whose launcher died without removing it, or None."""
     info = _load()
-    return info if info is not None and not _alive(info.pid) else None
+    return info if info is not None and not alive(info.pid) else None
 
 
 def forget(info: StackInfo) -> None:
