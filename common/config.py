@@ -54,6 +54,7 @@ from common.errors import ConfigError
 
 Env = Mapping[str, str]
 N = TypeVar("N", int, float)
+D = TypeVar("D")  # a default of another type than the number (None: unset)
 
 
 def _get(env: Env, name: str, default: str) -> str:
@@ -70,13 +71,40 @@ def _int(env: Env, name: str, default: int, *, minimum: int = 0) -> int:
 
 
 def _parsed(env: Env, name: str, default: N, parse: Callable[[str], N], what: str, minimum: N) -> N:
-    raw = _get(env, name, str(default))
+    return env_number(
+        env,
+        name,
+        default,
+        parse,
+        what=what,
+        ok=lambda value: value >= minimum,  # NaN fails it too
+        must=f"must be at least {minimum}",
+    )
+
+
+def env_number(
+    env: Env,
+    name: str,
+    default: D,
+    parse: Callable[[str], N],
+    *,
+    what: str = "a number",
+    ok: Callable[[N], bool] = lambda _value: True,
+    must: str = "",
+) -> N | D:
+    """The number variable ``name`` holds (``default`` when unset or blank), read by
+    ``parse``; a ConfigError naming the variable when it is not ``what`` or not ``ok``
+    (the message then says ``must``). The one reader every service's settings use, so a
+    bad value is refused in the same words wherever it is read."""
+    raw = env.get(name, "").strip()
+    if not raw:
+        return default
     try:
         value = parse(raw)
     except ValueError:
         raise ConfigError(f"{name}={raw!r} is not {what}") from None
-    if not value >= minimum:  # NaN too
-        raise ConfigError(f"{name}={raw!r} must be at least {minimum}")
+    if not ok(value):
+        raise ConfigError(f"{name}={raw!r} {must}")
     return value
 
 

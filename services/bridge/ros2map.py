@@ -34,6 +34,7 @@ from common.contract import keys
 from common.contract import rmw_zenoh as rz
 from common.db import Database
 from common.ros2node import Ros2Node, type_of_key
+from common.tasks import cancel_and_wait
 from services.bridge.sensor_payloads import MalformedMessage
 from services.bridge.world_message import MAX_CELLS
 
@@ -113,9 +114,7 @@ class Ros2Map:
 
     async def close(self) -> None:
         if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
+            await cancel_and_wait([self._task])
 
     def world_applied(self, name: str) -> None:
         """The world's rows are written (again): its map row needs the ROS grid (again)."""

@@ -34,6 +34,7 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from common.config import env_number
 from common.errors import ConfigError
 from services.bridge.safety import SafetyParams
 
@@ -43,29 +44,25 @@ def _optional_positive(env: Mapping[str, str], name: str) -> float | None:
 
 
 def _positive(env: Mapping[str, str], name: str, default: float, scale: float = 1.0) -> float:
-    raw = env.get(name, "").strip()
-    if not raw:
-        return default
-    try:
-        value = float(raw) * scale
-    except ValueError:
-        raise ConfigError(f"{name}={raw!r} is not a number") from None
-    if not value > 0:  # also refuses NaN
-        raise ConfigError(f"{name}={raw!r} must be positive")
-    return value
+    return env_number(
+        env,
+        name,
+        default,
+        lambda raw: float(raw) * scale,
+        ok=lambda value: value > 0,  # also refuses NaN
+        must="must be positive",
+    )
 
 
 def _non_negative(env: Mapping[str, str], name: str, default: float) -> float:
-    raw = env.get(name, "").strip()
-    if not raw:
-        return default
-    try:
-        value = float(raw)
-    except ValueError:
-        raise ConfigError(f"{name}={raw!r} is not a number") from None
-    if not 0 <= value < math.inf:  # also refuses NaN
-        raise ConfigError(f"{name}={raw!r} must be a finite number >= 0")
-    return value
+    return env_number(
+        env,
+        name,
+        default,
+        float,
+        ok=lambda value: 0 <= value < math.inf,  # also refuses NaN
+        must="must be a finite number >= 0",
+    )
 
 
 def _switch(env: Mapping[str, str], name: str, default: bool) -> bool:

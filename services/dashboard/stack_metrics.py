@@ -50,8 +50,9 @@ from starlette.responses import Response
 from starlette.routing import BaseRoute, Route
 
 from common import bus
+from common.config import env_number
 from common.contract import keys
-from common.errors import ConfigError
+from common.tasks import cancel_and_wait
 from services.dashboard.metrics_source import (
     ID_TABLES,
     EngineRow,
@@ -81,16 +82,14 @@ class MetricsConfig:
         env = os.environ if env is None else env
 
         def seconds(name: str, default: float) -> float:
-            text = env.get(name, "").strip()
-            if not text:
-                return default
-            try:
-                value = float(text)
-            except ValueError:
-                value = float("nan")
-            if not 0.05 <= value <= 3600:
-                raise ConfigError(f"{name}={text!r}: seconds from 0.05 to 3600")
-            return value
+            return env_number(
+                env,
+                name,
+                default,
+                float,
+                ok=lambda value: 0.05 <= value <= 3600,
+                must="must be seconds from 0.05 to 3600",
+            )
 
         return cls(
             seconds("PNAV_METRICS_REFRESH_S", cls.refresh_s),
@@ -173,9 +172,7 @@ class Metrics:
 
     async def close(self) -> None:
         if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
+            await cancel_and_wait([self._task])
             self._task = None
         if self._subscriber is not None:
             with contextlib.suppress(Exception):

@@ -23,7 +23,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from common.bus import open_session
-from common.config import ZenohSettings, default_instance, lockstep_from_env
+from common.config import ZenohSettings, default_instance, env_number, lockstep_from_env
 from common.contract import keys
 from common.errors import ConfigError, ConnectionFailure, UsageError
 from common.lifeline import die_with_parent
@@ -143,23 +143,11 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
 
 
 def _int_env(name: str) -> int | None:
-    raw = _env(name)
-    if raw is None:
-        return None
-    try:
-        return int(raw)
-    except ValueError:
-        raise ConfigError(f"{name}={raw!r} is not a whole number") from None
+    return env_number(os.environ, name, None, int, what="a whole number")
 
 
 def _float_env(name: str) -> float | None:
-    raw = _env(name)
-    if raw is None:
-        return None
-    try:
-        return float(raw)
-    except ValueError:
-        raise ConfigError(f"{name}={raw!r} is not a number") from None
+    return env_number(os.environ, name, None, float)
 
 
 def build(args: argparse.Namespace) -> tuple[World, SimConfig, float]:
