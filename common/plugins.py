@@ -68,13 +68,9 @@ def _load(point: EntryPoint, base: type[T]) -> type[T] | None:
     try:
         cls = point.load()
     except Exception as exc:
-        log.event(
-            logger,
-            logging.ERROR,
+        _ignored(
+            point,
             "scenario plug-in cannot be loaded; ignored",
-            group=point.group,
-            scenario=point.name,
-            target=point.value,
             error=f"{type(exc).__name__}: {exc}",
         )
         return None
@@ -84,16 +80,21 @@ def _load(point: EntryPoint, base: type[T]) -> type[T] | None:
         why = f"its class says scenario = {getattr(cls, 'scenario', None)!r}"
     else:
         return cls
+    _ignored(point, "scenario plug-in refused; ignored", why=why)
+    return None
+
+
+def _ignored(point: EntryPoint, message: str, **detail: str) -> None:
+    """Log ``point`` as ignored, naming it the same way whatever the reason."""
     log.event(
         logger,
         logging.ERROR,
-        "scenario plug-in refused; ignored",
+        message,
         group=point.group,
         scenario=point.name,
         target=point.value,
-        why=why,
+        **detail,
     )
-    return None
 
 
 def _qualname(cls: type) -> str:
