@@ -62,40 +62,38 @@ class StepRunner:
             stats = self.stats[cls] = RuleStats(rule.name, cls.scenario)
         started = time.perf_counter()
         stats.executed += 1
-        steps = cls._steps
-        try:
-            overridden, is_async = steps["data_acquisition"]
-            if overridden:
-                result = rule.data_acquisition()
-                if is_async:
-                    await result
-        except asyncio.CancelledError:
-            raise
-        except Exception:
-            self._discard_on_error(rule, stats, "data acquisition")
-            self._timed(rule, stats, started)
+        if not await self._step(rule, "data_acquisition", "data acquisition", stats, started):
             return
-
         rule.activated = self._tests(rule, stats, rule.activation_guards, "activation guard")
         if rule.activated:
             stats.activated += 1
             if self._tests(rule, stats, rule.conditions, "condition"):
-                try:
-                    overridden, is_async = steps["actions"]
-                    if overridden:
-                        result = rule.actions()
-                        if is_async:
-                            await result
-                except asyncio.CancelledError:
-                    raise
-                except Exception:
-                    self._discard_on_error(rule, stats, "actions")
-                    self._timed(rule, stats, started)
+                if not await self._step(rule, "actions", "actions", stats, started):
                     return
                 stats.acted += 1
 
         self._generate(rule, stats)
         self._timed(rule, stats, started)
+
+    async def _step(
+        self, rule: Rule, step: str, what: str, stats: RuleStats, started: float
+    ) -> bool:
+        """Run ``rule``'s ``step`` (data_acquisition or actions) if its class has one; False
+        after an error, the rule then discarded and its run's time filed."""
+        overridden, is_async = type(rule)._steps[step]
+        if not overridden:
+            return True
+        try:
+            result = getattr(rule, step)()
+            if is_async:
+                await result
+        except asyncio.CancelledError:
+            raise
+        except Exception:
+            self._discard_on_error(rule, stats, what)
+            self._timed(rule, stats, started)
+            return False
+        return True
 
     def _timed(self, rule: Rule, stats: RuleStats, started: float) -> None:
         """File the run's time; a run over the rule budget is counted and logged."""
