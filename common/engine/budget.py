@@ -15,7 +15,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from common.engine.errorlog import WINDOW_S
 
@@ -32,20 +32,15 @@ class _Over:
     budget_s: float = 0.0
 
 
+@dataclass(eq=False)
 class BudgetLog:
-    def __init__(
-        self,
-        logger: logging.Logger,
-        engine: str,
-        window_s: float = WINDOW_S,
-        clock: Callable[[], float] = time.monotonic,
-    ) -> None:
-        self.logger = logger
-        self.engine = engine
-        self.window_s = window_s
-        self.clock = clock
-        self._seen: dict[tuple[str, str], _Over] = {}
-        self._pending = 0  # rule types with over-runs not yet logged: flush is free when 0
+    logger: logging.Logger
+    engine: str
+    window_s: float = WINDOW_S
+    clock: Callable[[], float] = time.monotonic
+    _seen: dict[tuple[str, str], _Over] = field(default_factory=dict, init=False, repr=False)
+    # rule types with over-runs not yet logged: flush is free when 0
+    _pending: int = field(default=0, init=False, repr=False)
 
     def over(
         self, rule: str, scenario: str, robot: str | None, seconds: float, budget_s: float

@@ -17,7 +17,7 @@ import logging
 import time
 from collections import OrderedDict
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from common.outage import is_connection_error
 
@@ -41,18 +41,14 @@ class _Seen:
     lost_connection: BaseException | None = None
 
 
+@dataclass(eq=False)
 class ErrorLog:
-    def __init__(
-        self,
-        logger: logging.Logger,
-        window_s: float = WINDOW_S,
-        clock: Callable[[], float] = time.monotonic,
-    ) -> None:
-        self.logger = logger
-        self.window_s = window_s
-        self.clock = clock
-        self._seen: OrderedDict[ErrorKey, _Seen] = OrderedDict()
-        self._pending = 0  # distinct errors with unlogged repeats: flush is free when 0
+    logger: logging.Logger
+    window_s: float = WINDOW_S
+    clock: Callable[[], float] = time.monotonic
+    _seen: OrderedDict[ErrorKey, _Seen] = field(default_factory=OrderedDict, init=False, repr=False)
+    # distinct errors with unlogged repeats: flush is free when 0
+    _pending: int = field(default=0, init=False, repr=False)
 
     def report(
         self,

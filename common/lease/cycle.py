@@ -13,7 +13,7 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import KW_ONLY, dataclass, field
 from typing import Final
 
 from common import log
@@ -58,36 +58,26 @@ class LeaseCounters:
     handovers_expired: int = 0  # ... and released anyway after HANDOVER_LIMIT_S
 
 
+@dataclass(eq=False)
 class Cycle:
     """What one replica carries from cycle to cycle besides its locks: the hysteresis count
     and the share last seen."""
 
-    def __init__(
-        self,
-        service: str,
-        instance: str,
-        held: Holdings,
-        counters: LeaseCounters,
-        announce: Announce,
-        *,
-        settle_cycles: int,
-        takeover_wait_s: float,
-        under_way: UnderWay | None = None,
-        wake: Callable[[], None] | None = None,
-    ) -> None:
-        self.service = service
-        self.instance = instance
-        self.held = held
-        self.counters = counters
-        self.announce = announce
-        self.settle_cycles = settle_cycles
-        self.takeover_wait_s = takeover_wait_s
-        self.under_way = under_way
-        self.wake = wake  # run a cycle soon (a hand-over's work ended)
-        self.handing: dict[str, Handover] = {}  # robots whose lock waits for their hand-over
-        self.pending = 0  # consecutive cycles a give-back was due (decide)
-        self.members = 0
-        self.share = (0, 0)
+    service: str
+    instance: str
+    held: Holdings
+    counters: LeaseCounters
+    announce: Announce
+    _: KW_ONLY
+    settle_cycles: int
+    takeover_wait_s: float
+    under_way: UnderWay | None = None
+    wake: Callable[[], None] | None = None  # run a cycle soon (a hand-over's work ended)
+    # robots whose lock waits for their hand-over
+    handing: dict[str, Handover] = field(default_factory=dict, init=False)
+    pending: int = field(default=0, init=False)  # consecutive cycles a give-back was due
+    members: int = field(default=0, init=False)
+    share: tuple[int, int] = field(default=(0, 0), init=False)
 
     async def run(self, session: LockSession, view: Snapshot) -> None:
         """Act on ``view``, just read on ``session``."""

@@ -75,24 +75,19 @@ class MapRow:
         return cls(map_id, version, cells, row["resolution_m"], origin)
 
 
+@dataclass(eq=False)
 class MapData:
     """One map row, with its planning grids per inflation radius (built on first use)."""
 
-    def __init__(
-        self,
-        map_id: str,
-        version: str,
-        occupied: np.ndarray[Any, np.dtype[np.bool_]],
-        resolution: float,
-        origin: tuple[float, float, float],
-    ) -> None:
-        self.map_id = map_id
-        self.version = version
-        self.occupied = occupied
-        self.resolution = resolution
-        self.origin = origin
-        self._grids: dict[tuple[float, str], PlanGrid] = {}
-        self._occupied: dict[str, np.ndarray[Any, np.dtype[np.bool_]]] = {}
+    map_id: str
+    version: str
+    occupied: np.ndarray[Any, np.dtype[np.bool_]] = field(repr=False)
+    resolution: float
+    origin: tuple[float, float, float]
+    _grids: dict[tuple[float, str], PlanGrid] = field(default_factory=dict, init=False, repr=False)
+    _occupied: dict[str, np.ndarray[Any, np.dtype[np.bool_]]] = field(
+        default_factory=dict, init=False, repr=False
+    )
 
     @classmethod
     def of_row(cls, row: MapRow) -> MapData:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from dataclasses import KW_ONLY, dataclass, field
 
 from common.errors import ConfigError
 
@@ -55,6 +56,7 @@ class Every:
         return False
 
 
+@dataclass(eq=False)
 class Pacer:
     """How many physics steps to run now so sim time follows ``rate`` x wall time.
 
@@ -62,32 +64,29 @@ class Pacer:
     the rate asked), it drops the debt instead of running a burst, and counts the slip.
     """
 
-    def __init__(
-        self,
-        rate: float,
-        dt: float,
-        *,
-        max_lag_s: float = 0.25,
-        wall: Callable[[], float] = time.monotonic,
-    ) -> None:
-        self.rate = rate
-        self.dt = dt
-        self.max_lag_s = max_lag_s
-        self._wall = wall
-        self._anchor_wall = wall()
-        self._anchor_steps = 0
-        self.slips = 0
+    rate: float
+    dt: float
+    _: KW_ONLY
+    max_lag_s: float = 0.25
+    wall: Callable[[], float] = time.monotonic
+    slips: int = field(default=0, init=False)
+    # the wall time and step count sim time is paced from (moved on by a slip)
+    _anchor_wall: float = field(init=False, repr=False)
+    _anchor_steps: int = field(default=0, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self._anchor_wall = self.wall()
 
     def steps_due(self, steps_done: int) -> int:
         """Steps owed now (for ``--rate max``: a large batch, the caller checks the time)."""
         if self.rate == MAX:
             return 1 << 30
-        elapsed = self._wall() - self._anchor_wall
+        elapsed = self.wall() - self._anchor_wall
         target = self._anchor_steps + int(elapsed * self.rate / self.dt + 1e-9)
         owed = target - steps_done
         if owed * self.dt > self.max_lag_s * self.rate:
             self.slips += 1
-            self._anchor_wall = self._wall()
+            self._anchor_wall = self.wall()
             self._anchor_steps = steps_done
             return 1
         return max(0, owed)
@@ -97,4 +96,4 @@ class Pacer:
         if self.rate == MAX:
             return 0.0
         due = self._anchor_wall + (steps_done + 1 - self._anchor_steps) * self.dt / self.rate
-        return max(0.0, due - self._wall())
+        return max(0.0, due - self.wall())
