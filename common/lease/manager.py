@@ -17,7 +17,7 @@ from common.contract import keys
 from common.errors import ConnectionFailure
 from common.lease.cycle import Cycle, LeaseCounters, UnderWay
 from common.lease.holdings import Holdings
-from common.lease.session import LockSession, open_session, statement_timeout
+from common.lease.session import LockSession, statement_timeout
 from common.lease.sql import SHUTDOWN
 
 logger = logging.getLogger("pnav.lease")
@@ -203,7 +203,7 @@ class LeaseManager:
 
     # -- the connection -----------------------------------------------------------------------
     async def _open(self, wait_s: float = 0.0) -> None:
-        session, closed = await open_session(
+        session, closed = await LockSession.open(
             self.url,
             self.service,
             self.instance,

@@ -47,41 +47,30 @@ class LockSession:
         *,
         old_pid: int | None,
         on_closed: Callable[[asyncpg.Connection], None],
+        wait_s: float = 0.0,
     ) -> tuple[LockSession, list[str]]:
         """Connect, end the session ``old_pid`` of ours that may linger and close its history
-        rows (``connection lost``; returns their robots), join. Raises on any failure."""
-        timeout = statement_timeout(settings)
-        name = f"pnav-lease {service}/{instance}"[:63]
-        conn: asyncpg.Connection = await asyncpg.connect(
-            url, timeout=timeout, server_settings={"application_name": name}
-        )
-        try:
-            # Postgres ends the session (and so frees our robots) if we go silent
-            ms = int(settings.timeout_s * 1000)
-            await conn.execute(f"SET idle_session_timeout = {ms}", timeout=timeout)
-            pid = int(await conn.fetchval("SELECT pg_backend_pid()", timeout=timeout))
-            closed: list[str] = []
-            if old_pid is not None:
-                try:
-                    await conn.fetchval(sql.END_OLD_SESSION, old_pid, name, timeout=timeout)
-                except asyncpg.InsufficientPrivilegeError:
-                    pass  # another role's backend: the idle timeout will end it
-                rows = await conn.fetch(
-                    sql.CLOSE_OLD_ROWS,
-                    service,
-                    instance,
-                    old_pid,
-                    sql.CONNECTION_LOST,
-                    timeout=timeout,
-                )
-                closed = [row["robot_id"] for row in rows]
-            if not await conn.fetchval(sql.JOIN, service, timeout=timeout):
-                raise ConnectionFailure("the membership lock is held exclusively")
-        except BaseException:
-            conn.terminate()
-            raise
+        rows (``connection lost``; returns their robots), join; all of it tried again for
+        ``wait_s`` (Postgres starting up). Raises :class:`ConnectionFailure`, at once for a
+        database without the lease migration."""
+        deadline = time.monotonic() + wait_s
+        while True:
+            try:
+                conn, pid, closed = await _join(url, service, instance, settings, old_pid)
+                break
+            except Exception as exc:
+                if isinstance(exc, asyncpg.UndefinedFunctionError):
+                    raise ConnectionFailure(
+                        f"the database has no robot leases (contract migration 2): run "
+                        f"`pnav migrate` ({exc})"
+                    ) from exc
+                if time.monotonic() >= deadline:
+                    raise ConnectionFailure(
+                        f"{service}: cannot open the lease connection: {exc!r}"
+                    ) from exc
+            await asyncio.sleep(0.2)
         conn.add_termination_listener(on_closed)
-        return cls(conn, pid, service, instance, timeout), closed
+        return cls(conn, pid, service, instance, statement_timeout(settings)), closed
 
     @property
     def alive(self) -> bool:
@@ -135,35 +124,42 @@ class LockSession:
         await self._call(self.conn.close)
 
 
-async def open_session(
-    url: str,
-    service: str,
-    instance: str,
-    settings: LeaseSettings,
-    *,
-    old_pid: int | None,
-    on_closed: Callable[[asyncpg.Connection], None],
-    wait_s: float = 0.0,
-) -> tuple[LockSession, list[str]]:
-    """:meth:`LockSession.open`, tried again for ``wait_s`` (Postgres starting up); raises
-    :class:`ConnectionFailure`, at once for a database without the lease migration."""
-    deadline = time.monotonic() + wait_s
-    while True:
-        try:
-            return await LockSession.open(
-                url, service, instance, settings, old_pid=old_pid, on_closed=on_closed
+async def _join(
+    url: str, service: str, instance: str, settings: LeaseSettings, old_pid: int | None
+) -> tuple[asyncpg.Connection, int, list[str]]:
+    """One try of :meth:`LockSession.open`: the connection, its backend pid and the robots
+    of ``old_pid``'s rows it closed. Raises on any failure."""
+    timeout = statement_timeout(settings)
+    name = f"pnav-lease {service}/{instance}"[:63]
+    conn: asyncpg.Connection = await asyncpg.connect(
+        url, timeout=timeout, server_settings={"application_name": name}
+    )
+    try:
+        # Postgres ends the session (and so frees our robots) if we go silent
+        ms = int(settings.timeout_s * 1000)
+        await conn.execute(f"SET idle_session_timeout = {ms}", timeout=timeout)
+        pid = int(await conn.fetchval("SELECT pg_backend_pid()", timeout=timeout))
+        closed: list[str] = []
+        if old_pid is not None:
+            try:
+                await conn.fetchval(sql.END_OLD_SESSION, old_pid, name, timeout=timeout)
+            except asyncpg.InsufficientPrivilegeError:
+                pass  # another role's backend: the idle timeout will end it
+            rows = await conn.fetch(
+                sql.CLOSE_OLD_ROWS,
+                service,
+                instance,
+                old_pid,
+                sql.CONNECTION_LOST,
+                timeout=timeout,
             )
-        except Exception as exc:
-            if isinstance(exc, asyncpg.UndefinedFunctionError):
-                raise ConnectionFailure(
-                    f"the database has no robot leases (contract migration 2): run "
-                    f"`pnav migrate` ({exc})"
-                ) from exc
-            if time.monotonic() >= deadline:
-                raise ConnectionFailure(
-                    f"{service}: cannot open the lease connection: {exc!r}"
-                ) from exc
-        await asyncio.sleep(0.2)
+            closed = [row["robot_id"] for row in rows]
+        if not await conn.fetchval(sql.JOIN, service, timeout=timeout):
+            raise ConnectionFailure("the membership lock is held exclusively")
+    except BaseException:
+        conn.terminate()
+        raise
+    return conn, pid, closed
 
 
 def statement_timeout(settings: LeaseSettings) -> float:
