@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections import Counter
 from collections.abc import Awaitable, Callable, Iterable
 from typing import Any, TypeVar, Unpack
 
@@ -107,8 +108,8 @@ class PlannerStore(GuardedStore):
         # velocity recommendations held until the activation ends (defer_recommendations);
         # None: each written when a rule asks
         self.outbox: WriteBehind[Recommendation] | None = None
-        self.odometry_reads = 0  # odometry read from the table (tests, benchmarks)
-        self.battery_reads = 0  # battery rows read from the table (tests, benchmarks)
+        # per table: rows read from it because no image could stand in (tests, benchmarks)
+        self.reads: Counter[str] = Counter()
 
     # -- clocks ------------------------------------------------------------------------------
     def now(self) -> float:
@@ -235,32 +236,45 @@ class PlannerStore(GuardedStore):
             self._routes_changed.discard(robot_id)
         return await self._goals.get(robot_id, lambda: self.source.active_goal(robot_id, known))
 
-    def _kept(
-        self, images: dict[str, tuple[R, float] | None], robot_id: str, max_age_s: float
+    async def _newest(
+        self,
+        table: str,
+        images: dict[str, tuple[R, float] | None],
+        robot_id: str,
+        max_age_s: float,
+        read: Callable[[str], Awaitable[R | None]],
     ) -> R | None:
-        """The newest row as its notification carried it, while it is younger than
-        ``max_age_s`` (wall or lockstep s); None: read the source."""
+        """The robot's newest row of ``table``: as its notification carried it, while that
+        is younger than ``max_age_s`` (wall or lockstep s); else ``read`` from the source
+        (counted in :attr:`reads`)."""
         image = images.get(robot_id)
         if image is not None and self._clock() - image[1] < max_age_s:
             return image[0]
-        return None
+        self.reads[table] += 1
+        return await read(robot_id)
 
     async def newest_odometry(self, robot_id: str) -> records.Odometry | None:
-        odometry = self._kept(self._odometry, robot_id, FAST_REFRESH_S)
-        if odometry is not None:
-            return odometry
-        self.odometry_reads += 1
-        return await self.source.newest_odometry(robot_id)
+        return await self._newest(
+            keys.ODOMETRY, self._odometry, robot_id, FAST_REFRESH_S, self.source.newest_odometry
+        )
 
     async def newest_scan(self, robot_id: str) -> records.LaserScan | None:
         return await self.source.newest_scan(robot_id)
 
     async def newest_battery(self, robot_id: str) -> records.Battery | None:
-        battery = self._kept(self._battery, robot_id, REFRESH_S)
-        if battery is not None:
-            return battery
-        self.battery_reads += 1
-        return await self.source.newest_battery(robot_id)
+        return await self._newest(
+            keys.BATTERY, self._battery, robot_id, REFRESH_S, self.source.newest_battery
+        )
+
+    @property
+    def odometry_reads(self) -> int:
+        """Odometry read from the table (tests, benchmarks)."""
+        return self.reads[keys.ODOMETRY]
+
+    @property
+    def battery_reads(self) -> int:
+        """Battery rows read from the table (tests, benchmarks)."""
+        return self.reads[keys.BATTERY]
 
     # -- writes ------------------------------------------------------------------------------
     async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
