@@ -94,8 +94,8 @@ def env_number(
 ) -> N | D:
     """The number variable ``name`` holds (``default`` when unset or blank), read by
     ``parse``; a ConfigError naming the variable when it is not ``what`` or not ``ok``
-    (the message then says ``must``). The one reader every service's settings use, so a
-    bad value is refused in the same words wherever it is read."""
+    (the message then says ``must``). The settings here, the bridge's, the metrics' and
+    the sim's options read their numbers with it, each giving only its own range."""
     raw = env.get(name, "").strip()
     if not raw:
         return default
