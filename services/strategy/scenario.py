@@ -92,29 +92,28 @@ class ApplyCommand(Rule):
         try:
             await self.store.treat(self.table, snap, outcome)
         except StaleState as exc:
-            log.event(
-                logger,
-                logging.INFO,
-                "command deferred",
-                robot=self.robot_id,
-                table=self.table,
-                command_id=self.command_id,
-                command=snap.command,
-                why=str(exc),
-            )
+            self._log("command deferred", snap, why=str(exc))
             return
         self.done = True
+        self._log(
+            "command accepted" if outcome.accepted else "command rejected",
+            snap,
+            argument=snap.argument,
+            outcome="accepted" if outcome.accepted else "rejected",
+            reason=outcome.reason,
+        )
+
+    def _log(self, message: str, snap: CommandSnapshot, **more: object) -> None:
+        """Log what became of this rule's command, naming it the same way every time."""
         log.event(
             logger,
             logging.INFO,
-            "command accepted" if outcome.accepted else "command rejected",
+            message,
             robot=self.robot_id,
             table=self.table,
             command_id=self.command_id,
             command=snap.command,
-            argument=snap.argument,
-            outcome="accepted" if outcome.accepted else "rejected",
-            reason=outcome.reason,
+            **more,
         )
 
     def rule_generation(self) -> Iterable[Rule]:
