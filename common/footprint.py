@@ -280,6 +280,21 @@ class Footprint:
         return out
 
 
+class Footprinted:
+    """A robot described by the contract's two footprint columns: ``footprint_radius_m``,
+    and ``footprint_polygon`` (robot frame, counter-clockwise; None: the disc of the
+    radius). A dataclass that mixes it in declares the two fields; :attr:`footprint` reads
+    them as one shape."""
+
+    footprint_radius_m: float
+    footprint_polygon: Polygon | None
+
+    @property
+    def footprint(self) -> Footprint:
+        """The robot's footprint: its polygon, or the disc of ``footprint_radius_m``."""
+        return Footprint.of(self.footprint_radius_m, self.footprint_polygon)
+
+
 @functools.lru_cache(maxsize=64)
 def _of(radius_m: float, polygon: Polygon | None) -> Footprint:
     # cached: every reader of a robot row asks for the same few footprints, and the cached

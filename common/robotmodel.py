@@ -33,7 +33,7 @@ import yaml
 from common import yamldoc
 from common.contract import limits
 from common.errors import ModelError
-from common.footprint import Footprint, Polygon, polygon_problem
+from common.footprint import Footprinted, Polygon, polygon_problem
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "models"
@@ -107,7 +107,7 @@ class LidarModel:
 
 
 @dataclass(frozen=True)
-class RobotModel:
+class RobotModel(Footprinted):
     """A differential-drive robot; field names end in the contract's units. Its footprint is
     ``footprint_polygon`` when the model gives one (robot frame, counter-clockwise,
     common/footprint.py), else the disc of ``footprint_radius_m``."""
@@ -124,10 +124,6 @@ class RobotModel:
     height_m: float
     lidar: LidarModel
     footprint_polygon: Polygon | None = None
-
-    @property
-    def footprint(self) -> Footprint:
-        return Footprint.of(self.footprint_radius_m, self.footprint_polygon)
 
     def robot_row(self) -> dict[str, object]:
         """The ``robot`` table's model columns (CONTRACT.md), as the world message carries

@@ -17,7 +17,7 @@ import numpy as np
 
 from common.contract import keys, tables
 from common.contract.columns import BOOL, FLOAT, FLOATS, ID, INT, Column, Table
-from common.footprint import Footprint, Polygon
+from common.footprint import Footprinted, Polygon
 from common.robotmodel import DEFAULT_MODEL, load_model
 from common.scan import beam_angles, readings
 
@@ -30,7 +30,7 @@ _R = TypeVar("_R")
 
 
 @dataclass(frozen=True)
-class Robot:
+class Robot(Footprinted):
     robot_id: str
     max_linear_mps: float
     max_angular_rps: float
@@ -42,11 +42,6 @@ class Robot:
     # the row's footprint_polygon (robot frame, counter-clockwise); None: the disc of
     # footprint_radius_m. Read it through ``footprint``.
     footprint_polygon: Polygon | None = None
-
-    @property
-    def footprint(self) -> Footprint:
-        """The robot's footprint: its polygon, or the disc of ``footprint_radius_m``."""
-        return Footprint.of(self.footprint_radius_m, self.footprint_polygon)
 
     def braking_m(self, speed_mps: float) -> float:
         """Distance the robot needs to stop from ``speed_mps`` at its acceleration limit."""

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from common.contract.limits import clamp as clamp  # the plug-in interface's clamp
-from common.footprint import Footprint, Polygon
+from common.footprint import Footprinted, Polygon
 
 # The entry-point group that names the move scenarios (name = a strategy's planner_scenario).
 SCENARIO_GROUP = "pnav.planner.scenarios"
@@ -40,7 +40,7 @@ class Movement:
 
 
 @dataclass(frozen=True)
-class RobotInfo:
+class RobotInfo(Footprinted):
     """A robot as the planner reads it (its robot row): what ``select`` sees of it."""
 
     robot_id: str
@@ -50,11 +50,6 @@ class RobotInfo:
     footprint_radius_m: float
     # the row's footprint_polygon (robot frame, counter-clockwise); None: the disc
     footprint_polygon: Polygon | None = None
-
-    @property
-    def footprint(self) -> Footprint:
-        """The robot's footprint: its polygon, or the disc of ``footprint_radius_m``."""
-        return Footprint.of(self.footprint_radius_m, self.footprint_polygon)
 
 
 class MoveScenario:
