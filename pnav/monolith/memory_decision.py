@@ -16,7 +16,7 @@ from datetime import UTC, datetime
 from common.contract import keys
 from common.contract.recommendations import Recommendation
 from common.engine import Engine
-from pnav.monolith.contract import MemoryContract, Row
+from pnav.monolith.contract import MemoryContract, Row, owns_every_robot
 from services.decision import meta
 from services.decision.arbitration import Issued, RobotDecision, SystemDecision
 from services.decision.store import DecisionStore
@@ -114,15 +114,11 @@ def _command_row(d: RobotDecision) -> Row:
     }
 
 
-def _everyone(_robot_id: str) -> bool:
-    return True
-
-
 def decision_engine(
     contract: MemoryContract,
     engine: Engine,
     now: Callable[[], float | None],
-    owns: Callable[[str], bool] = _everyone,
+    owns: Callable[[str], bool] = owns_every_robot,
 ) -> DecisionStore:
     """Seed the decision's meta rule on ``engine`` as the service does; its store.
 
