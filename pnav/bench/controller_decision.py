@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from common.contract.records import LaserScan, Odometry, Robot
+from pnav.bench.figures import decision_options
 from services.controller.avoid_left import AvoidLeft
 from services.controller.avoid_right import AvoidRight
 from services.controller.safety_stop import SafetyStop
@@ -74,9 +75,7 @@ def run(n: int, seed: int, repeat: int) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m pnav.bench.controller_decision")
-    parser.add_argument("--scans", type=int, default=5000)
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--repeat", type=int, default=5, help="best of this many passes")
+    decision_options(parser, "scans", 5000, repeat=5)
     args = parser.parse_args(argv)
     result = run(args.scans, args.seed, args.repeat)
     print(

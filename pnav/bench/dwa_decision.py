@@ -28,7 +28,7 @@ import numpy as np
 
 from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
-from pnav.bench.figures import emit, machine
+from pnav.bench.figures import decision_options, emit, machine
 from pnav_local.dwa import choose, command_for
 from pnav_local.dwa_params import DwaParams
 
@@ -159,9 +159,7 @@ def run(name: str, raw: Mapping[str, Any], n: int, seed: int, repeat: int) -> di
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m pnav.bench.dwa_decision")
-    parser.add_argument("--scenes", type=int, default=50)
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--repeat", type=int, default=3, help="best of this many passes")
+    decision_options(parser, "scenes", 50, repeat=3)
     parser.add_argument("--only", choices=sorted(PARAMS), help="one params set")
     parser.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
     args = parser.parse_args(argv)

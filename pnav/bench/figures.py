@@ -1,7 +1,9 @@
-"""Shared pieces of every benchmark: percentiles, the machine, printing, JSON output."""
+"""Shared pieces of every benchmark: percentiles, the machine, printing, JSON output, the
+options of a decision benchmark."""
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import platform
@@ -49,3 +51,14 @@ def emit(result: dict[str, Any], json_path: str | None) -> None:
     else:
         Path(json_path).write_text(text + "\n")
         print(f"wrote {json_path}")
+
+
+def decision_options(
+    parser: argparse.ArgumentParser, inputs: str, default_inputs: int, repeat: int
+) -> None:
+    """The options of a benchmark timing decisions on made-up inputs: how many
+    (``--<inputs>``), the seed they are drawn with, and how many passes are timed (the
+    best kept)."""
+    parser.add_argument(f"--{inputs}", type=int, default=default_inputs)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--repeat", type=int, default=repeat, help="best of this many passes")

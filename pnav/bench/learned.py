@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from pnav.bench.dwa_decision import JACKAL, POLYGONS, barn, scenes
-from pnav.bench.figures import emit, machine
+from pnav.bench.figures import decision_options, emit, machine
 from pnav_learned.drive import recommend
 from pnav_learned.features import FEATURES
 from pnav_learned.model import FORMAT, Model, load, parse
@@ -70,12 +70,10 @@ def timed(
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m pnav.bench.learned")
     parser.add_argument("--model", help="a model file (default: random weights, 32x32)")
-    parser.add_argument("--scenes", type=int, default=200)
-    parser.add_argument("--seed", type=int, default=1)
+    decision_options(parser, "scenes", 200, repeat=3)
     parser.add_argument(
         "--set", default="default", choices=("default", "barn", "barn_box"), help="the scenes"
     )
-    parser.add_argument("--repeat", type=int, default=3, help="best of this many passes")
     parser.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
     args = parser.parse_args(argv)
     model = load(args.model) if args.model else random_model()

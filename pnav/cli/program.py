@@ -202,16 +202,7 @@ async def _set_goal(rt: Runtime, args: argparse.Namespace) -> int:
 
     goal, waypoints = _goal_poses(args)
     (robot,) = await stack_commands.pick_robots(rt, args.robot, one=True)
-    goal_id = await stack_commands.set_goal(
-        rt,
-        robot,
-        goal.x,
-        goal.y,
-        goal.tolerance_m,
-        yaw=goal.yaw,
-        yaw_tolerance_rad=goal.yaw_tolerance_rad,
-        waypoints=waypoints,
-    )
+    goal_id = await stack_commands.set_route(rt, robot, goal, waypoints)
     facing = "" if goal.yaw is None else f" facing {math.degrees(goal.yaw):g} deg"
     route = f" through {len(waypoints)} waypoint(s)" if waypoints else ""
     print(f"{robot}: goal {goal_id} set to ({goal.x}, {goal.y}){facing}{route}")

@@ -88,20 +88,28 @@ async def set_goal(
     yaw_tolerance_rad: float | None = None,
     waypoints: Sequence[people.Pose] = (),
 ) -> int:
-    """Supersede the robot's active goal and set a new one (a pose: ``yaw`` in radians, and a
-    route's waypoints before it), in one transaction.
+    """:func:`set_route` to the pose (x, y), ``yaw`` in radians."""
+    goal = people.Pose(x, y, yaw, yaw_tolerance_rad, tolerance)
+    return await set_route(rt, robot, goal, waypoints)
+
+
+async def set_route(
+    rt: Runtime, robot: str, goal: people.Pose, waypoints: Sequence[people.Pose] = ()
+) -> int:
+    """Supersede the robot's active goal and set a new one (a pose, and a route's waypoints
+    before it), in one transaction.
 
     A value the goal or goal_waypoint table would refuse raises ContractError, naming it,
     before anything is written."""
-    people.check_route(people.Pose(x, y, yaw, yaw_tolerance_rad, tolerance), waypoints)
+    people.check_route(goal, waypoints)
     return await people.set_goal(
         rt.database,
         robot,
-        x,
-        y,
-        tolerance,
-        yaw=yaw,
-        yaw_tolerance_rad=yaw_tolerance_rad,
+        goal.x,
+        goal.y,
+        goal.tolerance_m,
+        yaw=goal.yaw,
+        yaw_tolerance_rad=goal.yaw_tolerance_rad,
         waypoints=waypoints,
     )
 

@@ -20,10 +20,8 @@ import json
 from collections.abc import Mapping
 from typing import Any, Protocol
 
-import numpy as np
-
 from common.contract.planned_path import PlannedPath, planned_path_of
-from common.contract.records import LaserScan, Odometry, Robot, robots
+from common.contract.records import Robot, laser_scan_of, odometry_of, robots
 from common.errors import UsageError
 from pnav_local import dwa
 from pnav_local.dwa_params import DwaParams
@@ -44,32 +42,6 @@ class Labeller(Protocol):
         odom: Mapping[str, Any],
         path: Mapping[str, Any],
     ) -> tuple[float, float] | None: ...
-
-
-def scan_of(row: Mapping[str, Any]) -> LaserScan:
-    return LaserScan(
-        row["id"],
-        row["robot_id"],
-        row["stamp"],
-        row["angle_min"],
-        row["angle_increment"],
-        row["range_min"],
-        row["range_max"],
-        np.asarray(row["ranges"], dtype=np.float32),
-    )
-
-
-def odometry_of(row: Mapping[str, Any]) -> Odometry:
-    return Odometry(
-        row["id"],
-        row["robot_id"],
-        row["stamp"],
-        row["x"],
-        row["y"],
-        row["yaw"],
-        row["linear_mps"],
-        row["angular_rps"],
-    )
 
 
 class DwaLabeller:
@@ -94,7 +66,7 @@ class DwaLabeller:
             self._path = (path["id"], planned_path_of(path))
         robot = self.robot[robot_id]
         choice = dwa.choose(
-            scan_of(scan),
+            laser_scan_of(scan),
             odometry_of(odom),
             robot,
             self._path[1],

@@ -116,6 +116,53 @@ def split(n: int, seed: int, held_out: int | None = None) -> Split:
     return order[cut:], order[:cut]
 
 
+def _split_enough(x: np.ndarray, seed: int, held_out: int | None) -> Split:
+    """:func:`split` of ``x``'s rows, refused (UsageError) below MIN_EXAMPLES."""
+    if len(x) < MIN_EXAMPLES:
+        raise UsageError(f"--data: {len(x)} usable examples, at least {MIN_EXAMPLES} needed")
+    return split(len(x), seed, held_out)
+
+
+def _scaling(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each feature's mean and spread over the training rows ``x`` (the network sees the
+    features standardised); a constant feature keeps spread 1: it is left as it is."""
+    x_mean, x_scale = x.mean(axis=0), x.std(axis=0)
+    x_scale[x_scale < 1e-9] = 1.0
+    return x_mean, x_scale
+
+
+def _document(
+    net: Any,
+    features: tuple[str, ...],
+    targets: tuple[str, ...],
+    x_train: np.ndarray,
+    x_scaling: tuple[np.ndarray, np.ndarray],
+    y_scaling: tuple[np.ndarray, np.ndarray],
+    metrics: dict[str, Any],
+    output: str | None = None,
+) -> dict[str, Any]:
+    """The model document (pnav_learned.model's format, without name and version) of the
+    fitted ``net``: the features' scaling and the ranges training covered, the targets'
+    scaling, the layers and the held-out ``metrics``; ``output``: how the last layer is
+    read, where not as it is ("logistic": a probability)."""
+    doc: dict[str, Any] = {"format": FORMAT, "features": list(features), "targets": list(targets)}
+    if output is not None:
+        doc["output"] = output
+    return doc | {
+        "x_mean": x_scaling[0].tolist(),
+        "x_scale": x_scaling[1].tolist(),
+        "x_min": x_train.min(axis=0).tolist(),
+        "x_max": x_train.max(axis=0).tolist(),
+        "y_mean": y_scaling[0].tolist(),
+        "y_scale": y_scaling[1].tolist(),
+        "layers": [
+            {"w": w.tolist(), "b": b.tolist()}
+            for w, b in zip(net.coefs_, net.intercepts_, strict=True)
+        ],
+        "metrics": metrics,
+    }
+
+
 def fit(
     x: np.ndarray,
     y: np.ndarray,
@@ -127,11 +174,8 @@ def fit(
     from sklearn.metrics import mean_absolute_error, r2_score
     from sklearn.neural_network import MLPRegressor
 
-    if len(x) < MIN_EXAMPLES:
-        raise UsageError(f"--data: {len(x)} usable examples, at least {MIN_EXAMPLES} needed")
-    train, test = split(len(x), seed, held_out)
-    x_mean, x_scale = x[train].mean(axis=0), x[train].std(axis=0)
-    x_scale[x_scale < 1e-9] = 1.0  # a constant feature: leave it as it is
+    train, test = _split_enough(x, seed, held_out)
+    x_mean, x_scale = _scaling(x[train])
     y_mean, y_scale = y[train].mean(axis=0), y[train].std(axis=0)
     constant = y_scale < 1e-9  # e.g. dwa at top speed all along an easy run
     y_scale[constant] = 1.0
@@ -153,22 +197,7 @@ def fit(
         varies = float(np.var(y[test, i])) > 1e-8
         metrics[f"{name}_r2"] = float(r2_score(y[test, i], predicted[:, i])) if varies else None
         metrics[f"{name}_mae"] = float(mean_absolute_error(y[test, i], predicted[:, i]))
-    doc: dict[str, Any] = {
-        "format": FORMAT,
-        "features": list(FEATURES),
-        "targets": list(TARGETS),
-        "x_mean": x_mean.tolist(),
-        "x_scale": x_scale.tolist(),
-        "x_min": x[train].min(axis=0).tolist(),
-        "x_max": x[train].max(axis=0).tolist(),
-        "y_mean": y_mean.tolist(),
-        "y_scale": y_scale.tolist(),
-        "layers": [
-            {"w": w.tolist(), "b": b.tolist()}
-            for w, b in zip(net.coefs_, net.intercepts_, strict=True)
-        ],
-        "metrics": metrics,
-    }
+    doc = _document(net, FEATURES, TARGETS, x[train], (x_mean, x_scale), (y_mean, y_scale), metrics)
     return doc, metrics
 
 
@@ -183,13 +212,10 @@ def fit_foresight(
     held-out metrics (precision and recall of "no progress within 3 s" at thresholds)."""
     from sklearn.neural_network import MLPClassifier
 
-    if len(x) < MIN_EXAMPLES:
-        raise UsageError(f"--data: {len(x)} usable examples, at least {MIN_EXAMPLES} needed")
-    train, test = split(len(x), seed, held_out)
+    train, test = _split_enough(x, seed, held_out)
     if len(np.unique(y[train])) < 2:
         raise UsageError("--data: every training example has the same label: nothing to learn")
-    x_mean, x_scale = x[train].mean(axis=0), x[train].std(axis=0)
-    x_scale[x_scale < 1e-9] = 1.0
+    x_mean, x_scale = _scaling(x[train])
     # no early stopping (which stopped short of sharp probabilities on a synthetic rule:
     # recall 0.79 against 0.91 at 0.6), and a stronger L2 penalty against over-fitting
     net = MLPClassifier(
@@ -224,23 +250,18 @@ def fit_foresight(
             metrics[f"{prefix}recall_{threshold:.1f}"] = (
                 hits / int(real.sum()) if real.any() else None
             )
-    doc: dict[str, Any] = {
-        "format": FORMAT,
-        "features": list(FORESIGHT_FEATURES),
-        "targets": ["no_progress"],
-        "output": "logistic",
-        "x_mean": x_mean.tolist(),
-        "x_scale": x_scale.tolist(),
-        "x_min": x[train].min(axis=0).tolist(),
-        "x_max": x[train].max(axis=0).tolist(),
-        "y_mean": [0.0],
-        "y_scale": [1.0],
-        "layers": [
-            {"w": w.tolist(), "b": b.tolist()}
-            for w, b in zip(net.coefs_, net.intercepts_, strict=True)
-        ],
-        "metrics": metrics,
-    }
+    # a probability as it is: no target scaling
+    unscaled = (np.zeros(1), np.ones(1))
+    doc = _document(
+        net,
+        FORESIGHT_FEATURES,
+        ("no_progress",),
+        x[train],
+        (x_mean, x_scale),
+        unscaled,
+        metrics,
+        output="logistic",
+    )
     return doc, metrics
 
 
@@ -263,19 +284,16 @@ def train(
             raise UsageError(f"--data {path}: no such file")
     if target not in TARGET_KINDS:
         raise UsageError(f"--target {target!r}: one of {', '.join(TARGET_KINDS)}")
+
+    def read(paths: list[Path]) -> tuple[np.ndarray, np.ndarray]:
+        return read_foresight(paths) if target == "foresight" else read_examples(paths, sources)
+
     held: int | None = None
-    if target == "foresight":
-        x, y = read_foresight(files)
-        if test:
-            tx, ty = read_foresight(test)
-            x, y, held = np.concatenate([x, tx]), np.concatenate([y, ty]), len(tx)
-        doc, _ = fit_foresight(x, y, hidden, seed, held)
-    else:
-        x, y = read_examples(files, sources)
-        if test:
-            tx, ty = read_examples(test, sources)
-            x, y, held = np.concatenate([x, tx]), np.concatenate([y, ty]), len(tx)
-        doc, _ = fit(x, y, hidden, seed, held)
+    x, y = read(files)
+    if test:
+        tx, ty = read(test)
+        x, y, held = np.concatenate([x, tx]), np.concatenate([y, ty]), len(tx)
+    doc, _ = (fit_foresight if target == "foresight" else fit)(x, y, hidden, seed, held)
     weights = json.dumps(doc["layers"], sort_keys=True).encode()
     doc = {
         "name": name,

@@ -42,6 +42,12 @@ class AdapterError(RuntimeError):
     """The monolith's own plumbing failed (not a scenario's logic): always fatal."""
 
 
+def owns_every_robot(_robot_id: str) -> bool:
+    """A store's ``owns`` in the monolith: its one process stands for every replica, so it
+    holds every robot (the stack's leases split them)."""
+    return True
+
+
 class Table:
     """Rows of one contract table, in id order, indexed by robot (``None``: no robot_id)."""
 

@@ -1,7 +1,8 @@
 """What the bridge does, in process: sensor messages in as rows, the newest decision out.
 
 Shared with services/bridge: the validation of every sensor message into a record
-(``messages.PARSERS``, the same wrap of yaw, the same checks), the clamp of a command to the
+(``messages.PARSERS``, the same wrap of yaw, the same checks), the row each record becomes
+(its ``sensor_tables.SENSOR_TABLES`` image), the clamp of a command to the
 robot's limits (``commands.clamp``, NaN to 0), the safety layer (``safety.SafetyLayer``: the
 command checked against the robot's newest scan, limited or stopped if it would hit what the
 scan shows, the reason written on the row) and the watchdog (``watchdog.Watchdog``, 0.5 s
@@ -32,15 +33,8 @@ from common.footprint import Footprint
 from pnav.bench.provenance_samples import origin_of
 from pnav.monolith.contract import MemoryContract, Row
 from services.bridge.safety import LIMITED, STOPPED, UNCHECKED, SafetyLayer
-from services.bridge.sensor_payloads import (
-    PARSERS,
-    TABLE_OF_TOPIC,
-    BatteryState,
-    Collision,
-    LaserScan,
-    Odometry,
-    SensorRecord,
-)
+from services.bridge.sensor_payloads import PARSERS, TABLE_OF_TOPIC, LaserScan, SensorRecord
+from services.bridge.sensor_tables import SENSOR_TABLES
 from services.bridge.settings import BridgeSettings
 from services.bridge.watchdog import Watchdog
 
@@ -178,35 +172,11 @@ def _find(contract: MemoryContract, table: str, robot_id: str, row_id: int) -> R
 
 
 def _row(record: SensorRecord) -> Row:
-    """The contract row the bridge's writer inserts for ``record`` (no id yet)."""
-    common: Row = {"robot_id": record.robot_id, "stamp": record.stamp}
-    if isinstance(record, Odometry):
-        return common | {
-            "seq": record.seq,
-            "x": record.x,
-            "y": record.y,
-            "yaw": record.yaw,
-            "linear_mps": record.linear,
-            "angular_rps": record.angular,
-        }
+    """The contract row the bridge's writer inserts for ``record`` (no id yet): its sensor
+    table's image, but a scan's ranges one float32 array (real[]) every reader shares."""
+    row = SENSOR_TABLES[type(record)].image(record)
     if isinstance(record, LaserScan):
-        ranges = record.values().astype(np.float32)  # real[]
+        ranges = record.values().astype(np.float32)
         ranges.flags.writeable = False  # shared by every reader of the row: never changed
-        return common | {
-            "seq": record.seq,
-            "angle_min": record.angle_min,
-            "angle_increment": record.angle_increment,
-            "range_min": record.range_min,
-            "range_max": record.range_max,
-            "ranges": ranges,
-        }
-    if isinstance(record, BatteryState):
-        return common | {
-            "energy_wh": record.energy_wh,
-            "capacity_wh": record.capacity_wh,
-            "percentage": record.percentage,
-            "charging": record.charging,
-            "power_w": record.power_w,
-        }
-    assert isinstance(record, Collision)
-    return common | {"other": record.other, "x": record.x, "y": record.y}
+        row["ranges"] = ranges
+    return row

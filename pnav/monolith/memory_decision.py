@@ -11,17 +11,19 @@ the service does, bookkeeping included.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import fields
 from datetime import UTC, datetime
 
 from common.contract import keys
 from common.contract.recommendations import Recommendation
 from common.engine import Engine
-from pnav.monolith.contract import MemoryContract, Row
+from pnav.monolith.contract import MemoryContract, Row, owns_every_robot
 from services.decision import meta
 from services.decision.arbitration import Issued, RobotDecision, SystemDecision
 from services.decision.store import DecisionStore
 
 _KINDS = ("robot", "system")
+_ISSUED = tuple(f.name for f in fields(Issued))  # command2robot's columns of those names
 
 
 class MemoryDecisionSource:
@@ -47,14 +49,7 @@ class MemoryDecisionSource:
         for robot in self.contract[keys.ROBOT].all_rows():
             row = self.contract[keys.COMMAND2ROBOT].newest(robot["robot_id"])
             if row is not None:
-                out[row["robot_id"]] = Issued(
-                    row["id"],
-                    row["stamp"],
-                    row["linear_mps"],
-                    row["angular_rps"],
-                    row["recommendation_id"],
-                    row["source"],
-                )
+                out[row["robot_id"]] = Issued(**{name: row[name] for name in _ISSUED})
         return out
 
     async def write_robot_commands(self, ds: Sequence[RobotDecision]) -> list[int | None]:
@@ -114,15 +109,11 @@ def _command_row(d: RobotDecision) -> Row:
     }
 
 
-def _everyone(_robot_id: str) -> bool:
-    return True
-
-
 def decision_engine(
     contract: MemoryContract,
     engine: Engine,
     now: Callable[[], float | None],
-    owns: Callable[[str], bool] = _everyone,
+    owns: Callable[[str], bool] = owns_every_robot,
 ) -> DecisionStore:
     """Seed the decision's meta rule on ``engine`` as the service does; its store.
 

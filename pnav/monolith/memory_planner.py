@@ -14,8 +14,6 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 
-import numpy as np
-
 from common.contract import keys, offers, records
 from common.contract.recommendations import Recommendation
 from common.contract.zones import Zone
@@ -116,32 +114,18 @@ class MemoryPlannerSource:
             w for w in self.contract[keys.GOAL_WAYPOINT].rows(robot_id) if w["goal_id"] == goal_id
         ]
 
+    # a row of the in-memory contract holds what a row image holds: the image's parsers
     async def newest_odometry(self, robot_id: str) -> records.Odometry | None:
         r = self._newest(keys.ODOMETRY, robot_id)
-        if r is None:
-            return None
-        return records.Odometry(
-            r["id"], r["robot_id"], r["stamp"], r["x"], r["y"], r["yaw"], r["linear_mps"],
-            r["angular_rps"],
-        )  # fmt: skip
+        return None if r is None else records.odometry_of(r)
 
     async def newest_scan(self, robot_id: str) -> records.LaserScan | None:
         r = self._newest(keys.LASER_SCAN, robot_id)
-        if r is None:
-            return None
-        return records.LaserScan(
-            r["id"], r["robot_id"], r["stamp"], r["angle_min"], r["angle_increment"],
-            r["range_min"], r["range_max"], np.asarray(r["ranges"], dtype=np.float32),
-        )  # fmt: skip
+        return None if r is None else records.laser_scan_of(r)
 
     async def newest_battery(self, robot_id: str) -> records.Battery | None:
         r = self._newest(keys.BATTERY, robot_id)
-        if r is None:
-            return None
-        return records.Battery(
-            r["id"], r["robot_id"], r["stamp"], r["energy_wh"], r["capacity_wh"],
-            r["percentage"], r["charging"],
-        )  # fmt: skip
+        return None if r is None else records.battery_of(r)
 
     async def mark_reached(self, goal_id: int, robot_id: str, stamp: float) -> bool:
         goal = self.contract[keys.GOAL].by_id.get(goal_id)

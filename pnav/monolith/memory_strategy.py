@@ -17,7 +17,7 @@ from datetime import UTC, datetime
 
 from common.contract import keys
 from common.engine import Engine
-from pnav.monolith.contract import MemoryContract, Row
+from pnav.monolith.contract import MemoryContract, Row, owns_every_robot
 from services.strategy import meta
 from services.strategy.commands import Outcome
 from services.strategy.runnable import Needs
@@ -154,15 +154,11 @@ def user_command(
     return contract.insert(keys.USER_COMMAND, row)
 
 
-def _everyone(_robot_id: str) -> bool:
-    return True
-
-
 def strategy_engine(
     contract: MemoryContract,
     engine: Engine,
     now: Callable[[], float | None],
-    owns: Callable[[str], bool] = _everyone,
+    owns: Callable[[str], bool] = owns_every_robot,
 ) -> StrategyStore:
     """Seed the strategy's meta rule on ``engine`` as the service does; its store.
 
