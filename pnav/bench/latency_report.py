@@ -19,6 +19,7 @@ from pnav.bench.sense_to_act import LINKS, measure
 # the issue's targets: robots -> p99 ms, on a 2-core machine
 TARGETS_MS = {1: 5.0, 10: 10.0, 50: 50.0}
 LIMITS_MS = (5.0, 50.0)
+LAYOUTS = ("auto", "composed", "separate")
 # the stack's p99 within this many times the floor measured in the same run (the chain)
 FLOOR_RATIO_TARGET = 2.0
 
@@ -33,6 +34,21 @@ def parse_links(text: str) -> tuple[str, ...]:
             f"{', '.join(LINKS)}"
         )
     return links
+
+
+def parse_layouts(text: str | None) -> tuple[str | None, ...]:
+    """``--processes``: ``auto``, ``composed``, ``separate`` or several, comma-separated, one
+    run each per size (None: one run, the layout PNAV_PROCESSES or ``auto`` gives)."""
+    if text is None:
+        return (None,)
+    layouts = tuple(dict.fromkeys(part.strip() for part in text.split(",") if part.strip()))
+    unknown = [layout for layout in layouts if layout not in LAYOUTS]
+    if not layouts or unknown:
+        raise SystemExit(
+            f"pnav bench latency: --processes {text!r}: each layout must be one of "
+            f"{', '.join(LAYOUTS)}"
+        )
+    return layouts
 
 
 def target_for(robots: int) -> float | None:
@@ -80,7 +96,36 @@ def summarise(run: dict[str, Any]) -> dict[str, Any]:
 
 def _label(run: dict[str, Any]) -> str:
     link = "" if run.get("link", "native") == "native" else f", {run['link']} link"
-    return f"  {run['robots']:>3} robots{link}: "
+    layout = f"{run['layout']:>8} " if "layout" in run else ""
+    return f"  {layout}{run['robots']:>3} robots{link}: "
+
+
+def _cpu(run: dict[str, Any]) -> float:
+    return float(sum(p["cpu_percent"] for p in run["processes"].values()))
+
+
+def _pss(run: dict[str, Any]) -> float:
+    return float(sum(p["peak_pss_mb"] for p in run["processes"].values()))
+
+
+def separation_price(results: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per size and link measured both ways: what one process per service costs over the
+    composed layout (separate minus composed), p50/p99 ms, CPU % of a core and PSS MB."""
+    by_key = {(r["robots"], r.get("link", "native"), r.get("layout")): r for r in results}
+    prices = []
+    for (robots, link, layout), separate in by_key.items():
+        composed = by_key.get((robots, link, "composed"))
+        if layout != "separate" or composed is None:
+            continue
+        price: dict[str, Any] = {"robots": robots, "link": link}
+        for q in ("p50", "p99"):
+            a, b = separate["latency_ms"].get(q), composed["latency_ms"].get(q)
+            price[f"{q}_ms"] = None if a is None or b is None else round(a - b, 3)
+        price["cpu_percent"] = round(_cpu(separate) - _cpu(composed), 1)
+        price["pss_mb"] = round(_pss(separate) - _pss(composed), 1)
+        price["processes"] = len(separate["processes"]) - len(composed["processes"])
+        prices.append(price)
+    return prices
 
 
 def floor(robots: int, seconds: float) -> dict[str, Any]:
@@ -109,7 +154,7 @@ def beside_floor(result: dict[str, Any], measured: dict[str, Any]) -> dict[str, 
 
 def table(results: Sequence[dict[str, Any]]) -> list[str]:
     head = (
-        f"{'link':>6} {'robots':>6} {'repl':>4} {'samples':>7}"
+        f"{'link':>6} {'layout':>8} {'robots':>6} {'repl':>4} {'samples':>7}"
         f" {'p50':>7} {'p95':>7} {'p99':>7} {'max':>7}"
         f" {'>5ms':>6} {'>50ms':>6} {'target':>7} {'rows/s':>7} {'sim x':>6} {'CPU %':>6}"
     )
@@ -117,18 +162,17 @@ def table(results: Sequence[dict[str, Any]]) -> list[str]:
     for r in results:
         lat = r["latency_ms"]
         rows = sum(r["rows_per_s"].values())
-        cpu = sum(p["cpu_percent"] for p in r["processes"].values())
+        cpu = _cpu(r)
         repl = max(r["replicas"].values(), default=1)
+        layout = r.get("layout", "?")
+        lead = f"{r.get('link', 'native'):>6} {layout:>8} {r['robots']:>6} {repl:>4}"
         target = "-" if r["target_p99_ms"] is None else f"<{r['target_p99_ms']:g}"
         mark = {True: " ok", False: " MISS", None: ""}[r["target_met"]]
         if "p50" not in lat:  # no sample: only the shares over the limits, of nothing
-            lines.append(
-                f"{r.get('link', 'native'):>6} {r['robots']:>6} {repl:>4} {0:>7}"
-                "   no samples (see unmatched)"
-            )
+            lines.append(f"{lead} {0:>7}   no samples (see unmatched)")
             continue
         lines.append(
-            f"{r.get('link', 'native'):>6} {r['robots']:>6} {repl:>4} {r['samples']:>7}"
+            f"{lead} {r['samples']:>7}"
             f" {lat['p50']:>7.2f} {lat['p95']:>7.2f} {lat['p99']:>7.2f} {lat['max']:>7.1f}"
             f" {lat['share_over_5ms']:>6.1%}"
             f" {lat['share_over_50ms']:>6.1%} {target:>7} {rows:>7.0f} {r['sim_rate']:>6.2f}"
@@ -153,6 +197,20 @@ def table(results: Sequence[dict[str, Any]]) -> list[str]:
             f"(CPU {f['cpu_pct']:.0f}%), stack p99 {r['latency_ms'].get('p99', float('nan')):.2f}"
             f" ms = {'-' if ratio is None else f'{ratio:.2f}'}x the floor{mark}"
         )
+    prices = separation_price(results)
+    if prices:
+        lines.append("")
+        lines.append(
+            "the price of separate processes (separate minus composed, same size and link)"
+        )
+        for p in prices:
+            p50, p99 = p["p50_ms"], p["p99_ms"]
+            link = "" if p["link"] == "native" else f", {p['link']} link"
+            lines.append(
+                f"  {p['robots']:>3} robots{link}: p50 {'-' if p50 is None else f'{p50:+.2f}'} ms,"
+                f" p99 {'-' if p99 is None else f'{p99:+.2f}'} ms, CPU {p['cpu_percent']:+.0f} %"
+                f" of a core, PSS {p['pss_mb']:+.0f} MB, {p['processes']:+d} processes"
+            )
     lines.append("")
     lines.append("per stage, p50 / p99 ms")
     for r in results:
@@ -194,16 +252,20 @@ def run(
     json_path: str | None = None,
     links: Sequence[str] = ("native",),
     with_floor: bool = True,
+    layouts: Sequence[str | None] = (None,),
 ) -> int:
     results = []
     for n in robots:
         runs = []
         for link in links:
-            print(
-                f"running {n} robot(s) at {hz:g} Hz for {seconds:g} sim s, {link} link ...",
-                flush=True,
-            )
-            runs.append(summarise(uvloop.run(measure(n, hz, seconds, replicas or {}, link))))
+            for layout in layouts:
+                print(
+                    f"running {n} robot(s) at {hz:g} Hz for {seconds:g} sim s, {link} link, "
+                    f"processes {layout or 'as PNAV_PROCESSES or auto'} ...",
+                    flush=True,
+                )
+                measured_run = measure(n, hz, seconds, replicas or {}, link, layout)
+                runs.append(summarise(uvloop.run(measured_run)))
         if with_floor:  # one floor per size: it has no robot link
             print(f"the floor at {n} robot(s) for {seconds:g} s ...", flush=True)
             measured = floor(n, seconds)
@@ -211,5 +273,6 @@ def run(
         results.extend(runs)
     for line in table(results):
         print(line)
-    emit({"benchmark": "latency", "machine": machine(), "runs": results}, json_path)
+    report = {"benchmark": "latency", "machine": machine(), "runs": results}
+    emit({**report, "separation_price": separation_price(results)}, json_path)
     return 0

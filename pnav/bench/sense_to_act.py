@@ -24,7 +24,7 @@ import contextlib
 import re
 import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +35,7 @@ from pnav.bench import provenance_samples as prov
 from pnav.bench.hall import Hall, write_hall
 from pnav.bench.processes import Usage
 from pnav.cli import stack_commands
+from pnav.run.composition import resolve_processes
 from pnav.run.launcher import launched
 from pnav.run.stack_options import StackOptions
 
@@ -200,10 +201,15 @@ def join_trace(
 
 
 async def measure(
-    robots: int, hz: float, seconds: float, replicas: dict[str, int], link: str = "native"
+    robots: int,
+    hz: float,
+    seconds: float,
+    replicas: dict[str, int],
+    link: str = "native",
+    processes: str | None = None,
 ) -> dict[str, Any]:
     """One run: the stack with ``robots`` robots on ``link``, measured for ``seconds`` sim
-    seconds."""
+    seconds; ``processes``: the stack's layout (None: PNAV_PROCESSES, else ``auto``)."""
     work = Path(tempfile.mkdtemp(prefix=f"pnav-latency-{robots}-{link}-"))
     hall = write_hall(work / "world", robots)
     trace_path, bridge_trace = work / "trace.csv", work / "bridge-trace.csv"
@@ -219,6 +225,8 @@ async def measure(
             **link_env(link, bridge_trace),
         },
     )
+    if processes is not None:
+        options = replace(options, processes=processes)
     async with launched(options) as stack:
         config = ServiceConfig(
             service="bench", database_url=stack.local.database_url, zenoh=stack.local.zenoh
@@ -256,6 +264,7 @@ async def measure(
     wall = t1 - t0
     return {
         "link": link,
+        "layout": resolve_processes(options.processes),
         "robots": robots,
         "hz": hz,
         "replicas": replicas,

@@ -14,6 +14,7 @@ from pnav.cli.learn_command import add_learn_parser
 from pnav.cli.options import (
     GOAL_M,
     MAX_TOL_M,
+    PROCESSES_HELP,
     Parser,
     coordinate,
     count,
@@ -196,7 +197,14 @@ def build_parser() -> argparse.ArgumentParser:
         "(native,ros2: the ROS 2 link beside the native one in one report; default native)",
     )
     latency.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
-    processes_option(latency)
+    latency.add_argument(
+        "--processes",
+        dest="layouts",
+        metavar="LAYOUT[,LAYOUT]",
+        help="the stack's layout, one run per layout and size: auto, composed or separate "
+        "(composed,separate: both in one report, with the price of separate processes); "
+        "default PNAV_PROCESSES or auto. " + PROCESSES_HELP,
+    )
     latency.add_argument(
         "--no-floor",
         action="store_true",

@@ -12,7 +12,9 @@ from pnav.bench.hall import write_hall
 from pnav.bench.latency_report import (
     beside_floor,
     latency_figures,
+    parse_layouts,
     parse_links,
+    separation_price,
     table,
     target_for,
 )
@@ -219,6 +221,37 @@ def test_robot_links_are_parsed_in_order_and_an_unknown_one_is_refused() -> None
     for bad in ("", "dds", "native,ros3"):
         with pytest.raises(SystemExit, match="--robot-link"):
             parse_links(bad)
+
+
+def test_layouts_are_parsed_in_order_and_an_unknown_one_is_refused() -> None:
+    assert parse_layouts(None) == (None,)
+    assert parse_layouts("composed, separate,composed") == ("composed", "separate")
+    for bad in ("", "threads", "composed,sep"):
+        with pytest.raises(SystemExit, match="--processes"):
+            parse_layouts(bad)
+
+
+def test_the_price_of_separate_processes_is_separate_minus_composed_per_size() -> None:
+    def run(
+        layout: str, robots: int, p99: float, cpu: float, pss: float, procs: int
+    ) -> dict[str, object]:
+        names = [f"p{i}" for i in range(procs)]
+        usage = {n: {"cpu_percent": cpu / procs, "peak_pss_mb": pss / procs} for n in names}
+        return {**stack_run(p99), "robots": robots, "layout": layout, "processes": usage}
+
+    runs = [
+        run("composed", 1, 10.0, 20.0, 280.0, 5),
+        run("separate", 1, 12.5, 26.0, 400.0, 8),
+        run("composed", 10, 14.0, 80.0, 290.0, 5),  # no separate run at 10: no price
+    ]
+    (price,) = separation_price(runs)
+    assert price["robots"] == 1 and price["link"] == "native"
+    assert price["p99_ms"] == pytest.approx(2.5) and price["p50_ms"] == pytest.approx(0.0)
+    assert price["cpu_percent"] == pytest.approx(6.0) and price["pss_mb"] == pytest.approx(120.0)
+    assert price["processes"] == 3
+    line = next(x for x in table(runs) if "1 robots:" in x and "p99 +2.50 ms" in x)
+    assert "CPU +6 %" in line and "PSS +120 MB" in line and "+3 processes" in line
+    assert not separation_price(runs[:1] + runs[2:])
 
 
 @pytest.mark.parametrize("robots", [1, 10, 50])
