@@ -15,7 +15,7 @@ import os
 import signal
 import sys
 from collections.abc import Awaitable, Callable
-from typing import Any
+from typing import Any, TypeVar
 
 import uvloop
 import zenoh
@@ -29,6 +29,7 @@ from common.errors import ConnectionFailure, UsageError
 from common.lifeline import die_with_parent
 from common.outage import fold_outage_logs
 
+T = TypeVar("T")
 logger = logging.getLogger("pnav.runtime")
 
 
@@ -169,11 +170,11 @@ def _stop_limit_s() -> float:
 
 
 async def until_stopped(
-    work: Awaitable[None],
+    work: Awaitable[T],
     stop: asyncio.Event,
     limit_s: float,
     leave: Callable[[int], Any] = os._exit,
-) -> None:
+) -> T:
     """Await ``work``; once ``stop`` is set, give it ``limit_s`` to return, then leave the
     process (exit code 1, logged): a drain that cannot end must not keep it alive."""
     task = asyncio.ensure_future(work)
@@ -188,7 +189,30 @@ async def until_stopped(
                 leave(1)
     finally:
         asked.cancel()
-    await task
+    return await task
+
+
+def run_stoppable(work: Callable[[asyncio.Event], Awaitable[T]]) -> tuple[int, T | None]:
+    """Run ``work(stop)`` under uvloop until it returns, SIGINT and SIGTERM setting ``stop``
+    (it then has PNAV_STOP_LIMIT_S to return: :func:`until_stopped`). The exit code and what
+    ``work`` returned: 0 and its value; 2 (a UsageError) or 1 (a ConnectionFailure), logged,
+    and None. Any other exception is the caller's."""
+
+    async def runner() -> T:
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
+        return await until_stopped(work(stop), stop, _stop_limit_s())
+
+    try:
+        return 0, uvloop.run(runner())
+    except UsageError as exc:
+        logger.error("%s", exc)
+        return 2, None
+    except ConnectionFailure as exc:
+        logger.error("%s", exc)
+        return 1, None
 
 
 def run_service(service: str, main: ServiceMain, argv: list[str] | None = None) -> int:
@@ -205,24 +229,11 @@ def run_service(service: str, main: ServiceMain, argv: list[str] | None = None) 
     log.setup(service, config.log_level)
     # while Postgres is down, lines that only repeat so are counted, not printed
     fold_outage_logs()
-
-    async def runner() -> None:
-        stop = asyncio.Event()
-        loop = asyncio.get_running_loop()
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            loop.add_signal_handler(sig, stop.set)
-        await until_stopped(main(config, stop), stop, _stop_limit_s())
-
     try:
-        uvloop.run(runner())
-    except UsageError as exc:
-        logger.error("%s", exc)
-        return 2
-    except ConnectionFailure as exc:
-        logger.error("%s", exc)
-        return 1
+        code, _ = run_stoppable(lambda stop: main(config, stop))
     except Exception:
         logger.exception("service failed")
         return 1
-    log.event(logger, logging.INFO, "stopped", service=service)
-    return 0
+    if code == 0:
+        log.event(logger, logging.INFO, "stopped", service=service)
+    return code

@@ -94,14 +94,24 @@ async def set_goal(
     yaw_tolerance_rad: float | None = None,
     waypoints: Sequence[Pose] = (),
 ) -> int:
+    """:func:`set_route` to the pose (x, y), ``yaw`` in radians."""
+    return await set_route(db, robot, Pose(x, y, yaw, yaw_tolerance_rad, tolerance), waypoints)
+
+
+async def set_route(db: Database, robot: str, goal: Pose, waypoints: Sequence[Pose] = ()) -> int:
     """Supersede ``robot``'s active goal and set a new one (with its heading, and the route's
     waypoints before it), in one transaction; its id. The planner hears the goal's
     notification and reads the waypoints with it."""
-    goal = Pose(x, y, yaw, yaw_tolerance_rad, tolerance)
     async with db.transaction() as tx:
         await tx.conn.execute(SUPERSEDE_SQL, robot)
         goal_id = await tx.conn.fetchval(
-            INSERT_GOAL_SQL, robot, x, y, tolerance, yaw, goal.heading_tolerance
+            INSERT_GOAL_SQL,
+            robot,
+            goal.x,
+            goal.y,
+            goal.tolerance_m,
+            goal.yaw,
+            goal.heading_tolerance,
         )
         if waypoints:
             await tx.conn.execute(

@@ -102,16 +102,7 @@ async def set_route(
     A value the goal or goal_waypoint table would refuse raises ContractError, naming it,
     before anything is written."""
     people.check_route(goal, waypoints)
-    return await people.set_goal(
-        rt.database,
-        robot,
-        goal.x,
-        goal.y,
-        goal.tolerance_m,
-        yaw=goal.yaw,
-        yaw_tolerance_rad=goal.yaw_tolerance_rad,
-        waypoints=waypoints,
-    )
+    return await people.set_route(rt.database, robot, goal, waypoints)
 
 
 async def cancel_goal(rt: Runtime, robot: str) -> int | None:

@@ -25,20 +25,18 @@ import asyncio
 import contextlib
 import logging
 import os
-import signal
 import sys
 from collections.abc import Mapping
 from importlib.metadata import entry_points
 
-import uvloop
 import zenoh
 
 from common import bus, log
 from common.config import ServiceConfig, ZenohSettings
-from common.errors import ConfigError, ConnectionFailure, UsageError
+from common.errors import ConfigError, UsageError
 from common.lifeline import die_with_parent
 from common.outage import fold_outage_logs
-from common.runtime import HostedMain
+from common.runtime import HostedMain, run_stoppable
 
 logger = logging.getLogger("pnav.host")
 GROUP = "pnav.services"
@@ -150,21 +148,9 @@ def main(argv: list[str] | None = None) -> int:
     log.setup(HOST, os.environ.get("PNAV_LOG_LEVEL"))
     fold_outage_logs()
 
-    async def runner() -> str | None:
-        stop = asyncio.Event()
-        loop = asyncio.get_running_loop()
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            loop.add_signal_handler(sig, stop.set)
-        return await host(services, stop)
-
-    try:
-        failed = uvloop.run(runner())
-    except UsageError as exc:
-        logger.error("%s", exc)
-        return 2
-    except ConnectionFailure as exc:
-        logger.error("%s", exc)
-        return 1
+    code, failed = run_stoppable(lambda stop: host(services, stop))
+    if code:
+        return code
     if failed is not None:
         log.event(logger, logging.ERROR, "host stopped: a service failed", service=failed)
         return 1

@@ -150,6 +150,10 @@ class GoalRequest:
     yaw_tolerance_rad: float | None = None
     waypoints: tuple[Pose, ...] = ()
 
+    @property
+    def pose(self) -> Pose:
+        return Pose(self.x, self.y, self.yaw, self.yaw_tolerance_rad, self.tolerance_m)
+
     @classmethod
     def parse(cls, body: dict[str, Any]) -> GoalRequest:
         _unknown_fields(body, {*_POSE_FIELDS, "waypoints"})

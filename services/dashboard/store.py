@@ -155,16 +155,7 @@ class PgDashboardSource:
         return list(await self.db.pool.fetch(_RECOMMENDATIONS, list(ids)))
 
     async def set_goal(self, robot: str, goal: GoalRequest) -> int:
-        return await people.set_goal(
-            self.db,
-            robot,
-            goal.x,
-            goal.y,
-            goal.tolerance_m,
-            yaw=goal.yaw,
-            yaw_tolerance_rad=goal.yaw_tolerance_rad,
-            waypoints=goal.waypoints,
-        )
+        return await people.set_route(self.db, robot, goal.pose, goal.waypoints)
 
     async def routes(self, goal_ids: Sequence[int]) -> dict[int, list[Row]]:
         """The waypoints of these goals (goal_waypoint), in seq order, per goal."""

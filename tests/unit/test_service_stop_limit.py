@@ -8,7 +8,8 @@ import asyncio
 
 import pytest
 
-from common.runtime import until_stopped
+from common.errors import ConnectionFailure, UsageError
+from common.runtime import run_stoppable, until_stopped
 
 
 class Left(Exception):
@@ -59,3 +60,24 @@ async def test_an_error_in_the_service_reaches_the_caller() -> None:
 
     with pytest.raises(RuntimeError, match="broken"):
         await until_stopped(service(), asyncio.Event(), 5.0, leave)
+
+
+def test_a_service_or_a_host_gets_its_exit_code_from_how_its_work_ended() -> None:
+    # run_service and the host of several services both run their work through this
+    async def returns(stop: asyncio.Event) -> str:
+        return "done"
+
+    async def misused(stop: asyncio.Event) -> str:
+        raise UsageError("bad setting")
+
+    async def unreachable(stop: asyncio.Event) -> str:
+        raise ConnectionFailure("no database")
+
+    async def broken(stop: asyncio.Event) -> str:
+        raise RuntimeError("a bug")
+
+    assert run_stoppable(returns) == (0, "done")
+    assert run_stoppable(misused) == (2, None)
+    assert run_stoppable(unreachable) == (1, None)
+    with pytest.raises(RuntimeError, match="a bug"):  # the caller's: logged with its trace
+        run_stoppable(broken)

@@ -12,12 +12,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from common.errors import UsageError
-from common.footprint import Footprint, Polygon
+from common.footprint import Footprinted, Polygon
 
 
 @dataclass(frozen=True)
-class RobotFit:
-    """What the benchmark needs of a robot model."""
+class RobotFit(Footprinted):
+    """What the benchmark needs of a robot model (its ``footprint``: Footprinted)."""
 
     name: str
     max_linear_mps: float
@@ -27,10 +27,6 @@ class RobotFit:
     ref: str = ""
     # the model's footprint polygon (common/footprint.py); None: the disc of the radius
     footprint_polygon: Polygon | None = None
-
-    @property
-    def footprint(self) -> Footprint:
-        return Footprint.of(self.footprint_radius_m, self.footprint_polygon)
 
     @property
     def world_ref(self) -> str:
