@@ -24,31 +24,27 @@ LAYOUTS = ("auto", "composed", "separate")
 FLOOR_RATIO_TARGET = 2.0
 
 
+def _choices(text: str, allowed: Sequence[str], option: str, what: str) -> tuple[str, ...]:
+    """A comma-separated list of ``allowed`` names, in the order given, each once; a list
+    that is empty or names another is refused, naming ``option``."""
+    names = tuple(dict.fromkeys(part.strip() for part in text.split(",") if part.strip()))
+    if not names or any(name not in allowed for name in names):
+        raise SystemExit(
+            f"pnav bench latency: {option} {text!r}: each {what} must be one of "
+            f"{', '.join(allowed)}"
+        )
+    return names
+
+
 def parse_links(text: str) -> tuple[str, ...]:
     """``--robot-link``: ``native``, ``ros2`` or both, comma-separated, in the order given."""
-    links = tuple(dict.fromkeys(part.strip() for part in text.split(",") if part.strip()))
-    unknown = [link for link in links if link not in LINKS]
-    if not links or unknown:
-        raise SystemExit(
-            f"pnav bench latency: --robot-link {text!r}: each link must be one of "
-            f"{', '.join(LINKS)}"
-        )
-    return links
+    return _choices(text, LINKS, "--robot-link", "link")
 
 
 def parse_layouts(text: str | None) -> tuple[str | None, ...]:
     """``--processes``: ``auto``, ``composed``, ``separate`` or several, comma-separated, one
     run each per size (None: one run, the layout PNAV_PROCESSES or ``auto`` gives)."""
-    if text is None:
-        return (None,)
-    layouts = tuple(dict.fromkeys(part.strip() for part in text.split(",") if part.strip()))
-    unknown = [layout for layout in layouts if layout not in LAYOUTS]
-    if not layouts or unknown:
-        raise SystemExit(
-            f"pnav bench latency: --processes {text!r}: each layout must be one of "
-            f"{', '.join(LAYOUTS)}"
-        )
-    return layouts
+    return (None,) if text is None else _choices(text, LAYOUTS, "--processes", "layout")
 
 
 def target_for(robots: int) -> float | None:
