@@ -296,15 +296,16 @@ def bent_window(
     # single arc) as far, which a bend's shape is not
     min_v = p.min_travel_s * robot.max_linear_mps / p.horizon_s if p.min_travel_s > 0 else 0.0
     bent = tr.with_bends(
-        win, bend_s=p.bend_s, max_w=robot.max_angular_rps, accel_w=robot.max_angular_accel_rps2,
+        win, bend_s=p.bend_s, max_v=robot.max_linear_mps, max_w=robot.max_angular_rps,
+        accel_v=robot.max_linear_accel_mps2, accel_w=robot.max_angular_accel_rps2,
         turns=p.bend_turns, min_v=min_v, aim=local.facing, start=start, horizon_s=p.horizon_s,
     )  # fmt: skip
     room = POSE_BUDGET // p.steps - len(win.v)
-    if bent.then_w is None or len(bent.then_w) <= room:
+    if bent.then_w is None or bent.then_v is None or len(bent.then_w) <= room:
         return bent
     if room <= 0:
         return win
-    # the budget's rest: the fastest speeds' (they come slowest first)
+    # the budget's rest: the last ones (squaring up, then the fastest speeds' turns)
     n = win.arcs
     keep = slice(len(bent.then_w) - room, None)
     return tr.Window(
@@ -313,6 +314,7 @@ def bent_window(
         win.turns,
         bent.then_w[keep],
         bent.bend_s,
+        bent.then_v[keep],
     )
 
 
@@ -334,8 +336,10 @@ def command_for(choice: Choice, path: PlannedPath, note: str = "") -> Command:
     v, w = float(win.v[i]), float(win.w[i])
     bend = ""
     if win.then_w is not None and i >= win.arcs:
-        then = float(win.then_w[i - win.arcs])
-        bend = f" (this for {win.bend_s:.2f} s, then {then:+.2f} rad/s)"
+        k = i - win.arcs
+        then_v = v if win.then_v is None else float(win.then_v[k])
+        then_w = float(win.then_w[k])
+        bend = f" (this for {win.bend_s:.2f} s, then {then_v:.2f} m/s, {then_w:+.2f} rad/s)"
     return Command(
         v,
         w,

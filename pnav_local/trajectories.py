@@ -49,6 +49,9 @@ from pnav_local.clearance import Footprint
 # Obstacles are merged onto a grid this fine before the distance test: a 720-beam scan of a
 # cluttered world has many hits a few millimetres apart, which tell nothing more.
 MERGE_M = 0.04
+# A box's "turn a little, then straight on" roll-outs (``with_bends``): these turn rates
+# either way for the first segment (0.4 s: 6, 11 and 23 degrees), to square up to a gap.
+SQUARING_RPS = (0.25, 0.5, 1.0)
 # The most path vertices the line of sight is judged over (``sighted``: vertex x vertex).
 SIGHT_POINTS = 128
 
@@ -72,10 +75,11 @@ class Window:
     # speed): the roll-out then takes one sine and cosine per w, not per trajectory; 0: any
     turns: int = 0
     # two-segment trajectories (:func:`with_bends`), after the single arcs: trajectory i >=
-    # ``arcs`` holds (v[i], w[i]) for ``bend_s``, then turns at ``then_w[i - arcs]`` at the
-    # same speed. The command is always (v[i], w[i]): the first segment.
+    # ``arcs`` holds (v[i], w[i]) for ``bend_s``, then (then_v[i - arcs], then_w[i - arcs]).
+    # The command is always (v[i], w[i]): the first segment.
     then_w: FloatArray | None = None
     bend_s: float = 0.0
+    then_v: FloatArray | None = None  # the second segment's speeds (None: the first's)
 
     @property
     def arcs(self) -> int:
@@ -122,7 +126,9 @@ def with_bends(
     win: Window,
     *,
     bend_s: float,
+    max_v: float,
     max_w: float,
+    accel_v: float,
     accel_w: float,
     turns: int,
     min_v: float,
@@ -170,11 +176,24 @@ def with_bends(
                 extra.append(rate)
         vs.extend([v] * len(extra))
         then.extend(extra)
+    first_w = [w1] * len(vs)
+    then_v = list(vs)
+    # turn a little, then straight on: squaring up to a gap the box passes only square
+    v0 = float(win.v.min())
+    rest = horizon_s - bend_s
+    onward = max(0.25 * max_v, min_v * horizon_s / rest)
+    for spin in SQUARING_RPS:
+        for w in (-spin, spin):
+            if w_low <= w <= w_high and abs(onward - v0) <= accel_v * bend_s + 1e-9:
+                vs.append(v0)
+                first_w.append(w)
+                then_v.append(onward)
+                then.append(0.0)
     if not vs:
         return win
     v_all = np.concatenate([win.v, np.array(vs)])
-    w_all = np.concatenate([win.w, np.full(len(vs), w1)])
-    return Window(v_all, w_all, win.turns, np.array(then), bend_s)
+    w_all = np.concatenate([win.w, np.array(first_w)])
+    return Window(v_all, w_all, win.turns, np.array(then), bend_s, np.array(then_v))
 
 
 def start_pose(v0: float, w0: float, delay_s: float) -> tuple[float, float, float]:
@@ -220,7 +239,8 @@ def rollout(
     n = win.arcs
     x, y, yaw = arcs(win.v[:n], win.w[:n], times, win.turns)
     if win.then_w is not None and len(win.then_w):
-        bx, by, byaw = bends(win.v[n:], win.w[n:], win.then_w, win.bend_s, times)
+        then_v = win.v[n:] if win.then_v is None else win.then_v
+        bx, by, byaw = bends(win.v[n:], win.w[n:], then_v, win.then_w, win.bend_s, times)
         x, y, yaw = np.vstack([x, bx]), np.vstack([y, by]), np.vstack([yaw, byaw])
     sx, sy, syaw = start
     c, s = math.cos(syaw), math.sin(syaw)
@@ -228,14 +248,19 @@ def rollout(
 
 
 def bends(
-    v: FloatArray, w1: FloatArray, w2: FloatArray, bend_s: float, times: FloatArray
+    v1: FloatArray,
+    w1: FloatArray,
+    v2: FloatArray,
+    w2: FloatArray,
+    bend_s: float,
+    times: FloatArray,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Poses (x, y, yaw), each trajectory x times, from the origin facing +x: the arc
-    (v, w1) up to ``bend_s``, then the arc (v, w2) from where it ended."""
+    (v1, w1) up to ``bend_s``, then the arc (v2, w2) from where it ended."""
     first = np.minimum(times, bend_s)
-    x1, y1, yaw1 = arcs(v, w1, first)
+    x1, y1, yaw1 = arcs(v1, w1, first)
     after = np.maximum(times - bend_s, 0.0)
-    x2, y2, yaw2 = arcs(v, w2, after)
+    x2, y2, yaw2 = arcs(v2, w2, after)
     # the second arc placed at the first's end, turned by its heading there
     c, s = np.cos(yaw1), np.sin(yaw1)
     return x1 + c * x2 - s * y2, y1 + s * x2 + c * y2, yaw1 + yaw2

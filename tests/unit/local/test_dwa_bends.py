@@ -46,42 +46,54 @@ def path_of(points: list[tuple[float, float]]) -> PlannedPath:
 def test_a_bend_holds_its_first_arc_then_turns_from_where_it_ended() -> None:
     # 1 m/s straight for 0.4 s, then a quarter turn left over the 0.8 s left
     w2 = (math.pi / 2) / 0.8
-    x, y, yaw = tr.bends(
-        np.array([1.0]), np.array([0.0]), np.array([w2]), 0.4, np.array([0.2, 0.4, 1.2])
-    )
+    one, straight = np.array([1.0]), np.array([0.0])
+    x, y, yaw = tr.bends(one, straight, one, np.array([w2]), 0.4, np.array([0.2, 0.4, 1.2]))
     r = 1.0 / w2
     assert x[0].tolist() == pytest.approx([0.2, 0.4, 0.4 + r])
     assert y[0].tolist() == pytest.approx([0.0, 0.0, r])
     assert yaw[0].tolist() == pytest.approx([0.0, 0.0, math.pi / 2])
     # a turning first arc: the second starts at its end, at its heading
-    x, y, yaw = tr.bends(np.array([1.0]), np.array([1.0]), np.array([0.0]), 0.4, np.array([1.2]))
+    x, y, yaw = tr.bends(one, one, one, straight, 0.4, np.array([1.2]))
     x1, y1 = math.sin(0.4), 1.0 - math.cos(0.4)
     assert (x[0, 0], y[0, 0]) == pytest.approx((x1 + 0.8 * math.cos(0.4), y1 + 0.8 * math.sin(0.4)))
     assert yaw[0, 0] == pytest.approx(0.4)
+    # a turn in place, then straight on at another speed: it moves only after the turn
+    x, y, yaw = tr.bends(straight, np.array([0.5]), np.array([0.5]), straight, 0.4,
+                         np.array([0.4, 1.2]))  # fmt: skip
+    assert x[0].tolist() == pytest.approx([0.0, 0.4 * math.cos(0.2)])
+    assert y[0].tolist() == pytest.approx([0.0, 0.4 * math.sin(0.2)])
 
 
 def test_the_window_gains_straight_then_turn_at_each_fast_enough_speed() -> None:
     win = tr.window(0.5, 0.0, max_v=2.0, max_w=4.0, accel_v=10.0, accel_w=20.0, dt=0.3,
                     v_samples=9, w_samples=17)  # fmt: skip
-    bent = tr.with_bends(win, bend_s=0.4, max_w=4.0, accel_w=20.0, turns=8, min_v=0.4,
-                         aim=(3.0, 3.0), horizon_s=1.2)  # fmt: skip
+    bent = tr.with_bends(win, bend_s=0.4, max_v=2.0, max_w=4.0, accel_v=10.0, accel_w=20.0,
+                         turns=8, min_v=0.4, aim=(3.0, 3.0), horizon_s=1.2)  # fmt: skip
     n = win.arcs
-    assert bent.arcs == n == len(win.v) and bent.then_w is not None
-    # the arcs first, unchanged; every bend's first segment straight on
+    assert bent.arcs == n == len(win.v) and bent.then_w is not None and bent.then_v is not None
+    # the arcs first, unchanged
     assert bent.v[:n].tolist() == win.v.tolist() and bent.w[:n].tolist() == win.w.tolist()
-    assert (bent.w[n:] == 0.0).all()
-    speeds = sorted(set(bent.v[n:].tolist()))
-    assert speeds == [v for v in sorted(set(win.v.tolist())) if v >= 0.4]
-    for v in speeds:
-        rates = sorted(bent.then_w[bent.v[n:] == v].tolist())
+    v, w, then_v, then_w = bent.v[n:], bent.w[n:], bent.then_v, bent.then_w
+    # turn a little at the window's slowest speed, then straight on at 0.6 m/s (what covers
+    # 0.4 m / 1.2 s x 1.2 s in the 0.8 s left): squaring up to a gap
+    squaring = w != 0.0
+    assert sorted(w[squaring].tolist()) == [-1.0, -0.5, -0.25, 0.25, 0.5, 1.0]
+    assert (v[squaring] == win.v.min()).all() and (then_w[squaring] == 0.0).all()
+    assert then_v[squaring].tolist() == pytest.approx([0.6] * 6)
+    # straight on, then turn, at the same speed
+    assert (then_v[~squaring] == v[~squaring]).all()
+    speeds = sorted(set(v[~squaring].tolist()))
+    assert speeds == [s for s in sorted(set(win.v.tolist())) if s >= 0.4]
+    for speed in speeds:
+        rates = sorted(then_w[~squaring & (v == speed)].tolist())
         # +-1..4 rad/s, and the rate facing the aim from where the straight ends: left
         fixed = [-4.0, -3.0, -2.0, -1.0, 1.0, 2.0, 3.0, 4.0]
         extra = [r for r in rates if r not in fixed]
         assert [r for r in rates if r in fixed] == fixed and len(extra) == 1 and extra[0] > 0
     # none asked, or a horizon no longer than the first segment: the window as it was
-    assert tr.with_bends(win, bend_s=0.4, max_w=4.0, accel_w=20.0, turns=0, min_v=0.0) is win
-    assert tr.with_bends(win, bend_s=1.2, max_w=4.0, accel_w=20.0, turns=8, min_v=0.0,
-                         horizon_s=1.2) is win  # fmt: skip
+    limits = {"max_v": 2.0, "max_w": 4.0, "accel_v": 10.0, "accel_w": 20.0}
+    assert tr.with_bends(win, bend_s=0.4, turns=0, min_v=0.0, **limits) is win
+    assert tr.with_bends(win, bend_s=1.2, turns=8, min_v=0.0, horizon_s=1.2, **limits) is win
 
 
 # posts 0.6 m apart (the Jackal's box 0.43 m wide: 8.5 cm each side) 0.5 m ahead; past them
@@ -107,7 +119,7 @@ def test_only_straight_on_then_turn_clears_the_gap_at_speed() -> None:
     assert len(single) > 0 and not choice.ok[single].any()
     command = command_for(choice, path)
     assert (command.linear, command.angular) == (win.v[best], 0.0)
-    assert "(this for 0.40 s, then +" in command.reason
+    assert f"(this for 0.40 s, then {win.v[best]:.2f} m/s, +" in command.reason
     # the plain reference decides the same
     plain = dwa_reference.choose(scan, odom, JACKAL, path, p, BOX)
     assert plain is not None and plain.best == best and plain.ok.tolist() == choice.ok.tolist()
