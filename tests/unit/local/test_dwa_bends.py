@@ -24,10 +24,10 @@ BEAMS, FOV = 720, math.radians(270.0)
 Boxes = tuple[tuple[float, float, float, float], ...]  # x0, x1, y0, y1
 
 
-def scan_of(boxes: Boxes) -> LaserScan:
-    """What a 720-beam 270-degree lidar at the origin facing +x sees of these boxes."""
+def scan_of(boxes: Boxes, yaw: float = 0.0) -> LaserScan:
+    """What a 720-beam 270-degree lidar at the origin facing ``yaw`` sees of these boxes."""
     angles = -FOV / 2 + FOV / (BEAMS - 1) * np.arange(BEAMS)
-    dx, dy = np.cos(angles), np.sin(angles)
+    dx, dy = np.cos(angles + yaw), np.sin(angles + yaw)
     ranges = np.full(BEAMS, np.inf)
     with np.errstate(divide="ignore", invalid="ignore"):
         for x0, x1, y0, y1 in boxes:
@@ -175,3 +175,27 @@ def test_the_box_with_the_heaviest_params_stays_within_the_pose_budget() -> None
         assert choice is not None
         assert len(choice.window.v) * p.steps <= POSE_BUDGET
         assert choice.window.then_w is not None and len(choice.window.then_w) > 0
+
+
+def test_a_box_squares_up_to_a_gap_it_passes_only_square() -> None:
+    # posts 0.57 m apart (7 cm each side of the box square on), the robot and its path 11
+    # degrees off the gap's axis: every arc forward meets a post, a turn in place scores no
+    # progress; "turn 0.2 rad, then straight on" is what passes
+    yaw = math.radians(11.0)
+    posts: Boxes = ((0.45, 0.75, 0.285, 0.585), (0.45, 0.75, -0.585, -0.285))
+    scan = scan_of(posts, yaw)
+    path = path_of([(0.0, 0.0), (3.0 * math.cos(yaw), 3.0 * math.sin(yaw))])
+    odom = Odometry(1, "r1", 1.0, 0.0, 0.0, yaw, 0.0, 0.0)
+    p = DwaParams.read({})
+    choice = choose(scan, odom, JACKAL, path, p, BOX)
+    assert choice is not None and choice.best is not None
+    win, best = choice.window, choice.best
+    assert win.then_w is not None and win.then_v is not None and best >= win.arcs
+    assert (win.v[best], win.w[best]) == (0.0, -0.5)
+    assert (win.then_v[best - win.arcs], win.then_w[best - win.arcs]) == pytest.approx((0.5, 0.0))
+    plain = dwa_reference.choose(scan, odom, JACKAL, path, p, BOX)
+    assert plain is not None and plain.best == best
+    # without the two-segment roll-outs it stands
+    without = choose(scan, odom, JACKAL, path, DwaParams.read({"dwa_bend_turns": 0}), BOX)
+    assert without is not None and without.best is not None
+    assert (without.window.v[without.best], without.window.w[without.best]) == (0.0, 0.0)
