@@ -27,6 +27,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 import pnav_local.clearance as clearance
 import pnav_local.trajectories as tr
@@ -36,7 +37,7 @@ from common.contract.records import LaserScan, Odometry, Robot
 from common.controller_core.scenario import Command, ControllerScenario
 from common.footprint import Footprint
 from common.scan import readings
-from pnav_local.dwa_params import DwaParams
+from pnav_local.dwa_params import POSE_BUDGET, DwaParams
 
 PRIORITY = 30
 
@@ -54,6 +55,7 @@ class Choice:
     v_cap: float
     blocked: bool = False  # the path ahead runs into a lidar hit
     vetoed: int = 0  # better admissible arcs the safety layer's test refused (veto.py)
+    squeezed: bool = False  # admitted with dwa_squeeze_margin_m: nothing moved with the margin
 
 
 @functools.lru_cache(maxsize=8)
@@ -112,6 +114,50 @@ def stopping_speed(gap_m: float, lookahead_s: float, accel: float) -> float:
     return accel * (math.sqrt(t * t + 2.0 * gap_m / accel) - t)
 
 
+def admit(
+    win: tr.Window,
+    gaps: tr.FloatArray,
+    start_gap: float,
+    slow: npt.NDArray[np.int64],
+    beyond: tr.FloatArray,
+    p: DwaParams,
+    accel: float,
+    *,
+    squeeze: bool,
+) -> tuple[tr.BoolArray, bool]:
+    """(the admissible trajectories, whether they were admitted with the squeeze margin):
+    clear by the margin (trajectories.admissible), the slow ones ``slow`` also followed on
+    (``beyond``, their gaps). ``squeeze``: a footprint polygon that can move nowhere with
+    ``dwa_margin_m`` is admitted with ``dwa_squeeze_margin_m``."""
+
+    def admitted(margin: float) -> tr.BoolArray:
+        ok = tr.admissible(
+            win, gaps, start_gap, margin_m=margin, accel_v=accel, delay_s=p.delay_s,
+            horizon_s=p.horizon_s,
+        )  # fmt: skip
+        if p.min_travel_s > 0:
+            # a slow arc clear for the horizon only (a few centimetres) let the Jackal creep
+            # ever slower toward a corner it could not pass, never stuck long enough for
+            # recovery; counted at the robot's top speed, so a slow robot (the Burger) is
+            # hardly touched
+            limit = min(margin, start_gap - 0.005)
+            ok[slow] &= beyond.min(axis=1, initial=np.inf) >= limit  # tr.clear_for's test
+        return ok
+
+    ok = admitted(p.margin_m)
+    moving = win.v > 0
+    if squeeze and 0.0 < p.squeeze_margin_m < p.margin_m and not ok[moving].any():
+        # a box that can go nowhere with the margin: the planner plans the centre on the
+        # inscribed disc's clearance, so its path may lead through a gap the box passes
+        # with less (barn_hard_001: 6 cm each side, the way out 3 to 4 cm); the margin is
+        # shrunk to squeeze through rather than stand until recovery gives up, the safety
+        # layer's test still put to the winner (veto.py)
+        wider = admitted(p.squeeze_margin_m)
+        if wider[moving].any():
+            return wider, True
+    return ok, False
+
+
 def choose(
     scan: LaserScan,
     odom: Odometry,
@@ -157,6 +203,8 @@ def choose(
         extra_w=align,
     )
     start = tr.start_pose(odom.linear_mps, odom.angular_rps, p.delay_s)
+    if polygon is not None:
+        win = bent_window(win, p, robot, local, start)
     # only what this window's arcs can come near matters to them
     near = math.hypot(start[0], start[1]) + float(win.v.max()) * p.horizon_s + foot.reach_m + 0.5
     points = points[np.hypot(points[:, 0], points[:, 1]) <= near]
@@ -193,21 +241,9 @@ def choose(
     gaps = every[:n].reshape(poses[0].shape)
     start_gap = float(every[n])
     beyond = every[n + 1 :].reshape(len(slow), p.steps)
-    ok = tr.admissible(
-        win,
-        gaps,
-        start_gap,
-        margin_m=p.margin_m,
-        accel_v=accel,
-        delay_s=p.delay_s,
-        horizon_s=p.horizon_s,
-    )
-    if p.min_travel_s > 0:
-        # a slow arc clear for the horizon only (a few centimetres) let the Jackal creep ever
-        # slower toward a corner it could not pass, never stuck long enough for recovery;
-        # counted at the robot's top speed, so a slow robot (the Burger) is hardly touched
-        limit = min(p.margin_m, start_gap - 0.005)
-        ok[slow] &= beyond.min(axis=1, initial=np.inf) >= limit  # tr.clear_for's test
+
+    box = polygon is not None
+    ok, squeezed = admit(win, gaps, start_gap, slow, beyond, p, accel, squeeze=box)
     if not ok.any():
         return Choice(win, ok, None, None, local, v_cap)
     weights = p.weights
@@ -244,7 +280,42 @@ def choose(
     if polygon is not None:
         outline = Footprint.of(radius, polygon)
         best, vetoed = veto.winner(top_arc, scores.total, ok, win.v, win.w, scan, robot, outline)
-    return Choice(win, ok, scores, best, local, v_cap, blocked, vetoed)
+    return Choice(win, ok, scores, best, local, v_cap, blocked, vetoed, squeezed)
+
+
+def bent_window(
+    win: tr.Window, p: DwaParams, robot: Robot, local: tr.Local, start: tuple[float, float, float]
+) -> tr.Window:
+    """A footprint polygon's window with its two-segment roll-outs (trajectories.with_bends),
+    within what the pose budget leaves (the fastest speeds' first). A disc turns in place
+    wherever it fits, so "straight on, then turn" is two of its decisions; a box in a gap
+    narrower than its diagonal cannot, and must see the turn coming before it commits."""
+    if p.bend_turns <= 0 or p.bend_s <= 0.0 or p.bend_s >= p.horizon_s:
+        return win
+    # only arcs that cover dwa_min_travel_s at top speed: a slower one is followed on (its
+    # single arc) as far, which a bend's shape is not
+    min_v = p.min_travel_s * robot.max_linear_mps / p.horizon_s if p.min_travel_s > 0 else 0.0
+    bent = tr.with_bends(
+        win, bend_s=p.bend_s, max_v=robot.max_linear_mps, max_w=robot.max_angular_rps,
+        accel_v=robot.max_linear_accel_mps2, accel_w=robot.max_angular_accel_rps2,
+        turns=p.bend_turns, min_v=min_v, aim=local.facing, start=start, horizon_s=p.horizon_s,
+    )  # fmt: skip
+    room = POSE_BUDGET // p.steps - len(win.v)
+    if bent.then_w is None or bent.then_v is None or len(bent.then_w) <= room:
+        return bent
+    if room <= 0:
+        return win
+    # the budget's rest: the last ones (squaring up, then the fastest speeds' turns)
+    n = win.arcs
+    keep = slice(len(bent.then_w) - room, None)
+    return tr.Window(
+        np.concatenate([win.v, bent.v[n:][keep]]),
+        np.concatenate([win.w, bent.w[n:][keep]]),
+        win.turns,
+        bent.then_w[keep],
+        bent.bend_s,
+        bent.then_v[keep],
+    )
 
 
 def command_for(choice: Choice, path: PlannedPath, note: str = "") -> Command:
@@ -261,13 +332,22 @@ def command_for(choice: Choice, path: PlannedPath, note: str = "") -> Command:
             reason = f"dwa: none of {n} trajectories is admissible: brake{note}"
         return Command(0.0, 0.0, reason, inputs)
     i, s = choice.best, choice.scores
-    v, w = float(choice.window.v[i]), float(choice.window.w[i])
+    win = choice.window
+    v, w = float(win.v[i]), float(win.w[i])
+    bend = ""
+    if win.then_w is not None and i >= win.arcs:
+        k = i - win.arcs
+        then_v = v if win.then_v is None else float(win.then_v[k])
+        then_w = float(win.then_w[k])
+        bend = f" (this for {win.bend_s:.2f} s, then {then_v:.2f} m/s, {then_w:+.2f} rad/s)"
     return Command(
         v,
         w,
         f"dwa: best of {admitted}/{n} admissible trajectories: progress {s.progress[i]:+.2f},"
         f" path {s.path[i]:.2f}, heading {s.heading[i]:.2f}, clearance {s.clearance[i]:.2f},"
         f" speed {s.speed[i]:.2f}; {choice.local.remaining_m:.2f} m of path left"
+        + bend
+        + (" (squeezing: nothing moves with the margin)" if choice.squeezed else "")
         + (" (blocked ahead: rounding it)" if choice.blocked else "")
         + (f" ({choice.vetoed} better ones the safety layer would stop)" if choice.vetoed else "")
         + note,

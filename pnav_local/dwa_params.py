@@ -71,6 +71,12 @@ class DwaParams:
     # only for the horizon (the Jackal: 0.4 m; the Burger: 4 cm, nearly the horizon alone)
     min_travel_s: float = 0.2
     clearance_cap_m: float = 0.5  # gaps beyond this score no better
+    # a footprint polygon's two-segment roll-outs (trajectories.with_bends): straight on for
+    # bend_s, then one of bend_turns turn rates (and the one facing the path's lead); 0: none
+    bend_s: float = 0.4
+    bend_turns: int = 8
+    # a footprint polygon that can move nowhere with margin_m is admitted with this (0: never)
+    squeeze_margin_m: float = 0.02
     blocked_path_factor: float = 0.2  # the path weight while the path runs into a hit
     obstacle_range_m: float = 0.0  # hits farther than this are ignored; 0: what the horizon reaches
     # safety_stop's reach (its own params): the speed is kept below what would trigger it
@@ -116,6 +122,9 @@ class DwaParams:
             sight_m=get("dwa_sight_m", d.sight_m, 0.0, 20.0),
             min_travel_s=get("dwa_min_travel_s", d.min_travel_s, 0.0, 10.0),
             clearance_cap_m=get("dwa_clearance_cap_m", d.clearance_cap_m, 0.01, 10.0),
+            bend_s=get("dwa_bend_s", d.bend_s, 0.0, 10.0),
+            bend_turns=int(get("dwa_bend_turns", d.bend_turns, 0, 16)),
+            squeeze_margin_m=get("dwa_squeeze_margin_m", d.squeeze_margin_m, 0.0, 2.0),
             blocked_path_factor=get("dwa_blocked_path_factor", d.blocked_path_factor, 0.0, 1.0),
             obstacle_range_m=get("dwa_obstacle_range_m", d.obstacle_range_m, 0.0, 100.0),
             safety_margin_m=get("safety_margin_m", d.safety_margin_m, 0.0, 2.0),

@@ -49,6 +49,9 @@ from pnav_local.clearance import Footprint
 # Obstacles are merged onto a grid this fine before the distance test: a 720-beam scan of a
 # cluttered world has many hits a few millimetres apart, which tell nothing more.
 MERGE_M = 0.04
+# A box's "turn a little, then straight on" roll-outs (``with_bends``): these turn rates
+# either way for the first segment (0.4 s: 6, 11 and 23 degrees), to square up to a gap.
+SQUARING_RPS = (0.25, 0.5, 1.0)
 # The most path vertices the line of sight is judged over (``sighted``: vertex x vertex).
 SIGHT_POINTS = 128
 
@@ -71,6 +74,17 @@ class Window:
     # a grid's angular samples per speed (w the faster index, the same w's for every
     # speed): the roll-out then takes one sine and cosine per w, not per trajectory; 0: any
     turns: int = 0
+    # two-segment trajectories (:func:`with_bends`), after the single arcs: trajectory i >=
+    # ``arcs`` holds (v[i], w[i]) for ``bend_s``, then (then_v[i - arcs], then_w[i - arcs]).
+    # The command is always (v[i], w[i]): the first segment.
+    then_w: FloatArray | None = None
+    bend_s: float = 0.0
+    then_v: FloatArray | None = None  # the second segment's speeds (None: the first's)
+
+    @property
+    def arcs(self) -> int:
+        """How many of the trajectories are single arcs (the first ones)."""
+        return len(self.v) if self.then_w is None else len(self.v) - len(self.then_w)
 
 
 def window(
@@ -106,6 +120,80 @@ def window(
     # v over w, w fastest: what a meshgrid ("ij") of the unique speeds raveled gives
     vs = np.unique(vs) if vs[-1] != vs[0] else vs[:1]
     return Window(np.repeat(vs, len(ws)), np.tile(np.array(ws), len(vs)), len(ws))
+
+
+def with_bends(
+    win: Window,
+    *,
+    bend_s: float,
+    max_v: float,
+    max_w: float,
+    accel_v: float,
+    accel_w: float,
+    turns: int,
+    min_v: float,
+    aim: tuple[float, float] | None = None,
+    start: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    horizon_s: float = 0.0,
+) -> Window:
+    """``win`` with two-segment trajectories added after its arcs: at each of its speeds of
+    at least ``min_v`` (and above 0), straight on (the window's turn rate nearest 0) for
+    ``bend_s``, then a turn at the same speed for the rest of the horizon: ``turns`` rates
+    spread evenly over ``[-max_w, max_w]`` without 0, and the rate that faces ``aim`` at
+    the horizon's end from where the straight ends (the window's carrot-facing rate, one
+    segment later); each within what ``accel_w`` reaches from the first's in ``bend_s``.
+
+    One arc for the whole horizon cannot say "straight through this gap, then turn where
+    the path turns": a box leaving a gap 0.6 m wide whose path turns just past it found
+    only an arc into the pocket beside it (barn_hard_001, docs/CONTROLLER.md, *dwa*)."""
+    if turns <= 0 or bend_s <= 0.0 or horizon_s <= bend_s or len(win.v) == 0:
+        return win
+    if win.then_w is not None:
+        return win
+    w_low, w_high = float(win.w.min()), float(win.w.max())
+    w1 = min(max(0.0, w_low), w_high)
+    lo, hi = w1 - accel_w * bend_s, w1 + accel_w * bend_s
+    half = max(turns // 2, 1)
+    side = np.linspace(max_w / half, max_w, half)
+    rates = np.concatenate([-side[::-1], side]).tolist() if turns > 1 else [max_w]
+    base = [r for r in rates if lo - 1e-9 <= r <= hi + 1e-9]
+    sx, sy, syaw = start
+    vs: list[float] = []
+    then: list[float] = []
+    for v in np.unique(win.v).tolist():
+        if v < min_v or v <= 1e-6:
+            continue
+        extra = list(base)
+        if aim is not None:
+            # from where the straight ends, the rate that faces the aim at the horizon's end
+            ex = sx + math.cos(syaw) * v * bend_s
+            ey = sy + math.sin(syaw) * v * bend_s
+            bearing = math.atan2(aim[1] - ey, aim[0] - ex) - syaw - w1 * bend_s
+            rate = min(
+                max(math.remainder(bearing, 2.0 * math.pi) / (horizon_s - bend_s), -max_w), max_w
+            )
+            if lo <= rate <= hi and all(abs(rate - r) > 1e-6 for r in base):
+                extra.append(rate)
+        vs.extend([v] * len(extra))
+        then.extend(extra)
+    first_w = [w1] * len(vs)
+    then_v = list(vs)
+    # turn a little, then straight on: squaring up to a gap the box passes only square
+    v0 = float(win.v.min())
+    rest = horizon_s - bend_s
+    onward = max(0.25 * max_v, min_v * horizon_s / rest)
+    for spin in SQUARING_RPS:
+        for w in (-spin, spin):
+            if w_low <= w <= w_high and abs(onward - v0) <= accel_v * bend_s + 1e-9:
+                vs.append(v0)
+                first_w.append(w)
+                then_v.append(onward)
+                then.append(0.0)
+    if not vs:
+        return win
+    v_all = np.concatenate([win.v, np.array(vs)])
+    w_all = np.concatenate([win.w, np.array(first_w)])
+    return Window(v_all, w_all, win.turns, np.array(then), bend_s, np.array(then_v))
 
 
 def start_pose(v0: float, w0: float, delay_s: float) -> tuple[float, float, float]:
@@ -145,11 +233,37 @@ def arcs(
 def rollout(
     win: Window, start: tuple[float, float, float], horizon_s: float, steps: int
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Every sampled trajectory's poses at ``steps`` instants over the horizon, from ``start``."""
-    x, y, yaw = arcs(win.v, win.w, _times(horizon_s, steps), win.turns)
+    """Every sampled trajectory's poses at ``steps`` instants over the horizon, from ``start``
+    (the window's two-segment trajectories after its arcs: :func:`with_bends`)."""
+    times = _times(horizon_s, steps)
+    n = win.arcs
+    x, y, yaw = arcs(win.v[:n], win.w[:n], times, win.turns)
+    if win.then_w is not None and len(win.then_w):
+        then_v = win.v[n:] if win.then_v is None else win.then_v
+        bx, by, byaw = bends(win.v[n:], win.w[n:], then_v, win.then_w, win.bend_s, times)
+        x, y, yaw = np.vstack([x, bx]), np.vstack([y, by]), np.vstack([yaw, byaw])
     sx, sy, syaw = start
     c, s = math.cos(syaw), math.sin(syaw)
     return sx + c * x - s * y, sy + s * x + c * y, syaw + yaw
+
+
+def bends(
+    v1: FloatArray,
+    w1: FloatArray,
+    v2: FloatArray,
+    w2: FloatArray,
+    bend_s: float,
+    times: FloatArray,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Poses (x, y, yaw), each trajectory x times, from the origin facing +x: the arc
+    (v1, w1) up to ``bend_s``, then the arc (v2, w2) from where it ended."""
+    first = np.minimum(times, bend_s)
+    x1, y1, yaw1 = arcs(v1, w1, first)
+    after = np.maximum(times - bend_s, 0.0)
+    x2, y2, yaw2 = arcs(v2, w2, after)
+    # the second arc placed at the first's end, turned by its heading there
+    c, s = np.cos(yaw1), np.sin(yaw1)
+    return x1 + c * x2 - s * y2, y1 + s * x2 + c * y2, yaw1 + yaw2
 
 
 @functools.lru_cache(maxsize=8)

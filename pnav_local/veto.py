@@ -47,11 +47,18 @@ def winner(
         return best, 0
     decel = robot.max_linear_accel_mps2
 
+    judged: dict[tuple[float, float], bool] = {}
+
     def passes(i: int) -> bool:
-        return sweep.passes(
-            returns, footprint, float(v[i]), float(w[i]),
-            margin_m=sweep.MARGIN_M, latency_s=sweep.LATENCY_S, decel_mps2=decel,
-        )  # fmt: skip
+        # a box's two-segment roll-outs share their first (v, w), the command tested, with
+        # each other and with an arc: each command is judged once
+        command = (float(v[i]), float(w[i]))
+        if command not in judged:
+            judged[command] = sweep.passes(
+                returns, footprint, *command,
+                margin_m=sweep.MARGIN_M, latency_s=sweep.LATENCY_S, decel_mps2=decel,
+            )  # fmt: skip
+        return judged[command]
 
     if passes(best):
         return best, 0

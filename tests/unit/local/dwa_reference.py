@@ -3,8 +3,9 @@ decides, written the plain way (every pose against every hit in float64, each ar
 full, the path densified leg by leg), so a faster product that decides anything else fails
 tests/unit/local/test_dwa_reference.py.
 
-It shares with the product only what it does not try to speed up: the window, the arcs'
-poses, the path's localisation, the merge of the hits and the straight-ahead gap.
+It shares with the product only what it does not try to speed up: the window (a box's
+two-segment roll-outs included), the arcs' poses, the path's localisation, the merge of the
+hits and the straight-ahead gap.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from common import sweep
 from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
 from common.footprint import Footprint
-from pnav_local.dwa import Choice, path_in_robot_frame, stopping_speed
+from pnav_local.dwa import Choice, bent_window, path_in_robot_frame, stopping_speed
 from pnav_local.dwa_params import DwaParams
 
 Array = tr.FloatArray
@@ -119,34 +120,16 @@ def choose(
         extra_w=math.atan2(local.facing[1], local.facing[0]) / p.horizon_s,
     )  # fmt: skip
     start = tr.start_pose(odom.linear_mps, odom.angular_rps, p.delay_s)
+    if polygon is not None:  # the box's two-segment roll-outs: part of the window
+        win = bent_window(win, p, robot, local, start)
     near = math.hypot(start[0], start[1]) + float(win.v.max()) * p.horizon_s + outline + 0.5
     points = points[np.hypot(points[:, 0], points[:, 1]) <= near]
     xs, ys, yaws = tr.rollout(win, start, p.horizon_s, p.steps)
     g = gaps(xs, ys, yaws, points, radius, polygon)
     at = np.array([[start[0]]]), np.array([[start[1]]]), np.array([[start[2]]])
     start_gap = float(gaps(*at, points, radius, polygon)[0, 0])
-    # admissible: clear by the margin all along, or the brake stopping before the first hit
-    limit = min(p.margin_m, start_gap - 0.005)
-    ok = np.zeros(len(win.v), dtype=bool)
-    for i, v in enumerate(win.v):
-        hits = np.flatnonzero(g[i] < limit)
-        if len(hits) == 0:
-            ok[i] = True
-        elif v <= win.v.min() + 1e-9:
-            travel = abs(v) * p.horizon_s * hits[0] / p.steps
-            ok[i] = v * v / (2.0 * accel) + abs(v) * p.delay_s < travel
-    if p.min_travel_s > 0:
-        travel = p.min_travel_s * top
-        for i, (v, w) in enumerate(zip(win.v, win.w, strict=True)):
-            if not (abs(v) > 1e-6 and abs(v) * p.horizon_s < travel):
-                continue
-            turn_s = math.pi / max(abs(w), 1e-6) if abs(w) > 1e-6 else math.inf
-            end_s = max(min(travel / abs(v), turn_s), p.horizon_s)
-            t = end_s * np.linspace(1.0 / p.steps, 1.0, p.steps)
-            ax, ay, ayaw = tr.arcs(np.array([v]), np.array([w]), t)
-            c, s = math.cos(start[2]), math.sin(start[2])
-            px, py = start[0] + c * ax - s * ay, start[1] + s * ax + c * ay
-            ok[i] &= bool(gaps(px, py, start[2] + ayaw, points, radius, polygon).min() >= limit)
+
+    ok, squeezed = _admitted(win, g, start_gap, start, points, radius, polygon, p, accel, top)
     if not ok.any():
         return Choice(win, ok, None, None, local, v_cap)
     weights = p.weights
@@ -167,7 +150,56 @@ def choose(
     if polygon is not None:
         best, vetoed = _vetted(scan, robot, Footprint.of(robot.footprint_radius_m, polygon),
                                win, ok, scores.total)  # fmt: skip
-    return Choice(win, ok, scores, best, local, v_cap, blocked, vetoed)
+    return Choice(win, ok, scores, best, local, v_cap, blocked, vetoed, squeezed)
+
+
+def _admitted(
+    win: tr.Window,
+    g: Array,
+    start_gap: float,
+    start: tuple[float, float, float],
+    points: Array,
+    radius: float,
+    polygon: Sequence[Sequence[float]] | None,
+    p: DwaParams,
+    accel: float,
+    top: float,
+) -> tuple[Array, bool]:
+    """Admissible arc by arc, and whether with the squeeze margin (a box moving nowhere
+    with the margin)."""
+
+    def admitted(margin: float) -> Array:
+        """Clear by the margin all along, or the brake stopping before the first hit."""
+        limit = min(margin, start_gap - 0.005)
+        ok = np.zeros(len(win.v), dtype=bool)
+        for i, v in enumerate(win.v):
+            hits = np.flatnonzero(g[i] < limit)
+            if len(hits) == 0:
+                ok[i] = True
+            elif v <= win.v.min() + 1e-9:
+                travel = abs(v) * p.horizon_s * hits[0] / p.steps
+                ok[i] = v * v / (2.0 * accel) + abs(v) * p.delay_s < travel
+        if p.min_travel_s > 0:
+            travel = p.min_travel_s * top
+            for i, (v, w) in enumerate(zip(win.v, win.w, strict=True)):
+                if not (abs(v) > 1e-6 and abs(v) * p.horizon_s < travel):
+                    continue
+                turn_s = math.pi / max(abs(w), 1e-6) if abs(w) > 1e-6 else math.inf
+                end_s = max(min(travel / abs(v), turn_s), p.horizon_s)
+                t = end_s * np.linspace(1.0 / p.steps, 1.0, p.steps)
+                ax, ay, ayaw = tr.arcs(np.array([v]), np.array([w]), t)
+                c, s = math.cos(start[2]), math.sin(start[2])
+                px, py = start[0] + c * ax - s * ay, start[1] + s * ax + c * ay
+                ok[i] &= bool(gaps(px, py, start[2] + ayaw, points, radius, polygon).min() >= limit)
+        return ok
+
+    ok = admitted(p.margin_m)
+    moving = win.v > 0
+    if polygon is not None and 0.0 < p.squeeze_margin_m < p.margin_m and not ok[moving].any():
+        wider = admitted(p.squeeze_margin_m)  # nothing moves with the margin: squeeze
+        if wider[moving].any():
+            return wider, True
+    return ok, False
 
 
 def _vetted(

@@ -55,11 +55,13 @@ def admitted(polygon: tuple[tuple[float, float], ...] | None) -> tuple[bool, boo
     plain = dwa_reference.choose(scan, odom, JACKAL, path, p, polygon)
     assert choice is not None and plain is not None
     assert plain.ok.tolist() == choice.ok.tolist() and plain.best == choice.best
-    v, w = choice.window.v, choice.window.w
+    # the single arcs (a box's two-segment roll-outs come after them: they turn later)
+    n = choice.window.arcs
+    v, w, ok = choice.window.v[:n], choice.window.w[:n], choice.ok[:n]
     straight = (w == 0.0) & (v > 0.0)
     turning = (v == 0.0) & (np.abs(w) >= 1.0)  # in place, a quarter turn or more
     assert straight.any() and turning.any()
-    return bool(choice.ok[straight].all()), bool(choice.ok[turning].any())
+    return bool(ok[straight].all()), bool(ok[turning].any())
 
 
 def test_a_box_fits_the_doorway_straight_on_but_not_turned_in_it() -> None:
