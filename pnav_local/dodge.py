@@ -32,6 +32,7 @@ import numpy as np
 
 from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
+from common.controller_core.params import number
 from common.controller_core.scenario import Command, ControllerScenario, Key, ScenarioSpec
 from common.engine import Behaviour
 from pnav_local import threats
@@ -122,16 +123,27 @@ def path_ahead(path: PlannedPath | None, pose: tuple[float, float, float]) -> tu
     return ((c * dx + s * dy) / d, (-s * dx + c * dy) / d)
 
 
+def stop_reach(params: Mapping[str, Any]) -> threats.StopReach:
+    """safety_stop's reach as the strategy's params set it (the same keys and bounds)."""
+    d = threats.StopReach()
+    return threats.StopReach(
+        margin_m=number(params, "safety_margin_m", d.margin_m, high=2.0),
+        lookahead_s=number(params, "safety_lookahead_s", d.lookahead_s, high=5.0),
+    )
+
+
 def decide_for(
     tracker: Tracker,
     scan: LaserScan,
     odom: Odometry,
     robot: Robot,
     path: PlannedPath | None = None,
+    params: Mapping[str, Any] | None = None,
 ) -> Command | None:
     """Update the tracks with the scan; the evasive command, or None when no mover threatens
     what the robot is about to do. ``path``: the route in force, which evasive motions make
-    progress along (none: straight ahead)."""
+    progress along (none: straight ahead); ``params``: the strategy's (safety_stop's reach,
+    which no evasion may enter)."""
     tracker.update(scan, odom)
     pose = robot_pose(scan, odom)
     movers = movers_in_robot_frame(tracker, pose)
@@ -142,7 +154,8 @@ def decide_for(
     if math.isinf(threat.ttc):
         return None
     points, behind = static_hits(scan, tracker)
-    choice = threats.choose(v0, w0, robot, movers, points, behind, path_ahead(path, pose))
+    reach = stop_reach(params or {})
+    choice = threats.choose(v0, w0, robot, movers, points, behind, path_ahead(path, pose), reach)
     mover = next(m for m in movers if m.track == threat.mover)
     if abs(v0) < STANDING_MPS:
         act = "step out of its way" if choice.v != 0.0 else "stand"
@@ -193,7 +206,8 @@ class Dodge(ControllerScenario):
     def judge(self, scan: LaserScan, odom: Odometry | None) -> Command | None:
         if odom is None:
             return None
-        return decide_for(self.tracker, scan, odom, self.spec.robot, self.path)
+        spec = self.spec
+        return decide_for(self.tracker, scan, odom, spec.robot, self.path, spec.params)
 
     def ttl_s(self) -> float:
         period = self.tracker.period_s

@@ -60,6 +60,13 @@ DISPLACED_M = 0.02
 # body's is (the RMS of the centres about the fitted line within FIT_RMS_M)
 FIT_RMS_M = 0.02
 HISTORY_S = 0.6
+# A mover turning back at the end of its line leaves the constant-velocity fit (its centres
+# go out and come back: the RMS grows, the slope falls to nothing) and its points return over
+# the surface they left. A track that moved within STICKY_S keeps moving through that, at
+# the velocity of its newest SHORT_S of centres when those fit a line (the way it goes now)
+# and of the whole window else.
+STICKY_S = 0.6
+SHORT_S = 0.12
 GATE_M = 0.25  # the match gate, plus GATE_MPS x the time since the track was seen
 GATE_MPS = 1.5
 _RANGE_TOLERANCE_M = 1e-4
@@ -96,13 +103,15 @@ class Track:
     displaced: bool = False  # its points left the surface an older scan showed
     fit_rms: float = math.inf  # the centres' RMS distance from the fitted constant velocity
     whole: bool = False  # the newest cluster's outline was all there
+    moved_t: float = -math.inf  # the last sighting at which it was told moving (full test)
 
     @property
     def speed(self) -> float:
         return math.hypot(self.vx, self.vy)
 
     @property
-    def moving(self) -> bool:
+    def told(self) -> bool:
+        """Whether this sighting alone tells it moves (the full test)."""
         if self.sightings < MIN_SEEN or len(self.seen) < MIN_SEEN:
             return False
         span = self.seen[-1][0] - self.seen[0][0]
@@ -112,6 +121,11 @@ class Track:
             and self.displaced
             and self.fit_rms <= FIT_RMS_M
         )
+
+    @property
+    def moving(self) -> bool:
+        """Told moving now, or within ``STICKY_S`` (turning back, or stopping a moment)."""
+        return self.told or self.last_t - self.moved_t <= STICKY_S
 
     def at(self, t: float) -> tuple[float, float]:
         """Where the track is predicted at sim time ``t`` (constant velocity)."""
@@ -142,6 +156,24 @@ class Track:
         self.vx = float(ts @ dx) / denom
         self.vy = float(ts @ dy) / denom
         self.fit_rms = float(np.sqrt(np.mean((dx - self.vx * ts) ** 2 + (dy - self.vy * ts) ** 2)))
+        if self.fit_rms > FIT_RMS_M:
+            short = _line(a[a[:, 0] >= a[-1, 0] - SHORT_S])
+            if short is not None and short[2] <= FIT_RMS_M:
+                self.vx, self.vy = short[0], short[1]  # the way it goes now
+
+
+def _line(a: FloatArray) -> tuple[float, float, float] | None:
+    """The constant velocity fitted to sightings (t, x, y), and the RMS about it; None for
+    fewer than ``MIN_SEEN``."""
+    if len(a) < MIN_SEEN:
+        return None
+    ts = a[:, 0] - a[:, 0].mean()
+    denom = float(ts @ ts)
+    if denom <= 1e-9:
+        return None
+    dx, dy = a[:, 1] - a[:, 1].mean(), a[:, 2] - a[:, 2].mean()
+    vx, vy = float(ts @ dx) / denom, float(ts @ dy) / denom
+    return vx, vy, float(np.sqrt(np.mean((dx - vx * ts) ** 2 + (dy - vy * ts) ** 2)))
 
 
 def robot_pose(scan: LaserScan, odom: Odometry) -> tuple[float, float, float]:
@@ -276,9 +308,16 @@ class Tracker:
             k.add(t, cl)
             self.tracks.append(k)
         self._displacement(t, world)
+        self._told(t)
         self.history = [h for h in self.history if h[0] >= t - HISTORY_S]
         self.history.append((t, world[np.isfinite(world[:, 0])]))
         return found
+
+    def _told(self, t: float) -> None:
+        """Note when each track seen now was last told moving (its stickiness)."""
+        for k in self.tracks:
+            if k.last_t == t and k.told:
+                k.moved_t = t
 
     def _displacement(self, t: float, world: FloatArray) -> None:
         """For each track seen now and fast enough: whether its points left the surface the
