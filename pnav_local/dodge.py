@@ -150,13 +150,14 @@ def decide_for(
     if not movers:
         return None
     v0, w0 = odom.linear_mps, odom.angular_rps
-    threat = threats.expected(v0, w0, robot, movers)
-    if math.isinf(threat.ttc):
+    reach = stop_reach(params or {})
+    threat = threats.expected(v0, w0, robot, movers, reach)
+    if math.isinf(threat.threat):
         return None
     points, behind = static_hits(scan, tracker)
-    reach = stop_reach(params or {})
     choice = threats.choose(v0, w0, robot, movers, points, behind, path_ahead(path, pose), reach)
-    mover = next(m for m in movers if m.track == threat.mover)
+    contact = threat.ttc <= threat.stop
+    mover = next(m for m in movers if m.track == (threat.mover if contact else threat.stop_mover))
     if abs(v0) < STANDING_MPS:
         act = "step out of its way" if choice.v != 0.0 else "stand"
     elif choice.v < v0 - 0.05:
@@ -164,12 +165,17 @@ def decide_for(
     else:
         act = "keep clear"
     after = "meets none" if math.isinf(choice.ttc) else f"meets one in {choice.ttc:.1f} s"
+    what = (
+        f"contact in {threat.ttc:.1f} s"
+        if contact
+        else f"in safety_stop's reach in {threat.stop:.1f} s"
+    )
     reason = (
         f"dodge: mover track {mover.track} at ({mover.x:+.2f}, {mover.y:+.2f}) m moving "
         f"{math.hypot(mover.vx, mover.vy):.2f} m/s toward "
-        f"{math.degrees(math.atan2(mover.vy, mover.vx)):+.0f} deg: contact in "
-        f"{threat.ttc:.1f} s at {threat.v:.2f} m/s; {act}: {choice.v:.2f} m/s, "
-        f"{choice.w:+.2f} rad/s ({after} within {threats.HORIZON_S:g} s)"
+        f"{math.degrees(math.atan2(mover.vy, mover.vx)):+.0f} deg: {what} at {threat.v:.2f} "
+        f"m/s; {act}: {choice.v:.2f} m/s, {choice.w:+.2f} rad/s ({after} within "
+        f"{threats.HORIZON_S:g} s)"
     )
     return Command(choice.v, choice.w, reason)
 

@@ -72,6 +72,15 @@ class Motion:
     w: float
     ttc: float  # first predicted contact with a mover, s (inf: none within the horizon)
     mover: int | None  # the track it meets first
+    # first time safety_stop would stop it for a mover in its swept way (inf: none; judged
+    # for what the robot is about to do, ``expected``)
+    stop: float = math.inf
+    stop_mover: int | None = None
+
+    @property
+    def threat(self) -> float:
+        """When it first meets a mover, or is stopped for one: the sooner."""
+        return min(self.ttc, self.stop)
 
 
 def rollout(v0: float, w0: float, v: float, w: float, robot: Robot) -> FloatArray:
@@ -176,7 +185,7 @@ class StopReach:
 
 def stopped_at(
     poses: FloatArray, points: FloatArray, movers: list[Mover], robot: Robot, reach: StopReach
-) -> float:
+) -> tuple[float, int | None]:
     """The first time within ``STOPPABLE_S`` at which safety_stop would stop a robot following
     ``poses`` (with their speeds): a hit of the scan where it is (``points``) or a mover's
     outline where it is predicted (its disc, plus the growing margin) inside the reach of the
@@ -185,7 +194,7 @@ def stopped_at(
     ts = times()
     sel = np.flatnonzero((ts <= STOPPABLE_S + 1e-9) & (np.abs(poses[:, 3]) > STOP_MOVING_MPS))
     if len(sel) == 0:
-        return math.inf
+        return math.inf, None
     ps, ts = poses[sel], ts[sel]
     radius = robot.footprint_radius_m
     speed = np.abs(ps[:, 3])
@@ -194,8 +203,8 @@ def stopped_at(
     # only what is within the farthest reach of the farthest pose can be hit
     far = float(np.hypot(ps[:, 0], ps[:, 1]).max() + limit.max())
     sets = []
-    if len(points):
-        near = points[np.hypot(points[:, 0], points[:, 1]) <= far]
+    near = points[np.hypot(points[:, 0], points[:, 1]) <= far] if len(points) else points
+    if len(near):
         sets.append(np.broadcast_to(near, (len(ps), *near.shape)))
     if movers:
         m = np.asarray([(k.x, k.y, k.vx, k.vy, k.radius) for k in movers], dtype=np.float64)
@@ -205,13 +214,16 @@ def stopped_at(
         cy = (m[:, 1][None, :] + m[:, 3][None, :] * ts[:, None])[..., None] + r * np.sin(a)
         sets.append(np.stack([cx, cy], axis=-1).reshape(len(ps), -1, 2))
     if not sets:
-        return math.inf
+        return math.inf, None
     local = _local(ps, np.concatenate(sets, axis=1))
     along = np.sign(ps[:, 3])[:, None] * local[..., 0]
     dist = np.hypot(local[..., 0], local[..., 1])
     hit = (along > 0.0) & (np.abs(local[..., 1]) <= radius) & (dist <= limit[:, None])
     rows = np.flatnonzero(hit.any(axis=1))
-    return float(ts[rows[0]]) if len(rows) else math.inf
+    if len(rows) == 0:
+        return math.inf, None
+    first = int(np.flatnonzero(hit[rows[0]])[0]) - len(near)  # beyond the hits: a mover's
+    return float(ts[rows[0]]), movers[first // OUTLINE_POINTS].track if first >= 0 else None
 
 
 def choose(
@@ -270,20 +282,28 @@ def choose(
         if motion.v == 0.0:
             return motion
         if clear_of_static(poses, points, robot.footprint) and math.isinf(
-            stopped_at(poses, points, movers, robot, reach)
+            stopped_at(poses, points, movers, robot, reach)[0]
         ):
             return motion
     raise AssertionError("unreachable: the stop is among the motions judged")
 
 
-def expected(v0: float, w0: float, robot: Robot, movers: list[Mover]) -> Motion:
+def expected(
+    v0: float, w0: float, robot: Robot, movers: list[Mover], reach: StopReach = StopReach()
+) -> Motion:
     """What the robot is about to do without this scenario, judged: the worse of keeping its
     measured velocity and speeding up to its top speed on the same turn (a local controller
-    on a clear way does)."""
+    on a clear way does): when it first meets a mover, and when safety_stop would first stop
+    it for one (a mover crossing its swept way; the scan's standing hits are the local
+    controller's to keep clear of)."""
     worst: Motion | None = None
+    empty = np.empty((0, 2))
     for v in (v0, robot.max_linear_mps if v0 >= -0.01 else v0):
-        t, k = ttc(rollout(v0, w0, v, w0, robot), movers, robot.footprint)
-        if worst is None or t < worst.ttc:
-            worst = Motion(v, w0, t, k)
+        poses = rollout(v0, w0, v, w0, robot)
+        t, k = ttc(poses, movers, robot.footprint)
+        stop, by = stopped_at(poses, empty, movers, robot, reach)
+        motion = Motion(v, w0, t, k, stop, by)
+        if worst is None or motion.threat < worst.threat:
+            worst = motion
     assert worst is not None
     return worst
