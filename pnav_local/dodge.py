@@ -6,9 +6,10 @@ from one scan to the next (tracks.py: clusters, matched, each one's velocity in 
 frame from the odometry), and per fresh scan predicts, for the next ``threats.HORIZON_S``,
 whether the robot meets a moving one doing what it is about to do (keeping its measured
 velocity, or speeding up to its top speed on the same turn: what a local controller does
-on a clear way) (threats.py). If not, it says nothing. If so, it recommends the evasive
-motion that meets no mover within the horizon and keeps clear of the static hits, the
-fastest forward one first: slower (yield before crossing a mover's line), a stop, a swerve,
+on a clear way), or would be stopped by safety_stop for one crossing its swept way
+(threats.py). If not, it says nothing. If so, it recommends the evasive motion that meets no
+mover within the horizon, keeps clear of the static hits and out of safety_stop's reach,
+the fastest forward one first: slower (yield before crossing a mover's line), a stop, a swerve,
 or driving on or backing out of a standing robot's spot when a mover is heading at it; if
 every motion meets a mover, the one that meets it latest. Its reason names the mover's
 track, its velocity and the time to collision.

@@ -9,7 +9,10 @@ motion's time to collision is the first predicted time the robot's footprint (it
 turned with each pose: a box's corners reach farther than its sides; or its disc) comes
 within a mover's disc within the horizon (inf: none). The static hits of the scan
 (the beams not on a moving cluster) must stay clear of any evasive motion other than the
-stop, or be no nearer than they are now.
+stop, or be no nearer than they are now. And a motion must stay out of the controller's
+safety_stop's reach in its first ``STOPPABLE_S`` (:func:`stopped_at`: the hits and the
+movers' discs in its swept way at each pose, as safety_stop judges a scan): a robot that
+safety_stop stops among movers stands, held, in their way.
 
 Bounded: a fixed set of motions (``SPEEDS`` x ``TURNS``) of ``STEPS`` poses, against at most
 tracks.MAX_TRACKS movers and ``MAX_STATIC`` static hits (the nearest, merged on a grid).

@@ -16,7 +16,10 @@ apparent motion wanders, a body's is steady). A cluster cut by the edge of the l
 or by something nearer in front of it changes shape as the robot moves, so it is matched
 but never adds to its track's velocity nor tells whether it left its surface. A moving
 track unseen for at most ``COAST_S`` (hidden behind another mover, or merged with it into
-one cluster) is still predicted on at its velocity (:meth:`Tracker.movers`).
+one cluster) is still predicted on at its velocity (:meth:`Tracker.movers`). A track told
+moving stays moving for ``STICKY_S`` after it last was (a mover turning back at the end of
+its line fails the line and the surface tests for a window's length), at the velocity of its
+newest ``SHORT_S`` of centres while the whole window's are off a line.
 
 Deterministic (no randomness, ties broken by index) and bounded: at most ``MAX_CLUSTERS``
 clusters (the nearest) and ``MAX_TRACKS`` tracks per robot, whatever the scan holds.
