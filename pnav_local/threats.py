@@ -37,6 +37,7 @@ DELAY_S = 0.05  # scan to wheels: the robot keeps its velocity meanwhile
 MARGIN_M = 0.15  # kept beyond the two discs at once...
 MARGIN_MPS = 0.05  # ...plus this for each second ahead (the prediction's growing error)
 STATIC_MARGIN_M = 0.02
+CLOSING_M = 0.01  # a mover inside the margin meets the robot once the gap closes by this
 MAX_STATIC = 1024
 GRID_M = 0.04
 SPEEDS = (1.0, 0.85, 0.7, 0.55, 0.4, 0.25, 0.1, 0.0)  # shares of the top speed
@@ -131,8 +132,11 @@ def ttc(
         return math.inf, None
     ts = times()
     m = np.asarray([(k.x, k.y, k.vx, k.vy, k.radius) for k in movers], dtype=np.float64)
-    # contact at the start too: a mover already touching the margin counts at once
-    now = footprint.clearance(m[:, 0:2]) < m[:, 4] + margin
+    # a mover already inside the margin (one beside the robot, or a box taken for one) meets
+    # the robot when the gap closes from what it is now, not at once: one leaving, or passing
+    # alongside, is no threat; its outline touching the robot's is one at once
+    gap0 = footprint.clearance(m[:, 0:2])
+    now = gap0 < m[:, 4]
     if now.any():
         return 0.0, movers[int(np.flatnonzero(now)[0])].track
     mx = m[:, 0][None, :] + m[:, 2][None, :] * ts[:, None]  # steps x movers
@@ -140,6 +144,7 @@ def ttc(
     local = _local(poses, np.stack([mx, my], axis=-1))
     gap = footprint.clearance(local.reshape(-1, 2)).reshape(mx.shape)
     reach = m[:, 4][None, :] + margin + MARGIN_MPS * ts[:, None]
+    reach = np.minimum(reach, gap0[None, :] - CLOSING_M)
     hit = gap < reach
     rows = np.flatnonzero(hit.any(axis=1))
     if len(rows) == 0:

@@ -175,3 +175,18 @@ def test_a_standing_box_is_not_kept_moving() -> None:
         )
         assert command is None and tracker.movers() == [], t
         y += 1.0 * PERIOD
+
+
+def test_a_mover_inside_the_margin_meets_the_robot_only_as_the_gap_closes() -> None:
+    # 0.55 m to the left of a robot driving on at 1.9 m/s: inside the margins already (a box
+    # beside the way told moving for two scans in static BARN: dodge yielded at 0.5 m/s for
+    # it, and the run went another way). Leaving, or passing alongside: no threat; coming
+    # at the robot: one at once; touching it: contact now
+    def threat(vx: float, vy: float, y: float = 0.55) -> float:
+        mover = threats.Mover(1, 0.05, y, vx, vy, 0.21)
+        return threats.expected(1.9, 0.0, JACKAL_BOX, [mover]).ttc
+
+    assert math.isinf(threat(0.0, 0.22)), "leaving to the left"
+    assert math.isinf(threat(1.9, 0.0)), "alongside, as fast"
+    assert threat(0.0, -0.3) <= 0.2, "coming at it"
+    assert threat(0.0, 0.3, y=0.4) == 0.0, "touching it"
