@@ -70,6 +70,9 @@ HISTORY_S = 0.6
 # and of the whole window else.
 STICKY_S = 0.6
 SHORT_S = 0.12
+# ...once it was told moving for this long on end: a box told moving for a scan or two as the
+# robot passes it (its faces turning into view) is not kept moving
+STEADY_S = 0.3
 GATE_M = 0.25  # the match gate, plus GATE_MPS x the time since the track was seen
 GATE_MPS = 1.5
 _RANGE_TOLERANCE_M = 1e-4
@@ -97,6 +100,7 @@ class Track:
     radius: float
     seen: list[tuple[float, float, float]] = field(default_factory=list)
     last_t: float = 0.0
+    prev_t: float = -math.inf  # the sighting before the newest
     last_x: float = 0.0
     last_y: float = 0.0
     vx: float = 0.0
@@ -107,6 +111,7 @@ class Track:
     fit_rms: float = math.inf  # the centres' RMS distance from the fitted constant velocity
     whole: bool = False  # the newest cluster's outline was all there
     moved_t: float = -math.inf  # the last sighting at which it was told moving (full test)
+    told_from: float = math.inf  # the first sighting of the newest run of them told moving
 
     @property
     def speed(self) -> float:
@@ -127,8 +132,12 @@ class Track:
 
     @property
     def moving(self) -> bool:
-        """Told moving now, or within ``STICKY_S`` (turning back, or stopping a moment)."""
-        return self.told or self.last_t - self.moved_t <= STICKY_S
+        """Told moving now, or within ``STICKY_S`` after being told so for ``STEADY_S`` on end
+        (turning back, or stopping a moment)."""
+        if self.told:
+            return True
+        steady = self.moved_t - self.told_from >= STEADY_S - 1e-9
+        return steady and self.last_t - self.moved_t <= STICKY_S
 
     def at(self, t: float) -> tuple[float, float]:
         """Where the track is predicted at sim time ``t`` (constant velocity)."""
@@ -136,6 +145,7 @@ class Track:
         return self.last_x + self.vx * dt, self.last_y + self.vy * dt
 
     def add(self, t: float, c: Cluster) -> None:
+        self.prev_t = self.last_t
         self.last_t, self.last_x, self.last_y = t, c.x, c.y
         self.beams = (c.first, c.last)
         self.whole = c.whole
@@ -319,8 +329,11 @@ class Tracker:
     def _told(self, t: float) -> None:
         """Note when each track seen now was last told moving (its stickiness)."""
         for k in self.tracks:
-            if k.last_t == t and k.told:
-                k.moved_t = t
+            if k.last_t != t or not k.told:
+                continue
+            if k.moved_t < k.prev_t:  # not told at its previous sighting: a new run
+                k.told_from = t
+            k.moved_t = t
 
     def _displacement(self, t: float, world: FloatArray) -> None:
         """For each track seen now and fast enough: whether its points left the surface the
