@@ -17,7 +17,7 @@ import pytest
 from common.contract.records import Odometry
 from pnav_local import threats
 from pnav_local.dodge import decide_for, static_hits
-from pnav_local.tracks import STICKY_S, Tracker
+from pnav_local.tracks import STICKY_S, Cluster, Track, Tracker
 from services.controller.safety_stop import SafetyStop
 from tests.unit.local.scene import JACKAL_BOX, Disc, Segment, scan_at
 
@@ -190,3 +190,26 @@ def test_a_mover_inside_the_margin_meets_the_robot_only_as_the_gap_closes() -> N
     assert math.isinf(threat(1.9, 0.0)), "alongside, as fast"
     assert threat(0.0, -0.3) <= 0.2, "coming at it"
     assert threat(0.0, 0.3, y=0.4) == 0.0, "touching it"
+
+
+@pytest.mark.parametrize(("told_for", "kept"), [(0.04, False), (0.4, True)])
+def test_only_a_track_told_moving_for_a_while_is_kept_moving(told_for: float, kept: bool) -> None:
+    # a body's centres on a line at 0.5 m/s, its points off their old surface until
+    # ``told_for`` after it was first told moving, then back on it (a box's faces turning
+    # into view tell a moment's motion; a mover turning back returns over its surface)
+    track = Track(1, 0.2)
+    tracker = Tracker(tracks=[track])
+    first: float | None = None
+    for i in range(60):
+        t = i * PERIOD
+        track.add(t, Cluster(0.5 * t, 2.0, 0.2, 0, 10, True))
+        track.displaced = first is None or t < first + told_for
+        tracker.last_t = t
+        tracker._told(t)
+        if first is None and track.told:
+            first = t
+        if first is not None and t >= first + told_for:
+            assert not track.told
+            within = t - track.moved_t <= STICKY_S
+            assert track.moving == (kept and within), (t, track.moved_t, track.told_from)
+    assert first is not None
