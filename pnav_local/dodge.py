@@ -6,9 +6,10 @@ from one scan to the next (tracks.py: clusters, matched, each one's velocity in 
 frame from the odometry), and per fresh scan predicts, for the next ``threats.HORIZON_S``,
 whether the robot meets a moving one doing what it is about to do (keeping its measured
 velocity, or speeding up to its top speed on the same turn: what a local controller does
-on a clear way) (threats.py). If not, it says nothing. If so, it recommends the evasive
-motion that meets no mover within the horizon and keeps clear of the static hits, the
-fastest forward one first: slower (yield before crossing a mover's line), a stop, a swerve,
+on a clear way), or would be stopped by safety_stop for one crossing its swept way
+(threats.py). If not, it says nothing. If so, it recommends the evasive motion that meets no
+mover within the horizon, keeps clear of the static hits and out of safety_stop's reach,
+the fastest forward one first: slower (yield before crossing a mover's line), a stop, a swerve,
 or driving on or backing out of a standing robot's spot when a mover is heading at it; if
 every motion meets a mover, the one that meets it latest. Its reason names the mover's
 track, its velocity and the time to collision.
@@ -32,6 +33,7 @@ import numpy as np
 
 from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
+from common.controller_core.params import number
 from common.controller_core.scenario import Command, ControllerScenario, Key, ScenarioSpec
 from common.engine import Behaviour
 from pnav_local import threats
@@ -122,28 +124,41 @@ def path_ahead(path: PlannedPath | None, pose: tuple[float, float, float]) -> tu
     return ((c * dx + s * dy) / d, (-s * dx + c * dy) / d)
 
 
+def stop_reach(params: Mapping[str, Any]) -> threats.StopReach:
+    """safety_stop's reach as the strategy's params set it (the same keys and bounds)."""
+    d = threats.StopReach()
+    return threats.StopReach(
+        margin_m=number(params, "safety_margin_m", d.margin_m, high=2.0),
+        lookahead_s=number(params, "safety_lookahead_s", d.lookahead_s, high=5.0),
+    )
+
+
 def decide_for(
     tracker: Tracker,
     scan: LaserScan,
     odom: Odometry,
     robot: Robot,
     path: PlannedPath | None = None,
+    params: Mapping[str, Any] | None = None,
 ) -> Command | None:
     """Update the tracks with the scan; the evasive command, or None when no mover threatens
     what the robot is about to do. ``path``: the route in force, which evasive motions make
-    progress along (none: straight ahead)."""
+    progress along (none: straight ahead); ``params``: the strategy's (safety_stop's reach,
+    which no evasion may enter)."""
     tracker.update(scan, odom)
     pose = robot_pose(scan, odom)
     movers = movers_in_robot_frame(tracker, pose)
     if not movers:
         return None
     v0, w0 = odom.linear_mps, odom.angular_rps
-    threat = threats.expected(v0, w0, robot, movers)
-    if math.isinf(threat.ttc):
+    reach = stop_reach(params or {})
+    threat = threats.expected(v0, w0, robot, movers, reach)
+    if math.isinf(threat.threat):
         return None
     points, behind = static_hits(scan, tracker)
-    choice = threats.choose(v0, w0, robot, movers, points, behind, path_ahead(path, pose))
-    mover = next(m for m in movers if m.track == threat.mover)
+    choice = threats.choose(v0, w0, robot, movers, points, behind, path_ahead(path, pose), reach)
+    contact = threat.ttc <= threat.stop
+    mover = next(m for m in movers if m.track == (threat.mover if contact else threat.stop_mover))
     if abs(v0) < STANDING_MPS:
         act = "step out of its way" if choice.v != 0.0 else "stand"
     elif choice.v < v0 - 0.05:
@@ -151,12 +166,17 @@ def decide_for(
     else:
         act = "keep clear"
     after = "meets none" if math.isinf(choice.ttc) else f"meets one in {choice.ttc:.1f} s"
+    what = (
+        f"contact in {threat.ttc:.1f} s"
+        if contact
+        else f"in safety_stop's reach in {threat.stop:.1f} s"
+    )
     reason = (
         f"dodge: mover track {mover.track} at ({mover.x:+.2f}, {mover.y:+.2f}) m moving "
         f"{math.hypot(mover.vx, mover.vy):.2f} m/s toward "
-        f"{math.degrees(math.atan2(mover.vy, mover.vx)):+.0f} deg: contact in "
-        f"{threat.ttc:.1f} s at {threat.v:.2f} m/s; {act}: {choice.v:.2f} m/s, "
-        f"{choice.w:+.2f} rad/s ({after} within {threats.HORIZON_S:g} s)"
+        f"{math.degrees(math.atan2(mover.vy, mover.vx)):+.0f} deg: {what} at {threat.v:.2f} "
+        f"m/s; {act}: {choice.v:.2f} m/s, {choice.w:+.2f} rad/s ({after} within "
+        f"{threats.HORIZON_S:g} s)"
     )
     return Command(choice.v, choice.w, reason)
 
@@ -193,7 +213,8 @@ class Dodge(ControllerScenario):
     def judge(self, scan: LaserScan, odom: Odometry | None) -> Command | None:
         if odom is None:
             return None
-        return decide_for(self.tracker, scan, odom, self.spec.robot, self.path)
+        spec = self.spec
+        return decide_for(self.tracker, scan, odom, spec.robot, self.path, spec.params)
 
     def ttl_s(self) -> float:
         period = self.tracker.period_s

@@ -16,7 +16,10 @@ apparent motion wanders, a body's is steady). A cluster cut by the edge of the l
 or by something nearer in front of it changes shape as the robot moves, so it is matched
 but never adds to its track's velocity nor tells whether it left its surface. A moving
 track unseen for at most ``COAST_S`` (hidden behind another mover, or merged with it into
-one cluster) is still predicted on at its velocity (:meth:`Tracker.movers`).
+one cluster) is still predicted on at its velocity (:meth:`Tracker.movers`). A track told
+moving stays moving for ``STICKY_S`` after it last was (a mover turning back at the end of
+its line fails the line and the surface tests for a window's length), at the velocity of its
+newest ``SHORT_S`` of centres while the whole window's are off a line.
 
 Deterministic (no randomness, ties broken by index) and bounded: at most ``MAX_CLUSTERS``
 clusters (the nearest) and ``MAX_TRACKS`` tracks per robot, whatever the scan holds.
@@ -60,6 +63,16 @@ DISPLACED_M = 0.02
 # body's is (the RMS of the centres about the fitted line within FIT_RMS_M)
 FIT_RMS_M = 0.02
 HISTORY_S = 0.6
+# A mover turning back at the end of its line leaves the constant-velocity fit (its centres
+# go out and come back: the RMS grows, the slope falls to nothing) and its points return over
+# the surface they left. A track that moved within STICKY_S keeps moving through that, at
+# the velocity of its newest SHORT_S of centres when those fit a line (the way it goes now)
+# and of the whole window else.
+STICKY_S = 0.6
+SHORT_S = 0.12
+# ...once it was told moving for this long on end: a box told moving for a scan or two as the
+# robot passes it (its faces turning into view) is not kept moving
+STEADY_S = 0.3
 GATE_M = 0.25  # the match gate, plus GATE_MPS x the time since the track was seen
 GATE_MPS = 1.5
 _RANGE_TOLERANCE_M = 1e-4
@@ -87,6 +100,7 @@ class Track:
     radius: float
     seen: list[tuple[float, float, float]] = field(default_factory=list)
     last_t: float = 0.0
+    prev_t: float = -math.inf  # the sighting before the newest
     last_x: float = 0.0
     last_y: float = 0.0
     vx: float = 0.0
@@ -96,13 +110,16 @@ class Track:
     displaced: bool = False  # its points left the surface an older scan showed
     fit_rms: float = math.inf  # the centres' RMS distance from the fitted constant velocity
     whole: bool = False  # the newest cluster's outline was all there
+    moved_t: float = -math.inf  # the last sighting at which it was told moving (full test)
+    told_from: float = math.inf  # the first sighting of the newest run of them told moving
 
     @property
     def speed(self) -> float:
         return math.hypot(self.vx, self.vy)
 
     @property
-    def moving(self) -> bool:
+    def told(self) -> bool:
+        """Whether this sighting alone tells it moves (the full test)."""
         if self.sightings < MIN_SEEN or len(self.seen) < MIN_SEEN:
             return False
         span = self.seen[-1][0] - self.seen[0][0]
@@ -113,12 +130,22 @@ class Track:
             and self.fit_rms <= FIT_RMS_M
         )
 
+    @property
+    def moving(self) -> bool:
+        """Told moving now, or within ``STICKY_S`` after being told so for ``STEADY_S`` on end
+        (turning back, or stopping a moment)."""
+        if self.told:
+            return True
+        steady = self.moved_t - self.told_from >= STEADY_S - 1e-9
+        return steady and self.last_t - self.moved_t <= STICKY_S
+
     def at(self, t: float) -> tuple[float, float]:
         """Where the track is predicted at sim time ``t`` (constant velocity)."""
         dt = t - self.last_t
         return self.last_x + self.vx * dt, self.last_y + self.vy * dt
 
     def add(self, t: float, c: Cluster) -> None:
+        self.prev_t = self.last_t
         self.last_t, self.last_x, self.last_y = t, c.x, c.y
         self.beams = (c.first, c.last)
         self.whole = c.whole
@@ -142,6 +169,24 @@ class Track:
         self.vx = float(ts @ dx) / denom
         self.vy = float(ts @ dy) / denom
         self.fit_rms = float(np.sqrt(np.mean((dx - self.vx * ts) ** 2 + (dy - self.vy * ts) ** 2)))
+        if self.fit_rms > FIT_RMS_M:
+            short = _line(a[a[:, 0] >= a[-1, 0] - SHORT_S])
+            if short is not None and short[2] <= FIT_RMS_M:
+                self.vx, self.vy = short[0], short[1]  # the way it goes now
+
+
+def _line(a: FloatArray) -> tuple[float, float, float] | None:
+    """The constant velocity fitted to sightings (t, x, y), and the RMS about it; None for
+    fewer than ``MIN_SEEN``."""
+    if len(a) < MIN_SEEN:
+        return None
+    ts = a[:, 0] - a[:, 0].mean()
+    denom = float(ts @ ts)
+    if denom <= 1e-9:
+        return None
+    dx, dy = a[:, 1] - a[:, 1].mean(), a[:, 2] - a[:, 2].mean()
+    vx, vy = float(ts @ dx) / denom, float(ts @ dy) / denom
+    return vx, vy, float(np.sqrt(np.mean((dx - vx * ts) ** 2 + (dy - vy * ts) ** 2)))
 
 
 def robot_pose(scan: LaserScan, odom: Odometry) -> tuple[float, float, float]:
@@ -276,9 +321,19 @@ class Tracker:
             k.add(t, cl)
             self.tracks.append(k)
         self._displacement(t, world)
+        self._told(t)
         self.history = [h for h in self.history if h[0] >= t - HISTORY_S]
         self.history.append((t, world[np.isfinite(world[:, 0])]))
         return found
+
+    def _told(self, t: float) -> None:
+        """Note when each track seen now was last told moving (its stickiness)."""
+        for k in self.tracks:
+            if k.last_t != t or not k.told:
+                continue
+            if k.moved_t < k.prev_t:  # not told at its previous sighting: a new run
+                k.told_from = t
+            k.moved_t = t
 
     def _displacement(self, t: float, world: FloatArray) -> None:
         """For each track seen now and fast enough: whether its points left the surface the
