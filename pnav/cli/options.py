@@ -154,17 +154,31 @@ PROCESSES_HELP = (
 )
 
 
+PROCESSES_CHOICES = ("auto", "composed", "separate")
+
+
+def processes_list(text: str) -> str:
+    """``--processes`` of a command that runs every layout listed (comma-separated), as
+    given once each is known."""
+    names = [part.strip() for part in text.split(",")]
+    if not all(name in PROCESSES_CHOICES for name in names):
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: each layout must be one of {', '.join(PROCESSES_CHOICES)}"
+        )
+    return text
+
+
 def processes_option(parser: argparse.ArgumentParser) -> None:
     """``--processes``: how the stack's services share processes (pnav.run.launcher)."""
-    parser.add_argument(
-        "--processes", choices=("auto", "composed", "separate"), help=PROCESSES_HELP
-    )
+    parser.add_argument("--processes", choices=PROCESSES_CHOICES, help=PROCESSES_HELP)
 
 
 def apply_processes(args: argparse.Namespace) -> None:
     """``--processes`` for every stack the command starts (a benchmark's workers' too):
     PNAV_PROCESSES, which pnav.run.stack_options.StackOptions reads."""
-    if getattr(args, "processes", None):
+    # a list (`pnav bench latency --processes composed,separate`) is the command's own: it
+    # gives each run its layout
+    if getattr(args, "processes", None) in PROCESSES_CHOICES:
         os.environ["PNAV_PROCESSES"] = args.processes
 
 

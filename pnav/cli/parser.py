@@ -24,6 +24,7 @@ from pnav.cli.options import (
     not_negative,
     port,
     positive,
+    processes_list,
     processes_option,
     record_option,
     record_parser,
@@ -199,7 +200,7 @@ def build_parser() -> argparse.ArgumentParser:
     latency.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
     latency.add_argument(
         "--processes",
-        dest="layouts",
+        type=processes_list,
         metavar="LAYOUT[,LAYOUT]",
         help="the stack's layout, one run per layout and size: auto, composed or separate "
         "(composed,separate: both in one report, with the price of separate processes); "

@@ -164,7 +164,7 @@ def _bench(args: argparse.Namespace) -> int:
             args.json,
             latency_report.parse_links(args.robot_link),
             with_floor=not args.no_floor,
-            layouts=latency_report.parse_layouts(args.layouts),
+            layouts=latency_report.parse_layouts(args.processes),
         )
     if args.bench == "nav":
         from pnav.bench.nav import runner

@@ -452,7 +452,9 @@ def test_paced_by_the_stack_the_sim_keeps_real_time_until_a_first_decision(
         t0, start = node.sim.time, time.monotonic()
         time.sleep(1.0)
         rate = (node.sim.time - t0) / (time.monotonic() - start)
-        assert 0.5 < rate <= 1.05  # real time (sleeping a step at a time runs a bit slow)
+        # real time at most, not flat out (rate 0 is max); how far below real time a loaded
+        # machine leaves it is the machine's, so only that it moves is asked of the low side
+        assert 0.0 < rate <= 1.05
         listener.send("r1", pack({"stamp": 0.0, "linear": 0.0, "angular": 0.0,
                                   "command_id": 1, "decided_stamp": node.sim.time}))  # fmt: skip
         listener.wait(lambda: gate.heard)
