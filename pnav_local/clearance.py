@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+import pnav_local.scratch as scratch
 from pnav_local.bounds import PAIRS_PER_PRODUCT, BoolArray, FloatArray
 
 IntArray = npt.NDArray[np.int64]
@@ -137,7 +138,8 @@ def _gather(counts: IntArray, starts: IntArray) -> IntArray:
     """The hit indices of every box, box after box."""
     total = int(counts.sum())
     ends = np.cumsum(counts)
-    out: IntArray = np.arange(total, dtype=np.int64) + np.repeat(starts - (ends - counts), counts)
+    out: IntArray = np.repeat(starts - (ends - counts), counts)
+    out += scratch.arange(total)
     return out
 
 
@@ -203,11 +205,12 @@ def _polygon_gap(qx: FloatArray, qy: FloatArray, polygon: FloatArray) -> FloatAr
 
 
 def _box_order(
-    qx: FloatArray, qy: FloatArray, box: tuple[float, float, float, float]
+    qx: FloatArray, qy: FloatArray, box: tuple[float, float, float, float], inside: FloatArray
 ) -> FloatArray:
-    """Per point (robot frame; ``qx``, ``qy`` are overwritten), what orders its gap from the
-    axis-aligned box ``box`` (:func:`_box`) as the gap does: the signed gap inside (negative),
-    its square outside. :func:`_polygon_gap`'s closed form, without the root per point."""
+    """Per point (robot frame), what orders its gap from the axis-aligned box ``box``
+    (:func:`_box`) as the gap does: the signed gap inside (negative), its square outside;
+    :func:`_polygon_gap`'s closed form without the root per point. In ``qx`` (``qy`` and
+    ``inside``, as long, are overwritten too)."""
     cx, cy, hx, hy = box
     if cx != 0.0:
         qx -= cx
@@ -217,14 +220,14 @@ def _box_order(
     dx -= hx
     dy = np.abs(qy, out=qy)
     dy -= hy
-    inside = np.maximum(dx, dy)  # < 0: both are, and the gap is the nearer side's
+    np.maximum(dx, dy, out=inside)  # < 0: both are, and the gap is the nearer side's
     np.maximum(dx, 0.0, out=dx)
     np.maximum(dy, 0.0, out=dy)
     dx *= dx
     dy *= dy
     dx += dy
-    out: FloatArray = np.where(inside < 0.0, inside, dx)
-    return out
+    np.copyto(dx, inside, where=inside < 0.0)
+    return dx
 
 
 def gaps(
@@ -305,26 +308,32 @@ def _nearest(
         c, s = counts[begin * boxes : end * boxes], starts[begin * boxes : end * boxes]
         found = _gather(c, s)
         n = per_pose[begin:end]
-        # each pose's values repeated over its pairs (a repeat is cheaper than a gather), and
-        # the arithmetic in place: a pair costs some 25 passes over arrays of ~30,000 pairs
-        dx = index.x[found]
-        dx -= np.repeat(px[begin:end], n)
-        dy = index.y[found]
-        dy -= np.repeat(py[begin:end], n)
+        # the pairs' arithmetic in place, in scratch arrays (scratch.py: fresh ones cost more
+        # in page faults than the arithmetic), each pose's values taken to its pairs by owner
+        pairs = len(found)
+        owner = np.repeat(scratch.arange(end - begin), n)
+        tmp = scratch.array("tmp", pairs)
+        dx = np.take(index.x, found, out=scratch.array("dx", pairs), mode="clip")
+        dx -= np.take(px[begin:end], owner, out=tmp, mode="clip")
+        dy = np.take(index.y, found, out=scratch.array("dy", pairs), mode="clip")
+        dy -= np.take(py[begin:end], owner, out=tmp, mode="clip")
         if polygon is None or headings is None:
             dx *= dx
             dy *= dy
             dx += dy
             d = dx  # squared: one root per pose (the caller's), not per pair
         else:
-            co, so = np.repeat(cos[begin:end], n), np.repeat(sin[begin:end], n)
+            co = np.take(cos[begin:end], owner, out=scratch.array("co", pairs), mode="clip")
+            so = np.take(sin[begin:end], owner, out=scratch.array("so", pairs), mode="clip")
             # (co dx + so dy, -so dx + co dy): the same sums, bit for bit
-            qx = co * dx
-            tmp = so * dy
-            qx += tmp
+            qx = np.multiply(co, dx, out=scratch.array("qx", pairs))
+            qx += np.multiply(so, dy, out=tmp)
             qy = np.multiply(co, dy, out=co)
             qy -= np.multiply(so, dx, out=tmp)
-            d = _box_order(qx, qy, box) if box is not None else _polygon_gap(qx, qy, polygon)
+            if box is not None:
+                d = _box_order(qx, qy, box, scratch.array("inside", pairs))
+            else:
+                d = _polygon_gap(qx, qy, polygon)
         if len(d):
             at = done[begin:end] - done[begin] + n[0] - n  # each pose's first pair
             some = n > 0
