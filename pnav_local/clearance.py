@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+import pnav_local.scratch as scratch
 from pnav_local.bounds import PAIRS_PER_PRODUCT, BoolArray, FloatArray
 
 IntArray = npt.NDArray[np.int64]
@@ -137,7 +138,8 @@ def _gather(counts: IntArray, starts: IntArray) -> IntArray:
     """The hit indices of every box, box after box."""
     total = int(counts.sum())
     ends = np.cumsum(counts)
-    out: IntArray = np.arange(total, dtype=np.int64) + np.repeat(starts - (ends - counts), counts)
+    out: IntArray = np.repeat(starts - (ends - counts), counts)
+    out += scratch.arange(total)
     return out
 
 
@@ -202,6 +204,32 @@ def _polygon_gap(qx: FloatArray, qy: FloatArray, polygon: FloatArray) -> FloatAr
     return out
 
 
+def _box_order(
+    qx: FloatArray, qy: FloatArray, box: tuple[float, float, float, float], inside: FloatArray
+) -> FloatArray:
+    """Per point (robot frame), what orders its gap from the axis-aligned box ``box``
+    (:func:`_box`) as the gap does: the signed gap inside (negative), its square outside;
+    :func:`_polygon_gap`'s closed form without the root per point. In ``qx`` (``qy`` and
+    ``inside``, as long, are overwritten too)."""
+    cx, cy, hx, hy = box
+    if cx != 0.0:
+        qx -= cx
+    if cy != 0.0:
+        qy -= cy
+    dx = np.abs(qx, out=qx)
+    dx -= hx
+    dy = np.abs(qy, out=qy)
+    dy -= hy
+    np.maximum(dx, dy, out=inside)  # < 0: both are, and the gap is the nearer side's
+    np.maximum(dx, 0.0, out=dx)
+    np.maximum(dy, 0.0, out=dy)
+    dx *= dx
+    dy *= dy
+    dx += dy
+    np.copyto(dx, inside, where=inside < 0.0)
+    return dx
+
+
 def gaps(
     xs: FloatArray,
     ys: FloatArray,
@@ -262,8 +290,10 @@ def _nearest(
     counts, starts = index.pairs(px, py, reach)
     boxes = len(counts) // len(px)
     per_pose = counts.reshape(len(px), boxes).sum(axis=1)
+    box = None
     if polygon is not None and headings is not None:
         cos, sin = np.cos(headings), np.sin(headings)
+        box = _box(polygon)
     # poses in runs of at most PAIRS_PER_PRODUCT pairs (a single pose's box may exceed it);
     # mostly one run, found without a search
     done = np.cumsum(per_pose)
@@ -278,14 +308,32 @@ def _nearest(
         c, s = counts[begin * boxes : end * boxes], starts[begin * boxes : end * boxes]
         found = _gather(c, s)
         n = per_pose[begin:end]
-        owner = np.repeat(np.arange(begin, end), n)
-        dx = index.x[found] - px[owner]
-        dy = index.y[found] - py[owner]
+        # the pairs' arithmetic in place, in scratch arrays (scratch.py: fresh ones cost more
+        # in page faults than the arithmetic), each pose's values taken to its pairs by owner
+        pairs = len(found)
+        owner = np.repeat(scratch.arange(end - begin), n)
+        tmp = scratch.array("tmp", pairs)
+        dx = np.take(index.x, found, out=scratch.array("dx", pairs), mode="clip")
+        dx -= np.take(px[begin:end], owner, out=tmp, mode="clip")
+        dy = np.take(index.y, found, out=scratch.array("dy", pairs), mode="clip")
+        dy -= np.take(py[begin:end], owner, out=tmp, mode="clip")
         if polygon is None or headings is None:
-            d = dx * dx + dy * dy  # squared: one root per pose (the caller's), not per pair
+            dx *= dx
+            dy *= dy
+            dx += dy
+            d = dx  # squared: one root per pose (the caller's), not per pair
         else:
-            co, so = cos[owner], sin[owner]
-            d = _polygon_gap(co * dx + so * dy, -so * dx + co * dy, polygon)
+            co = np.take(cos[begin:end], owner, out=scratch.array("co", pairs), mode="clip")
+            so = np.take(sin[begin:end], owner, out=scratch.array("so", pairs), mode="clip")
+            # (co dx + so dy, -so dx + co dy): the same sums, bit for bit
+            qx = np.multiply(co, dx, out=scratch.array("qx", pairs))
+            qx += np.multiply(so, dy, out=tmp)
+            qy = np.multiply(co, dy, out=co)
+            qy -= np.multiply(so, dx, out=tmp)
+            if box is not None:
+                d = _box_order(qx, qy, box, scratch.array("inside", pairs))
+            else:
+                d = _polygon_gap(qx, qy, polygon)
         if len(d):
             at = done[begin:end] - done[begin] + n[0] - n  # each pose's first pair
             some = n > 0
@@ -294,4 +342,8 @@ def _nearest(
             else:
                 out[begin:end][some] = np.minimum.reduceat(d, at[some])
         begin = end
+    if box is not None:
+        # _box_order's values: the signed gap inside, the squared gap outside (a root is
+        # monotone, so the root of the smallest is the smallest root, bit for bit)
+        np.sqrt(out, out=out, where=out > 0.0)
     return out

@@ -247,6 +247,33 @@ def rollout(
     return sx + c * x - s * y, sy + s * x + c * y, syaw + yaw
 
 
+def shared_steps(
+    win: Window, horizon_s: float, steps: int
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], int]:
+    """(the two-segment trajectories whose first segment is one of the window's arcs, those
+    arcs, how many of the first instants they share): the instants up to ``bend_s``, where
+    :func:`rollout` gives both the same poses bit for bit (the second arc adds exact zeros
+    before the bend). Nothing shared: empty arrays and 0."""
+    none = np.zeros(0, dtype=np.int64)
+    if win.then_w is None or len(win.then_w) == 0:
+        return none, none, 0
+    shared = int(np.count_nonzero(_times(horizon_s, steps) <= win.bend_s))
+    if shared == 0:
+        return none, none, 0
+    n = win.arcs
+    arc_of = {
+        vw: i for i, vw in enumerate(zip(win.v[:n].tolist(), win.w[:n].tolist(), strict=True))
+    }
+    rows: list[int] = []
+    arcs: list[int] = []
+    for j, vw in enumerate(zip(win.v[n:].tolist(), win.w[n:].tolist(), strict=True)):
+        i = arc_of.get(vw)
+        if i is not None:
+            rows.append(n + j)
+            arcs.append(i)
+    return np.array(rows, dtype=np.int64), np.array(arcs, dtype=np.int64), shared
+
+
 def bends(
     v1: FloatArray,
     w1: FloatArray,
