@@ -85,7 +85,9 @@ def main(argv: list[str] | None = None) -> int:
     dwa_ms, dwa_cpu = timed(
         lambda s, o, p: choose(s, o, JACKAL, p, params, polygon), data, args.repeat
     )
-    ml_ms, ml_cpu = timed(lambda s, o, p: recommend(model, s, o, JACKAL, p), data, args.repeat)
+    ml_ms, ml_cpu = timed(
+        lambda s, o, p: recommend(model, s, o, JACKAL, p, None, params, polygon), data, args.repeat
+    )
     results = {
         "model": model.path,
         "set": args.set,
