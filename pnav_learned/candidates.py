@@ -29,7 +29,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
 import pnav_local.clearance as clearance
 import pnav_local.trajectories as tr
@@ -153,7 +152,8 @@ def gaps(
     ex, ey = np.abs(qx - cx) - hx, np.abs(qy - cy) - hy
     outside = np.sqrt(np.maximum(ex, 0.0) ** 2 + np.maximum(ey, 0.0) ** 2)
     box_gaps: tr.FloatArray = np.where((ex < 0.0) & (ey < 0.0), np.maximum(ex, ey), outside)
-    return box_gaps.min(axis=1)
+    nearest: tr.FloatArray = box_gaps.min(axis=1)
+    return nearest
 
 
 def bounds(
