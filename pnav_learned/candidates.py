@@ -1,9 +1,9 @@
 """learned_drive's check: the network proposes, geometry checks.
 
-The model's (linear, angular) is a proposal, not a command. It and its nearest neighbours on
-dwa's own lattice (the dynamic window dwa would sample for the same odometry, robot row and
-``dwa_*`` params: pnav_local.trajectories.window) are ranked by how near each is to the
-proposal, in lattice cells, and put to dwa's own admissibility, with dwa's own functions: the
+The model's (linear, angular) is a proposal, not a command. It and the points of dwa's own
+lattice (the dynamic window dwa would sample for the same odometry, robot row and ``dwa_*``
+params: pnav_local.trajectories.window) are ranked by how near each is to the proposal, in
+lattice cells, and put, nearest first, to dwa's own admissibility, with dwa's own functions: the
 footprint (the robot row's polygon, or its disc) rolled out along each arc for the horizon
 against the scan's hits with the margin (pnav_local.clearance), the stopping distance of the
 window's slowest speed (pnav_local.trajectories.admissible), a slow arc followed on as far
@@ -37,11 +37,10 @@ from common.scan import readings
 from pnav_local.dwa import stopping_speed
 from pnav_local.dwa_params import DwaParams
 
-# how many of the lattice's points nearest the proposal are checked if the proposal fails,
-# and how many of its slowest row (turns nearly in place, and the brake) beside them
-NEIGHBOURS = 12
-SLOWEST = 4
-BATCH = 4  # neighbours checked at once
+# how many of the ranked lattice points are checked at once once the proposal has failed:
+# the nearest few first (usually one of them passes), then more at a time; the rest of the
+# lattice in one go
+BATCHES = (4, 12, 32)
 
 
 @dataclass(frozen=True)
@@ -64,17 +63,12 @@ class Verdict:
 def ranked(
     proposal: tuple[float, float], win: tr.Window, v_cell: float, w_cell: float
 ) -> tuple[tr.FloatArray, tr.FloatArray]:
-    """The proposal (clamped into the window) and the window's points nearest it, nearest
-    first (distance in lattice cells), with the slowest row's nearest among them."""
-    v_low, v_high = float(win.v[0]), float(win.v[-1])
-    v0 = min(max(proposal[0], v_low), v_high)
-    w0 = min(max(proposal[1], float(win.w.min())), float(win.w.max()))
-    d = np.hypot((win.v - v0) / v_cell, (win.w - w0) / w_cell)
-    order = np.argsort(d, kind="stable")
-    slowest = order[win.v[order] <= v_low + 1e-9][:SLOWEST]
-    pick = np.union1d(order[:NEIGHBOURS], slowest)  # sorted by index: ranked again below
-    pick = pick[np.argsort(d[pick], kind="stable")]
-    return np.concatenate([[v0], win.v[pick]]), np.concatenate([[w0], win.w[pick]])
+    """The window's points, nearest the proposal first (distance in lattice cells), standing
+    still (no speed, no turn) last: it is what a brake does, not a move."""
+    d = np.hypot((win.v - proposal[0]) / v_cell, (win.w - proposal[1]) / w_cell)
+    still = (np.abs(win.v) < 1e-9) & (np.abs(win.w) < 1e-9)
+    order = np.lexsort((d, still))  # by stillness, then distance
+    return win.v[order], win.w[order]
 
 
 @functools.lru_cache(maxsize=8)
@@ -123,36 +117,38 @@ def gaps(
     out = np.full(len(xs), np.inf)
     reach = foot.reach_m + needed_m
     # only the points within reach of the poses' bounding box can be within reach of a pose
-    inside = np.flatnonzero(
-        (px >= xs.min() - reach) & (px <= xs.max() + reach)
-        & (py >= ys.min() - reach) & (py <= ys.max() + reach)
-    )  # fmt: skip
-    if len(inside) == 0:
-        return out
-    px, py = px[inside], py[inside]
-    dx = px[None, :] - xs[:, None]
-    dy = py[None, :] - ys[:, None]
-    d2 = dx * dx + dy * dy
-    near = np.flatnonzero((d2 <= reach * reach).any(axis=0))
+    x0, x1 = float(xs.min()) - reach, float(xs.max()) + reach
+    y0, y1 = float(ys.min()) - reach, float(ys.max()) + reach
+    near = np.flatnonzero(
+        (np.abs(px - (x0 + x1) / 2.0) <= (x1 - x0) / 2.0)
+        & (np.abs(py - (y0 + y1) / 2.0) <= (y1 - y0) / 2.0)
+    )
     if len(near) == 0:
-        out[:] = needed_m
         return out
+    dx = px[near][None, :] - xs[:, None]
+    dy = py[near][None, :] - ys[:, None]
     if foot.polygon is None:
-        gap: tr.FloatArray = np.sqrt(d2[:, near].min(axis=1)) - foot.radius_m
-        return gap
-    dx, dy = dx[:, near], dy[:, near]
+        disc: tr.FloatArray = np.sqrt((dx * dx + dy * dy).min(axis=1)) - foot.radius_m
+        return disc
     c, s = np.cos(yaws)[:, None], np.sin(yaws)[:, None]
     qx, qy = c * dx + s * dy, c * dy - s * dx  # each point in the pose's frame
     if box is None:
-        shape = qx.shape
         general = clearance._polygon_gap(qx.ravel(), qy.ravel(), foot.polygon)
-        polygon_gaps: tr.FloatArray = general.reshape(shape).min(axis=1)
+        polygon_gaps: tr.FloatArray = general.reshape(qx.shape).min(axis=1)
         return polygon_gaps
+    # the box's signed distance (clearance's closed form), in place: outside, the distance
+    # to the nearest side or corner; inside, minus the distance to the nearest side
     cx, cy, hx, hy = box
     ex, ey = np.abs(qx - cx) - hx, np.abs(qy - cy) - hy
-    outside = np.sqrt(np.maximum(ex, 0.0) ** 2 + np.maximum(ey, 0.0) ** 2)
-    box_gaps: tr.FloatArray = np.where((ex < 0.0) & (ey < 0.0), np.maximum(ex, ey), outside)
-    nearest: tr.FloatArray = box_gaps.min(axis=1)
+    inside = np.minimum(np.maximum(ex, ey), 0.0)
+    np.maximum(ex, 0.0, out=ex)
+    np.maximum(ey, 0.0, out=ey)
+    ex *= ex
+    ey *= ey
+    ex += ey
+    np.sqrt(ex, out=ex)
+    ex += inside
+    nearest: tr.FloatArray = ex.min(axis=1)
     return nearest
 
 
@@ -243,12 +239,19 @@ def check(
         max((v_high - v_low) / max(1, p.linear_samples - 1), 1e-3),
         max((w_high - w_low) / max(1, p.angular_samples - 1), 1e-3),
     )
-    v, w = ranked(proposal, lattice, *cells)
-    checked = 1
-    for at in range(1, len(v), BATCH):
-        ok, arc_gaps = admissible(v[at : at + BATCH], w[at : at + BATCH])
+    v, w = ranked((v0, w0), lattice, *cells)
+    checked, at = 1, 0
+    for k in range(len(BATCHES) + 1):
+        if at >= len(v):
+            break
+        size = BATCHES[k] if k < len(BATCHES) else len(v) - at
+        ok, arc_gaps = admissible(v[at : at + size], w[at : at + size])
         checked += len(ok)
-        if ok.any():
-            i = int(np.flatnonzero(ok)[0])
-            return Verdict(float(v[at + i]), float(w[at + i]), at + i, checked, float(arc_gaps[i]))
+        moving = ok & ((np.abs(v[at : at + size]) >= 1e-9) | (np.abs(w[at : at + size]) >= 1e-9))
+        if moving.any():
+            i = int(np.flatnonzero(moving)[0])
+            return Verdict(
+                float(v[at + i]), float(w[at + i]), at + i + 1, checked, float(arc_gaps[i])
+            )
+        at += size
     return Verdict(0.0, 0.0, None, checked, math.inf)

@@ -90,6 +90,15 @@ def test_boxed_in_none_is_admissible_and_the_verdict_is_a_brake() -> None:
     assert verdict.checked > 1  # the neighbours were tried before giving up
 
 
+def test_standing_still_is_no_move_while_a_move_passes() -> None:
+    # a wall 0.45 m ahead, from a standstill: nothing near straight on passes, standing still
+    # would, and so do sharp turns (the corners, 0.33 m out, keep 0.12 m): one is chosen
+    verdict = check((1.0, 0.0), scan_of(wall(0.45, -1.5, 1.5)), odom(0.0), JACKAL, P, 10.0, BOX)
+    assert verdict.rank not in (None, 0)
+    assert abs(verdict.angular) >= 1.0
+    assert verdict.checked > 17  # beyond the nearest few, into the rest of dwa's lattice
+
+
 @pytest.mark.parametrize(
     ("v", "w", "cap"), [(0.0, 0.0, 9.0), (1.7, -3.5, 9.0), (0.5, 1.0, 0.3), (2.0, 4.0, 0.0)]
 )
@@ -106,4 +115,3 @@ def test_the_window_is_the_one_dwa_samples(v: float, w: float, cap: float) -> No
 def test_hits_are_the_points_within_reach() -> None:
     xs, ys = hits(scan_of([(1.0, 0.0), (0.0, 2.0), (-3.0, 0.0)]), 2.5)
     assert sorted(zip(np.round(xs, 3), np.round(ys, 3), strict=True)) == [(0.0, 2.0), (1.0, 0.0)]
-
