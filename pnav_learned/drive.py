@@ -94,6 +94,7 @@ def recommend(
             "proposed_linear_mps": round(linear, 4),
             "proposed_angular_rps": round(angular, 4),
             "admissible": verdict.admitted,
+            "checked": verdict.checked,
         },
     )
 
