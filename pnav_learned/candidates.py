@@ -41,6 +41,9 @@ from pnav_local.dwa_params import DwaParams
 # the nearest few first (usually one of them passes), then more at a time; the rest of the
 # lattice in one go
 BATCHES = (4, 12, 32)
+# from this many poses a batch's gaps are measured through dwa's sorted index of the hits
+# (clearance.Index, built once a decision when first needed) rather than pose by hit
+INDEXED_FROM = 100
 
 
 @dataclass(frozen=True)
@@ -195,6 +198,7 @@ def check(
     straight = max(0.0, straight - radius - p.safety_margin_m)
     v_cap = min(v_cap, stopping_speed(straight, p.safety_lookahead_s, accel))
     v_low, v_high, w_low, w_high = bounds(odom, robot, p, v_cap)
+    index: list[clearance.Index] = []  # dwa's index of the hits, once a batch is large
 
     def admissible(v: tr.FloatArray, w: tr.FloatArray) -> tuple[tr.BoolArray, tr.FloatArray]:
         """dwa's test of each arc (trajectories.admissible and the slow arcs' rule), and
@@ -210,7 +214,12 @@ def check(
             np.concatenate([poses[k].ravel(), [start[k]], on[k][: len(slow)].ravel()])
             for k in range(3)
         )
-        every = gaps((flat[0], flat[1], flat[2]), points, foot, box, needed)
+        if len(flat[0]) < INDEXED_FROM:
+            every = gaps((flat[0], flat[1], flat[2]), points, foot, box, needed)
+        else:
+            if not index:
+                index.append(clearance.Index(np.column_stack(points), foot.reach_m + needed))
+            every = clearance.gaps(flat[0], flat[1], flat[2], index[0], foot, needed)
         n = poses[0].size
         arc_gaps, start_gap = every[:n].reshape(poses[0].shape), float(every[n])
         ok = tr.admissible(
