@@ -9,13 +9,16 @@ against the scan's hits with the margin (pnav_local.clearance), the stopping dis
 window's slowest speed (pnav_local.trajectories.admissible), a slow arc followed on as far
 as the robot goes in ``dwa_min_travel_s`` (trajectories.further), and dwa's speed cap (the
 path's end, and safety_stop's reach straight ahead: pnav_local.dwa.stopping_speed). The
-nearest admissible candidate is recommended; with none, a brake that says so.
+nearest admissible candidate is recommended. Standing still is no move: it is ranked last,
+and if it is all that passes (or nothing does) the verdict is a brake that says so.
 
-Why so few: checking is the expensive half of a dwa decision (some 170 arcs of 10 poses
-each against the scan). Here the proposal is checked first, with the window's brake beside
-it (the brake's stopping test needs it in the set); only if the proposal fails are its
-neighbours checked, all at once. Most decisions in the open stop at the first check. What a
-decision costs, checks included, is what ``python -m pnav.bench.learned`` measures.
+Why nearest first: checking is the expensive half of a dwa decision (some 170 arcs of 10
+poses each against the scan). Here the proposal is checked alone first; only if it fails
+are the others, a few at a time (BATCHES), until one passes. Most decisions in the open
+stop at the first check, many others within the first batch; a robot in a pocket, whose
+proposal keeps pointing into it, has the whole lattice checked. What a decision costs,
+checks included, is what ``python -m pnav.bench.learned`` measures (docs/BENCHMARKS.md: half
+of dwa's on the held-out BARN worlds, as the proposal fails half the time).
 
 dwa itself is not edited or called: its scoring (progress, path, heading, clearance) is what
 the network replaces, and this module imports only the geometry.

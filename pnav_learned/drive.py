@@ -3,10 +3,13 @@ decisions (``pnav learn train``), e.g. a policy distilled from dwa's.
 
 Per fresh scan it computes the decision's features (pnav_learned.features: scan sectors,
 odometry, the planned path's carrot and target in the robot's frame), runs the model named
-by the strategy's params and recommends the velocity it predicts, clamped to the robot's
-limits, at priority 30 (dwa's: a local controller; avoid, recovery and the safety band keep
-the last word, and the bridge's safety layer judges the command as any other). Its reason
-names the model, its version and its confidence.
+by the strategy's params, and takes the velocity it predicts as a proposal that dwa's
+geometry checks (pnav_learned.candidates: the nearest admissible of it and dwa's lattice, or
+a brake when nothing but standing still is). It recommends that at priority 30 (dwa's: a
+local controller; avoid, recovery and the safety band keep the last word, and the bridge's
+safety layer judges the command as any other), with ``dwa_*`` params read as dwa reads them.
+Its reason names the model, its version, its confidence, the proposal and the check's
+verdict.
 
 Params: ``learned_model`` (a model registered in the ``model`` table, or a model file) and,
 optionally, ``learned_model_version`` (the registered version, or the version the file must
@@ -70,17 +73,20 @@ def recommend(
         f"learned_drive: {label}, confidence {confidence:.2f} (share of features within the"
         f" training data's range): proposed {linear:.2f} m/s, {angular:+.2f} rad/s; "
     )
+    # a gap is measured exactly only below what the margin reads (clearance.gaps)
+    exact = p.margin_m + 0.01
+    gap = f"{verdict.gap_m:.2f} m" if verdict.gap_m < exact else f"over {exact:.2f} m"
     if verdict.rank is None:
         why += (
             f"none of the {verdict.checked} candidates checked (the proposal and its"
             " neighbours on dwa's lattice) is admissible for the footprint: brake"
         )
     elif verdict.rank == 0:
-        why += f"admissible (gap {verdict.gap_m:.2f} m)"
+        why += f"admissible (gap {gap})"
     else:
         why += (
             f"not admissible; its neighbour {verdict.linear:.2f} m/s,"
-            f" {verdict.angular:+.2f} rad/s is (rank {verdict.rank}, gap {verdict.gap_m:.2f} m,"
+            f" {verdict.angular:+.2f} rad/s is (rank {verdict.rank}, gap {gap},"
             f" {verdict.checked} candidates checked)"
         )
     return Command(
