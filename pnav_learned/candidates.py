@@ -55,8 +55,8 @@ class Verdict:
 
     linear: float
     angular: float
-    # the chosen candidate's rank (0: the proposal itself, within the window); None: none
-    # of the candidates is admissible (linear and angular are then a brake)
+    # the chosen candidate's rank (0: the proposal itself, within the window); None: no
+    # candidate that moves is admissible (linear and angular are then a brake)
     rank: int | None
     checked: int  # candidates rolled out against the scan
     gap_m: float  # the chosen arc's smallest gap beyond the footprint (inf: nothing near)
