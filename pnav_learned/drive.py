@@ -3,10 +3,13 @@ decisions (``pnav learn train``), e.g. a policy distilled from dwa's.
 
 Per fresh scan it computes the decision's features (pnav_learned.features: scan sectors,
 odometry, the planned path's carrot and target in the robot's frame), runs the model named
-by the strategy's params and recommends the velocity it predicts, clamped to the robot's
-limits, at priority 30 (dwa's: a local controller; avoid, recovery and the safety band keep
-the last word, and the bridge's safety layer judges the command as any other). Its reason
-names the model, its version and its confidence.
+by the strategy's params, and takes the velocity it predicts as a proposal that dwa's
+geometry checks (pnav_learned.candidates: the nearest admissible of it and dwa's lattice, or
+a brake when nothing but standing still is). It recommends that at priority 30 (dwa's: a
+local controller; avoid, recovery and the safety band keep the last word, and the bridge's
+safety layer judges the command as any other), with ``dwa_*`` params read as dwa reads them.
+Its reason names the model, its version, its confidence, the proposal and the check's
+verdict.
 
 Params: ``learned_model`` (a model registered in the ``model`` table, or a model file) and,
 optionally, ``learned_model_version`` (the registered version, or the version the file must
@@ -21,6 +24,7 @@ which is one per (robot, scenario): never shared between robots.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -28,12 +32,15 @@ import numpy as np
 from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry, Robot
 from common.controller_core.scenario import Command
-from pnav_learned.features import features, sector_minima
+from pnav_learned.candidates import check
+from pnav_learned.features import FEATURES, features, sector_minima
 from pnav_learned.model import DRIVE, Model
 from pnav_learned.scenario import LearnedScenario
+from pnav_local.dwa_params import DwaParams
 
 PRIORITY = 30
 PARAMS = "learned"  # learned_model, learned_model_version
+TARGET_DIST = FEATURES.index("target_dist")
 
 
 def recommend(
@@ -43,7 +50,11 @@ def recommend(
     robot: Robot,
     path: PlannedPath,
     label: str | None = None,
+    params: DwaParams | None = None,
+    polygon: Sequence[Sequence[float]] | None = None,
 ) -> Command:
+    """The model's proposal, checked (pnav_learned.candidates): the nearest admissible of
+    it and its neighbours on dwa's lattice, or a brake that says none is."""
     sectors = sector_minima(scan.ranges, scan.angle_min, scan.angle_increment)
     x = features(
         sectors,
@@ -55,13 +66,42 @@ def recommend(
     linear, angular, confidence = model.predict(x)
     linear = float(np.clip(linear, -robot.max_linear_mps, robot.max_linear_mps))
     angular = float(np.clip(angular, -robot.max_angular_rps, robot.max_angular_rps))
+    p = params or DwaParams()
+    verdict = check((linear, angular), scan, odom, robot, p, float(x[TARGET_DIST]), polygon)
     label = label or f"model {model.name} version {model.version}"
+    why = (
+        f"learned_drive: {label}, confidence {confidence:.2f} (share of features within the"
+        f" training data's range): proposed {linear:.2f} m/s, {angular:+.2f} rad/s; "
+    )
+    # a gap is measured exactly only below what the margin reads (clearance.gaps)
+    exact = p.margin_m + 0.01
+    gap = f"{verdict.gap_m:.2f} m" if verdict.gap_m < exact else f"over {exact:.2f} m"
+    if verdict.rank is None:
+        why += (
+            f"none of the {verdict.checked} candidates checked (the proposal and its"
+            " neighbours on dwa's lattice) is admissible for the footprint: brake"
+        )
+    elif verdict.rank == 0:
+        why += f"admissible (gap {gap})"
+    else:
+        why += (
+            f"not admissible; its neighbour {verdict.linear:.2f} m/s,"
+            f" {verdict.angular:+.2f} rad/s is (rank {verdict.rank}, gap {gap},"
+            f" {verdict.checked} candidates checked)"
+        )
     return Command(
-        linear,
-        angular,
-        f"learned_drive: {label}, confidence"
-        f" {confidence:.2f} (share of features within the training data's range)",
-        {"planned_path": path.id, "model": model.name, "model_version": model.version},
+        verdict.linear,
+        verdict.angular,
+        why + p.scaled,
+        {
+            "planned_path": path.id,
+            "model": model.name,
+            "model_version": model.version,
+            "proposed_linear_mps": round(linear, 4),
+            "proposed_angular_rps": round(angular, 4),
+            "admissible": verdict.admitted,
+            "checked": verdict.checked,
+        },
     )
 
 
@@ -86,4 +126,8 @@ class LearnedDrive(LearnedScenario):
                 return None
             self.stopped_for = path.id
             return Command(0.0, 0.0, f"learned_drive: no path ({path.target}): stop")
-        return recommend(found.model, scan, odom, self.spec.robot, path, found.label)
+        robot = self.spec.robot
+        params = DwaParams.read(self.spec.params)
+        return recommend(
+            found.model, scan, odom, robot, path, found.label, params, robot.footprint_polygon
+        )

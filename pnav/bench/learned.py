@@ -1,14 +1,19 @@
 """Benchmark: one learned_drive decision against one dwa decision, on the same scenes.
 
-``python -m pnav.bench.learned [--model FILE] [--scenes N] [--set NAME] [--json FILE]`` decides
-the made-up scenes of ``pnav.bench.dwa_decision`` (``default``: the Jackal in clutter, a path
-10 m ahead; ``barn``: BARN-like clutter and a bending path; ``barn_box``: those with the
-Jackal's true box, which dwa then checks too) with dwa's default params and with learned_drive
-(features, then the model: it never looks at the footprint, so its cost is one for every set),
-and prints the milliseconds per
-decision of each (best of the passes, wall and CPU) and their ratio. Without ``--model`` the
-model is a (32, 32) network with random weights: its cost is the cost of any model of that
-shape, which is all a timing needs.
+``python -m pnav.bench.learned [--model FILE] [--scenes N] [--set NAME] [--db-dir DIR...]
+[--json FILE]`` decides the made-up scenes of ``pnav.bench.dwa_decision`` (``default``: the
+Jackal in clutter, a path 10 m ahead; ``barn``: BARN-like clutter and a bending path;
+``barn_box``: those with the Jackal's true box) with dwa's default params and with
+learned_drive, and prints the milliseconds per decision of each (best of the passes, wall
+and CPU) and their ratio. ``--db-dir`` decides instead the states of kept runs (``pnav bench
+nav --keep-db``): each recorded decision's scan, odometry, path and robot row (its
+footprint), as the controller met them.
+
+learned_drive's cost is the features, the model and its check (pnav_learned.candidates: the
+proposal, and if it fails its neighbours on dwa's lattice, rolled out against the scan with
+the footprint), so it depends on the scenes: the share of decisions whose proposal passed at
+once and the candidates checked a decision are printed too. Without ``--model`` the model is
+a (32, 32) network with random weights: its cost is the cost of any model of that shape.
 """
 
 from __future__ import annotations
@@ -18,10 +23,12 @@ import itertools
 import math
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from pnav.bench import recorded
 from pnav.bench.dwa_decision import JACKAL, POLYGONS, barn, scenes
 from pnav.bench.figures import decision_options, emit, machine
 from pnav_learned.drive import recommend
@@ -54,14 +61,12 @@ def random_model(hidden: tuple[int, ...] = (32, 32)) -> Model:
     return parse(doc, "random")
 
 
-def timed(
-    decide: Callable[[Any, Any, Any], object], data: list[Any], repeat: int
-) -> tuple[float, float]:
+def timed(decide: Callable[..., object], data: list[Any], repeat: int) -> tuple[float, float]:
     best = best_cpu = math.inf
     for _ in range(repeat):
         started, cpu = time.perf_counter(), time.process_time()
-        for scan, odom, path in data:
-            decide(scan, odom, path)
+        for scene in data:
+            decide(*scene)
         best = min(best, time.perf_counter() - started)
         best_cpu = min(best_cpu, time.process_time() - cpu)
     return best / len(data) * 1e3, best_cpu / len(data) * 1e3
@@ -74,19 +79,44 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--set", default="default", choices=("default", "barn", "barn_box"), help="the scenes"
     )
+    parser.add_argument(
+        "--db-dir",
+        type=Path,
+        nargs="+",
+        metavar="DIR",
+        help="kept runs' databases: decide their recorded states instead of --set's scenes",
+    )
     parser.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
     args = parser.parse_args(argv)
     model = load(args.model) if args.model else random_model()
-    data = (barn if args.set.startswith("barn") else scenes)(args.scenes, args.seed)
     params = DwaParams.read({})
-    polygon = POLYGONS.get(args.set)
-    dwa_ms, dwa_cpu = timed(
-        lambda s, o, p: choose(s, o, JACKAL, p, params, polygon), data, args.repeat
+    if args.db_dir:
+        data = [
+            (scan, odom, path, robot, robot.footprint_polygon)
+            for scan, odom, path, robot in recorded.states(args.db_dir)
+        ]
+        scene_set = "recorded"
+    else:
+        polygon = POLYGONS.get(args.set)
+        scenes_of = barn if args.set.startswith("barn") else scenes
+        data = [(s, o, p, JACKAL, polygon) for s, o, p in scenes_of(args.scenes, args.seed)]
+        scene_set = args.set
+    dwa_ms, dwa_cpu = timed(lambda s, o, p, r, f: choose(s, o, r, p, params, f), data, args.repeat)
+    ml_ms, ml_cpu = timed(
+        lambda s, o, p, r, f: recommend(model, s, o, r, p, None, params, f), data, args.repeat
     )
-    ml_ms, ml_cpu = timed(lambda s, o, p: recommend(model, s, o, JACKAL, p), data, args.repeat)
+    checks = [
+        int((recommend(model, s, o, r, p, None, params, f).inputs or {})["checked"])
+        for s, o, p, r, f in data
+    ]
+    first = sum(1 for c in checks if c == 1) / max(1, len(checks))
+    checked = sum(checks) / max(1, len(checks))
     results = {
         "model": model.path,
-        "set": args.set,
+        "set": scene_set,
+        "decisions": len(data),
+        "proposal_passed_share": round(first, 4),
+        "candidates_checked_mean": round(checked, 2),
         "dwa_ms_per_decision": round(dwa_ms, 3),
         "dwa_cpu_ms_per_decision": round(dwa_cpu, 3),
         "learned_ms_per_decision": round(ml_ms, 3),
@@ -96,7 +126,9 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"dwa           {dwa_ms:8.3f} ms per decision ({dwa_cpu:.3f} ms CPU)\n"
         f"learned_drive {ml_ms:8.3f} ms per decision ({ml_cpu:.3f} ms CPU),"
-        f" {100 * ml_ms / dwa_ms:.1f} % of dwa's"
+        f" {100 * ml_ms / dwa_ms:.1f} % of dwa's\n"
+        f"{len(data)} decisions; the proposal passed at once in {100 * first:.1f} %,"
+        f" {checked:.2f} candidates checked a decision on average"
     )
     emit({"benchmark": "learned_drive decision", "machine": machine(), **results}, args.json)
     return 0

@@ -54,8 +54,11 @@ async def test_learned_drive_recommends_what_its_model_predicts_and_says_which(
         pytest.approx(-0.4),
     )
     assert row["reason"].startswith("learned_drive: model tiny version const1, confidence ")
+    # the proposal was put to dwa's check (pnav_learned.candidates) and passed as it was
+    assert "proposed 0.15 m/s, -0.40 rad/s; admissible" in row["reason"]
     inputs = row["inputs"]
     assert inputs["planned_path"] == path and inputs["model_version"] == "const1"
+    assert inputs["admissible"] is True and inputs["checked"] == 1
 
 
 async def test_a_refused_model_stands_learned_drive_down_and_the_others_drive(
