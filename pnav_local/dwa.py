@@ -203,7 +203,7 @@ def choose(
         extra_w=align,
     )
     start = tr.start_pose(odom.linear_mps, odom.angular_rps, p.delay_s)
-    if polygon is not None:
+    if polygon is not None and bends_needed(points, start, foot.reach_m, p):
         win = bent_window(win, p, robot, local, start)
     # only what this window's arcs can come near matters to them
     near = math.hypot(start[0], start[1]) + float(win.v.max()) * p.horizon_s + foot.reach_m + 0.5
@@ -281,6 +281,24 @@ def choose(
         outline = Footprint.of(radius, polygon)
         best, vetoed = veto.winner(top_arc, scores.total, ok, win.v, win.w, scan, robot, outline)
     return Choice(win, ok, scores, best, local, v_cap, blocked, vetoed, squeezed)
+
+
+def bends_needed(
+    points: tr.FloatArray, start: tuple[float, float, float], reach_m: float, p: DwaParams
+) -> bool:
+    """Whether a footprint polygon's window needs its two-segment roll-outs: something lies
+    within its circumscribed reach and ``dwa_margin_m`` of its start, so it cannot turn in
+    place where it is. In the open a box turns wherever it is, so "straight on, then turn"
+    is two of its decisions, as for a disc; there a bend only won by a hair over the arcs
+    and sent the Jackal straight on at top speed into a mover's wake, where dodge held it
+    back behind the mover until the mover turned back into it (dynabarn_hard_000: dwa
+    judges each scan as though nothing moved, dodge judges the motion being made, and
+    neither the bend's later turn)."""
+    if len(points) == 0:
+        return False
+    near = reach_m + p.margin_m
+    d = np.hypot(points[:, 0] - start[0], points[:, 1] - start[1])
+    return bool(d.min() <= near)
 
 
 def bent_window(
