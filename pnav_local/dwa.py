@@ -297,8 +297,8 @@ def bent_window(
     wherever it fits, so "straight on, then turn" is two of its decisions; a box in a gap
     narrower than its diagonal cannot, and must see the turn coming before it commits.
     ``points``: the scan's hits (robot frame); ``reach_m``: the footprint's circumscribed
-    radius. Only the bends whose bend (where the first segment ends) comes within the
-    reach and ``dwa_margin_m`` of a hit are kept (bends_needed)."""
+    radius. With ``dwa_bends_in_open`` 0, only the bends whose bend (where the first segment
+    ends) comes within the reach and ``dwa_margin_m`` of a hit are kept (bends_needed)."""
     if p.bend_turns <= 0 or p.bend_s <= 0.0 or p.bend_s >= p.horizon_s:
         return win
     # only arcs that cover dwa_min_travel_s at top speed: a slower one is followed on (its
@@ -309,7 +309,8 @@ def bent_window(
         accel_v=robot.max_linear_accel_mps2, accel_w=robot.max_angular_accel_rps2,
         turns=p.bend_turns, min_v=min_v, aim=local.facing, start=start, horizon_s=p.horizon_s,
     )  # fmt: skip
-    bent = bends_needed(bent, win.arcs, start, points, reach_m + p.margin_m)
+    if not p.bends_in_open:
+        bent = bends_needed(bent, win.arcs, start, points, reach_m + p.margin_m)
     room = POSE_BUDGET // p.steps - len(win.v)
     if bent.then_w is None or bent.then_v is None or len(bent.then_w) <= room:
         return bent

@@ -228,7 +228,11 @@ def test_in_the_open_the_box_turns_by_later_decisions_not_a_bend() -> None:
     # turned back into it (collision at 4.5 s). A bend is kept only where the box could not
     # turn in place at its bend: a hit within its circumscribed reach and the margin.
     scan, odom, path = recorded_tick()
-    p = DwaParams.read({})
+    # the default (GOTO_FAST's): bends wherever they score best, the merged tree's choice
+    anywhere = choose(scan, odom, JACKAL, path, DwaParams.read({}), BOX)
+    assert anywhere is not None and anywhere.best is not None
+    assert anywhere.best >= anywhere.window.arcs  # a bend, its turn in the open
+    p = DwaParams.read({"dwa_bends_in_open": 0})  # GOTO_DODGE's
     choice = choose(scan, odom, JACKAL, path, p, BOX)
     assert choice is not None and choice.best is not None
     win = choice.window
