@@ -204,7 +204,7 @@ def choose(
     )
     start = tr.start_pose(odom.linear_mps, odom.angular_rps, p.delay_s)
     if polygon is not None:
-        win = bent_window(win, p, robot, local, start)
+        win = bent_window(win, p, robot, local, start, points, foot.reach_m)
     # only what this window's arcs can come near matters to them
     near = math.hypot(start[0], start[1]) + float(win.v.max()) * p.horizon_s + foot.reach_m + 0.5
     points = points[np.hypot(points[:, 0], points[:, 1]) <= near]
@@ -308,12 +308,21 @@ def _distinct(
 
 
 def bent_window(
-    win: tr.Window, p: DwaParams, robot: Robot, local: tr.Local, start: tuple[float, float, float]
+    win: tr.Window,
+    p: DwaParams,
+    robot: Robot,
+    local: tr.Local,
+    start: tuple[float, float, float],
+    points: tr.FloatArray,
+    reach_m: float,
 ) -> tr.Window:
     """A footprint polygon's window with its two-segment roll-outs (trajectories.with_bends),
     within what the pose budget leaves (the fastest speeds' first). A disc turns in place
     wherever it fits, so "straight on, then turn" is two of its decisions; a box in a gap
-    narrower than its diagonal cannot, and must see the turn coming before it commits."""
+    narrower than its diagonal cannot, and must see the turn coming before it commits.
+    ``points``: the scan's hits (robot frame); ``reach_m``: the footprint's circumscribed
+    radius. With ``dwa_bends_in_open`` 0, only the bends whose bend (where the first segment
+    ends) comes within the reach and ``dwa_margin_m`` of a hit are kept (bends_needed)."""
     if p.bend_turns <= 0 or p.bend_s <= 0.0 or p.bend_s >= p.horizon_s:
         return win
     # only arcs that cover dwa_min_travel_s at top speed: a slower one is followed on (its
@@ -324,6 +333,8 @@ def bent_window(
         accel_v=robot.max_linear_accel_mps2, accel_w=robot.max_angular_accel_rps2,
         turns=p.bend_turns, min_v=min_v, aim=local.facing, start=start, horizon_s=p.horizon_s,
     )  # fmt: skip
+    if not p.bends_in_open:
+        bent = bends_needed(bent, win.arcs, start, points, reach_m + p.margin_m)
     room = POSE_BUDGET // p.steps - len(win.v)
     if bent.then_w is None or bent.then_v is None or len(bent.then_w) <= room:
         return bent
@@ -336,6 +347,52 @@ def bent_window(
         np.concatenate([win.v, bent.v[n:][keep]]),
         np.concatenate([win.w, bent.w[n:][keep]]),
         win.turns,
+        bent.then_w[keep],
+        bent.bend_s,
+        bent.then_v[keep],
+    )
+
+
+def bends_needed(
+    bent: tr.Window,
+    arcs: int,
+    start: tuple[float, float, float],
+    points: tr.FloatArray,
+    near_m: float,
+) -> tr.Window:
+    """``bent`` without the "straight on, then turn" roll-outs (after its first ``arcs``)
+    whose bend, the pose where the straight ends, has no hit within ``near_m``: there the
+    box turns in place like a disc, so the turn is a later decision's, not this one's. In
+    the open such a bend won by a hair over the arcs and sent the Jackal straight on at top
+    speed into a mover's wake, where dodge held it back behind the mover until the mover
+    turned back into it (dynabarn_hard_000): dwa judges each scan as though nothing moved
+    and dodge the motion being made, neither the bend's later turn. "Turn a little, then
+    straight on" is kept: slow, and what shows a turn in place its progress."""
+    if bent.then_w is None or bent.then_v is None:
+        return bent
+    v, w = bent.v[arcs:], bent.w[arcs:]
+    sx, sy, syaw = start
+    t = bent.bend_s
+    turning = np.abs(w) > 1e-9
+    safe_w = np.where(turning, w, 1.0)
+    heading = syaw + w * t
+    dx = np.where(turning, v / safe_w * (np.sin(heading) - math.sin(syaw)), v * t * math.cos(syaw))
+    dy = np.where(turning, v / safe_w * (math.cos(syaw) - np.cos(heading)), v * t * math.sin(syaw))
+    bx, by = sx + dx, sy + dy
+    if len(points) == 0:
+        keep = np.zeros(len(v), dtype=bool)
+    else:
+        d2 = (bx[:, None] - points[None, :, 0]) ** 2 + (by[:, None] - points[None, :, 1]) ** 2
+        keep = d2.min(axis=1) <= near_m * near_m
+    keep |= bent.then_w == 0.0  # squaring up
+    if keep.all():
+        return bent
+    if not keep.any():
+        return tr.Window(bent.v[:arcs], bent.w[:arcs], bent.turns)
+    return tr.Window(
+        np.concatenate([bent.v[:arcs], v[keep]]),
+        np.concatenate([bent.w[:arcs], w[keep]]),
+        bent.turns,
         bent.then_w[keep],
         bent.bend_s,
         bent.then_v[keep],

@@ -75,6 +75,11 @@ class DwaParams:
     # bend_s, then one of bend_turns turn rates (and the one facing the path's lead); 0: none
     bend_s: float = 0.4
     bend_turns: int = 8
+    # 1: the straight-then-turn roll-outs everywhere; 0: only where the box could not turn in
+    # place at the bend (dwa.bends_needed). Where things move, a bend's later turn is judged
+    # by nobody (dwa takes the scan as still, dodge judges the motion being made): GOTO_DODGE
+    # sets 0
+    bends_in_open: bool = True
     # a footprint polygon that can move nowhere with margin_m is admitted with this (0: never)
     squeeze_margin_m: float = 0.02
     blocked_path_factor: float = 0.2  # the path weight while the path runs into a hit
@@ -124,6 +129,7 @@ class DwaParams:
             clearance_cap_m=get("dwa_clearance_cap_m", d.clearance_cap_m, 0.01, 10.0),
             bend_s=get("dwa_bend_s", d.bend_s, 0.0, 10.0),
             bend_turns=int(get("dwa_bend_turns", d.bend_turns, 0, 16)),
+            bends_in_open=get("dwa_bends_in_open", float(d.bends_in_open), 0.0, 1.0) >= 0.5,
             squeeze_margin_m=get("dwa_squeeze_margin_m", d.squeeze_margin_m, 0.0, 2.0),
             blocked_path_factor=get("dwa_blocked_path_factor", d.blocked_path_factor, 0.0, 1.0),
             obstacle_range_m=get("dwa_obstacle_range_m", d.obstacle_range_m, 0.0, 100.0),

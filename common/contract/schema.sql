@@ -1157,3 +1157,15 @@ ALTER TABLE strategy ADD CONSTRAINT strategy_model_params CHECK (
 ALTER TABLE model
     ADD CONSTRAINT model_name_plain CHECK (name ~ '^[A-Za-z0-9_.-]+$') NOT VALID,
     ADD CONSTRAINT model_version_plain CHECK (version ~ '^[A-Za-z0-9_.-]+$') NOT VALID;
+
+-- migration 19: GOTO_DODGE bends a box's roll-outs only where it could not turn in place
+--
+-- dwa's two-segment roll-outs for a footprint polygon ("straight on, then turn") commit to a
+-- turn that dwa judges against the scan as if nothing moved, and dodge judges only the motion
+-- being made: in the open, where the box could turn in place later, such a bend can lead it
+-- into a mover's way. GOTO_DODGE, the strategy for worlds that move, keeps them only where
+-- the box could not turn in place at the bend (`dwa_bends_in_open` 0; docs/CONTROLLER.md,
+-- *dwa*). Other strategies keep the default, 1: bends wherever they score best.
+UPDATE strategy SET params = params || '{"dwa_bends_in_open": 0}'
+    WHERE code = 'GOTO_DODGE' AND jsonb_typeof(params) = 'object'
+      AND NOT params ? 'dwa_bends_in_open';

@@ -2,8 +2,10 @@
 
 In the stack the strategy table is filled by the contract's migrations; the monolith has no
 Postgres to run them, so it reads the ``INSERT INTO strategy`` statements of schema.sql
-instead of keeping a copy of the rows that could drift from them. A migration that updates
-or deletes strategy rows is refused here rather than ignored.
+instead of keeping a copy of the rows that could drift from them. A migration that merges
+params into a row (``UPDATE strategy SET params = params || '{...}' WHERE code = '...'``) is
+applied in its place among the inserts; any other update, and any delete, of strategy rows is
+refused here rather than ignored.
 
 A benchmark combo is the shipped strategy with another planner scenario, under the code
 ``Combo.code``: what ``pnav.bench.nav.stack_episode.ensure_combo`` inserts in the stack.
@@ -24,19 +26,34 @@ from pnav.monolith.contract import AdapterError
 _TOKEN = re.compile(r"\s+|--[^\n]*|'(?:[^']|'')*'|NULL|-?\d+(?:\.\d+)?|[(),;]|[^\s(),;']+")
 _INSERT = re.compile(r"INSERT INTO strategy\s*\(([^)]*)\)\s*VALUES", re.IGNORECASE)
 _CHANGE = re.compile(r"\b(UPDATE\s+strategy|DELETE\s+FROM\s+strategy)\b", re.IGNORECASE)
+# the one change the monolith follows: params merged into a shipped row, by its code
+_MERGE = re.compile(
+    r"UPDATE\s+strategy\s+SET\s+params\s*=\s*params\s*\|\|\s*'((?:[^']|'')*)'\s+"
+    r"WHERE\s+code\s*=\s*'([^']*)'[^;]*;",
+    re.IGNORECASE,
+)
 
 
 def shipped_strategies(schema: str | None = None) -> dict[str, records.Strategy]:
     """Strategy code -> row, as the contract's migrations insert them."""
     text = schema_text() if schema is None else schema
-    if (change := _CHANGE.search(text)) is not None:
-        raise AdapterError(
-            f"schema.sql changes strategy rows ({change[0]!r}): teach pnav/monolith/strategies.py"
-        )
+    merges = {m.start(): m for m in _MERGE.finditer(text)}
+    for change in _CHANGE.finditer(text):
+        if change.start() not in merges:
+            raise AdapterError(
+                f"schema.sql changes strategy rows ({change[0]!r}): teach "
+                "pnav/monolith/strategies.py"
+            )
     out: dict[str, records.Strategy] = {}
-    for insert in _INSERT.finditer(text):
-        columns = [c.strip() for c in insert[1].split(",")]
-        for values in _tuples(text, insert.end()):
+    steps = sorted([*((m.start(), m) for m in _INSERT.finditer(text)), *merges.items()])
+    for _, step in steps:
+        if step.re is _MERGE:
+            code, more = step[2], json.loads(step[1].replace("''", "'"))
+            if code in out:  # a row the statement's WHERE finds
+                out[code] = replace(out[code], params={**out[code].params, **more})
+            continue
+        columns = [c.strip() for c in step[1].split(",")]
+        for values in _tuples(text, step.end()):
             row = dict(zip(columns, values, strict=True))
             out[str(row["code"])] = records.Strategy(
                 code=str(row["code"]),

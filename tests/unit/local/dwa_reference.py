@@ -121,7 +121,7 @@ def choose(
     )  # fmt: skip
     start = tr.start_pose(odom.linear_mps, odom.angular_rps, p.delay_s)
     if polygon is not None:  # the box's two-segment roll-outs: part of the window
-        win = bent_window(win, p, robot, local, start)
+        win = bent_window(win, p, robot, local, start, points, outline)
     near = math.hypot(start[0], start[1]) + float(win.v.max()) * p.horizon_s + outline + 0.5
     points = points[np.hypot(points[:, 0], points[:, 1]) <= near]
     xs, ys, yaws = tr.rollout(win, start, p.horizon_s, p.steps)

@@ -7,7 +7,9 @@ with the margin is admitted with ``dwa_squeeze_margin_m``."""
 from __future__ import annotations
 
 import itertools
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +17,7 @@ import pytest
 import pnav_local.trajectories as tr
 from common.contract.planned_path import PlannedPath
 from common.contract.records import LaserScan, Odometry
-from pnav_local.dwa import choose, command_for
+from pnav_local.dwa import choose, command_for, obstacles
 from pnav_local.dwa_params import POSE_BUDGET, DwaParams
 from tests.unit.local import dwa_reference
 from tests.unit.local.test_dwa_reference import BOX, JACKAL
@@ -199,3 +201,55 @@ def test_a_box_squares_up_to_a_gap_it_passes_only_square() -> None:
     without = choose(scan, odom, JACKAL, path, DwaParams.read({"dwa_bend_turns": 0}), BOX)
     assert without is not None and without.best is not None
     assert (without.window.v[without.best], without.window.w[without.best]) == (0.0, 0.0)
+
+
+def recorded_tick() -> tuple[LaserScan, Odometry, PlannedPath]:
+    """dynabarn_hard_000's tick at 1.46 s (GOTO_DODGE, the Jackal), as the merged tree's run
+    recorded it: a mover 1.1 m ahead to the left crossing the way, the field open."""
+    doc = json.loads(TICK.read_text())
+    s, o, p = doc["scan"], doc["odom"], doc["path"]
+    ranges = np.asarray(s["ranges_mm"], dtype=np.float64) / 1000.0
+    scan = LaserScan(1, "r1", s["stamp"], s["angle_min"], s["angle_increment"], s["range_min"],
+                     s["range_max"], ranges.astype("f4"))  # fmt: skip
+    odom = Odometry(1, "r1", o["stamp"], o["x"], o["y"], o["yaw"], o["linear_mps"],
+                    o["angular_rps"])  # fmt: skip
+    path = PlannedPath(1, "r1", p["stamp"], 1, "goal", p["target_x"], p["target_y"],
+                       tuple(p["xs"]), tuple(p["ys"]), p["length_m"])  # fmt: skip
+    return scan, odom, path
+
+
+TICK = Path(__file__).with_name("dynabarn_hard_000_tick.json")
+
+
+def test_in_the_open_the_box_turns_by_later_decisions_not_a_bend() -> None:
+    # the merged tree chose "2 m/s straight on for 0.4 s, then +0.48 rad/s" here, its turn
+    # in the open, over the arc toward the path (2 m/s, +0.14 rad/s): straight on at top
+    # speed into the mover's wake, where dodge held it behind the mover until the mover
+    # turned back into it (collision at 4.5 s). A bend is kept only where the box could not
+    # turn in place at its bend: a hit within its circumscribed reach and the margin.
+    scan, odom, path = recorded_tick()
+    # the default (GOTO_FAST's): bends wherever they score best, the merged tree's choice
+    anywhere = choose(scan, odom, JACKAL, path, DwaParams.read({}), BOX)
+    assert anywhere is not None and anywhere.best is not None
+    assert anywhere.best >= anywhere.window.arcs  # a bend, its turn in the open
+    p = DwaParams.read({"dwa_bends_in_open": 0})  # GOTO_DODGE's
+    choice = choose(scan, odom, JACKAL, path, p, BOX)
+    assert choice is not None and choice.best is not None
+    win = choice.window
+    assert choice.best < win.arcs  # a single arc
+    assert (win.v[choice.best], win.w[choice.best]) == pytest.approx((2.0, 0.14), abs=0.01)
+    command = command_for(choice, path)
+    assert "then" not in command.reason and "this for" not in command.reason
+    # every "straight on, then turn" left in the window bends within reach of a hit
+    if win.then_w is not None:
+        turns = np.flatnonzero(win.then_w != 0.0) + win.arcs
+        x, y, _ = tr.rollout(
+            tr.Window(win.v[turns], win.w[turns]), tr.start_pose(odom.linear_mps,
+            odom.angular_rps, p.delay_s), win.bend_s, 1,
+        )  # fmt: skip
+        hits = obstacles(scan, 5.0)
+        reach = max(math.hypot(a, b) for a, b in BOX) + p.margin_m
+        for bx, by in zip(x[:, -1], y[:, -1], strict=True):
+            assert np.hypot(hits[:, 0] - bx, hits[:, 1] - by).min() <= reach + 1e-9
+    plain = dwa_reference.choose(scan, odom, JACKAL, path, p, BOX)
+    assert plain is not None and plain.best == choice.best

@@ -123,6 +123,24 @@ def test_the_strategy_rows_come_from_schema_sql() -> None:
     assert combo.params == shipped["GOTO_DIRECT"].params
 
 
+def test_a_migration_merging_params_into_a_strategy_row_is_followed_and_others_refused() -> None:
+    # migration 19 merges dwa_bends_in_open into GOTO_DODGE: the monolith runs it as the stack
+    assert shipped_strategies()["GOTO_DODGE"].params["dwa_bends_in_open"] == 0
+    assert "dwa_bends_in_open" not in shipped_strategies()["GOTO_FAST"].params
+    base = (
+        "INSERT INTO strategy (code, params) VALUES ('A', '{\"x\": 1}'), ('B', '{}');\n"
+        "UPDATE strategy SET params = params || '{\"x\": 2, \"y\": \"it''s\"}' WHERE code = 'A';\n"
+    )
+    rows = shipped_strategies(base)
+    assert rows["A"].params == {"x": 2, "y": "it's"} and rows["B"].params == {}
+    # an insert after the merge is not touched by it: statements apply in order
+    later = shipped_strategies(base + "INSERT INTO strategy (code, params) VALUES ('C', '{}');")
+    assert later["C"].params == {}
+    for change in ("UPDATE strategy SET planner_scenario = NULL;", "DELETE FROM strategy;"):
+        with pytest.raises(AdapterError, match="changes strategy rows"):
+            shipped_strategies(base + change)
+
+
 def test_the_planner_counts_its_own_gates_on_the_clock_it_is_given() -> None:
     # the monolith hands the planner sim time for its gates (re-reads, replanning): a route
     # is born at that clock's time, not at the wall clock's
