@@ -20,6 +20,7 @@ import os
 import sys
 import threading
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 from common.bus import open_session
@@ -42,88 +43,110 @@ def _env(name: str) -> str | None:
     return value or None
 
 
+@dataclass(frozen=True)
+class EnvOption:
+    """An option that falls back to an environment variable (for containers): its help ends
+    ``[ENV]``, or ``[ENV, default ...]`` when ``shown`` (or ``default``) says what is used
+    with neither."""
+
+    flag: str
+    env: str
+    help: str
+    kind: type[int] | type[float] | None = None  # None: a string
+    default: str | int | float | None = None
+    shown: str | None = None
+    metavar: str | None = None
+
+    def add_to(self, ap: argparse.ArgumentParser) -> None:
+        raw: str | int | float | None
+        if self.kind is None:
+            raw = _env(self.env)
+        else:
+            what = "a whole number" if self.kind is int else "a number"
+            raw = env_number(os.environ, self.env, None, self.kind, what=what)
+        shown = self.shown if self.shown is not None else self.default
+        tail = f"[{self.env}]" if shown is None else f"[{self.env}, default {shown}]"
+        ap.add_argument(
+            self.flag,
+            type=self.kind or str,
+            default=self.default if raw is None else raw,
+            metavar=self.metavar,
+            help=f"{self.help} {tail}",
+        )
+
+
+SIM_OPTIONS = (
+    EnvOption("--world", "PNAV_SIM_WORLD", "world file (or bare map_server YAML)"),
+    EnvOption("--rate", "PNAV_SIM_RATE", "sim seconds per wall second, or 'max'", default="1"),
+    EnvOption(
+        "--robots",
+        "PNAV_SIM_ROBOTS",
+        "run exactly N robots: the world's first N, then extra ones placed on free spots",
+        int,
+    ),
+    EnvOption(
+        "--battery",
+        "PNAV_SIM_BATTERY",
+        "start charge of every robot, percent (overrides the world)",
+        float,
+    ),
+    EnvOption("--seed", "PNAV_SIM_SEED", "seed of the sensor noise", int, default=0),
+    EnvOption(
+        "--scan-hz",
+        "PNAV_SIM_SCAN_HZ",
+        "every robot's lidar rate in sim time",
+        float,
+        shown="each robot model's lidar rate_hz",
+    ),
+    EnvOption(
+        "--model",
+        "PNAV_SIM_MODEL",
+        "robot model of every robot the world does not give one: a name in models/ or a model file",
+        shown="turtlebot3_burger",
+    ),
+    EnvOption(
+        "--odom-hz", "PNAV_SIM_ODOM_HZ", "odometry rate in sim time", float, 30.0, shown="30"
+    ),
+    EnvOption(
+        "--cmd-timeout",
+        "PNAV_SIM_CMD_TIMEOUT",
+        "stop a robot's wheels when no cmd_vel came for it for S sim seconds, as robot "
+        "firmware does; 0: never",
+        float,
+        shown=f"{CMD_TIMEOUT_S:g}",
+        metavar="S",
+    ),
+    EnvOption(
+        "--max-lag",
+        "PNAV_SIM_MAX_LAG",
+        "pace by the stack: never run more than S sim seconds past a robot's newest "
+        "decision (services/sim/lag_gate.py; for --rate max)",
+        float,
+    ),
+    EnvOption(
+        "--lockstep",
+        "PNAV_LOCKSTEP",
+        "step only when the stack is quiet: hold at 0 until these services (a comma list, "
+        "e.g. bridge,strategy,planner,controller,decision) report, then wait after every "
+        "message (services/sim/lockstep_barrier.py; same world and seed, same run)",
+        metavar="SERVICES",
+    ),
+    EnvOption(
+        "--trace",
+        "PNAV_SIM_TRACE",
+        "write when each sensor message left and each command arrived, for `pnav bench "
+        "latency` (common/trace.py)",
+    ),
+)
+
+
 def sim_parser(prog: str = "python -m services.sim") -> argparse.ArgumentParser:
     """The sim's options (its benchmark, pnav.bench.sim_rate, adds its own to them)."""
     ap = argparse.ArgumentParser(prog=prog, description="proactive-nav pybullet simulator")
-    ap.add_argument(
-        "--world",
-        default=_env("PNAV_SIM_WORLD"),
-        help="world file (or bare map_server YAML) [PNAV_SIM_WORLD]",
-    )
+    SIM_OPTIONS[0].add_to(ap)
     ap.add_argument("--gui", action="store_true", help="open the pybullet GUI (default headless)")
-    ap.add_argument(
-        "--rate",
-        default=_env("PNAV_SIM_RATE") or "1",
-        help="sim seconds per wall second, or 'max' [PNAV_SIM_RATE, default 1]",
-    )
-    ap.add_argument(
-        "--robots",
-        type=int,
-        default=_int_env("PNAV_SIM_ROBOTS"),
-        help="run exactly N robots: the world's first N, then extra ones placed on "
-        "free spots [PNAV_SIM_ROBOTS]",
-    )
-    ap.add_argument(
-        "--battery",
-        type=float,
-        default=_float_env("PNAV_SIM_BATTERY"),
-        help="start charge of every robot, percent (overrides the world) [PNAV_SIM_BATTERY]",
-    )
-    ap.add_argument(
-        "--seed",
-        type=int,
-        default=_int_env("PNAV_SIM_SEED") or 0,
-        help="seed of the sensor noise [PNAV_SIM_SEED, default 0]",
-    )
-    ap.add_argument(
-        "--scan-hz",
-        type=float,
-        default=_float_env("PNAV_SIM_SCAN_HZ"),
-        help="every robot's lidar rate in sim time [PNAV_SIM_SCAN_HZ, default: each robot "
-        "model's lidar rate_hz]",
-    )
-    ap.add_argument(
-        "--model",
-        default=_env("PNAV_SIM_MODEL"),
-        help="robot model of every robot the world does not give one: a name in models/ "
-        "or a model file [PNAV_SIM_MODEL, default turtlebot3_burger]",
-    )
-    ap.add_argument(
-        "--odom-hz",
-        type=float,
-        default=_float_env("PNAV_SIM_ODOM_HZ") or 30.0,
-        help="odometry rate in sim time [PNAV_SIM_ODOM_HZ, default 30]",
-    )
-    ap.add_argument(
-        "--cmd-timeout",
-        type=float,
-        default=_float_env("PNAV_SIM_CMD_TIMEOUT"),
-        metavar="S",
-        help="stop a robot's wheels when no cmd_vel came for it for S sim seconds, as robot "
-        f"firmware does; 0: never [PNAV_SIM_CMD_TIMEOUT, default {CMD_TIMEOUT_S:g}]",
-    )
-    ap.add_argument(
-        "--max-lag",
-        type=float,
-        default=_float_env("PNAV_SIM_MAX_LAG"),
-        help="pace by the stack: never run more than S sim seconds past a robot's newest "
-        "decision (services/sim/lag_gate.py; for --rate max) [PNAV_SIM_MAX_LAG]",
-    )
-    ap.add_argument(
-        "--lockstep",
-        default=_env("PNAV_LOCKSTEP"),
-        metavar="SERVICES",
-        help="step only when the stack is quiet: hold at 0 until these services (a comma "
-        "list, e.g. bridge,strategy,planner,controller,decision) report, then wait after "
-        "every message (services/sim/lockstep_barrier.py; same world and seed, same run) "
-        "[PNAV_LOCKSTEP]",
-    )
-    ap.add_argument(
-        "--trace",
-        default=_env("PNAV_SIM_TRACE"),
-        help="write when each sensor message left and each command arrived, for "
-        "`pnav bench latency` (common/trace.py) [PNAV_SIM_TRACE]",
-    )
+    for option in SIM_OPTIONS[1:]:
+        option.add_to(ap)
     ap.add_argument(
         "--world-only",
         action="store_true",
@@ -140,14 +163,6 @@ def sim_parser(prog: str = "python -m services.sim") -> argparse.ArgumentParser:
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     return sim_parser().parse_args(argv)
-
-
-def _int_env(name: str) -> int | None:
-    return env_number(os.environ, name, None, int, what="a whole number")
-
-
-def _float_env(name: str) -> float | None:
-    return env_number(os.environ, name, None, float)
 
 
 def build(args: argparse.Namespace) -> tuple[World, SimConfig, float]:
