@@ -32,7 +32,7 @@ from pnav_learned.features import FEATURES, features, sector_minima
 from pnav_learned.history import HISTORY_FEATURES, History, sample
 
 if TYPE_CHECKING:
-    from pnav.learn.relabel import Labeller
+    from pnav.learn.relabel import DwaLabeller
 
 DEFAULT_HORIZON_S = 3.0
 
@@ -92,7 +92,7 @@ class Dataset:
 
 
 async def read(
-    conn: Any, horizon_s: float = DEFAULT_HORIZON_S, label: Labeller | None = None
+    conn: Any, horizon_s: float = DEFAULT_HORIZON_S, label: DwaLabeller | None = None
 ) -> Dataset:
     """Every decision of the database ``conn`` opens, as examples. ``label``: the targets
     are its command for each example's state (NaN where it has none), ``source`` its name,
