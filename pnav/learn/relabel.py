@@ -30,10 +30,8 @@ LABELS = ("dwa",)
 
 
 class DwaLabeller:
-    """dwa's command for a recorded state, with the robot row and the strategy's params:
-    (robot_id, scan row, odometry row, planned_path row) -> (linear, angular), or None where
-    dwa has nothing to say (no point of the path ahead: it is silent). The one labeller
-    (``LABELS``); the dataset names it by ``name`` in each example's ``source``."""
+    """dwa's command for a recorded state, with the robot row and the strategy's params (a
+    ``dataset.Labeller``); None where dwa is silent (no point of the path ahead)."""
 
     name = "dwa"
 
