@@ -9,12 +9,10 @@ and decides in :meth:`judge` with :meth:`model` and ``self.path``.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from typing import Any, ClassVar
 
 from common.contract.planned_path import PlannedPath
-from common.contract.records import LaserScan, Odometry, Robot
-from common.controller_core.scenario import Command, ControllerScenario
+from common.controller_core.scenario import ControllerScenario
 from pnav_learned.model import Kind
 from pnav_learned.registry import Found, resolve
 
@@ -36,12 +34,6 @@ class LearnedScenario(ControllerScenario):
         if live:
             self.found = await resolve(self.host, self.spec.params, self.params, self.kind)
         await super().data_acquisition()
-
-    @classmethod
-    def decide(
-        cls, scan: LaserScan, odom: Odometry | None, robot: Robot, params: Mapping[str, Any]
-    ) -> Command | None:
-        return None  # the path and the model are read in acquisition: ``judge`` decides
 
     def model(self) -> Found | None:
         """The model to decide with; None (and ``refusal`` says why) while it is refused:

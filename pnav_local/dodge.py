@@ -203,13 +203,6 @@ class Dodge(ControllerScenario):
         if isinstance(lost, Dodge):
             self.tracker = lost.tracker
 
-    @classmethod
-    def decide(
-        cls, scan: LaserScan, odom: Odometry | None, robot: Robot, params: Mapping[str, Any]
-    ) -> Command | None:
-        """A single scan shows no motion: silent (``judge`` has the robot's tracks)."""
-        return None
-
     def judge(self, scan: LaserScan, odom: Odometry | None) -> Command | None:
         if odom is None:
             return None

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -450,13 +450,6 @@ class Dwa(ControllerScenario):
         # the path in force, from the store's cache (read again on a planned_path note)
         self.path = await self.host.planned_path(self.spec.robot.robot_id) if self.live else None
         await super().data_acquisition()
-
-    @classmethod
-    def decide(
-        cls, scan: LaserScan, odom: Odometry | None, robot: Robot, params: Mapping[str, Any]
-    ) -> Command | None:
-        """Without a path there is nothing to follow: silent (``judge`` has the path)."""
-        return None
 
     def footprint_polygon(self) -> Sequence[Sequence[float]] | None:
         """The outline the roll-outs are checked with (robot frame, metres, CCW): the robot

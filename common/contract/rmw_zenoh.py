@@ -77,21 +77,25 @@ def mangle(name: str) -> str:
     return name.replace("/", "%") if name else "%"
 
 
+def _type_parts(pattern: re.Pattern[str], type_name: str, what: str) -> tuple[str, str, str]:
+    """(package, kind, name) of ``type_name`` as ``pattern`` reads it; ValueError if it is
+    not ``what``. The two spellings of a type differ only in their separators."""
+    match = pattern.match(type_name)
+    if match is None:
+        raise ValueError(f"not {what}: {type_name!r}")
+    package, kind, name = match.groups()
+    return package, kind, name
+
+
 def dds_type(ros_type: str) -> str:
     """``std_msgs/msg/String`` -> ``std_msgs::msg::dds_::String_`` (the type name in keys)."""
-    match = _TYPE.match(ros_type)
-    if match is None:
-        raise ValueError(f"not a ROS 2 type name: {ros_type!r}")
-    package, kind, name = match.groups()
+    package, kind, name = _type_parts(_TYPE, ros_type, "a ROS 2 type name")
     return f"{package}::{kind}::dds_::{name}_"
 
 
 def ros_type(dds_name: str) -> str:
     """The inverse of :func:`dds_type`."""
-    match = _DDS_TYPE.match(dds_name)
-    if match is None:
-        raise ValueError(f"not a DDS type name: {dds_name!r}")
-    package, kind, name = match.groups()
+    package, kind, name = _type_parts(_DDS_TYPE, dds_name, "a DDS type name")
     return f"{package}/{kind}/{name}"
 
 

@@ -23,18 +23,32 @@ import bisect
 import json
 import math
 from collections import defaultdict
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from pnav_learned.features import FEATURES, features, sector_minima
 from pnav_learned.history import HISTORY_FEATURES, History, sample
 
-if TYPE_CHECKING:
-    from pnav.learn.relabel import Labeller
-
 DEFAULT_HORIZON_S = 3.0
+
+Row = Mapping[str, Any]
+
+
+class Labeller(Protocol):
+    """What :func:`read` labels each decision's state with: (robot_id, scan row, odometry
+    row, planned_path row) -> (linear, angular), or None where it has nothing to say (dwa:
+    no point of the path ahead, it is silent); ``name`` is each example's ``source``.
+    relabel.DwaLabeller labels with dwa's choice; pnav.bench.recorded keeps the states."""
+
+    name: str
+
+    def __call__(
+        self, robot_id: str, scan: Row, odom: Row, path: Row
+    ) -> tuple[float, float] | None: ...
+
 
 # the example's columns beside the features (Parquet column names)
 META = ("decision_id", "robot_id", "stamp", "strategy", "scan_id", "odometry_id", "path_id")

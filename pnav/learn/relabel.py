@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from typing import Any, Protocol
+from typing import Any
 
 from common.contract.planned_path import PlannedPath, planned_path_of
 from common.contract.records import Robot, laser_scan_of, odometry_of, robots
@@ -29,23 +29,9 @@ from pnav_local.dwa_params import DwaParams
 LABELS = ("dwa",)
 
 
-class Labeller(Protocol):
-    """(robot_id, scan row, odometry row, planned_path row) -> (linear, angular), or None
-    where the labeller has nothing to say (dwa: no point of the path ahead, it is silent)."""
-
-    name: str
-
-    def __call__(
-        self,
-        robot_id: str,
-        scan: Mapping[str, Any],
-        odom: Mapping[str, Any],
-        path: Mapping[str, Any],
-    ) -> tuple[float, float] | None: ...
-
-
 class DwaLabeller:
-    """dwa's command for a recorded state, with the robot row and the strategy's params."""
+    """dwa's command for a recorded state, with the robot row and the strategy's params (a
+    ``dataset.Labeller``); None where dwa is silent (no point of the path ahead)."""
 
     name = "dwa"
 

@@ -73,7 +73,16 @@ PENDING_SQL: Final = (
 Point = tuple[float, float]
 
 
+# reasons a goal is refused (the ``refused`` counters' keys); rviz.py refuses a goal pose
+# for the same reasons, and for its own
+FRAME: Final = "frame"
+OUT_OF_RANGE: Final = "out_of_range"
+NO_POSES: Final = "no_poses"
+
+
 class Refused(Exception):
+    """A goal refused for ``reason``; the message says what was wrong with it."""
+
     def __init__(self, reason: str, detail: str) -> None:
         super().__init__(detail)
         self.reason = reason
@@ -137,7 +146,7 @@ class Nav2Actions:
         try:
             poses = [pose_of(p) for p in goal.poses] if through else [pose_of(goal.pose)]
             if not poses:
-                raise Refused("no_poses", "NavigateThroughPoses with no pose")
+                raise Refused(NO_POSES, "NavigateThroughPoses with no pose")
             *ahead, last = poses
             # Nav2 drives through every pose but the last without stopping; a waypoint with a
             # heading would halt the robot there (PLANNER.md), so only the last keeps its own
@@ -146,7 +155,7 @@ class Nav2Actions:
         except Refused as exc:
             return self._refuse(robot, exc.reason, str(exc))
         except ContractError as exc:
-            return self._refuse(robot, "out_of_range", str(exc))
+            return self._refuse(robot, OUT_OF_RANGE, str(exc))
         row = await people.set_goal(
             self.runtime.database, robot, last.x, last.y, None, yaw=last.yaw, waypoints=waypoints
         )
@@ -253,16 +262,27 @@ class Nav2Actions:
 
 def pose_of(msg: Any) -> people.Pose:
     """A PoseStamped in the map frame -> a pose of the goal tables (values checked there)."""
+    in_map_frame(msg)
+    yaw = goal_yaw(msg.pose)
+    return people.Pose(float(msg.pose.position.x), float(msg.pose.position.y), yaw)
+
+
+def in_map_frame(msg: Any) -> None:
+    """Refused unless the stamped message is in the map frame (or names none)."""
     frame = msg.header.frame_id.strip("/")
     if frame not in ("", MAP_FRAME):
-        raise Refused("frame", f"frame {frame!r}: a goal is in the map frame")
-    q = msg.pose.orientation
+        raise Refused(FRAME, f"frame {frame!r}: a goal is in the map frame")
+
+
+def goal_yaw(pose: Any) -> float | None:
+    """A goal's heading, the pose's orientation about z (RViz's arrow); None for an all-zero
+    quaternion, which a client that sets only a position leaves: any heading. Refused if
+    the quaternion is not finite."""
+    q = pose.orientation
     parts = (float(q.x), float(q.y), float(q.z), float(q.w))
     if not all(math.isfinite(v) for v in parts):
-        raise Refused("out_of_range", f"orientation not finite: {parts}")
-    # an all-zero quaternion, which a client that sets only a position leaves: any heading
-    yaw = ros2types.yaw_of(q) if any(parts) else None
-    return people.Pose(float(msg.pose.position.x), float(msg.pose.position.y), yaw)
+        raise Refused(OUT_OF_RANGE, f"orientation not finite: {parts}")
+    return ros2types.yaw_of(q) if any(parts) else None
 
 
 def distance_remaining(

@@ -39,22 +39,26 @@ from common.errors import ContractError
 from common.robotlink import RobotLinkSettings
 from common.ros2node import Publisher, Ros2Node, type_of_key
 from common.runtime import Runtime
-from pnav.ros2.nav2actions import Nav2Actions
+from pnav.ros2.nav2actions import (
+    MAP_FRAME,
+    OUT_OF_RANGE,
+    Nav2Actions,
+    Refused,
+    goal_yaw,
+    in_map_frame,
+)
 
 logger = logging.getLogger("pnav.ros2.rviz")
 
 NODE_NAME: Final = "pnav_rviz"
 GOAL_TOPIC: Final = "goal_pose"
-MAP_FRAME: Final = "map"
 ROBOT_RELOAD_S: Final = 2.0
 MAX_PAYLOAD: Final = 4096  # a PoseStamped is under 100 bytes with a sane frame id
 
-# reasons a goal pose is refused
+# reasons a goal pose is refused, beside Nav2Actions' (a frame, a value out of range)
 WRONG_TYPE: Final = "wrong_type"
 BAD_CDR: Final = "bad_cdr"
-FRAME: Final = "frame"
 NO_ROBOT: Final = "no_robot"
-OUT_OF_RANGE: Final = "out_of_range"
 
 NEWEST_PATH_SQL: Final = (
     f"SELECT id, robot_id, stamp, xs, ys FROM {keys.PLANNED_PATH} "
@@ -160,8 +164,8 @@ class RvizLink:
         try:
             target, x, y, yaw = self._goal(robot, key, payload)
             limits.check_goal(x, y, None)
-        except _Refused as exc:
-            self._refuse(exc.reason, exc.detail, key)
+        except Refused as exc:
+            self._refuse(exc.reason, str(exc), key)
             return
         except ContractError as exc:
             self._refuse(OUT_OF_RANGE, str(exc), key)
@@ -177,18 +181,16 @@ class RvizLink:
         self, robot: str | None, key: str, payload: bytes
     ) -> tuple[str, float, float, float | None]:
         if type_of_key(key) != (self._pose.dds, self._pose.hash):
-            raise _Refused(WRONG_TYPE, f"{key.rsplit('/', 2)[1]} is not a PoseStamped")
+            raise Refused(WRONG_TYPE, f"{key.rsplit('/', 2)[1]} is not a PoseStamped")
         if len(payload) > MAX_PAYLOAD:
-            raise _Refused(BAD_CDR, f"{len(payload)} bytes")
+            raise Refused(BAD_CDR, f"{len(payload)} bytes")
         try:
             msg = ros2types.decode(ros2types.POSE_STAMPED, payload)
         except Exception as exc:
-            raise _Refused(BAD_CDR, str(exc)[:160]) from None
-        frame = msg.header.frame_id.strip("/")
-        if frame not in ("", MAP_FRAME):
-            raise _Refused(FRAME, f"frame {frame!r}: a goal is in the map frame")
+            raise Refused(BAD_CDR, str(exc)[:160]) from None
+        in_map_frame(msg)
         target = robot if robot is not None else self._robot_of_global()
-        return target, float(msg.pose.position.x), float(msg.pose.position.y), heading(msg.pose)
+        return target, float(msg.pose.position.x), float(msg.pose.position.y), goal_yaw(msg.pose)
 
     def _robot_of_global(self) -> str:
         """The robot ``/goal_pose`` is for: the un-namespaced one, or the only one."""
@@ -197,7 +199,7 @@ class RvizLink:
             return bare[0]
         if len(self.robots) == 1:
             return next(iter(self.robots))
-        raise _Refused(
+        raise Refused(
             NO_ROBOT,
             f"/{GOAL_TOPIC} with {len(self.robots)} robots and none un-namespaced: "
             f"publish on <namespace>/{GOAL_TOPIC}",
@@ -233,26 +235,6 @@ class RvizLink:
             return
         publisher.put(msg, reliable=True)
         self.plans_out += 1
-
-
-class _Refused(Exception):
-    def __init__(self, reason: str, detail: str) -> None:
-        super().__init__(detail)
-        self.reason = reason
-        self.detail = detail
-
-
-def heading(pose: Any) -> float | None:
-    """The goal's heading from RViz's arrow (the pose's orientation about z), or None for an
-    all-zero quaternion, which a client that sets only a position leaves; a quaternion that is
-    not finite is refused."""
-    q = pose.orientation
-    parts = (float(q.x), float(q.y), float(q.z), float(q.w))
-    if not all(math.isfinite(v) for v in parts):
-        raise _Refused(OUT_OF_RANGE, f"orientation not finite: {parts}")
-    if not any(parts):
-        return None
-    return ros2types.yaw_of(q)
 
 
 def path_msg(stamp: float, xs: list[float], ys: list[float]) -> Any:

@@ -30,7 +30,6 @@ random stream.
 from __future__ import annotations
 
 import math
-import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -47,6 +46,7 @@ from pnav.bench.nav.generator import (
     draw_suite,
     first_passable,
     known_level,
+    world_stream,
 )
 from pnav.bench.nav.robots import RobotFit
 from pnav.bench.nav.search import Point, ReferencePath
@@ -234,10 +234,7 @@ def generate_barn_world(
     field of that random stream through which the robot's disc (plus the margin) finds a
     path. The same (level, seed, robot footprint) always gives the same world."""
     rule = level_rule(level)
-    if seed < 0:
-        raise UsageError(f"seed must not be negative, got {seed}")
-    # the protocol and the level are mixed into the stream: unrelated to the default suite
-    rng = np.random.default_rng([seed, zlib.crc32(f"{PROTOCOL}/{level}".encode())])
+    rng = world_stream(seed, f"{PROTOCOL}/{level}", UsageError)
     inflation = robot.footprint_radius_m + layout.margin_m
     found = first_passable(
         rng,

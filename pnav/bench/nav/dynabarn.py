@@ -16,7 +16,6 @@ writes the same worlds, byte for byte.
 
 from __future__ import annotations
 
-import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -26,7 +25,7 @@ from common.errors import UsageError
 from pnav.bench.nav.automaton import BoolGrid
 from pnav.bench.nav.barn import DEFAULT_LAYOUT, BarnLayout, InCorridor, wall_pixels
 from pnav.bench.nav.difficulty import Difficulty, measure
-from pnav.bench.nav.generator import ORIGIN, draw_suite, known_level
+from pnav.bench.nav.generator import ORIGIN, draw_suite, known_level, world_stream
 from pnav.bench.nav.robots import RobotFit
 from pnav.bench.nav.search import ReferencePath, reference_path
 
@@ -127,9 +126,7 @@ def generate_dynabarn_world(
     """The dynamic world of ``level`` drawn with ``seed`` for ``robot``. The same (level,
     seed, robot) always gives the same world."""
     rule = level_rule(level)
-    if seed < 0:
-        raise UsageError(f"seed must not be negative, got {seed}")
-    rng = np.random.default_rng([seed, zlib.crc32(f"{PROTOCOL}/{level}".encode())])
+    rng = world_stream(seed, f"{PROTOCOL}/{level}", UsageError)
     walls = wall_pixels(layout)
     x0, y0, _ = layout.start
     inflation = robot.footprint_radius_m + layout.margin_m

@@ -54,6 +54,15 @@ def known_level(levels: Mapping[str, T], level: str, error: type[Exception]) -> 
         raise error(f"unknown level {level!r}; known: {', '.join(levels)}") from None
 
 
+def world_stream(seed: int, stream: str, error: type[Exception]) -> np.random.Generator:
+    """The random stream world ``seed`` is drawn from, ``error`` for a negative seed.
+    ``stream`` (the level, or protocol/level) is mixed in: seed 7 of two levels, or of two
+    protocols, are unrelated worlds."""
+    if seed < 0:
+        raise error(f"seed must not be negative, got {seed}")
+    return np.random.default_rng([seed, zlib.crc32(stream.encode())])
+
+
 def draw_suite(
     levels: Sequence[str],
     count: int,
@@ -208,10 +217,7 @@ def generate_world(
     """The world of ``level`` drawn with ``seed``: the first field of that random stream
     through which the robot finds a path. Raises RuntimeError after ``max_attempts``."""
     rule = level_rule(level)
-    if seed < 0:
-        raise ValueError(f"seed must not be negative, got {seed}")
-    # the level is mixed into the stream: seed 7 of two levels are unrelated worlds
-    rng = np.random.default_rng([seed, zlib.crc32(level.encode())])
+    rng = world_stream(seed, level, ValueError)
     found = first_passable(
         rng, rule, layout, lambda cells: rasterize(cells, layout), layout.inflation_m, max_attempts
     )
