@@ -235,7 +235,7 @@ class SimNode:
         await_listeners(self._publishers, stop)
         self._log_running(
             max_lag=None if self.gate is None else self.gate.max_lag_s,
-            held=self.hold is not None or None,
+            held=self.hold is not None,
         )
         while not stop.is_set() and not _reached(sim, until_sim_s):
             now = time.monotonic()
