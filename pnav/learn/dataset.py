@@ -42,6 +42,9 @@ TARGETS = ("linear_mps_cmd", "angular_rps_cmd")
 OUTCOMES = ("source", "progress_m", "collision", "goal_status")
 # with a label (relabel.py): what the stack decided, beside the label's targets
 DECIDED = ("decided_linear_mps", "decided_angular_rps", "decided_source")
+# with dwa's label: its choice's cell of dwa's lattice (pnav_learned.lattice; -1: none) and
+# which cells are admissible (learned_drive's check, per cell: the lattice classifier's data)
+LATTICE = ("dwa_cell", "dwa_admissible")
 
 
 @dataclass
@@ -129,7 +132,7 @@ async def read(
     )
     names = (*META, *FEATURES, *HISTORY_FEATURES, *TARGETS, *OUTCOMES)
     if label is not None:
-        names = (*names, *DECIDED)
+        names = (*names, *DECIDED, *LATTICE)
     columns: dict[str, list[Any]] = {n: [] for n in names}
     histories: dict[str, History] = defaultdict(History)
     skipped = 0
@@ -180,6 +183,8 @@ async def read(
             said = label(robot, scan, o, path)
             values["linear_mps_cmd"], values["angular_rps_cmd"] = said or (math.nan, math.nan)
             values["source"] = label.name
+            cell = label.cell if said is not None else None
+            values["dwa_cell"], values["dwa_admissible"] = cell or (-1, [])
         for name, value in values.items():
             columns[name].append(value)
     return Dataset(columns, len(decisions), skipped)
