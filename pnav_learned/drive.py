@@ -46,7 +46,7 @@ PARAMS = "learned"  # learned_model, learned_model_version
 TARGET_DIST = FEATURES.index("target_dist")
 # a lattice classifier's cells put to the check a decision, as one batch: enough that one
 # passes in most decisions, few enough that the batch costs a small share of dwa's window
-TOP_K = 4
+TOP_K = 6
 
 
 def recommend(
