@@ -15,7 +15,7 @@ import pytest
 from common.contract.planned_path import PlannedPath
 from pnav_learned import lattice
 from pnav_learned.candidates import Scene
-from pnav_learned.drive import TOP_K, recommend
+from pnav_learned.drive import NEXT_K, TOP_K, recommend
 from pnav_learned.errors import ModelRefused
 from pnav_learned.features import FEATURES
 from pnav_learned.model import DRIVE, DRIVE_KINDS, FORMAT, Model, load
@@ -89,22 +89,43 @@ def test_a_refused_first_choice_gives_way_to_the_next_in_the_same_batch(tmp_path
     assert "choice 2 of the" in said.reason
 
 
-def test_when_no_likely_cell_passes_dwa_decides_and_the_why_says_so(tmp_path: Path) -> None:
-    # a post straight ahead 1.2 m off: the model insists on straight on at speed, and no
-    # speed of it passes; dwa's whole window has arcs round the post that do
+def test_the_next_likeliest_are_checked_only_when_the_first_batch_fails(tmp_path: Path) -> None:
+    # a post straight ahead 1.2 m off: the model ranks straight on at the six top speeds
+    # first (all refused), then a hard left turn, which passes
     straight = [lattice.CELLS.index(f"cell_{i}_{lattice.ANGULAR // 2}") for i in range(8, 2, -1)]
-    m = model(tmp_path, straight)
-    scan, moving, path = scan_of([(1.2, 0.0)]), odom(1.0), path_ahead()
+    m = model(tmp_path, [*straight, HARD_LEFT])
+    scan = scan_of([(1.2, 0.0)])
+    said = recommend(m, scan, odom(1.0), JACKAL, path_ahead(), None, P, BOX)
+    scene = Scene(scan, odom(1.0), JACKAL, P, 10.0, BOX)
+    v, w = lattice.grid(scene.bounds)
+    assert not scene.admissible(v[straight], w[straight])[0].any()
+    assert (said.linear, said.angular) == (v[HARD_LEFT], w[HARD_LEFT])
+    assert said.inputs is not None and said.inputs["fallback"] is False
+    assert said.inputs["checked"] == TOP_K + NEXT_K
+    assert f"choice {TOP_K + 1} of the {TOP_K + NEXT_K} likeliest checked" in said.reason
+
+
+def test_when_no_likely_cell_passes_dwa_decides_and_the_why_says_so(tmp_path: Path) -> None:
+    # three posts ahead: the model ranks first the cells that are refused; dwa's whole
+    # window has arcs round them
+    posts = [(1.2, 0.0), (1.0, 0.6), (1.0, -0.6)]
+    scan, moving, path = scan_of(posts), odom(1.0), path_ahead()
+    scene = Scene(scan, moving, JACKAL, P, 10.0, BOX)
+    v, w = lattice.grid(scene.bounds)
+    ok, _ = scene.admissible(v, w)
+    refused = [int(i) for i in np.flatnonzero(~ok) if v[i] > 0.0]
+    assert len(refused) >= TOP_K + NEXT_K
+    m = model(tmp_path, refused)
     said = recommend(m, scan, moving, JACKAL, path, None, P, BOX)
     choice = dwa.choose(scan, moving, JACKAL, path, P, BOX)
     assert choice is not None
     expected = dwa.command_for(choice, path)
     assert (said.linear, said.angular) == (expected.linear, expected.angular)
-    assert said.linear > 0.5 and abs(said.angular) > 0.5  # dwa drives round the post
+    assert said.linear > 0.5 and abs(said.angular) > 0.5  # dwa drives round the posts
     assert said.inputs is not None and said.inputs["fallback"] is True
-    assert said.inputs["checked"] == TOP_K
+    assert said.inputs["checked"] == TOP_K + NEXT_K
     assert said.reason.startswith("learned_drive: model lat version lat1, confidence 1.00")
-    assert f"none of the {TOP_K} likeliest cells" in said.reason
+    assert f"none of the {TOP_K + NEXT_K} likeliest cells" in said.reason
     assert "fallback to dwa's own decision; " + expected.reason in said.reason
 
 
