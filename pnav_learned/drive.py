@@ -119,18 +119,18 @@ def recommend(
 
 def candidates(probs: FloatArray, v: FloatArray, w: FloatArray, k: int) -> npt.NDArray[np.int64]:
     """The ``k`` likeliest cells that are distinct moves, likeliest first: a window with no
-    room for speed repeats its speeds, and standing still is a brake, not a move."""
-    picked: list[int] = []
-    seen: set[tuple[float, float]] = set()
-    for i in np.argsort(-probs, kind="stable").tolist():
-        move = (round(float(v[i]), 6), round(float(w[i]), 6))
-        if move in seen or move == (0.0, 0.0):
-            continue
-        seen.add(move)
-        picked.append(i)
-        if len(picked) == k:
-            break
-    return np.asarray(picked, dtype=np.int64)
+    room for speed (or for turning) repeats its speeds (turn rates), and standing still is a
+    brake, not a move."""
+    order = np.argsort(-probs, kind="stable")
+    rows, columns = np.divmod(order, lattice.ANGULAR)
+    # the cells of a window with no room for speed are one per turn rate, and so on
+    key = (rows if v[-1] > v[0] else 0) * lattice.ANGULAR + (columns if w[-1] > w[0] else 0)
+    _, first = np.unique(key, return_index=True)
+    first.sort()
+    picked = order[first]
+    moving = (v[picked] != 0.0) | (w[picked] != 0.0)
+    chosen: npt.NDArray[np.int64] = picked[moving][:k].astype(np.int64)
+    return chosen
 
 
 def from_lattice(
