@@ -20,6 +20,9 @@ proposal keeps pointing into it, has the whole lattice checked. What a decision 
 checks included, is what ``python -m pnav.bench.learned`` measures (docs/BENCHMARKS.md: half
 of dwa's on the held-out BARN worlds, as the proposal fails half the time).
 
+A classifier over dwa's lattice (pnav_learned.lattice) is checked with the same functions:
+its likeliest cells as one batch, through :class:`Scene` (pnav_learned.drive.from_lattice).
+
 dwa itself is not edited or called: its scoring (progress, path, heading, clearance) is what
 the network replaces, and this module imports only the geometry.
 """

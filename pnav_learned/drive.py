@@ -11,6 +11,12 @@ safety layer judges the command as any other), with ``dwa_*`` params read as dwa
 Its reason names the model, its version, its confidence, the proposal and the check's
 verdict.
 
+A model that is a classifier over dwa's lattice (``pnav learn train --target lattice``:
+pnav_learned.lattice; told apart from a regression by its targets) is run instead by
+:func:`from_lattice`: its TOP_K likeliest cells of the decision's window checked as one
+batch, the NEXT_K next only if none passes, and dwa's own decision (pnav_local.dwa) if none
+of those does; the reason then says that dwa decided.
+
 Params: ``learned_model`` (a model registered in the ``model`` table, or a model file) and,
 optionally, ``learned_model_version`` (the registered version, or the version the file must
 have): pnav_learned.registry. A model file that is missing, corrupt, made for other features
