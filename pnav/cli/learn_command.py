@@ -32,7 +32,8 @@ def add_learn_parser(commands: argparse._SubParsersAction[argparse.ArgumentParse
         "--label",
         choices=("dwa",),
         help="targets: what this controller would have commanded in each recorded state"
-        " (DAgger), not what the stack decided",
+        " (DAgger), not what the stack decided; with dwa, also its cell of dwa's lattice and"
+        " the cells that pass learned_drive's check (train --target lattice)",
     )
     data.add_argument(
         "--label-strategy",
