@@ -175,3 +175,29 @@ def test_a_lattice_model_is_no_regression_model(tmp_path: Path) -> None:
     path.write_text(json.dumps(lattice_doc([STRAIGHT_ON])))
     with pytest.raises(ModelRefused, match="153 targets, expected"):
         load(path, None, DRIVE)
+
+
+async def test_learned_drive_resolves_either_kind_and_refuses_others(tmp_path: Path) -> None:
+    # the scenario's params name a lattice file or a regression file: each is loaded as what
+    # it is; a file of neither kind is refused with the reason, and the scenario stands down
+    from typing import cast
+
+    from common.controller_core.scenario import Host
+    from pnav_learned import registry
+    from pnav_learned.drive import LearnedDrive
+    from tests.unit.learn.test_model_refusals import Register, model_doc
+
+    host = cast(Host, Register())
+    lat = tmp_path / "lat.json"
+    lat.write_text(json.dumps(lattice_doc([STRAIGHT_ON])))
+    reg = tmp_path / "reg.json"
+    reg.write_text(json.dumps(model_doc()))
+    kind = LearnedDrive.kind
+    found = await registry.resolve(host, {"learned_model": str(lat)}, "learned", kind)
+    assert not isinstance(found, str) and found.model.lattice
+    found = await registry.resolve(host, {"learned_model": str(reg)}, "learned", kind)
+    assert not isinstance(found, str) and not found.model.lattice
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps(lattice_doc([STRAIGHT_ON]) | {"targets": ["no_progress"]}))
+    refused = await registry.resolve(host, {"learned_model": str(other)}, "learned", kind)
+    assert isinstance(refused, str) and "targets ['no_progress'], expected 153 cells" in refused
