@@ -20,6 +20,9 @@ proposal keeps pointing into it, has the whole lattice checked. What a decision 
 checks included, is what ``python -m pnav.bench.learned`` measures (docs/BENCHMARKS.md: half
 of dwa's on the held-out BARN worlds, as the proposal fails half the time).
 
+A classifier over dwa's lattice (pnav_learned.lattice) is checked with the same functions:
+its likeliest cells as one batch, through :class:`Scene` (pnav_learned.drive.from_lattice).
+
 dwa itself is not edited or called: its scoring (progress, path, heading, clearance) is what
 the network replaces, and this module imports only the geometry.
 """
@@ -115,9 +118,10 @@ def gaps(
 ) -> tr.FloatArray:
     """Per pose (flat), the gap between its footprint and the nearest point: exact below
     ``needed_m``, at least ``needed_m`` otherwise (inf with no point near), as
-    clearance.gaps. Every pose against every point, the centres' distances first and the
-    outline's only for the points within its reach of some pose: for a dozen poses this
-    costs less than the sorted index dwa builds for its hundreds (used for the neighbours)."""
+    clearance.gaps. Every pose against every point in the poses' bounding box, the centres'
+    distances first and the outline's only for the pairs within reach (a box's:
+    :func:`_box_gaps`): for a few dozen poses this costs less than the sorted index dwa
+    builds for its hundreds (used for larger batches)."""
     xs, ys, yaws = poses
     px, py = points
     out = np.full(len(xs), np.inf)
@@ -131,6 +135,8 @@ def gaps(
     )
     if len(near) == 0:
         return out
+    if foot.polygon is not None and box is not None:
+        return _box_gaps(poses, (px[near], py[near]), box, reach, out)
     dx = px[near][None, :] - xs[:, None]
     dy = py[near][None, :] - ys[:, None]
     if foot.polygon is None:
@@ -138,12 +144,40 @@ def gaps(
         return disc
     c, s = np.cos(yaws)[:, None], np.sin(yaws)[:, None]
     qx, qy = c * dx + s * dy, c * dy - s * dx  # each point in the pose's frame
-    if box is None:
-        general = clearance._polygon_gap(qx.ravel(), qy.ravel(), foot.polygon)
-        polygon_gaps: tr.FloatArray = general.reshape(qx.shape).min(axis=1)
-        return polygon_gaps
-    # the box's signed distance (clearance's closed form), in place: outside, the distance
-    # to the nearest side or corner; inside, minus the distance to the nearest side
+    general = clearance._polygon_gap(qx.ravel(), qy.ravel(), foot.polygon)
+    polygon_gaps: tr.FloatArray = general.reshape(qx.shape).min(axis=1)
+    return polygon_gaps
+
+
+def _box_gaps(
+    poses: tuple[tr.FloatArray, tr.FloatArray, tr.FloatArray],
+    points: tuple[tr.FloatArray, tr.FloatArray],
+    box: tuple[float, float, float, float],
+    reach: float,
+    out: tr.FloatArray,
+) -> tr.FloatArray:
+    """gaps() for a box along the robot's axes: the outline's arithmetic (clearance's
+    closed form) only for the (pose, point) pairs whose centres are within ``reach``: a
+    point farther from a pose's centre is farther than the margin from its outline, which is
+    all that is said of it, and most pairs are (a few arcs in the open come near a few dozen
+    hits). The pairs are found in single precision, with a centimetre to spare; each found
+    pair is measured in double, as clearance measures it."""
+    xs, ys, yaws = poses
+    px, py = points
+    dx = px.astype(np.float32)[None, :] - xs.astype(np.float32)[:, None]
+    dy = py.astype(np.float32)[None, :] - ys.astype(np.float32)[:, None]
+    dx *= dx
+    dy *= dy
+    dx += dy
+    pose, point = np.nonzero(dx <= np.float32((reach + 0.01) ** 2))
+    if len(pose) == 0:
+        return out
+    # the pairs in row order: each pose's are one run
+    ddx, ddy = px[point] - xs[pose], py[point] - ys[pose]
+    c, s = np.cos(yaws[pose]), np.sin(yaws[pose])
+    qx, qy = c * ddx + s * ddy, c * ddy - s * ddx  # each point in the pose's frame
+    # the box's signed distance, in place: outside, the distance to the nearest side or
+    # corner; inside, minus the distance to the nearest side
     cx, cy, hx, hy = box
     ex, ey = np.abs(qx - cx) - hx, np.abs(qy - cy) - hy
     inside = np.minimum(np.maximum(ex, ey), 0.0)
@@ -154,8 +188,9 @@ def gaps(
     ex += ey
     np.sqrt(ex, out=ex)
     ex += inside
-    nearest: tr.FloatArray = ex.min(axis=1)
-    return nearest
+    starts = np.flatnonzero(np.diff(pose, prepend=-1))
+    out[pose[starts]] = np.minimum.reduceat(ex, starts)
+    return out
 
 
 def bounds(
@@ -172,6 +207,78 @@ def bounds(
     return v_low, max(v_low, v_high), min(w_low, w_high), max(w_low, w_high)
 
 
+class Scene:
+    """One decision's checks: what every candidate of it is put to (the hits near the
+    window, the footprint, the start pose, dwa's speed cap and window), worked out once;
+    :meth:`admissible` rolls a set of candidates out against them."""
+
+    def __init__(
+        self,
+        scan: LaserScan,
+        odom: Odometry,
+        robot: Robot,
+        p: DwaParams,
+        remaining_m: float,
+        polygon: Sequence[Sequence[float]] | None = None,
+    ) -> None:
+        self.robot, self.p, self.odom = robot, p, odom
+        top = robot.max_linear_mps
+        shape = None if polygon is None else tuple((float(x), float(y)) for x, y in polygon)
+        self.foot, self.box = _outline(robot.footprint_radius_m, shape)
+        accel = robot.max_linear_accel_mps2
+        self.start = tr.start_pose(odom.linear_mps, odom.angular_rps, p.delay_s)
+        self.needed = p.margin_m + 0.01
+        # the hits an arc of this window can come near: the farthest the window reaches
+        v_top = min(top, max(0.0, odom.linear_mps) + accel * p.window_s)
+        travel = max(v_top * p.horizon_s, p.min_travel_s * top)
+        reach = math.hypot(self.start[0], self.start[1]) + travel + self.foot.reach_m + self.needed
+        self.points = hits(scan, p.obstacle_range_m or reach)
+        radius = robot.footprint_radius_m
+        v_cap = math.sqrt(2.0 * accel * max(0.0, remaining_m)) * 0.8
+        px, py = self.points
+        ahead = (px > 0.0) & (np.abs(py) < radius)
+        straight = float(np.hypot(px[ahead], py[ahead]).min(initial=math.inf))
+        straight = max(0.0, straight - radius - p.safety_margin_m)
+        self.v_cap = min(v_cap, stopping_speed(straight, p.safety_lookahead_s, accel))
+        self.bounds = bounds(odom, robot, p, self.v_cap)
+        self._index: clearance.Index | None = None  # dwa's index of the hits, once needed
+
+    def admissible(self, v: tr.FloatArray, w: tr.FloatArray) -> tuple[tr.BoolArray, tr.FloatArray]:
+        """dwa's test of each arc (trajectories.admissible and the slow arcs' rule), and
+        each arc's smallest gap. The window's brake is in every set put to
+        trajectories.admissible (its "stops in time" holds for a set's slowest speed only),
+        as a row of its own that is not rolled out."""
+        p, start, top = self.p, self.start, self.robot.max_linear_mps
+        win = tr.Window(v, w)
+        poses = tr.rollout(win, start, p.horizon_s, p.steps)
+        slow, on = tr.further(win, start, p.min_travel_s * top, p.horizon_s, p.steps)
+        if p.min_travel_s <= 0:
+            slow = slow[:0]
+        flat = tuple(
+            np.concatenate([poses[k].ravel(), [start[k]], on[k][: len(slow)].ravel()])
+            for k in range(3)
+        )
+        if len(flat[0]) < INDEXED_FROM:
+            every = gaps((flat[0], flat[1], flat[2]), self.points, self.foot, self.box, self.needed)
+        else:
+            if self._index is None:
+                reach = self.foot.reach_m + self.needed
+                self._index = clearance.Index(np.column_stack(self.points), reach)
+            every = clearance.gaps(flat[0], flat[1], flat[2], self._index, self.foot, self.needed)
+        n = poses[0].size
+        arc_gaps, start_gap = every[:n].reshape(poses[0].shape), float(every[n])
+        ok = tr.admissible(
+            tr.Window(np.append(v, self.bounds[0]), np.append(w, 0.0)),
+            np.vstack([arc_gaps, np.full((1, p.steps), np.inf)]),
+            start_gap, margin_m=p.margin_m, accel_v=self.robot.max_linear_accel_mps2,
+            delay_s=p.delay_s, horizon_s=p.horizon_s,
+        )[:-1]  # fmt: skip
+        if len(slow):
+            limit = min(p.margin_m, start_gap - 0.005)
+            ok[slow] &= every[n + 1 :].reshape(len(slow), p.steps).min(axis=1) >= limit
+        return ok, arc_gaps.min(axis=1)
+
+
 def check(
     proposal: tuple[float, float],
     scan: LaserScan,
@@ -183,59 +290,10 @@ def check(
 ) -> Verdict:
     """The nearest admissible velocity to ``proposal`` among it and its lattice neighbours.
     ``remaining_m``: how far the path's end is (the speed cap near it)."""
-    top = robot.max_linear_mps
-    shape = None if polygon is None else tuple((float(x), float(y)) for x, y in polygon)
-    foot, box = _outline(robot.footprint_radius_m, shape)
-    accel = robot.max_linear_accel_mps2
-    start = tr.start_pose(odom.linear_mps, odom.angular_rps, p.delay_s)
-    needed = p.margin_m + 0.01
-    # the hits an arc of this window can come near: the farthest the window reaches
-    v_top = min(top, max(0.0, odom.linear_mps) + accel * p.window_s)
-    travel = max(v_top * p.horizon_s, p.min_travel_s * top)
-    reach = math.hypot(start[0], start[1]) + travel + foot.reach_m + needed
-    points = hits(scan, p.obstacle_range_m or reach)
-    radius = robot.footprint_radius_m
-    v_cap = math.sqrt(2.0 * accel * max(0.0, remaining_m)) * 0.8
-    ahead = (points[0] > 0.0) & (np.abs(points[1]) < radius)
-    straight = float(np.hypot(points[0][ahead], points[1][ahead]).min(initial=math.inf))
-    straight = max(0.0, straight - radius - p.safety_margin_m)
-    v_cap = min(v_cap, stopping_speed(straight, p.safety_lookahead_s, accel))
-    v_low, v_high, w_low, w_high = bounds(odom, robot, p, v_cap)
-    index: list[clearance.Index] = []  # dwa's index of the hits, once a batch is large
-
-    def admissible(v: tr.FloatArray, w: tr.FloatArray) -> tuple[tr.BoolArray, tr.FloatArray]:
-        """dwa's test of each arc (trajectories.admissible and the slow arcs' rule), and
-        each arc's smallest gap. The window's brake is in every set put to
-        trajectories.admissible (its "stops in time" holds for a set's slowest speed only),
-        as a row of its own that is not rolled out."""
-        win = tr.Window(v, w)
-        poses = tr.rollout(win, start, p.horizon_s, p.steps)
-        slow, on = tr.further(win, start, p.min_travel_s * top, p.horizon_s, p.steps)
-        if p.min_travel_s <= 0:
-            slow = slow[:0]
-        flat = tuple(
-            np.concatenate([poses[k].ravel(), [start[k]], on[k][: len(slow)].ravel()])
-            for k in range(3)
-        )
-        if len(flat[0]) < INDEXED_FROM:
-            every = gaps((flat[0], flat[1], flat[2]), points, foot, box, needed)
-        else:
-            if not index:
-                index.append(clearance.Index(np.column_stack(points), foot.reach_m + needed))
-            every = clearance.gaps(flat[0], flat[1], flat[2], index[0], foot, needed)
-        n = poses[0].size
-        arc_gaps, start_gap = every[:n].reshape(poses[0].shape), float(every[n])
-        ok = tr.admissible(
-            tr.Window(np.append(v, v_low), np.append(w, 0.0)),
-            np.vstack([arc_gaps, np.full((1, p.steps), np.inf)]),
-            start_gap, margin_m=p.margin_m, accel_v=accel, delay_s=p.delay_s,
-            horizon_s=p.horizon_s,
-        )[:-1]  # fmt: skip
-        if len(slow):
-            limit = min(p.margin_m, start_gap - 0.005)
-            ok[slow] &= every[n + 1 :].reshape(len(slow), p.steps).min(axis=1) >= limit
-        return ok, arc_gaps.min(axis=1)
-
+    scene = Scene(scan, odom, robot, p, remaining_m, polygon)
+    admissible = scene.admissible
+    v_low, v_high, w_low, w_high = scene.bounds
+    top, accel = robot.max_linear_mps, robot.max_linear_accel_mps2
     # the proposal first, clamped into the window; its neighbours, nearest first, a few at
     # a time, only while none has passed
     v0, w0 = min(max(proposal[0], v_low), v_high), min(max(proposal[1], w_low), w_high)
@@ -245,7 +303,7 @@ def check(
     lattice = tr.window(
         odom.linear_mps, odom.angular_rps, max_v=top, max_w=robot.max_angular_rps,
         accel_v=accel, accel_w=robot.max_angular_accel_rps2, dt=p.window_s,
-        v_samples=p.linear_samples, w_samples=p.angular_samples, v_cap=v_cap,
+        v_samples=p.linear_samples, w_samples=p.angular_samples, v_cap=scene.v_cap,
     )  # fmt: skip
     cells = (
         max((v_high - v_low) / max(1, p.linear_samples - 1), 1e-3),

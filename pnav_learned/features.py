@@ -15,10 +15,12 @@ Everything is in the robot's frame (x ahead, y left) at the odometry's pose:
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 SECTORS = 16
 RANGE_CAP_M = 3.5  # the Burger's lidar range; farther hits tell a local policy nothing
@@ -38,17 +40,32 @@ FEATURES: tuple[str, ...] = (
 FloatArray = np.ndarray[tuple[int, ...], np.dtype[np.float64]]
 
 
+@functools.lru_cache(maxsize=8)
+def _sectors_of(
+    angle_min: float, angle_increment: float, count: int
+) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+    """For a lidar's beams: their order by sector, where each sector with beams starts in
+    that order, and which sectors those are (the same for every scan of one lidar, so the
+    sorting is done once, not per decision)."""
+    angles = angle_min + angle_increment * np.arange(count)
+    wrapped = (angles + math.pi) % (2.0 * math.pi)  # 0 .. 2 pi from straight behind
+    index = np.minimum((wrapped / (2.0 * math.pi) * SECTORS).astype(np.int64), SECTORS - 1)
+    order = np.argsort(index, kind="stable")
+    present, starts = np.unique(index[order], return_index=True)
+    return order, starts, present
+
+
 def sector_minima(
     ranges: Sequence[float] | np.ndarray, angle_min: float, angle_increment: float
 ) -> FloatArray:
     """The nearest hit per sector (``SECTORS`` of them, from -pi), capped at RANGE_CAP_M."""
     r = np.asarray(ranges, dtype=np.float64)
-    angles = angle_min + angle_increment * np.arange(r.size)
-    wrapped = (angles + math.pi) % (2.0 * math.pi)  # 0 .. 2 pi from straight behind
-    index = np.minimum((wrapped / (2.0 * math.pi) * SECTORS).astype(np.int64), SECTORS - 1)
-    r = np.where(np.isfinite(r), np.minimum(r, RANGE_CAP_M), RANGE_CAP_M)
     out = np.full(SECTORS, RANGE_CAP_M)
-    np.minimum.at(out, index, r)
+    if r.size == 0:
+        return out
+    order, starts, present = _sectors_of(float(angle_min), float(angle_increment), r.size)
+    r = np.where(np.isfinite(r), np.minimum(r, RANGE_CAP_M), RANGE_CAP_M)
+    out[present] = np.minimum.reduceat(r[order], starts)
     return out
 
 

@@ -20,12 +20,14 @@ import numpy as np
 
 from pnav_learned.errors import ModelRefused
 from pnav_learned.features import FEATURES
+from pnav_learned.lattice import CELLS
 
 FORMAT = "pnav-mlp/1"
 TARGETS = ("linear_mps", "angular_rps")  # learned_drive's; foresight names its own
-# what the last layer's output goes through: a regression (learned_drive) or a probability
-# (foresight: a classifier's logit)
-OUTPUTS = ("identity", "logistic")
+# what the last layer's output goes through: a regression (learned_drive's proposal), a
+# probability (foresight: a classifier's logit) or a distribution over classes (learned_drive's
+# lattice classifier: one probability per cell of dwa's lattice, pnav_learned.lattice)
+OUTPUTS = ("identity", "logistic", "softmax")
 # bounds on one decision's work and on what a file may make us read, whatever it says
 MAX_FILE_BYTES = 4 * 1024 * 1024
 MAX_LAYERS = 6
@@ -60,11 +62,20 @@ class Model:
             h = h @ w + b
             if i < last:
                 h = np.maximum(h, 0.0)
-        y = h * self.y_scale + self.y_mean
+        if self.output == "softmax":
+            y = np.exp(h - h.max())
+            y /= y.sum()
+        else:
+            y = h * self.y_scale + self.y_mean
         if self.output == "logistic":
             y = 1.0 / (1.0 + np.exp(-np.clip(y, -60.0, 60.0)))
         inside = float(np.mean((x >= self.x_min) & (x <= self.x_max)))
         return y, inside
+
+    @property
+    def lattice(self) -> bool:
+        """Whether this is a classifier over dwa's lattice (else a proposal's regression)."""
+        return self.output == "softmax"
 
     def predict(self, x: FloatArray) -> tuple[float, float, float]:
         """(linear, angular, confidence) for one feature vector: learned_drive's model."""
@@ -116,12 +127,32 @@ class Kind:
 
 
 DRIVE = Kind("learned_drive", FEATURES, TARGETS)
+# learned_drive's classifier over dwa's lattice: the same features, a probability per cell
+DRIVE_LATTICE = Kind("learned_drive", FEATURES, CELLS, "softmax")
+# what learned_drive runs: either, told apart by the file's targets
+DRIVE_KINDS = (DRIVE_LATTICE, DRIVE)
+Kinds = Kind | tuple[Kind, ...]
 
 
-def parse(doc: Any, path: str, version: str | None = None, kind: Kind = DRIVE) -> Model:
-    """The model in ``doc`` (a decoded model file), or :class:`ModelRefused`."""
+def scenario_of(kind: Kinds) -> str:
+    """The scenario that runs models of ``kind`` (or of these kinds)."""
+    return (kind[0] if isinstance(kind, tuple) else kind).scenario
+
+
+def _pick(doc: dict[str, Any], kind: Kinds) -> Kind:
+    """The kind among ``kind`` whose targets the file names (the first if none: its refusal
+    then says what was expected)."""
+    kinds = kind if isinstance(kind, tuple) else (kind,)
+    targets = doc.get("targets")
+    return next((k for k in kinds if targets == list(k.targets)), kinds[0])
+
+
+def parse(doc: Any, path: str, version: str | None = None, kind: Kinds = DRIVE) -> Model:
+    """The model in ``doc`` (a decoded model file), or :class:`ModelRefused`. ``kind``: the
+    kind of model the scenario runs, or several it can (told apart by the targets)."""
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise ModelRefused(f"not a {FORMAT} model file")
+    kind = _pick(doc, kind)
     features, targets = kind.features, kind.targets
     if doc.get("features") != list(features):
         raise ModelRefused(
@@ -129,7 +160,10 @@ def parse(doc: Any, path: str, version: str | None = None, kind: Kind = DRIVE) -
             f" {kind.scenario} computes ({len(features)}: {', '.join(features[:3])}...)"
         )
     if doc.get("targets") != list(targets):
-        raise ModelRefused(f"targets {doc.get('targets')}, expected {list(targets)}")
+        said = doc.get("targets")
+        said = said if not isinstance(said, list) or len(said) <= 4 else f"{len(said)} targets"
+        expected = list(targets) if len(targets) <= 4 else f"{len(targets)} cells"
+        raise ModelRefused(f"targets {said}, expected {expected}")
     if doc.get("output", "identity") != kind.output:
         raise ModelRefused(f"output {doc.get('output')!r}, {kind.scenario} needs {kind.output!r}")
     found = str(doc.get("version", ""))
@@ -159,7 +193,7 @@ def parse(doc: Any, path: str, version: str | None = None, kind: Kind = DRIVE) -
     )
 
 
-def load(path: str | Path, version: str | None = None, kind: Kind = DRIVE) -> Model:
+def load(path: str | Path, version: str | None = None, kind: Kinds = DRIVE) -> Model:
     """Read and check the model file at ``path`` for ``kind``'s scenario; ``version``: the
     one required."""
     p = Path(path)

@@ -30,7 +30,7 @@ from typing import Any
 from common import log
 from common.controller_core.scenario import Host
 from pnav_learned.errors import ModelRefused
-from pnav_learned.model import Kind, Model, load
+from pnav_learned.model import Kinds, Model, load, scenario_of
 
 logger = logging.getLogger("pnav.controller")
 
@@ -59,14 +59,14 @@ def model_path(name: str) -> Path:
     return p if p.is_absolute() else Path(os.environ.get("PNAV_MODEL_DIR", ".")) / p
 
 
-def load_cached(path: Path, version: str | None, kind: Kind) -> Model | str:
+def load_cached(path: Path, version: str | None, kind: Kinds) -> Model | str:
     """The model at ``path`` (cached until the file's modification time changes), or why
     it is refused (logged once per file, version and modification)."""
     try:
         mtime = path.stat().st_mtime
     except OSError:
         mtime = -1.0
-    key = (kind.scenario, str(path), version, mtime)
+    key = (scenario_of(kind), str(path), version, mtime)
     if key not in _cache:
         try:
             _cache[key] = load(path, version, kind)
@@ -76,7 +76,7 @@ def load_cached(path: Path, version: str | None, kind: Kind) -> Model | str:
         log.event(
             logger,
             logging.WARNING if isinstance(found, str) else logging.INFO,
-            f"{kind.scenario} model",
+            f"{scenario_of(kind)} model",
             path=str(path),
             outcome=found if isinstance(found, str) else f"loaded version {found.version}",
         )
@@ -93,7 +93,7 @@ def named(params: Mapping[str, Any], prefix: str) -> tuple[str | None, str | Non
     )
 
 
-async def resolve(host: Host, params: Mapping[str, Any], prefix: str, kind: Kind) -> Found | str:
+async def resolve(host: Host, params: Mapping[str, Any], prefix: str, kind: Kinds) -> Found | str:
     """The model the params name (see the module's docstring), or why there is none."""
     name, version = named(params, prefix)
     if name is None:

@@ -13,14 +13,14 @@ from typing import Any, ClassVar
 
 from common.contract.planned_path import PlannedPath
 from common.controller_core.scenario import ControllerScenario
-from pnav_learned.model import Kind
+from pnav_learned.model import Kinds
 from pnav_learned.registry import Found, resolve
 
 
 class LearnedScenario(ControllerScenario):
     needs_odometry = True
     params: ClassVar[str]
-    kind: ClassVar[Kind]
+    kind: ClassVar[Kinds]
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)

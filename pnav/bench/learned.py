@@ -11,8 +11,10 @@ footprint), as the controller met them.
 
 learned_drive's cost is the features, the model and its check (pnav_learned.candidates: the
 proposal, and if it fails its neighbours on dwa's lattice, rolled out against the scan with
-the footprint), so it depends on the scenes: the share of decisions whose proposal passed at
-once and the candidates checked a decision are printed too. Without ``--model`` the model is
+the footprint; for a classifier over dwa's lattice, its likeliest cells as one batch, and
+dwa's own decision when none passes), so it depends on the scenes: the share of decisions
+whose proposal passed at once (or, for a lattice classifier, that fell back to dwa) and the
+candidates checked a decision are printed too. Without ``--model`` the model is
 a (32, 32) network with random weights: its cost is the cost of any model of that shape.
 """
 
@@ -33,7 +35,7 @@ from pnav.bench.dwa_decision import JACKAL, POLYGONS, barn, scenes
 from pnav.bench.figures import decision_options, emit, machine
 from pnav_learned.drive import recommend
 from pnav_learned.features import FEATURES
-from pnav_learned.model import FORMAT, Model, load, parse
+from pnav_learned.model import DRIVE_KINDS, FORMAT, Model, load, parse
 from pnav_local.dwa import choose
 from pnav_local.dwa_params import DwaParams
 
@@ -88,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
     args = parser.parse_args(argv)
-    model = load(args.model) if args.model else random_model()
+    model = load(args.model, kind=DRIVE_KINDS) if args.model else random_model()
     params = DwaParams.read({})
     if args.db_dir:
         data = [
@@ -105,30 +107,38 @@ def main(argv: list[str] | None = None) -> int:
     ml_ms, ml_cpu = timed(
         lambda s, o, p, r, f: recommend(model, s, o, r, p, None, params, f), data, args.repeat
     )
-    checks = [
-        int((recommend(model, s, o, r, p, None, params, f).inputs or {})["checked"])
-        for s, o, p, r, f in data
-    ]
+    said = [(recommend(model, s, o, r, p, None, params, f).inputs or {}) for s, o, p, r, f in data]
+    checks = [int(inputs["checked"]) for inputs in said]
+    # a lattice classifier's top cells are one batch; what counts is how often dwa decides
+    fallbacks = sum(1 for inputs in said if inputs.get("fallback")) / max(1, len(said))
     first = sum(1 for c in checks if c == 1) / max(1, len(checks))
     checked = sum(checks) / max(1, len(checks))
     results = {
         "model": model.path,
         "set": scene_set,
         "decisions": len(data),
-        "proposal_passed_share": round(first, 4),
+        "lattice": model.lattice,
+        "proposal_passed_share": None if model.lattice else round(first, 4),
+        "fallback_share": round(fallbacks, 4) if model.lattice else None,
         "candidates_checked_mean": round(checked, 2),
         "dwa_ms_per_decision": round(dwa_ms, 3),
         "dwa_cpu_ms_per_decision": round(dwa_cpu, 3),
         "learned_ms_per_decision": round(ml_ms, 3),
         "learned_cpu_ms_per_decision": round(ml_cpu, 3),
         "learned_share_of_dwa": round(ml_ms / dwa_ms, 4),
+        "learned_cpu_share_of_dwa": round(ml_cpu / dwa_cpu, 4),
     }
     print(
         f"dwa           {dwa_ms:8.3f} ms per decision ({dwa_cpu:.3f} ms CPU)\n"
         f"learned_drive {ml_ms:8.3f} ms per decision ({ml_cpu:.3f} ms CPU),"
-        f" {100 * ml_ms / dwa_ms:.1f} % of dwa's\n"
-        f"{len(data)} decisions; the proposal passed at once in {100 * first:.1f} %,"
-        f" {checked:.2f} candidates checked a decision on average"
+        f" {100 * ml_ms / dwa_ms:.1f} % of dwa's ({100 * ml_cpu / dwa_cpu:.1f} % CPU)\n"
+        + (
+            f"{len(data)} decisions; dwa decided (no likely cell admissible) in"
+            f" {100 * fallbacks:.1f} %, {checked:.2f} cells checked a decision on average"
+            if model.lattice
+            else f"{len(data)} decisions; the proposal passed at once in {100 * first:.1f} %,"
+            f" {checked:.2f} candidates checked a decision on average"
+        )
     )
     emit({"benchmark": "learned_drive decision", "machine": machine(), **results}, args.json)
     return 0

@@ -21,6 +21,7 @@ class _Collect:
     """A labeller that labels nothing and keeps each decision's state."""
 
     name = "recorded"
+    cell: tuple[int, list[bool]] | None = None  # no lattice labels
 
     def __init__(self, by_robot: dict[str, Robot]) -> None:
         self.robots = by_robot

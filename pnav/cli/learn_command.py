@@ -32,7 +32,8 @@ def add_learn_parser(commands: argparse._SubParsersAction[argparse.ArgumentParse
         "--label",
         choices=("dwa",),
         help="targets: what this controller would have commanded in each recorded state"
-        " (DAgger), not what the stack decided",
+        " (DAgger), not what the stack decided; with dwa, also its cell of dwa's lattice and"
+        " the cells that pass learned_drive's check (train --target lattice)",
     )
     data.add_argument(
         "--label-strategy",
@@ -46,9 +47,12 @@ def add_learn_parser(commands: argparse._SubParsersAction[argparse.ArgumentParse
     train.add_argument("--out", type=Path, required=True, metavar="MODEL.json")
     train.add_argument(
         "--target",
-        choices=("drive", "foresight"),
+        choices=("drive", "foresight", "lattice"),
         default="drive",
-        help="drive: learned_drive's velocity (default); foresight: no progress within 3 s",
+        help=(
+            "drive: learned_drive's velocity (default); lattice: learned_drive's classifier"
+            " over dwa's lattice (data from --label dwa); foresight: no progress within 3 s"
+        ),
     )
     train.add_argument(
         "--test",

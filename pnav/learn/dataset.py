@@ -44,6 +44,9 @@ class Labeller(Protocol):
     relabel.DwaLabeller labels with dwa's choice; pnav.bench.recorded keeps the states."""
 
     name: str
+    # the last state's (dwa's cell on the lattice, the admissible cells), where the
+    # labeller has them (the dwa_cell and dwa_admissible columns); None where it has not
+    cell: tuple[int, list[bool]] | None
 
     def __call__(
         self, robot_id: str, scan: Row, odom: Row, path: Row
@@ -56,6 +59,9 @@ TARGETS = ("linear_mps_cmd", "angular_rps_cmd")
 OUTCOMES = ("source", "progress_m", "collision", "goal_status")
 # with a label (relabel.py): what the stack decided, beside the label's targets
 DECIDED = ("decided_linear_mps", "decided_angular_rps", "decided_source")
+# with dwa's label: its choice's cell of dwa's lattice (pnav_learned.lattice; -1: none) and
+# which cells are admissible (learned_drive's check, per cell: the lattice classifier's data)
+LATTICE = ("dwa_cell", "dwa_admissible")
 
 
 @dataclass
@@ -143,7 +149,7 @@ async def read(
     )
     names = (*META, *FEATURES, *HISTORY_FEATURES, *TARGETS, *OUTCOMES)
     if label is not None:
-        names = (*names, *DECIDED)
+        names = (*names, *DECIDED, *LATTICE)
     columns: dict[str, list[Any]] = {n: [] for n in names}
     histories: dict[str, History] = defaultdict(History)
     skipped = 0
@@ -194,6 +200,8 @@ async def read(
             said = label(robot, scan, o, path)
             values["linear_mps_cmd"], values["angular_rps_cmd"] = said or (math.nan, math.nan)
             values["source"] = label.name
+            cell = label.cell if said is not None else None
+            values["dwa_cell"], values["dwa_admissible"] = cell or (-1, [])
         for name, value in values.items():
             columns[name].append(value)
     return Dataset(columns, len(decisions), skipped)

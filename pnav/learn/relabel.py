@@ -17,12 +17,23 @@ strategy ``--label-strategy`` names.
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping
 from typing import Any
 
 from common.contract.planned_path import PlannedPath, planned_path_of
-from common.contract.records import Robot, laser_scan_of, odometry_of, robots
+from common.contract.records import (
+    LaserScan,
+    Odometry,
+    Robot,
+    laser_scan_of,
+    odometry_of,
+    robots,
+)
 from common.errors import UsageError
+from pnav_learned import lattice
+from pnav_learned.candidates import Scene
+from pnav_learned.features import to_robot_frame
 from pnav_local import dwa
 from pnav_local.dwa_params import DwaParams
 
@@ -34,6 +45,9 @@ class DwaLabeller:
     ``dataset.Labeller``); None where dwa is silent (no point of the path ahead)."""
 
     name = "dwa"
+    # the last state's (dwa's cell on the lattice, the admissible cells): None when dwa had
+    # nothing to say (pnav learn dataset's dwa_cell and dwa_admissible columns)
+    cell: tuple[int, list[bool]] | None = None
 
     def __init__(self, robot: Mapping[str, Robot], params: Mapping[str, DwaParams]) -> None:
         self.robot = robot
@@ -60,9 +74,31 @@ class DwaLabeller:
             robot.footprint_polygon,
         )
         if choice is None:
+            self.cell = None
             return None
         command = dwa.command_for(choice, self._path[1])
+        self.cell = cell_of(
+            (command.linear, command.angular), laser_scan_of(scan), odometry_of(odom), robot,
+            self.params[robot_id], self._path[1],
+        )  # fmt: skip
         return command.linear, command.angular
+
+
+def cell_of(
+    command: tuple[float, float],
+    scan: LaserScan,
+    odom: Odometry,
+    robot: Robot,
+    p: DwaParams,
+    path: PlannedPath,
+) -> tuple[int, list[bool]]:
+    """(the cell of dwa's lattice nearest ``command``, which cells are admissible): the
+    lattice and the check learned_drive uses at run time (pnav_learned.lattice, .candidates),
+    for the state's window."""
+    tx, ty = to_robot_frame(path.xs[-1], path.ys[-1], (odom.x, odom.y, odom.yaw))
+    scene = Scene(scan, odom, robot, p, math.hypot(tx, ty), robot.footprint_polygon)
+    ok, _ = scene.admissible(*lattice.grid(scene.bounds))
+    return lattice.nearest(command, scene.bounds), ok.tolist()
 
 
 async def labeller(conn: Any, label: str, strategy: str | None = None) -> DwaLabeller:

@@ -1,10 +1,14 @@
 """``pnav learn train``: fit a small multilayer perceptron (scikit-learn, CPU) and write it
 as a model file a learned scenario can run (pnav_learned.model: JSON, evaluated with numpy).
 
-Two targets (``--target``):
+Three targets (``--target``):
 
 - ``drive`` (learned_drive): a regressor from a decision's features to the velocity the
   stack commanded; held-out R^2 and mean absolute error per target;
+- ``lattice`` (learned_drive): a classifier from a decision's features to the cell of dwa's
+  lattice dwa chose (pnav_learned.lattice; datasets made with ``--label dwa``, which have
+  the ``dwa_cell`` and ``dwa_admissible`` columns); held out: how often dwa's cell, and an
+  admissible cell, is among the k likeliest;
 - ``foresight``: a classifier from a decision's features and the last seconds'
   (pnav_learned.history) to "no progress within 3 s" (the dataset's ``progress_m`` below
   ``NO_PROGRESS_M``); held-out precision and recall at foresight's threshold and others.
@@ -26,15 +30,19 @@ from typing import Any
 import numpy as np
 
 from common.errors import UsageError
-from pnav.learn.dataset import matrix
+from pnav.learn.dataset import LATTICE, matrix
 from pnav_learned.features import FEATURES
 from pnav_learned.history import FORESIGHT_FEATURES, NEAR_TARGET_M, NO_PROGRESS_M, no_progress
+from pnav_learned.lattice import ANGULAR, CELLS
 from pnav_learned.model import FORMAT, TARGETS
 
 DATA_TARGETS = ("linear_mps_cmd", "angular_rps_cmd")
 HELD_OUT = 0.2
 MIN_EXAMPLES = 20
-TARGET_KINDS = ("drive", "foresight")
+TARGET_KINDS = ("drive", "foresight", "lattice")
+# the lattice classifier's held-out metrics: how often dwa's cell, or an admissible one, is
+# among the k likeliest (learned_drive checks TOP_K of them; fewer and more for comparison)
+TOP_KS = (1, 2, 4, 6, 8)
 FORESIGHT_THRESHOLDS = (0.4, 0.5, 0.6, 0.7)  # precision and recall reported at each
 HORIZON_S = 3.0  # foresight's label: no progress within the next 3 s
 
@@ -91,6 +99,95 @@ def read_examples(
     x, y = matrix(columns, FEATURES)[keep], matrix(columns, DATA_TARGETS)[keep]
     finite = np.all(np.isfinite(x), axis=1) & np.all(np.isfinite(y), axis=1)
     return x[finite], y[finite]
+
+
+def read_lattice(paths: list[Path]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The lattice classifier's examples (``pnav learn dataset --label dwa``): features,
+    dwa's cell, and which cells were admissible (for the held-out metrics). States where dwa
+    had nothing to say, or every cell was refused, are left out."""
+    columns = read_columns(paths, (*FEATURES, *LATTICE))
+    x = matrix(columns, FEATURES)
+    cell = np.asarray(columns["dwa_cell"], dtype=np.int64)
+    keep = np.all(np.isfinite(x), axis=1) & (cell >= 0)
+    ok = np.zeros((len(cell), len(CELLS)), dtype=bool)
+    for i, row in enumerate(columns["dwa_admissible"]):
+        if keep[i] and len(row) == len(CELLS):
+            ok[i] = row
+        else:
+            keep[i] = False
+    return x[keep], passing(cell[keep], ok[keep]), ok[keep]
+
+
+def passing(cell: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """Each example's label: dwa's cell where it passes learned_drive's check, else the
+    admissible cell nearest it on the grid (dwa's choice may be off the grid: a turn rate
+    facing the carrot, a two-segment arc, or admitted only by squeezing; its nearest cell
+    may then fail where one beside it passes), or dwa's cell where none passes. The
+    classifier learns cells that pass, so its likeliest are seldom all refused."""
+    i, j = np.divmod(np.arange(len(CELLS)), ANGULAR)
+    ci, cj = np.divmod(cell, ANGULAR)
+    far = np.hypot(i[None, :] - ci[:, None], j[None, :] - cj[:, None])
+    far = np.where(ok, far, np.inf)
+    best = np.argmin(far, axis=1)
+    return np.where(np.isfinite(far.min(axis=1)), best, cell)
+
+
+def fit_lattice(
+    x: np.ndarray,
+    y: np.ndarray,
+    ok: np.ndarray,
+    hidden: tuple[int, ...],
+    seed: int,
+    held_out: int | None = None,
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """learned_drive's classifier over dwa's lattice (pnav_learned.lattice): the model
+    document and its held-out metrics: dwa's cell among the k likeliest, and an admissible
+    cell among them (what decides whether learned_drive falls back to dwa)."""
+    from sklearn.neural_network import MLPClassifier
+
+    train, test = _split_enough(x, seed, held_out)
+    x_mean, x_scale = _scaling(x[train])
+    net = MLPClassifier(
+        hidden_layer_sizes=hidden,
+        activation="relu",
+        alpha=1e-3,
+        max_iter=300,
+        early_stopping=True,
+        n_iter_no_change=10,
+        random_state=seed,
+    )
+    net.fit((x[train] - x_mean) / x_scale, y[train])
+    # sklearn has an output per class seen (one logistic output for two): the file has one
+    # per cell, a cell never seen in training never likely
+    seen = np.asarray(net.classes_, dtype=np.int64)
+    if len(seen) < 3:
+        raise UsageError(f"--data: dwa chose {len(seen)} cells only: nothing to learn")
+    last_w, last_b = net.coefs_[-1], net.intercepts_[-1]
+    w = np.zeros((last_w.shape[0], len(CELLS)))
+    b = np.full(len(CELLS), -30.0)
+    w[:, seen], b[seen] = last_w, last_b
+    net.coefs_[-1], net.intercepts_[-1] = w, b
+    h = (x[test] - x_mean) / x_scale
+    for i, (lw, lb) in enumerate(zip(net.coefs_, net.intercepts_, strict=True)):
+        h = h @ lw + lb
+        if i < len(net.coefs_) - 1:
+            h = np.maximum(h, 0.0)
+    order = np.argsort(-h, axis=1)
+    metrics: dict[str, Any] = {
+        "train_examples": len(train),
+        "held_out": len(test),
+        "cells_seen": len(seen),
+    }
+    rows = np.arange(len(test))[:, None]
+    for k in TOP_KS:
+        top = order[:, :k]
+        metrics[f"dwa_cell_in_top{k}"] = float(np.mean(np.any(top == y[test][:, None], axis=1)))
+        metrics[f"admissible_in_top{k}"] = float(np.mean(ok[test][rows, top].any(axis=1)))
+    unscaled = (np.zeros(len(CELLS)), np.ones(len(CELLS)))
+    doc = _document(
+        net, FEATURES, CELLS, x[train], (x_mean, x_scale), unscaled, metrics, output="softmax"
+    )
+    return doc, metrics
 
 
 def read_foresight(paths: list[Path]) -> tuple[np.ndarray, np.ndarray]:
@@ -289,11 +386,19 @@ def train(
         return read_foresight(paths) if target == "foresight" else read_examples(paths, sources)
 
     held: int | None = None
-    x, y = read(files)
-    if test:
-        tx, ty = read(test)
-        x, y, held = np.concatenate([x, tx]), np.concatenate([y, ty]), len(tx)
-    doc, _ = (fit_foresight if target == "foresight" else fit)(x, y, hidden, seed, held)
+    if target == "lattice":
+        x, y, ok = read_lattice(files)
+        if test:
+            tx, ty, tok = read_lattice(test)
+            x, y, held = np.concatenate([x, tx]), np.concatenate([y, ty]), len(tx)
+            ok = np.concatenate([ok, tok])
+        doc, _ = fit_lattice(x, y, ok, hidden, seed, held)
+    else:
+        x, y = read(files)
+        if test:
+            tx, ty = read(test)
+            x, y, held = np.concatenate([x, tx]), np.concatenate([y, ty]), len(tx)
+        doc, _ = (fit_foresight if target == "foresight" else fit)(x, y, hidden, seed, held)
     weights = json.dumps(doc["layers"], sort_keys=True).encode()
     doc = {
         "name": name,

@@ -11,6 +11,7 @@ import pyarrow.parquet as pq
 
 from pnav_learned.features import FEATURES, RANGE_CAP_M, SECTORS
 from pnav_learned.history import FORESIGHT_FEATURES
+from pnav_learned.lattice import ANGULAR, CELLS, LINEAR
 
 
 def rule(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -77,4 +78,33 @@ def write_foresight(path: Path, n: int = 4000, seed: int = 1, shuffle: bool = Fa
         stuck = stuck[np.random.default_rng(seed + 1).permutation(n)]
     columns = {name: x[:, i] for i, name in enumerate(FORESIGHT_FEATURES)}
     columns["progress_m"] = np.where(stuck, 0.05, 0.9)
+    pq.write_table(pa.table(columns), path)
+
+
+def lattice_rule(x: np.ndarray) -> np.ndarray:
+    """The cell of dwa's lattice the made-up policy picks (pnav_learned.lattice): slowest,
+    middling or fastest by how free it is ahead, hard right, straight or hard left by where
+    the carrot is."""
+    ahead = x[:, SECTORS // 2 - 1 : SECTORS // 2 + 1].min(axis=1)
+    carrot = np.arctan2(x[:, FEATURES.index("carrot_y")], x[:, FEATURES.index("carrot_x")])
+    row = np.digitize(ahead, [1.2, 2.4]) * (LINEAR - 1) // 2
+    column = np.digitize(carrot, [-0.5, 0.5]) * (ANGULAR - 1) // 2
+    return row * ANGULAR + column
+
+
+def write_lattice(path: Path, n: int = 4000, seed: int = 1, shuffle: bool = False) -> None:
+    """Examples as ``pnav learn dataset --label dwa`` writes them, labelled with
+    :func:`lattice_rule`'s cell; every cell admissible (so the label is the rule's)."""
+    x = features(n, seed)
+    cell = lattice_rule(x)
+    if shuffle:
+        cell = cell[np.random.default_rng(seed + 1).permutation(n)]
+    columns = {name: x[:, i] for i, name in enumerate(FEATURES)}
+    columns |= {
+        "linear_mps_cmd": np.zeros(n),
+        "angular_rps_cmd": np.zeros(n),
+        "source": ["dwa"] * n,
+        "dwa_cell": cell,
+        "dwa_admissible": [[True] * len(CELLS)] * n,
+    }
     pq.write_table(pa.table(columns), path)

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+import pnav_local.clearance as clearance
 import pnav_local.trajectories as tr
 from common.contract.records import LaserScan, Odometry, Robot
 from pnav_learned.candidates import _outline, bounds, check, gaps, hits
@@ -115,3 +116,26 @@ def test_the_window_is_the_one_dwa_samples(v: float, w: float, cap: float) -> No
 def test_hits_are_the_points_within_reach() -> None:
     xs, ys = hits(scan_of([(1.0, 0.0), (0.0, 2.0), (-3.0, 0.0)]), 2.5)
     assert sorted(zip(np.round(xs, 3), np.round(ys, 3), strict=True)) == [(0.0, 2.0), (1.0, 0.0)]
+
+
+@pytest.mark.parametrize("polygon", [BOX, None])
+def test_gaps_are_clearances_below_what_the_margin_reads(polygon: object) -> None:
+    # the check measures only the (pose, point) pairs within reach: below what the margin
+    # reads it says what pnav_local.clearance says, above it at least that much
+    rng = np.random.default_rng(3)
+    foot, box = _outline(JACKAL.footprint_radius_m, polygon)  # type: ignore[arg-type]
+    needed = P.margin_m + 0.01
+    for _ in range(20):
+        xs, ys, yaws = (
+            rng.uniform(-1.5, 1.5, 40),
+            rng.uniform(-1.5, 1.5, 40),
+            rng.uniform(-4, 4, 40),
+        )
+        poses = (xs, ys, yaws)
+        points = (rng.uniform(-2.0, 2.0, 25), rng.uniform(-2.0, 2.0, 25))
+        got = gaps(poses, points, foot, box, needed)  # type: ignore[arg-type]
+        want = clearance.gaps(*poses, np.column_stack(points), foot, needed)
+        close = want < needed
+        assert close.any() and (~close).any()
+        assert np.array_equal(got[close], want[close])
+        assert np.all(got[~close] >= needed)

@@ -10,9 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pnav.learn.train import train
+from pnav.learn.train import passing, train
 from pnav_learned.features import FEATURES
-from pnav_learned.model import load
+from pnav_learned.lattice import CELLS
+from pnav_learned.model import DRIVE_KINDS, load
 from tests.unit.learn import synthetic
 
 pytestmark = pytest.mark.timeout(300)
@@ -121,3 +122,33 @@ def test_foresight_refuses_a_dataset_of_another_horizon(tmp_path: Path) -> None:
     pq.write_table(table.replace_schema_metadata({"pnav.horizon_s": "5.0"}), data)
     with pytest.raises(UsageError, match="outcomes over 5 s"):
         train(data, out, name="f", target="foresight", hidden=(4,))
+
+
+def test_the_lattice_classifier_learns_the_cell_the_rule_picks(tmp_path: Path) -> None:
+    data, out = tmp_path / "data.parquet", tmp_path / "model.json"
+    synthetic.write_lattice(data)
+    doc = train(data, out, name="cells", target="lattice", hidden=(32,))
+    assert doc["targets"] == list(CELLS) and doc["output"] == "softmax"
+    assert doc["metrics"]["dwa_cell_in_top1"] > 0.85
+    assert doc["metrics"]["dwa_cell_in_top2"] > 0.95
+    # the file as learned_drive reads it, on examples it never saw
+    model = load(out, doc["version"], DRIVE_KINDS)
+    assert model.lattice
+    fresh = synthetic.features(400, seed=7)
+    truth = synthetic.lattice_rule(fresh)
+    likeliest = np.array([int(np.argmax(model.outputs(x)[0])) for x in fresh])
+    assert np.mean(likeliest == truth) > 0.85
+
+
+def test_the_lattice_classifier_learns_nothing_from_cells_cut_loose(tmp_path: Path) -> None:
+    data, out = tmp_path / "data.parquet", tmp_path / "model.json"
+    synthetic.write_lattice(data, shuffle=True)
+    doc = train(data, out, name="noise", target="lattice", hidden=(32,))
+    assert doc["metrics"]["dwa_cell_in_top1"] < 0.35  # the commonest cell: 22 %
+
+
+def test_a_refused_cell_is_relabelled_with_the_nearest_that_passes() -> None:
+    ok = np.zeros((2, len(CELLS)), dtype=bool)
+    at = CELLS.index("cell_4_8")
+    ok[0, [CELLS.index("cell_4_10"), CELLS.index("cell_5_9"), CELLS.index("cell_0_0")]] = True
+    assert passing(np.array([at, at]), ok).tolist() == [CELLS.index("cell_5_9"), at]
