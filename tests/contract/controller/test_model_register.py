@@ -116,7 +116,8 @@ async def test_foresight_recommends_its_manoeuvre_naming_its_model_and_p(
     assert row["priority"] == 60 and row["linear_mps"] == pytest.approx(-0.15)
     assert row["reason"].startswith(
         "foresight: model stopped version fear1 (registered): no progress within 3 s"
-        " predicted, p 0.98 >= 0.60, confidence 1.00: backing up"
+        " predicted, p 0.98 >= 0.60, confidence 1.00, with the robot stalled (under 0.25 m"
+        " a second) for 1.5 s: backing up"
     )
     inputs = row["inputs"]
     assert inputs["model_version"] == "fear1" and inputs["planned_path"] == path_id
