@@ -66,6 +66,12 @@ class SimClock:
         self._stamp = stamp
 
     @property
+    def stamp(self) -> float | None:
+        """The newest stamp heard, not extrapolated (None before the first): a held sim's
+        clock (services/sim/hold.py) stands exactly at the time it holds at."""
+        return self._stamp
+
+    @property
     def started(self) -> bool:
         return self._stamp is not None
 

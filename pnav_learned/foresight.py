@@ -5,7 +5,9 @@ Per fresh scan it computes the decision's features (pnav_learned.features) and t
 seconds' (pnav_learned.history: progress, displacement, turning, speed, the nearest hit
 ahead), and runs a classifier trained on the records (``pnav learn train --target
 foresight``) for p, the probability of "no progress within 3 s". When p reaches
-``foresight_threshold`` (0.6) it backs up (if the lidar sees the rear clear) and turns toward
+``foresight_threshold`` (0.6) while the robot is stalled (it moved less than
+``foresight_stall_m``, 0.25 m, in the last second), and both have held for
+``foresight_hold_s`` (1.5 s), it backs up (if the lidar sees the rear clear) and turns toward
 the freer side, for a second or two, at priority 60: above the local controllers (dwa,
 learned_drive: 30) and avoidance (50), below the planner's recovery (70), which still takes
 over if the robot does get stuck, and below dodge and the safety band. Then it stays quiet
@@ -36,7 +38,14 @@ from common.contract.records import LaserScan, Odometry, Robot
 from common.controller_core.params import number
 from common.controller_core.scenario import Command
 from pnav_learned.features import FloatArray, features, sector_minima
-from pnav_learned.history import FORESIGHT_FEATURES, NEAR_TARGET_M, History, Sample, sample
+from pnav_learned.history import (
+    FORESIGHT_FEATURES,
+    HISTORY_FEATURES,
+    NEAR_TARGET_M,
+    History,
+    Sample,
+    sample,
+)
 from pnav_learned.model import Kind
 from pnav_learned.registry import Found
 from pnav_learned.scenario import LearnedScenario
@@ -50,6 +59,7 @@ WATCH, BACK_UP, TURN = "watch", "back_up", "turn"
 REAR_CONE_RAD = math.radians(30)  # beams this close to straight back see the rear
 FREER_HORIZON_M = 1.0
 REAR_MARGIN_M = 0.1
+MOVED_1S = HISTORY_FEATURES.index("moved_1s")
 
 
 @dataclass(frozen=True)
@@ -63,6 +73,8 @@ class Settings:
     turn_s: float = 1.5
     turn_rps: float = 1.0
     cooldown_s: float = 5.0
+    stall_m: float = 0.25  # a stall: the robot moved less than this in the last second, m
+    hold_s: float = 1.5  # act once the fear and a stall have held together this long, s
 
     @classmethod
     def read(cls, params: Mapping[str, Any], robot: Robot) -> Settings:
@@ -75,6 +87,8 @@ class Settings:
             turn_s=number(params, "foresight_turn_s", d.turn_s, high=10.0),
             turn_rps=min(d.turn_rps, robot.max_angular_rps),
             cooldown_s=number(params, "foresight_cooldown_s", d.cooldown_s, high=60.0),
+            stall_m=number(params, "foresight_stall_m", d.stall_m, high=10.0),
+            hold_s=number(params, "foresight_hold_s", d.hold_s, high=10.0),
         )
 
     @property
@@ -110,6 +124,7 @@ class Foresee:
         self.turn = 1.0
         self.why = ""
         self.p: float | None = None  # the last prediction (tests, people)
+        self.feared_since: float | None = None  # since when fear and stall held together
 
     def predict(self, found: Found, decision: FloatArray) -> tuple[float, float]:
         """(p of no progress within 3 s, the model's confidence) for the newest sample."""
@@ -128,18 +143,28 @@ class Foresee:
         self.history.add(s)
         if self.phase != WATCH:
             return self._manoeuvre(s.stamp, surrounding[0], cfg)
+        self.feared_since, since = None, self.feared_since
         if s.stamp < self.quiet_until or s.target_dist < NEAR_TARGET_M:
             return None
-        if self.history.features()[0] < cfg.min_history_s:
+        history = self.history.features()
+        if history[0] < cfg.min_history_s:
             return None  # too little of the last seconds to judge them
         p, confidence = self.predict(found, decision)
         self.p = p
-        if p < cfg.threshold:
+        moved = float(history[MOVED_1S])
+        if p < cfg.threshold or moved >= cfg.stall_m:
+            return None  # no fear, or a fear the robot's own motion does not bear out
+        # a fear borne out by a stall acts only once both have held hold_s: dwa slows and
+        # turns in place at bends for a second or so, and a stale model fears those too
+        self.feared_since = s.stamp if since is None else since
+        if s.stamp - self.feared_since < cfg.hold_s - 1e-9:
             return None
         self.why = (
             f"foresight: {found.label}: no progress within 3 s predicted, p {p:.2f} >="
-            f" {cfg.threshold:.2f}, confidence {confidence:.2f}"
+            f" {cfg.threshold:.2f}, confidence {confidence:.2f}, with the robot stalled"
+            f" (under {cfg.stall_m:.2f} m a second) for {s.stamp - self.feared_since:.1f} s"
         )
+        self.feared_since = None
         self.turn = 1.0 if surrounding[1] else -1.0
         self.phase, self.since = BACK_UP if surrounding[0] else TURN, s.stamp
         return self._manoeuvre(s.stamp, surrounding[0], cfg)

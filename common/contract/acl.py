@@ -9,7 +9,8 @@ dictionary) and the router lets it put only its own keys:
 - its liveliness token ``pnav/alive/{name}/*`` and lockstep report ``pnav/lockstep/{name}/*``
   (``user``: under the names of people's tools, :data:`USER_SERVICES`);
 - the ``sim`` alone: sensor messages, the clock, the world (and answers on its queryable);
-- the ``bridge`` alone: ``cmd_vel`` and the acknowledgements of collision events.
+- the ``bridge`` alone: ``cmd_vel`` and the acknowledgements of collision events;
+- ``user`` alone: ``pnav/sim/run``, which lets a held sim run (services/sim/hold.py).
 
 A host process running several services in one Zenoh session (pnav.run.host, docs/ARCHITECTURE.md
 "Processes") authenticates as a host identity named after them (:func:`host_identity`:
@@ -108,6 +109,10 @@ def put_keys(identity: str) -> list[str]:
         own += [keys.robot_watch(keys.CMD_VEL), keys.robot_watch(keys.COLLISION_ACK)]
         # a ROS 2 robot with no pybullet sim: the bridge gives the stack ROS time
         own.append(keys.SIM_CLOCK)
+    elif identity == USER:
+        # a held sim (--held) runs only as far as people let it: `pnav demo` drives its
+        # mission's steps at the sim times it chose this way
+        own.append(keys.SIM_RUN)
     own += [keys.lockstep_key(name, "*") for name in _names(identity)]
     return own
 

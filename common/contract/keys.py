@@ -15,6 +15,7 @@ Key expressions (``{robot}`` is a robot id; ids are ``[A-Za-z0-9_-]+``):
 - ``pnav/robot/{robot}/cmd_vel``  bridge -> sim, velocity command
 - ``pnav/sim/clock``              sim time
 - ``pnav/sim/world``              the loaded world (map, chargers, robots); also a queryable
+- ``pnav/sim/run``                people -> a held sim (``--held``): run to a sim time, or on
 - ``pnav/alive/{service}/{instance}`` liveliness token of a running service
 - ``pnav/lockstep/{service}/{instance}`` a participant's quiet report (lockstep runs only)
 - ``pnav/supervisor/{launcher}``  a launcher's report of the processes it supervises
@@ -143,6 +144,7 @@ def parse_robot_key(key: str) -> tuple[str, str]:
 
 SIM_CLOCK: Final = f"{PREFIX}/sim/clock"
 SIM_WORLD: Final = f"{PREFIX}/sim/world"
+SIM_RUN: Final = f"{PREFIX}/sim/run"
 
 
 # -- liveliness --------------------------------------------------------------------------

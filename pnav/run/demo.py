@@ -12,10 +12,19 @@ On the warehouse world, at an accelerated sim rate, one robot:
 
 Nobody intervenes after step 3. The demo then prints a mission summary (and writes it as
 JSON with ``--json``) and exits 0 on success, 1 with the reason otherwise.
+
+The user's steps are taken at fixed sim times (:data:`USER_STEPS_S`), not after some wall
+time: the sim is held (``--held``, services/sim/hold.py) at sim time 0 until the stack is up
+and the first goal given, then let run to each next step's time and held there while the
+step is taken. A driver on wall time against a sim at 5x was another mission on a loaded
+machine: it once gave the first goal at 33 s of sim time, the battery drained meanwhile,
+and CHARGE came before the strategy switch. Held, a loaded machine makes the mission take
+longer in wall time, never another mission.
 """
 
 from __future__ import annotations
 
+import asyncio
 import json
 import sys
 import time
@@ -25,7 +34,9 @@ from typing import Any
 
 import uvloop
 
+from common.bus import pack
 from common.config import ServiceConfig
+from common.contract import keys
 from common.robotmodel import DEFAULT_MODEL, load_model
 from common.runtime import Runtime
 from pnav.cli import stack_commands
@@ -42,6 +53,12 @@ START_BATTERY_PCT = 0.45
 GOAL_NEAR = (3.7, 2.5)
 GOAL_FAR = (8.8, 6.6)
 WALL_LIMIT_S = 105.0
+# the sim times of the user's steps: the first goal, GOTO_DIRECT, GOTO_AVOID, the goal change
+USER_STEPS_S = (0.0, 3.0, 6.0, 7.0)
+# the services the stack must have up before the sim may run (the sim's own is not waited on)
+STACK_SERVICES = ("bridge", "strategy", "planner", "controller", "decision")
+# a run message put before the sim's subscription reached the router is lost: say it again
+RUN_RESEND_S = 0.5
 
 
 class Demo:
@@ -54,12 +71,10 @@ class Demo:
         self.goal: int | None = None  # the goal in force: its failure ends the demo
 
     def event(self, text: str) -> None:
-        log = self.monitor.log
-        self.events.append({"sim_s": round(log.now.stamp, 2), "event": text})
+        now = self.rt.clock.now()  # the sim's clock: where the sim holds, exactly
+        self.events.append({"sim_s": round(now, 2), "event": text})
         print(
-            f"\r\x1b[K[sim {log.now.stamp:6.1f} s] {text}"
-            if self.tty
-            else f"[sim {log.now.stamp:6.1f} s] {text}",
+            f"\r\x1b[K[sim {now:6.1f} s] {text}" if self.tty else f"[sim {now:6.1f} s] {text}",
             flush=True,
         )
 
@@ -83,19 +98,52 @@ class Demo:
     def remaining(self) -> float:
         return max(1.0, WALL_LIMIT_S - (time.monotonic() - self.started))
 
-    async def until(self, what: str, predicate: Callable[[MissionLog], bool]) -> None:
+    async def until(
+        self, what: str, predicate: Callable[[MissionLog], bool], within: float | None = None
+    ) -> bool:
+        """Wait for ``predicate``; MissionFailed past the demo's time limit. With ``within``
+        (wall seconds), False if it did not hold by then."""
+        limit = self.remaining() if within is None else min(within, self.remaining())
         try:
             ok = await self.monitor.wait_for(
-                predicate, self.remaining(), on_poll=self.progress, goal=self.goal
+                predicate, limit, on_poll=self.progress, goal=self.goal
             )
         except GoalEnded as end:
             raise MissionFailed(f"waiting for {what}: {end}") from None
-        if not ok:
+        if not ok and (within is None or self.remaining() <= 1.0):
             raise MissionFailed(f"{what} did not happen within the demo's time limit")
+        return ok
 
-    async def after_sim(self, seconds: float) -> None:
-        start = self.monitor.log.now.stamp
-        await self.until(f"{seconds} s of sim time", lambda log: log.now.stamp >= start + seconds)
+    async def stack_up(self) -> None:
+        """Until every service of :data:`STACK_SERVICES` holds its liveliness token: the
+        held sim is let run only once nothing is still starting."""
+
+        def missing() -> set[str]:
+            replies = self.rt.zenoh.liveliness().get(keys.alive_watch(), timeout=2.0)
+            up = {str(r.ok.key_expr).split("/")[2] for r in replies if r.ok is not None}
+            return set(STACK_SERVICES) - up
+
+        while gone := await asyncio.to_thread(missing):
+            if self.remaining() <= 1.0:
+                raise MissionFailed(f"services not up within the demo's time limit: {gone}")
+            await asyncio.sleep(0.2)
+
+    async def run_to(self, sim_s: float | None) -> None:
+        """Let the held sim run to sim time ``sim_s`` and wait until it holds there (None:
+        let it run on, and wait until it moved)."""
+        start = self.rt.clock.stamp or 0.0
+
+        def arrived(_: MissionLog) -> bool:
+            stamp = self.rt.clock.stamp
+            if stamp is None:
+                return False
+            return stamp > start if sim_s is None else stamp >= sim_s - 1e-6
+
+        what = "the sim to run on" if sim_s is None else f"the sim to reach {sim_s} s"
+        while True:
+            self.rt.zenoh.put(keys.SIM_RUN, pack({"until": sim_s}))
+            if await self.until(what, arrived, within=RUN_RESEND_S):
+                return
 
     async def strategy(self, code: str) -> None:
         verdict, reason = await stack_commands.send_user_command(
@@ -106,19 +154,22 @@ class Demo:
         self.event(f"user: strategy {code} ({reason})")
 
     async def run(self) -> int:
-        await self.until("the robot's first odometry", lambda log: log.now.stamp > 0)
+        first, direct, avoid, change = USER_STEPS_S
+        await self.stack_up()
         await self.until("the default strategy", lambda log: log.now.strategy == "GOTO_AVOID")
+        await self.run_to(first)  # the sim's clock heard: it holds at 0
         near = self.goal = await stack_commands.set_goal(self.rt, ROBOT, *GOAL_NEAR)
         self.event(f"user: goal {near} at {GOAL_NEAR} (GOTO_AVOID)")
-        await self.after_sim(3.0)
+        await self.run_to(direct)
         await self.strategy("GOTO_DIRECT")
-        await self.after_sim(3.0)
+        await self.run_to(avoid)
         await self.strategy("GOTO_AVOID")
-        await self.after_sim(1.0)
-        if self.monitor.log.goals.get(near) != "active":
+        await self.run_to(change)
+        if (await self.monitor.poll()).goals.get(near) != "active":
             raise MissionFailed("the first goal ended before the goal change")
         far = self.goal = await stack_commands.set_goal(self.rt, ROBOT, *GOAL_FAR)
         self.event(f"user: goal changed in motion to {far} at {GOAL_FAR}; hands off from now")
+        await self.run_to(None)
         await self.until("the battery detour (CHARGE)", lambda log: log.now.strategy == "CHARGE")
         self.event(f"system: CMD_BATTSAVE -> CHARGE at {self.monitor.log.now.battery_pct:.2f}%")
         await self.until("charging at a station", lambda log: log.now.charging)
@@ -179,6 +230,7 @@ async def demo(
         rate=rate,
         robots=1,
         battery=start_battery_pct(model),
+        sim_held=True,  # the user's steps at their sim times (USER_STEPS_S)
         zenoh_port=None,
         dashboard=dashboard,
         model=model,

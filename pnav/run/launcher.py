@@ -187,6 +187,8 @@ def sim_options(options: StackOptions, world: Path) -> list[str]:
         argv += ["--battery", str(options.battery)]
     if options.model is not None:
         argv += ["--model", options.model]
+    if options.sim_held:
+        argv.append("--held")
     return argv
 
 

@@ -40,6 +40,9 @@ class StackOptions:
     gui: bool = False
     robots: int | None = None
     battery: float | None = None
+    # the sim holds at sim time 0 and runs only as far as pnav/sim/run lets it (--held,
+    # services/sim/hold.py): ``pnav demo`` steps its mission on sim time so
+    sim_held: bool = False
     # robot model of every robot the world does not give one (None: the Burger)
     model: str | None = None
     data_dir: Path | None = None

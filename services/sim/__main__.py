@@ -6,7 +6,8 @@ Its benchmark (``python -m pnav.bench.sim_rate``) takes the same options.
 
 Options fall back to environment variables (for containers): PNAV_SIM_WORLD, PNAV_SIM_RATE,
 PNAV_SIM_ROBOTS, PNAV_SIM_BATTERY, PNAV_SIM_SEED, PNAV_SIM_SCAN_HZ, PNAV_SIM_MODEL,
-PNAV_SIM_ODOM_HZ, PNAV_SIM_TRACE, PNAV_SIM_MAX_LAG, PNAV_SIM_CMD_TIMEOUT, PNAV_LOCKSTEP; Zenoh
+PNAV_SIM_ODOM_HZ, PNAV_SIM_TRACE, PNAV_SIM_MAX_LAG, PNAV_SIM_CMD_TIMEOUT, PNAV_LOCKSTEP,
+PNAV_SIM_HELD; Zenoh
 comes from the PNAV_ZENOH_* variables (common.config.ZenohSettings). SIGINT and SIGTERM stop
 it cleanly.
 """
@@ -156,6 +157,13 @@ def sim_parser(prog: str = "python -m services.sim") -> argparse.ArgumentParser:
         "[PNAV_SIM_WORLD_ONLY]",
     )
     ap.add_argument(
+        "--held",
+        action="store_true",
+        default=_env("PNAV_SIM_HELD") in ("1", "true", "yes", "on"),
+        help="hold at sim time 0, then run only as far as pnav/sim/run messages let it: "
+        "{until: S} to sim time S, {until: nil} on (services/sim/hold.py) [PNAV_SIM_HELD]",
+    )
+    ap.add_argument(
         "--physics-hz", type=float, default=240.0, help="physics steps per sim second (default 240)"
     )
     return ap
@@ -187,6 +195,8 @@ def build(args: argparse.Namespace) -> tuple[World, SimConfig, float]:
     args.lockstep = lockstep_from_env({"PNAV_LOCKSTEP": args.lockstep or ""})
     if args.lockstep and args.max_lag is not None:
         raise ConfigError("--lockstep and --max-lag exclude each other (lockstep always waits)")
+    if args.lockstep and args.held:
+        raise ConfigError("--lockstep and --held exclude each other (lockstep holds at 0 itself)")
     scan_ok = args.scan_hz is None or args.scan_hz > 0
     if not args.physics_hz > 0 or not scan_ok or not args.odom_hz > 0:
         raise ConfigError("--physics-hz, --scan-hz and --odom-hz must be positive")
@@ -209,6 +219,7 @@ def serve(
     trace: str | None = None,
     max_lag: float | None = None,
     lockstep: tuple[str, ...] = (),
+    held: bool = False,
 ) -> int:
     from common.trace import Tracer
     from services.sim.lag_gate import Gate
@@ -238,6 +249,7 @@ def serve(
                 lockstep=lockstep,
                 robot_link=link,
                 ros2_session=ros2_session,
+                held=held,
             )
             try:
                 node.run(stop)
@@ -287,7 +299,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         world, config, rate = build(args)
         if args.world_only:
             return announce_world(world)
-        return serve(world, config, rate, args.trace, args.max_lag, args.lockstep)
+        return serve(world, config, rate, args.trace, args.max_lag, args.lockstep, args.held)
     except UsageError as exc:
         event(log, logging.ERROR, "cannot start the sim", problem=str(exc))
         print(f"error: {exc}", file=sys.stderr)

@@ -21,6 +21,7 @@ from common.contract import keys
 from common.log import event
 from common.robotlink import RobotLinkSettings
 from common.trace import CMD_VEL, NO_REF, Tracer
+from services.sim.hold import Hold
 from services.sim.lag_gate import Gate
 from services.sim.lockstep_barrier import Barrier
 from services.sim.matching import await_listeners, warn_unmatched
@@ -67,14 +68,19 @@ class SimNode:
         lockstep: tuple[str, ...] = (),
         robot_link: RobotLinkSettings | None = None,
         ros2_session: zenoh.Session | None = None,
+        held: bool = False,
     ) -> None:
         if gate is not None and lockstep:
             raise ValueError("--max-lag and --lockstep exclude each other: lockstep waits always")
+        if held and lockstep:
+            raise ValueError("--held and --lockstep exclude each other: lockstep holds at 0 itself")
         self.session = session
         self.rate = rate
         self.tracer = tracer
         self.gate = gate
         self.barrier = Barrier(session, lockstep) if lockstep else None
+        # held (hold.py): steps only as far as pnav/sim/run lets it
+        self.hold = Hold(session) if held else None
         # in lockstep a step's readings wait here, to go out one at a time
         self._held: list[tuple[str, str, dict[str, Any]]] = []
         self._publishers: dict[tuple[str, str], zenoh.Publisher] = {}
@@ -204,8 +210,9 @@ class SimNode:
     def publish_clock(self) -> None:
         if self.wire is not None and self.wire.publish_clock(self.sim.time):
             return  # a ROS /clock instead (clock: ros, ros2wire.py)
-        # in lockstep the clock stands still between messages: rate 0, no extrapolation
-        rate = 0.0 if self.barrier is not None else self.rate
+        # in lockstep the clock stands still between messages, and a held sim stands still:
+        # rate 0, no extrapolation
+        rate = 0.0 if self.barrier is not None or self._holding() else self.rate
         self._clock_pub.put(pack(messages.clock(self.sim.time, rate)))
 
     def publish_world(self) -> None:
@@ -226,9 +233,14 @@ class SimNode:
         next_clock = next_resend = 0.0
         self._next_gate_clock = 0.0
         await_listeners(self._publishers, stop)
-        self._log_running(max_lag=None if self.gate is None else self.gate.max_lag_s)
+        self._log_running(
+            max_lag=None if self.gate is None else self.gate.max_lag_s,
+            held=self.hold is not None,
+        )
         while not stop.is_set() and not _reached(sim, until_sim_s):
             now = time.monotonic()
+            if self._holding():
+                pacer.restart(sim.steps)  # sim time stands: no steps owed on release
             if now >= next_clock:
                 self.publish_clock()
                 next_clock = now + clock_period
@@ -242,9 +254,13 @@ class SimNode:
                 next_resend = now + RESEND_CHECK_S
             if self.tracer is not None:
                 self.tracer.maybe_flush()
-            owed = pacer.steps_due(sim.steps)
+            owed = 0 if self._holding() else pacer.steps_due(sim.steps)
             if owed == 0:
-                stop.wait(min(pacer.wall_until_next(sim.steps), max(0.0, next_clock - now)))
+                clock_due = max(0.0, next_clock - now)
+                if self.hold is not None and self._holding():
+                    self.hold.wait(clock_due)  # a run message wakes it at once
+                else:
+                    stop.wait(min(pacer.wall_until_next(sim.steps), clock_due))
                 continue
             self._step_owed(owed, stop, until_sim_s, next_clock)
         self.publish_clock()
@@ -272,6 +288,13 @@ class SimNode:
                 break
             if _reached(self.sim, until_sim_s):
                 break
+            if self._holding():
+                self.publish_clock()  # the time it holds at, with rate 0, at once
+                break
+
+    def _holding(self) -> bool:
+        """Held (hold.py) at the sim time reached."""
+        return self.hold is not None and self.hold.holding(self.sim.time)
 
     def _pass_gate(self, gate: Gate, stop: threading.Event) -> None:
         """Wait until the next step is no further than max_lag past every robot's newest
@@ -379,6 +402,8 @@ class SimNode:
         """Undeclare everything this node declared and free pybullet (not the session)."""
         if self.barrier is not None:
             self.barrier.close()
+        if self.hold is not None:
+            self.hold.close()
         entities: list[Any] = [
             self._subscriber,
             self._ack_subscriber,

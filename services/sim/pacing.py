@@ -91,6 +91,12 @@ class Pacer:
             return 1
         return max(0, owed)
 
+    def restart(self, steps_done: int) -> None:
+        """Pace from now and ``steps_done`` on: time the sim stood still (held) is owed no
+        steps, and is no slip."""
+        self._anchor_wall = self.wall()
+        self._anchor_steps = steps_done
+
     def wall_until_next(self, steps_done: int) -> float:
         """Wall seconds until the next step is due (0 for max rate)."""
         if self.rate == MAX:

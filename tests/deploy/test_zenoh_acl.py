@@ -182,6 +182,11 @@ CASES = [
     ("user", keys.robot_key("r1", keys.COLLISION_ACK), False),
     ("user", keys.SIM_CLOCK, False),
     ("user", keys.SIM_WORLD, False),
+    # people hold and run a held sim (`pnav demo`); nobody else does
+    ("user", keys.SIM_RUN, True),
+    ("sim", keys.SIM_RUN, False),
+    ("planner", keys.SIM_RUN, False),
+    ("bridge", keys.SIM_RUN, False),
     ("user", keys.notify_key(keys.ODOMETRY, "r1"), False),
     ("user", keys.notify_key(keys.COMMAND_RECOMMENDATION, "r1"), False),
     ("user", keys.notify_key(keys.COMMAND2ROBOT, "r1"), False),

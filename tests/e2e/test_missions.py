@@ -78,6 +78,9 @@ async def test_a_mission_succeeds_in_every_shipped_world_without_collision(
 async def test_the_demo_mission_detours_to_charge_switches_strategy_and_changes_goal() -> None:
     summary = await demo.demo(RATE)
     assert summary["outcome"] == "success", summary
+    # the user's steps at their sim times, however loaded the machine (the sim is held)
+    user = [e["sim_s"] for e in summary["events"] if e["event"].startswith("user:")]
+    assert user == list(demo.USER_STEPS_S), summary["events"]
     codes = [code for _, code in summary["strategy_timeline"]]
     # GOTO_AVOID -> GOTO_DIRECT -> GOTO_AVOID (user) -> CHARGE -> GOTO_AVOID (system)
     assert codes == ["GOTO_AVOID", "GOTO_DIRECT", "GOTO_AVOID", "CHARGE", "GOTO_AVOID"]

@@ -168,10 +168,15 @@ def listener(zenoh_settings: ZenohSettings) -> Iterator[Listener]:
 
 @contextmanager
 def running_sim(
-    settings: ZenohSettings, rate: float, gate: Gate | None = None, **config: Any
+    settings: ZenohSettings,
+    rate: float,
+    gate: Gate | None = None,
+    held: bool = False,
+    **config: Any,
 ) -> Iterator[SimNode]:
     session = open_session(settings)
-    node = SimNode(load_world(OPEN_ROOM), SimConfig(**config), session, rate=rate, gate=gate)
+    world = load_world(OPEN_ROOM)
+    node = SimNode(world, SimConfig(**config), session, rate=rate, gate=gate, held=held)
     stop = threading.Event()
     thread = threading.Thread(target=node.run, args=(stop,), daemon=True)
     thread.start()

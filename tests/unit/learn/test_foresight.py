@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
-from common.contract.records import LaserScan
+from common.contract.records import LaserScan, Robot
 from pnav_learned.features import FEATURES, RANGE_CAP_M, SECTORS
 from pnav_learned.foresight import KIND, Foresee, Settings, surroundings
 from pnav_learned.history import FORESIGHT_FEATURES, HISTORY_FEATURES, History, sample
@@ -55,7 +56,9 @@ def decision(target_dist: float = 5.0, ahead: float = 2.0) -> np.ndarray:
     return x
 
 
-CFG = Settings(threshold=0.6, min_history_s=1.0, back_up_s=1.0, turn_s=1.0, cooldown_s=3.0)
+CFG = Settings(
+    threshold=0.6, min_history_s=1.0, back_up_s=1.0, turn_s=1.0, cooldown_s=3.0, hold_s=0.0
+)  # acting at once: the machine's ticks (the hold has its own test)
 CLEAR, BLIND = (True, True), (False, False)  # (rear clear, left freer)
 
 
@@ -66,10 +69,11 @@ def tick(
     x_m: float,
     around: tuple[bool, bool] = CLEAR,
     target_dist: float = 5.0,
+    cfg: Settings = CFG,
 ) -> Any:
     d = decision(target_dist=5.0 - x_m if target_dist == 5.0 else target_dist)
     s = sample(t, (x_m, 0.0, 0.0), 0.0, (5.0, 0.0), d)
-    return f.step(s, d, model, around, CFG)
+    return f.step(s, d, model, around, cfg)
 
 
 def test_the_history_measures_the_last_seconds() -> None:
@@ -158,3 +162,54 @@ def test_the_rear_is_clear_only_where_the_lidar_sees_it() -> None:
     jackal = np.full(270, 3.0, dtype=np.float32)  # 270 degrees: no beam behind
     front = LaserScan(2, "r1", 0.0, -3 * math.pi / 4, math.radians(1), 0.1, 3.5, jackal)
     assert surroundings(front, 0.2, 0.2)[0] is False
+
+
+def test_a_fear_waits_for_the_robot_to_slow_before_it_acts(tmp_path: Path) -> None:
+    """A model that always fears (p 0.95 whatever the robot does): while the robot covers
+    more than stall_m (0.25 m) a second foresight stays silent; once it has slowed, it acts."""
+    model, f = found(tmp_path, weight=0.0), Foresee()
+    x, t = 0.0, 0.0
+    said: list[tuple[float, Any]] = []
+    while t < 3.0 - 1e-9:  # 3 s at 0.5 m/s (CFG acts at once: no hold)
+        said.append((t, tick(f, model, t, x)))
+        t, x = round(t + 0.1, 3), x + 0.05
+    assert f.p is not None and f.p > 0.9
+    assert all(c is None for _, c in said)
+    while t < 5.0 - 1e-9:  # stopped at x: moved_1s falls by 0.05 m a tick
+        said.append((t, tick(f, model, t, x)))
+        t = round(t + 0.1, 3)
+    first = next((t, c) for t, c in said if c is not None)
+    # at 3.5 s the last second holds 0.5 s of motion (0.25 m): 3.6 s is the first below it
+    assert first[0] == pytest.approx(3.6)
+    assert first[1].linear < 0 and "stalled (under 0.25 m a second) for 0.0 s" in first[1].reason
+
+
+def test_stall_m_and_hold_s_are_read_from_the_strategy_params() -> None:
+    robot = Robot("r1", 2.0, 4.0, 0.22, 270.0)
+    assert (Settings.read({}, robot).stall_m, Settings.read({}, robot).hold_s) == (0.25, 1.5)
+    got = Settings.read({"foresight_stall_m": 0.5, "foresight_hold_s": 2.0}, robot)
+    assert (got.stall_m, got.hold_s) == (0.5, 2.0)
+
+
+def test_a_fear_acts_only_once_it_and_a_stall_held_hold_s(tmp_path: Path) -> None:
+    """An always-fearing model: a 1 s pause (dwa turning in place at a bend) passes in
+    silence; a stall that lasts is acted on hold_s (1.5 s) after it began."""
+    cfg = replace(CFG, hold_s=1.5)
+    model, f = found(tmp_path, weight=0.0), Foresee()
+    x, t = 0.0, 0.0
+    said: list[tuple[float, Any]] = []
+
+    def drive(until: float, step_m: float) -> None:
+        nonlocal x, t
+        while t < until - 1e-9:
+            said.append((t, tick(f, model, t, x, cfg=cfg)))
+            t, x = round(t + 0.1, 3), x + step_m
+
+    drive(2.0, 0.05)  # 0.5 m/s
+    drive(3.0, 0.0)  # a 1 s pause (under 0.25 m a second for about 1 s): no act
+    drive(5.0, 0.05)
+    assert all(c is None for _, c in said)
+    drive(9.0, 0.0)  # stopped for good at 5.0 s: under 0.25 m a second from 5.6 s
+    first = next(t for t, c in said if c is not None)
+    assert first == pytest.approx(7.1)
+    assert "stalled (under 0.25 m a second) for 1.5 s" in said[round(first * 10)][1].reason

@@ -61,3 +61,22 @@ def test_max_rate_always_owes_steps() -> None:
     pacer = Pacer(MAX, 1 / 240)
     assert pacer.steps_due(10**6) > 10**6
     assert pacer.wall_until_next(0) == 0.0
+
+
+def test_time_the_sim_stood_held_is_owed_no_steps_and_is_no_slip() -> None:
+    wall = FakeWall()
+    pacer = Pacer(5.0, 1 / 240, wall=wall)
+    wall.now += 30.0  # held 30 wall seconds (services/sim/hold.py)
+    pacer.restart(0)
+    assert pacer.steps_due(0) == 0 and pacer.slips == 0
+    wall.now += 0.1  # then paced at the rate again: 0.5 sim s
+    assert pacer.steps_due(0) == 120
+
+
+def test_a_run_message_says_until_when_or_on() -> None:
+    from services.sim.hold import parse_until
+
+    assert parse_until({"until": 3}) == 3.0 and parse_until({"until": None}) is None
+    for bad in ({"until": -0.1}, {"until": float("inf")}, {"until": True}, {"until": "3"}, {}, []):
+        with pytest.raises((ValueError, KeyError, TypeError)):
+            parse_until(bad)
