@@ -15,7 +15,6 @@ import contextvars
 import json
 import logging
 import secrets
-import sys
 import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -41,16 +40,6 @@ Handler = Callable[[str, bytes], None]
 # size, to spare a copy of a few kilobytes over loopback (docs/BENCHMARKS.md, "Start-up:
 # where the seconds and megabytes went"). A config file (PNAV_ZENOH_CONFIG) may turn it on.
 SHARED_MEMORY = False
-
-# How long a thread waiting for the GIL waits before it asks the running one to let go
-# (Python's default: 5 ms). Zenoh's threads need the GIL to hand every sample to Python
-# (``subscribe``'s ``call_soon_threadsafe``, a threaded handler, the sim's cmd_vel), so with
-# the default a notification that comes while the event loop runs its rules waited up to
-# 5 ms for the loop to reach a call that lets go, and the Zenoh thread with it, every sample
-# queued behind on that link too. Half a millisecond bounds that wait to a tenth, for a
-# forced switch now and then (a few microseconds) in a process whose threads are both busy.
-# docs/BENCHMARKS.md, "Sense-to-act latency: where the milliseconds go (issue 31)".
-SWITCH_INTERVAL_S = 0.0005
 
 
 def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
@@ -81,12 +70,7 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
 
 
 def open_session(settings: ZenohSettings) -> zenoh.Session:
-    """Open a Zenoh session; raises ConnectionFailure if no router/peer answers.
-
-    Every process that opens one has Zenoh's threads calling into Python from then on: the
-    interpreter's switch interval is set to :data:`SWITCH_INTERVAL_S` (if it is longer), so a
-    sample never waits Python's default 5 ms for the GIL."""
-    hand_over_sooner()
+    """Open a Zenoh session; raises ConnectionFailure if no router/peer answers."""
     try:
         return zenoh.open(zenoh_config(settings))
     except ConfigError:
@@ -96,13 +80,6 @@ def open_session(settings: ZenohSettings) -> zenoh.Session:
         raise ConnectionFailure(
             f"cannot open a Zenoh {settings.mode} session on {where}: {exc}"
         ) from exc
-
-
-def hand_over_sooner() -> None:
-    """Let a thread waiting for the GIL have it within :data:`SWITCH_INTERVAL_S` (never
-    longer than the process has it already)."""
-    if sys.getswitchinterval() > SWITCH_INTERVAL_S:
-        sys.setswitchinterval(SWITCH_INTERVAL_S)
 
 
 def start_router(

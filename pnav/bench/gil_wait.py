@@ -4,8 +4,10 @@ Zenoh delivers every sample on a thread of its own, which needs the GIL to run t
 callback (``common.bus.subscribe_threaded``; ``bus.subscribe``'s hand-over to the loop too).
 While another thread of the process runs Python (the sim's physics, a long activation), that
 thread waits until the running one lets go: at the latest after the interpreter's switch
-interval, Python's default 5 ms, or the ``common.bus.SWITCH_INTERVAL_S`` a process with a
-session now uses (``bus.open_session``).
+interval, Python's default 5 ms, or a shorter one (``--short-ms``, 0.5 ms by default). A
+shorter one was tried in every process with a session and measured worse at low load
+(docs/BENCHMARKS.md, "Sense-to-act latency: where the milliseconds go"), so the stack
+keeps Python's; this measures what the interval does to a threaded handler alone.
 
 This measures it with the stack's own pieces: a process of its own puts a stamped sample
 every ~10 ms through a Zenoh router (in a process of its own, as the launcher's is); this
@@ -48,7 +50,7 @@ def one_round(
     """Delays (ms) of ``samples`` samples with the switch interval at ``interval_s``."""
     session = bus.open_session(settings)
     before = sys.getswitchinterval()
-    sys.setswitchinterval(interval_s)  # after open_session, which lowers it
+    sys.setswitchinterval(interval_s)
     delays: list[float] = []
 
     def on_sample(key: str, payload: bytes) -> None:
@@ -77,9 +79,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--samples", type=int, default=300, help="samples per round")
     parser.add_argument("--busy-ms", type=float, default=20.0, help="Python held at a time")
     parser.add_argument("--rounds", type=int, default=2, help="rounds per interval")
+    parser.add_argument("--short-ms", type=float, default=0.5, help="the shorter interval")
     parser.add_argument("--json", metavar="FILE", help="write the figures as JSON ('-': stdout)")
     args = parser.parse_args(argv)
-    intervals = {"python_default": DEFAULT_S, "pnav": bus.SWITCH_INTERVAL_S}
+    intervals = {"python_default": DEFAULT_S, "short": args.short_ms / 1000}
     delays: dict[str, list[float]] = {name: [] for name in intervals}
     with router_process() as settings:
         for _ in range(args.rounds):

@@ -151,24 +151,6 @@ async def test_subscribe_runs_handlers_on_the_event_loop_thread(
         b.close()
 
 
-def test_a_process_with_a_session_hands_the_gil_to_zenohs_threads_sooner(
-    zenoh_settings: ZenohSettings,
-) -> None:
-    """Zenoh's threads deliver samples under the GIL: once a session is open, a waiting
-    thread gets it within SWITCH_INTERVAL_S, not Python's 5 ms; a shorter one is kept."""
-    before = sys.getswitchinterval()
-    try:
-        sys.setswitchinterval(0.005)
-        session = bus.open_session(zenoh_settings)
-        session.close()
-        assert sys.getswitchinterval() == pytest.approx(bus.SWITCH_INTERVAL_S)
-        sys.setswitchinterval(bus.SWITCH_INTERVAL_S / 5)
-        bus.hand_over_sooner()
-        assert sys.getswitchinterval() == pytest.approx(bus.SWITCH_INTERVAL_S / 5)
-    finally:
-        sys.setswitchinterval(before)
-
-
 async def test_retention_keeps_sensor_tables_bounded(conn: asyncpg.Connection) -> None:
     await conn.execute("INSERT INTO robot (robot_id) VALUES ('r1'), ('r2')")
     await conn.execute("UPDATE retention_policy SET keep_rows_per_robot = 10")
