@@ -239,7 +239,8 @@ class SimNode:
         )
         while not stop.is_set() and not _reached(sim, until_sim_s):
             now = time.monotonic()
-            if self._holding():
+            holding = self._holding()  # sim time does not move until a step below
+            if holding:
                 pacer.restart(sim.steps)  # sim time stands: no steps owed on release
             if now >= next_clock:
                 self.publish_clock()
@@ -254,9 +255,10 @@ class SimNode:
                 next_resend = now + RESEND_CHECK_S
             if self.tracer is not None:
                 self.tracer.maybe_flush()
-            owed = 0 if self._holding() else pacer.steps_due(sim.steps)
+            owed = 0 if holding else pacer.steps_due(sim.steps)
             if owed == 0:
                 clock_due = max(0.0, next_clock - now)
+                # asked again: a run message that came since would not wake the wait
                 if self.hold is not None and self._holding():
                     self.hold.wait(clock_due)  # a run message wakes it at once
                 else:
