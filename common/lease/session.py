@@ -23,6 +23,7 @@ from common.config import LeaseSettings
 from common.errors import ConnectionFailure
 from common.lease import sql
 from common.lease.share import Snapshot
+from common.outage import outage_for
 
 
 class LockSession:
@@ -134,6 +135,11 @@ async def _join(
     conn: asyncpg.Connection = await asyncpg.connect(
         url, timeout=timeout, server_settings={"application_name": name}
     )
+    # The server answers: an outage this process's pools are backing off from is over.
+    # Left to their next probe (up to 2 s away), the robots this session is about to take
+    # would start scenarios whose every query fails at once, each failure ending and
+    # restarting them, until a pool's probe found the database back.
+    outage_for(url).recovered()
     try:
         # Postgres ends the session (and so frees our robots) if we go silent
         ms = int(settings.timeout_s * 1000)

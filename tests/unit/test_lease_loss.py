@@ -17,6 +17,7 @@ import asyncpg
 
 from common.config import LeaseSettings
 from common.lease import LeaseManager, history_overlaps
+from common.outage import outage_for
 from pnav._testing import eventually
 from tests.unit.pgproxy import PgProxy
 from tests.unit.test_lease import ROBOTS, SERVICE, Watch, add_robots
@@ -134,3 +135,22 @@ async def test_a_robot_handed_on_during_a_takeover_wait_still_waits_for_the_vani
     finally:
         for manager in (a, b, c):
             await manager.stop()
+
+
+async def test_a_lease_session_that_connects_ends_the_outage_its_pools_back_off_from(
+    conn: asyncpg.Connection, db_url: str
+) -> None:
+    # Postgres restarted: the pools of the process still back off (their next probe up to
+    # 2 s away) when the lease connection gets through; the robots it takes start scenarios
+    # that query at once, so the pools must try again at once too
+    outage = outage_for(db_url)
+    outage.failed(ConnectionRefusedError(111, "refused"))
+    assert outage.down and not outage.may_try()  # the probe just let through was spent
+    a = LeaseManager(db_url, SERVICE, "a", SETTINGS)
+    await a.start()
+    try:
+        await eventually(lambda: not outage.down, within=10, what="the outage over")
+        assert outage.may_try()
+    finally:
+        await a.stop()
+        outage.recovered()
